@@ -1,0 +1,35 @@
+"""tolsim: Monte Carlo tolerance analysis of ball-to-ball contact in linear ball bearings.
+
+Layers, importing one way only (lower never imports higher)::
+
+    tolsim.physics   pure kernels: Hertz contact, analytical velocity models,
+                     static contact, full friction model        (numpy, scipy, numba)
+    tolsim.study     sampling, evaluation and propagation       (+ physics)
+    tolsim.io        TOML config, netCDF schema and writer      (+ study, xarray, tomllib)
+    tolsim.reports   figures and reports                        (+ io, matplotlib)
+    tolsim.cli       the ``tolsim`` command                     (+ everything)
+
+Nomenclature (paper symbol -> code name), contacts always ordered BL, BR, TR, TL:
+
+    R_B     ball_radius [m]             f       conformity [-] (groove radius = 2 f R_B)
+    beta_i  contact_angle [rad]         beta_0  nominal_contact_angle [rad]
+    dbeta_i contact_angle_deviation     F_i     normal_force [N]
+    dgamma_i zero_velocity_offset [rad] (angular offset of the zero-velocity point)
+    a_i,b_i semi_major / semi_minor [m] (a across the groove, b along the rail)
+    epsilon velocity_deviation [-]      v_B = (1 + epsilon) v / 2
+    v       groove_velocity [m/s]       mu      friction_coefficient [-]
+    rho     side_force_ratio N_x/N_y    theta   groove rotation [rad]
+
+Reference: B. Lin, C. E. Okwudire, M. Duan, J. S. Wou, "An improved analytical model of
+friction and ball motion in linear ball bearings - with application to ball-to-ball contact
+prediction", IMECE2018-88033 (called "the paper" or [Lin2018] throughout).
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("tolsim")
+except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "0.0.0+unknown"
+
+__all__ = ["__version__"]

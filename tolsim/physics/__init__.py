@@ -1,0 +1,1 @@
+"""Physics layer: pure functions and Numba kernels (numpy, scipy and numba only)."""

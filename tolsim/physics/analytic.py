@@ -1,0 +1,410 @@
+"""Analytical models of the ball velocity deviation epsilon ([Lin2018] Sec. 2.3-2.4).
+
+Three models, each a Numba kernel over many balls behind a validated public function:
+
+``eq24``
+    Eq. (24): epsilon for pairwise-equal diagonal forces (F_1 on BL/TR, F_2 on BR/TL).
+``analytic``
+    The improved model proper: the linear friction law (17), the equilibrium (18) with the
+    physical sign of the spin-moment block (ERRATA 8) and the linearised kinematic constraint
+    (21) solved for the four zero-velocity offsets dgamma_i with four distinct forces;
+    epsilon from the linearised Eq. (23), and the exact Eq. (22) reported beside it.
+``point``
+    The authors' prior point-contact model (ref. [11] of [Lin2018]): three contacts roll at
+    their centres, the fourth slides; Fig. 7(b) baseline.
+
+Signs (derived in :mod:`tolsim.physics.geometry`): c_i = s_i R dgamma_i with
+s = (-1, +1, -1, +1), sgn(omega_i) = (+1, -1, -1, +1), so the friction force on the ball is
+f_i = mu k_f (R / a_i) F_i g_i dgamma_i with g = (-1, -1, +1, +1).
+
+ERRATA 9: linearising Eq. (22) gives the factor tan(beta_0)/2, not (1 - cos 2 beta_0)/2 (equal
+only at 45 deg). Both Eq. (23) and Eq. (24) use tan(beta_0)/2 here.
+
+Why ``analytic`` reduces exactly to Eq. (24) with paired forces: Eq. (18) row 1 reads
+sum_i k_i g_i dgamma_i = 0, which with k_BL = k_TR = k_1, k_BR = k_TL = k_2 involves only
+P = dgamma_TR - dgamma_BL and Q = dgamma_TL - dgamma_BR; Eq. (21) reads Q - P = D.  Those two
+fix Q = k_1 D / (k_1 + k_2) whatever the moment rows say, and Eq. (23) needs only Q.
+k_i ~ F_i / a_i ~ F_i^(2/3) then gives Eq. (24).
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import prange
+
+from tolsim._jit import jit, pjit
+from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing
+from tolsim.physics.hertz import hertz_constants
+
+# --------------------------------------------------------------------------------------------
+# Validity of the linearised formula (flags, never errors)
+# --------------------------------------------------------------------------------------------
+#: |c_i/a_i| above which the friction force is no longer linear in c/a ([Lin2018] Sec. 2.3:
+#: "When |c_i/a_i| < 0.5, f_i,z is almost linear"; Fig. 4(b)).
+MAX_ZERO_VELOCITY_RATIO = 0.5
+#: |dbeta_i + dgamma_i| above which the small-angle linearisation (21), (23) is not trusted:
+#: the paper's stated range of contact angle deviations, "typically -3 deg < dbeta < 3 deg".
+MAX_ANGLE_SUM = np.deg2rad(3.0)
+#: Smallest ratio of the diagonal pair forces min(F_1, F_2)/max(F_1, F_2) for ``eq24``
+#: (which has no dgamma to test): 0.25 is |rho| = 0.6, the largest side-force ratio of the
+#: paper's case study, where Table 2 still shows agreement within 0.1 percentage points.
+MIN_DIAGONAL_FORCE_RATIO = 0.25
+
+
+@dataclass(frozen=True)
+class VelocityResult:
+    """Result of a velocity model for n balls.
+
+    Attributes
+    ----------
+    velocity_deviation : ndarray, shape (n,)
+        epsilon [-], with v_B = (1 + epsilon) v / 2.
+    valid : ndarray of bool, shape (n,)
+        True where the model's assumptions hold (see the module constants).
+    zero_velocity_offset : ndarray, shape (n, 4) or None
+        dgamma_i [rad] (None for ``eq24``).
+    velocity_deviation_eq22 : ndarray, shape (n,) or None
+        epsilon from the exact Eq. (22) with the same dgamma (``analytic`` and ``point``).
+    extra : dict
+        Model-specific arrays (e.g. the sliding contact of ``point``).
+    """
+
+    velocity_deviation: np.ndarray
+    valid: np.ndarray
+    zero_velocity_offset: np.ndarray | None = None
+    velocity_deviation_eq22: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------------------------
+# Kernels: typed loops, no checks, outputs written into preallocated arrays.
+# --------------------------------------------------------------------------------------------
+@pjit
+def eq24_kernel(dbeta, force, nominal_angle, min_ratio, max_angle, out_eps, out_valid):
+    """Eq. (24) with F_1 = (F_BL + F_TR)/2 and F_2 = (F_BR + F_TL)/2."""
+    half_tan = 0.5 * np.tan(nominal_angle)
+    for n in prange(dbeta.shape[0]):
+        f1 = 0.5 * (force[n, 0] + force[n, 2])
+        f2 = 0.5 * (force[n, 1] + force[n, 3])
+        w1 = np.cbrt(f1 * f1)
+        w2 = np.cbrt(f2 * f2)
+        out_eps[n] = half_tan * (
+            w1 * (dbeta[n, 2] - dbeta[n, 0]) + w2 * (dbeta[n, 3] - dbeta[n, 1])
+        ) / (w1 + w2)
+        ok = min(force[n, 0], force[n, 1], force[n, 2], force[n, 3]) > 0.0
+        ok = ok and min(f1, f2) >= min_ratio * max(f1, f2)
+        for i in range(4):
+            ok = ok and abs(dbeta[n, i]) <= max_angle
+        out_valid[n] = ok
+
+
+@jit(inline="always")
+def det3(a11, a12, a13, a21, a22, a23, a31, a32, a33):
+    return (
+        a11 * (a22 * a33 - a23 * a32)
+        - a12 * (a21 * a33 - a23 * a31)
+        + a13 * (a21 * a32 - a22 * a31)
+    )
+
+
+@jit(inline="always")
+def eq22_velocity_deviation(b_bl, b_br, b_tl):
+    """Eq. (22): epsilon from the angles of the zero-velocity points (TR follows from (19))."""
+    num = np.sin(b_bl + b_br)
+    return 2.0 * num / (num + np.sin(b_bl + b_tl) + np.sin(b_br - b_tl)) - 1.0
+
+
+@pjit
+def analytic_kernel(
+    dbeta, force, nominal_angle, ball_radius, semi_major_coefficient, elliptic_e, k_f,
+    max_ratio, max_angle, out_eps, out_eps22, out_gamma, out_valid,
+):
+    """Solve Eqs. (17), (18) [ERRATA 8 sign], (21) for dgamma_i; epsilon from (23) and (22)."""
+    half_tan = 0.5 * np.tan(nominal_angle)
+    for n in prange(dbeta.shape[0]):
+        # Contact angles and axes. x_i, y_i components (global x, y), order BL, BR, TR, TL.
+        b0 = nominal_angle + dbeta[n, 0]
+        b1 = nominal_angle + dbeta[n, 1]
+        b2 = nominal_angle + dbeta[n, 2]
+        b3 = nominal_angle + dbeta[n, 3]
+        s0, c0 = np.sin(b0), np.cos(b0)
+        s1, c1 = np.sin(b1), np.cos(b1)
+        s2, c2 = np.sin(b2), np.cos(b2)
+        s3, c3 = np.sin(b3), np.cos(b3)
+        # local x axes: BL (c,-s) BR (c,s) TR (-c,s) TL (-c,-s)
+        x0, y0 = c0, -s0
+        x1, y1 = c1, s1
+        x2, y2 = -c2, s2
+        x3, y3 = -c3, -s3
+        # inward normals y_i: BL (s,c) BR (-s,c) TR (-s,-c) TL (s,-c)
+        f0, f1, f2, f3 = force[n, 0], force[n, 1], force[n, 2], force[n, 3]
+        ok = min(min(f0, f1), min(f2, f3)) > 0.0
+        a0 = semi_major_coefficient * np.cbrt(f0)
+        a1 = semi_major_coefficient * np.cbrt(f1)
+        a2 = semi_major_coefficient * np.cbrt(f2)
+        a3 = semi_major_coefficient * np.cbrt(f3)
+        # u_i = q_i dgamma_i = friction force / mu; q_i = k_f R F_i / a_i * g_i, g = (-,-,+,+)
+        q0 = -k_f * ball_radius * f0 / a0
+        q1 = -k_f * ball_radius * f1 / a1
+        q2 = k_f * ball_radius * f2 / a2
+        q3 = k_f * ball_radius * f3 / a3
+        # spin moments / (mu R): m_i = 3/8 F_i a_i E(e) / R, signed with sgn(omega) = (+,-,-,+)
+        sc = 0.375 * elliptic_e / ball_radius
+        m0 = sc * f0 * a0
+        m1 = -sc * f1 * a1
+        m2 = -sc * f2 * a2
+        m3 = sc * f3 * a3
+        # Moment rows (ERRATA 8): sum u_i x_i + sum m_i y_i = 0
+        r2 = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
+        r3 = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
+        # Null vector of rows (1,1,1,1), (x_i), (y_i): n_j = (-1)^j det(without column j)
+        d012 = det3(1.0, 1.0, 1.0, x0, x1, x2, y0, y1, y2)
+        n0 = det3(1.0, 1.0, 1.0, x1, x2, x3, y1, y2, y3)
+        n1 = -det3(1.0, 1.0, 1.0, x0, x2, x3, y0, y2, y3)
+        n2 = det3(1.0, 1.0, 1.0, x0, x1, x3, y0, y1, y3)
+        n3 = -d012
+        # Particular solution with u_3 = 0 (Cramer); rhs (0, r2, r3)
+        p0 = det3(0.0, 1.0, 1.0, r2, x1, x2, r3, y1, y2) / d012
+        p1 = det3(1.0, 0.0, 1.0, x0, r2, x2, y0, r3, y2) / d012
+        p2 = det3(1.0, 1.0, 0.0, x0, x1, r2, y0, y1, r3) / d012
+        # Eq. (21): g_BL - g_BR - g_TR + g_TL = -(db_BL + db_TL - db_BR - db_TR)
+        rhs = -(dbeta[n, 0] + dbeta[n, 3] - dbeta[n, 1] - dbeta[n, 2])
+        w0, w1, w2, w3 = 1.0 / q0, -1.0 / q1, -1.0 / q2, 1.0 / q3
+        t = (rhs - (w0 * p0 + w1 * p1 + w2 * p2)) / (w0 * n0 + w1 * n1 + w2 * n2 + w3 * n3)
+        g0 = (p0 + t * n0) / q0
+        g1 = (p1 + t * n1) / q1
+        g2 = (p2 + t * n2) / q2
+        g3 = (t * n3) / q3
+        out_gamma[n, 0] = g0
+        out_gamma[n, 1] = g1
+        out_gamma[n, 2] = g2
+        out_gamma[n, 3] = g3
+        out_eps[n] = half_tan * (-dbeta[n, 1] - g1 + dbeta[n, 3] + g3)
+        out_eps22[n] = eq22_velocity_deviation(b0 + g0, b1 + g1, b3 + g3)
+        ok = ok and ball_radius * abs(g0) <= max_ratio * a0
+        ok = ok and ball_radius * abs(g1) <= max_ratio * a1
+        ok = ok and ball_radius * abs(g2) <= max_ratio * a2
+        ok = ok and ball_radius * abs(g3) <= max_ratio * a3
+        ok = ok and abs(dbeta[n, 0] + g0) <= max_angle and abs(dbeta[n, 1] + g1) <= max_angle
+        ok = ok and abs(dbeta[n, 2] + g2) <= max_angle and abs(dbeta[n, 3] + g3) <= max_angle
+        out_valid[n] = ok
+
+
+@jit
+def _point_one(beta, force):
+    """Point-contact model for one ball (v = 1). Returns eps, eps22, gamma[4], slider, margin."""
+    sx = (-1.0, 1.0, 1.0, -1.0)
+    sy = (-1.0, -1.0, 1.0, 1.0)
+    target = (0.0, 0.0, 1.0, 1.0)  # groove velocity along z at each contact
+    px = np.empty(4)
+    py = np.empty(4)
+    xx = np.empty(4)
+    xy = np.empty(4)
+    for i in range(4):
+        px[i] = sx[i] * np.sin(beta[i])
+        py[i] = sy[i] * np.cos(beta[i])
+        # local x = y_i x z with y_i = -p_i: x = (y_y, -y_x) = (-p_y, p_x)
+        xx[i] = -py[i]
+        xy[i] = px[i]
+    best = -1
+    best_margin = -np.inf
+    best_state = np.zeros(3)
+    for j in range(4):
+        # rolling at the three contacts k != j: v_B + w_x p_y - w_y p_x = target_k (R = 1)
+        ks = [k for k in range(4) if k != j]
+        k0, k1, k2 = ks[0], ks[1], ks[2]
+        det = det3(1.0, py[k0], -px[k0], 1.0, py[k1], -px[k1], 1.0, py[k2], -px[k2])
+        vb = det3(target[k0], py[k0], -px[k0], target[k1], py[k1], -px[k1],
+                  target[k2], py[k2], -px[k2]) / det
+        wx = det3(1.0, target[k0], -px[k0], 1.0, target[k1], -px[k1],
+                  1.0, target[k2], -px[k2]) / det
+        wy = det3(1.0, py[k0], target[k0], 1.0, py[k1], target[k1],
+                  1.0, py[k2], target[k2]) / det
+        slip = vb + wx * py[j] - wy * px[j] - target[j]
+        fj = -force[j] * np.sign(slip)  # friction / mu on the ball, along z
+        # equilibrium of the other three: sum f = 0, sum f x_i = 0 (x and y components)
+        det_e = det3(1.0, 1.0, 1.0, xx[k0], xx[k1], xx[k2], xy[k0], xy[k1], xy[k2])
+        r1, r2, r3 = -fj, -fj * xx[j], -fj * xy[j]
+        fk0 = det3(r1, 1.0, 1.0, r2, xx[k1], xx[k2], r3, xy[k1], xy[k2]) / det_e
+        fk1 = det3(1.0, r1, 1.0, xx[k0], r2, xx[k2], xy[k0], r3, xy[k2]) / det_e
+        fk2 = det3(1.0, 1.0, r1, xx[k0], xx[k1], r2, xy[k0], xy[k1], r3) / det_e
+        margin = min(
+            (force[k0] - abs(fk0)) / force[k0],
+            (force[k1] - abs(fk1)) / force[k1],
+            (force[k2] - abs(fk2)) / force[k2],
+        )
+        if margin > best_margin + 1e-12:
+            best_margin = margin
+            best = j
+            best_state[0] = vb
+            best_state[1] = wx
+            best_state[2] = wy
+    vb, wx, wy = best_state[0], best_state[1], best_state[2]
+    gamma = np.zeros(4)
+    # zero-velocity point of the sliding contact: on the circle, where v_z = target
+    j = best
+    amp_c = wx * sy[j]  # coefficient of cos(b)
+    amp_s = -wy * sx[j]  # coefficient of sin(b)
+    rhs = target[j] - vb
+    amp = np.hypot(amp_c, amp_s)
+    phase = np.arctan2(amp_s, amp_c)
+    ratio = min(1.0, max(-1.0, rhs / amp))
+    cand1 = phase + np.arccos(ratio)
+    cand2 = phase - np.arccos(ratio)
+    d1 = (cand1 - beta[j] + np.pi) % (2 * np.pi) - np.pi
+    d2 = (cand2 - beta[j] + np.pi) % (2 * np.pi) - np.pi
+    gamma[j] = d1 if abs(d1) < abs(d2) else d2
+    eps = 2.0 * vb - 1.0
+    return eps, gamma, best, best_margin
+
+
+@pjit
+def point_kernel(dbeta, force, nominal_angle, out_eps, out_eps22, out_gamma, out_slider,
+                 out_valid):
+    """Prior point-contact model: three contacts roll at their centres, one slides."""
+    for n in prange(dbeta.shape[0]):
+        beta = np.empty(4)
+        for i in range(4):
+            beta[i] = nominal_angle + dbeta[n, i]
+        eps, gamma, slider, margin = _point_one(beta, force[n])
+        out_eps[n] = eps
+        for i in range(4):
+            out_gamma[n, i] = gamma[i]
+        out_eps22[n] = eq22_velocity_deviation(beta[0] + gamma[0], beta[1] + gamma[1],
+                                               beta[3] + gamma[3])
+        out_slider[n] = slider
+        out_valid[n] = margin >= -1e-9 and min(min(force[n, 0], force[n, 1]),
+                                               min(force[n, 2], force[n, 3])) > 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# Public, validated API
+# --------------------------------------------------------------------------------------------
+def _as_ball_arrays(contact_angle_deviation, normal_force):
+    """Validate and broadcast inputs to C-contiguous float64 arrays of shape (n, 4)."""
+    try:
+        dbeta = np.asarray(contact_angle_deviation, dtype=np.float64)
+        force = np.asarray(normal_force, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"inputs must be numeric arrays: {exc}") from None
+    for name, arr in (("contact_angle_deviation", dbeta), ("normal_force", force)):
+        if arr.ndim == 0 or arr.shape[-1] != 4:
+            raise ValueError(f"{name} must have a last axis of length 4 (BL, BR, TR, TL), "
+                             f"got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite")
+    if np.any(force < 0):
+        raise ValueError("normal_force must be >= 0 (a zero force means loss of contact)")
+    try:
+        dbeta, force = np.broadcast_arrays(dbeta, force)
+    except ValueError:
+        raise ValueError(f"contact_angle_deviation {dbeta.shape} and normal_force "
+                         f"{force.shape} do not broadcast") from None
+    shape = dbeta.shape[:-1]
+    dbeta = np.ascontiguousarray(dbeta.reshape(-1, 4))
+    force = np.ascontiguousarray(force.reshape(-1, 4))
+    return dbeta, force, shape
+
+
+def eq24(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1) -> VelocityResult:
+    """Velocity deviation from Eq. (24) of [Lin2018] (paired diagonal forces).
+
+    epsilon = tan(b0)/2 [(-db_BL + db_TR) F_1^(2/3) + (-db_BR + db_TL) F_2^(2/3)]
+              / (F_1^(2/3) + F_2^(2/3)),
+    with F_1 = (F_BL + F_TR)/2 and F_2 = (F_BR + F_TL)/2 (ERRATA 9 for the factor). With
+    Table 2's loading this is Eq. (26) (ERRATA 2 for its exponent).
+
+    Parameters
+    ----------
+    contact_angle_deviation : array_like, shape (..., 4)
+        dbeta_i [rad], BL, BR, TR, TL.
+    normal_force : array_like, shape (..., 4)
+        F_i [N].
+    bearing : Bearing
+        Only ``nominal_contact_angle`` is used.
+
+    Returns
+    -------
+    VelocityResult
+        ``valid`` is False where a force is zero, the diagonal force ratio is below
+        ``MIN_DIAGONAL_FORCE_RATIO`` or |dbeta_i| exceeds ``MAX_ANGLE_SUM``.
+    """
+    dbeta, force, shape = _as_ball_arrays(contact_angle_deviation, normal_force)
+    eps = np.empty(len(dbeta))
+    valid = np.empty(len(dbeta), dtype=np.bool_)
+    eq24_kernel(dbeta, force, bearing.nominal_contact_angle, MIN_DIAGONAL_FORCE_RATIO,
+                MAX_ANGLE_SUM, eps, valid)
+    return VelocityResult(eps.reshape(shape), valid.reshape(shape))
+
+
+def analytic(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
+             k_f: float = K_F_PAPER) -> VelocityResult:
+    """The improved analytical model with four distinct forces ([Lin2018] Eqs. 17-23).
+
+    Solves, per ball, the linear friction law (17), the three equilibrium rows of (18) with
+    the spin moments at their pure-spin value (14) and the physical sign (ERRATA 8), and the
+    linearised constraint (21) for dgamma_i. epsilon is Eq. (23) with tan(b0)/2 (ERRATA 9);
+    the exact Eq. (22) with the same dgamma is returned as ``velocity_deviation_eq22``.
+    a_i = a(F_i) from :mod:`tolsim.physics.hertz`. mu cancels.
+
+    Parameters
+    ----------
+    contact_angle_deviation : array_like, shape (..., 4)
+        dbeta_i [rad].
+    normal_force : array_like, shape (..., 4)
+        F_i [N].
+    bearing : Bearing
+        Geometry and material (for a_i).
+    k_f : float
+        Linear friction slope [-]; the paper's -1.38 by default.
+
+    Returns
+    -------
+    VelocityResult
+        ``valid`` is False where a force is zero, |c_i/a_i| > ``MAX_ZERO_VELOCITY_RATIO`` or
+        |dbeta_i + dgamma_i| > ``MAX_ANGLE_SUM`` at any contact.
+    """
+    if not (np.isfinite(k_f) and k_f < 0):
+        raise ValueError(f"k_f = {k_f!r} must be negative")
+    dbeta, force, shape = _as_ball_arrays(contact_angle_deviation, normal_force)
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    n = len(dbeta)
+    eps, eps22 = np.empty(n), np.empty(n)
+    gamma = np.empty((n, 4))
+    valid = np.empty(n, dtype=np.bool_)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        analytic_kernel(dbeta, force, bearing.nominal_contact_angle, bearing.ball_radius,
+                        hc.semi_major_coefficient, hc.elliptic_e, k_f,
+                        MAX_ZERO_VELOCITY_RATIO, MAX_ANGLE_SUM, eps, eps22, gamma, valid)
+    return VelocityResult(eps.reshape(shape), valid.reshape(shape),
+                          gamma.reshape(shape + (4,)), eps22.reshape(shape))
+
+
+def point(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1) -> VelocityResult:
+    """The authors' prior point-contact model (ref. [11] of [Lin2018]; Fig. 7(b)).
+
+    Three contacts roll at their centres (dgamma = 0); the fourth slides, with Coulomb
+    friction mu F opposing its slip. The sliding contact is the one for which the three
+    sticking friction forces that balance it (z force and the two moments, point contacts,
+    no spin moment) stay inside their friction cones, |f_k| <= mu F_k; among several, the
+    one with the largest margin; if none, the least violating, flagged invalid. epsilon
+    follows from the rolling constraints (equivalent to Eq. (22) with three dgamma = 0).
+
+    Returns
+    -------
+    VelocityResult
+        ``extra["sliding_contact"]`` holds the index (0..3, BL, BR, TR, TL) of the sliding
+        contact.
+    """
+    dbeta, force, shape = _as_ball_arrays(contact_angle_deviation, normal_force)
+    n = len(dbeta)
+    eps, eps22 = np.empty(n), np.empty(n)
+    gamma = np.empty((n, 4))
+    slider = np.empty(n, dtype=np.int64)
+    valid = np.empty(n, dtype=np.bool_)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        point_kernel(dbeta, force, bearing.nominal_contact_angle, eps, eps22, gamma, slider,
+                     valid)
+    return VelocityResult(eps.reshape(shape), valid.reshape(shape), gamma.reshape(shape + (4,)),
+                          eps22.reshape(shape), {"sliding_contact": slider.reshape(shape)})
