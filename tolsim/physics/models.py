@@ -14,9 +14,21 @@ MODELS = {
 }
 
 
-def register(name, func):
+#: What ``valid == False`` means for each model (shown to users next to the flag).
+VALIDITY_NOTES = {
+    "eq24": "outside Eq. (24)'s regime: a zero force, diagonal force ratio < 0.25 or "
+            "|dbeta| > 3 deg",
+    "analytic": "outside the linearised model's regime: a zero force, |c/a| > 0.5 or "
+                "|dbeta + dgamma| > 3 deg at some contact",
+    "point": "point model undetermined: no sliding contact keeps the others inside their "
+             "friction cones, or two candidates tie (equal diagonal forces)",
+}
+
+
+def register(name, func, validity_note=""):
     """Add a model to the registry (used by modules that are imported lazily)."""
     MODELS[name] = func
+    VALIDITY_NOTES[name] = validity_note
     return func
 
 

@@ -1,0 +1,79 @@
+"""``tolsim ball``: JSON contract, defaults and one-line errors with exit code 2."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tolsim.cli import main
+
+
+def run_cli(*args):
+    proc = subprocess.run([sys.executable, "-m", "tolsim", *args], capture_output=True,
+                          text=True, timeout=300)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def test_default_is_the_paper_case(capsys):
+    # Defaults: Lin2018 Table 1 and Table 2 case (a), ball 1 (theta = 2 deg, rho = -0.6):
+    # the derived formula gives +0.75 % (0.005 pp).
+    assert main(["ball", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("velocity_deviation", "ball_velocity_m_s", "normal_force_n", "contact_angle_deg",
+                "zero_velocity_offset_deg", "model", "warnings"):
+        assert key in out
+    assert out["velocity_deviation"] * 100 == pytest.approx(0.75, abs=0.005)
+    assert out["ball_velocity_m_s"] == pytest.approx((1 + out["velocity_deviation"]) * 5e-3)
+    assert out["contact_angle_deg"] == pytest.approx([43.0, 47.0, 45.0, 45.0])
+    assert len(out["zero_velocity_offset_deg"]) == 4
+    assert out["warnings"] == []
+
+
+def test_eq24_json_has_no_offsets(capsys):
+    assert main(["ball", "--model", "eq24", "--dbeta-deg", "-2", "2", "0", "0",
+                 "--load-n", "120", "200", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["zero_velocity_offset_deg"] is None
+    assert out["velocity_deviation"] * 100 == pytest.approx(-0.75, abs=0.005)  # Table 2 ball 2
+
+
+def test_forces_given_directly(capsys):
+    assert main(["ball", "--forces-n", "200", "60", "190", "70", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["normal_force_n"] == [200.0, 60.0, 190.0, 70.0]
+
+
+def test_point_model_reports_sliding_contact(capsys):
+    assert main(["ball", "--model", "point", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["sliding_contact"] in ("BR", "TL")
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["--dbeta-deg", "1", "2", "3"], "--dbeta-deg"),  # three deviations
+        (["--forces-n", "100", "-5", "100", "100"], "--forces-n"),  # negative force
+        (["--load-n", "200", "200"], "--load-n"),  # N_x >= N_y: a force is not positive
+        (["--model", "nonsense"], "--model"),  # unknown model
+        (["--forces-n", "1", "2", "3", "4", "--load-n", "1", "2"], "not allowed"),
+        (["--dbeta-deg", "x", "0", "0", "0"], "--dbeta-deg"),
+        (["--velocity-mm-s", "-3"], "--velocity-mm-s"),
+    ],
+)
+def test_bad_arguments_one_line_exit_2(args, needle):
+    code, out, err = run_cli("ball", *args)
+    assert code == 2
+    assert out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("tolsim ball: error:")
+    assert needle in lines[0]
+    assert "Traceback" not in err
+
+
+def test_help_teaches():
+    code, out, _ = run_cli("ball", "--help")
+    assert code == 0
+    for word in ("BL BR TR TL", "--load-n", "Examples", "eq24", "analytic", "point"):
+        assert word in out

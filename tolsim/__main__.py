@@ -1,0 +1,5 @@
+import sys
+
+from tolsim.cli import main
+
+sys.exit(main())

@@ -1,0 +1,93 @@
+"""The ``tolsim`` command line: a thin layer over the Python API.
+
+Each subcommand lives in its own module exposing ``add_parser(subparsers)`` and
+``run(args) -> int``. Bad input raises :class:`UsageError` (or goes through the parser), which
+prints one line ``tolsim <command>: error: <message>`` on stderr and exits with code 2.
+"""
+
+import argparse
+import importlib
+import sys
+
+#: subcommand -> module (imported lazily so ``tolsim ball`` never imports xarray/matplotlib)
+SUBCOMMANDS = {
+    "ball": "tolsim.cli.ball",
+    "run": "tolsim.cli.run",
+    "paper": "tolsim.cli.paper",
+    "report": "tolsim.cli.report",
+}
+
+SUMMARIES = {
+    "ball": "velocity deviation of one ball from its contact angles and forces",
+    "run": "Monte Carlo tolerance study from a TOML config to a netCDF result",
+    "paper": "reproduce the source paper's figures and Table 2",
+    "report": "HTML report of a study result file",
+}
+
+
+class UsageError(Exception):
+    """Bad user input: reported as one line and exit code 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line and exit code 2 (no usage dump)."""
+
+    def error(self, message):
+        raise UsageError(message)
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    pass
+
+
+def build_parser(argv=()):
+    """The top-level parser; only the subcommand named in ``argv`` is imported."""
+    from tolsim import __version__
+
+    parser = Parser(
+        prog="tolsim",
+        description=(
+            "tolsim: will the balls of a four-point-contact linear guide run into each other, "
+            "how likely, and how soon?"
+        ),
+        epilog="Run 'tolsim COMMAND --help' for the options and examples of a command.",
+        formatter_class=_HelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"tolsim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    requested = next((a for a in argv if not a.startswith("-")), None)
+    for name, module in SUBCOMMANDS.items():
+        # Only import the module of the command that runs (keeps start-up light); the others
+        # still appear in the listing.
+        if name == requested:
+            importlib.import_module(module).add_parser(sub, formatter_class=_HelpFormatter)
+        else:
+            sub.add_parser(name, help=SUMMARIES[name], add_help=False)
+    return parser
+
+
+def main(argv=None):
+    """Entry point of the ``tolsim`` console script."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    requested = next((a for a in argv if not a.startswith("-")), None)
+    command = f"tolsim {requested}" if requested in SUBCOMMANDS else "tolsim"
+    try:
+        parser = build_parser(argv)
+        args = parser.parse_args(argv)
+        command = f"tolsim {args.command}" if args.command else "tolsim"
+        if args.command is None:
+            parser.print_help()
+            return 2
+        module = importlib.import_module(SUBCOMMANDS[args.command])
+        return module.run(args)
+    except UsageError as exc:
+        msg = " ".join(str(exc).split())  # always one line
+        print(f"{command}: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
