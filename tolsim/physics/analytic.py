@@ -33,6 +33,7 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import jit, pjit
+from tolsim.physics._fastmath import cbrt_nonnegative
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing
 from tolsim.physics.hertz import hertz_constants
 
@@ -81,27 +82,47 @@ class VelocityResult:
 # Kernels: typed loops, no checks, outputs written into preallocated arrays.
 # --------------------------------------------------------------------------------------------
 @pjit
-def eq24_kernel(dbeta, force, nominal_angle, min_ratio, max_angle, out_eps, out_valid):
-    """Eq. (24) with F_1 = (F_BL + F_TR)/2 and F_2 = (F_BR + F_TL)/2.
+def _diagonal_force_ratio_squared(force, out):
+    """(min(F_1, F_2) / max(F_1, F_2))^2 per ball (pass 1 of Eq. 24)."""
+    for n in prange(force.shape[0]):
+        f1 = force[n, 0] + force[n, 2]
+        f2 = force[n, 1] + force[n, 3]
+        q = min(f1, f2) / max(f1, f2)
+        out[n] = q * q
 
-    Written with the ratio r = (F_small/F_large)^(2/3): one cube root per ball, no overflow.
-    """
+
+@pjit
+def _eq24_finish(dbeta, force, ratio, nominal_angle, min_ratio, max_angle, out_eps,
+                 out_valid):
+    """Eq. (24) given r = (F_small/F_large)^(2/3) per ball (pass 3)."""
     half_tan = 0.5 * np.tan(nominal_angle)
     for n in prange(dbeta.shape[0]):
-        f1 = 0.5 * (force[n, 0] + force[n, 2])
-        f2 = 0.5 * (force[n, 1] + force[n, 3])
+        f1 = force[n, 0] + force[n, 2]
+        f2 = force[n, 1] + force[n, 3]
         d1 = dbeta[n, 2] - dbeta[n, 0]  # -dbeta_BL + dbeta_TR, weighted by F_1^(2/3)
         d2 = dbeta[n, 3] - dbeta[n, 1]  # -dbeta_BR + dbeta_TL, weighted by F_2^(2/3)
-        big = max(f1, f2)
-        q = min(f1, f2) / big
-        r = np.cbrt(q * q)
+        r = ratio[n]
         w1 = 1.0 if f1 >= f2 else r
         w2 = r if f1 >= f2 else 1.0
         out_eps[n] = half_tan * (w1 * d1 + w2 * d2) / (1.0 + r)
         smallest = min(min(force[n, 0], force[n, 1]), min(force[n, 2], force[n, 3]))
         largest_angle = max(max(abs(dbeta[n, 0]), abs(dbeta[n, 1])),
                             max(abs(dbeta[n, 2]), abs(dbeta[n, 3])))
+        q = min(f1, f2) / max(f1, f2)
         out_valid[n] = (smallest > 0.0) & (q >= min_ratio) & (largest_angle <= max_angle)
+
+
+def eq24_kernel(dbeta, force, nominal_angle, min_ratio, max_angle, out_eps, out_valid):
+    """Eq. (24) with F_1 = (F_BL + F_TR)/2 and F_2 = (F_BR + F_TL)/2; unchecked fast path.
+
+    Written with the ratio r = (F_small/F_large)^(2/3): one cube root per ball, no overflow,
+    evaluated for all balls at once with the vectorised cube root (three passes).
+    ``dbeta`` and ``force`` are C-contiguous (n, 4) float64; ``out_eps`` (n,) float64 doubles
+    as scratch.
+    """
+    _diagonal_force_ratio_squared(force, out_eps)
+    ratio = cbrt_nonnegative(out_eps)
+    _eq24_finish(dbeta, force, ratio, nominal_angle, min_ratio, max_angle, out_eps, out_valid)
 
 
 @pjit
@@ -137,12 +158,27 @@ def eq22_velocity_deviation(b_bl, b_br, b_tl):
     return 2.0 * num / (num + np.sin(b_bl + b_tl) + np.sin(b_br - b_tl)) - 1.0
 
 
-@pjit
 def analytic_kernel(
     dbeta, force, nominal_angle, ball_radius, semi_major_coefficient, elliptic_e, k_f,
     max_ratio, max_angle, out_eps, out_eps22, out_gamma, out_valid,
 ):
-    """Solve Eqs. (17), (18) [ERRATA 8 sign], (21) for dgamma_i; epsilon from (23) and (22)."""
+    """Solve Eqs. (17), (18) [ERRATA 8 sign], (21) for dgamma_i; unchecked fast path.
+
+    ``dbeta``, ``force``: C-contiguous (n, 4) float64. The cube roots F_i^(1/3) (for a_i) are
+    taken for all balls at once with the vectorised cube root, then the per-ball solve runs.
+    """
+    force_cbrt = cbrt_nonnegative(force)
+    _analytic_solve(dbeta, force, force_cbrt, nominal_angle, ball_radius,
+                    semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, out_eps,
+                    out_eps22, out_gamma, out_valid)
+
+
+@pjit
+def _analytic_solve(
+    dbeta, force, force_cbrt, nominal_angle, ball_radius, semi_major_coefficient, elliptic_e,
+    k_f, max_ratio, max_angle, out_eps, out_eps22, out_gamma, out_valid,
+):
+    """Per-ball closed-form solve of Eqs. (17), (18), (21); epsilon from (23) and (22)."""
     half_tan = 0.5 * np.tan(nominal_angle)
     for n in prange(dbeta.shape[0]):
         # Contact angles and axes. x_i, y_i components (global x, y), order BL, BR, TR, TL.
@@ -162,10 +198,10 @@ def analytic_kernel(
         # inward normals y_i: BL (s,c) BR (-s,c) TR (-s,-c) TL (s,-c)
         f0, f1, f2, f3 = force[n, 0], force[n, 1], force[n, 2], force[n, 3]
         ok = min(min(f0, f1), min(f2, f3)) > 0.0
-        a0 = semi_major_coefficient * np.cbrt(f0)
-        a1 = semi_major_coefficient * np.cbrt(f1)
-        a2 = semi_major_coefficient * np.cbrt(f2)
-        a3 = semi_major_coefficient * np.cbrt(f3)
+        a0 = semi_major_coefficient * force_cbrt[n, 0]
+        a1 = semi_major_coefficient * force_cbrt[n, 1]
+        a2 = semi_major_coefficient * force_cbrt[n, 2]
+        a3 = semi_major_coefficient * force_cbrt[n, 3]
         # u_i = q_i dgamma_i = friction force / mu; q_i = k_f R F_i / a_i * g_i, g = (-,-,+,+)
         q0 = -k_f * ball_radius * f0 / a0
         q1 = -k_f * ball_radius * f1 / a1
