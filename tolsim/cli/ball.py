@@ -6,6 +6,7 @@ from ``--forces-n`` or from the top-groove load ``--load-n NX NY``.
 
 import json
 import math
+import sys
 
 import numpy as np
 
@@ -30,11 +31,27 @@ Models:
   analytic  the improved model: Eqs. (17), (18), (21) solved for the zero-velocity offsets
             dgamma_i with four distinct forces; epsilon from Eq. (23), Eq. (22) alongside.
   point     the authors' prior point-contact model (three contacts roll, one slides).
+  full      the comprehensive friction model: Coulomb friction integrated over the four
+            Hertz ellipses, equilibrium solved without linearisation (--surface).
 
 Loads: --forces-n gives the four normal forces directly; --load-n NX NY gives the load on the
 top groove per ball (N_x toward +x, i.e. toward BR/TR; N_y pressing down), turned into forces
 with the paper's paired approximation F_BL = F_TR = sqrt(2)/2 (N_y - N_x),
 F_BR = F_TL = sqrt(2)/2 (N_y + N_x) (at 45 deg).
+
+Static contact (--static): 'paired' (default) is the paper's approximation above; 'solved'
+computes the loaded contact angles and forces of the ball between the two grooves (exact
+Hertz contact, tolsim.physics.static) from --load-n and the geometric errors; the angles and
+forces that enter the velocity model are reported. Geometric errors can replace --dbeta-deg:
+--bottom-rotation-deg / --top-rotation-deg turn a whole groove profile about the nominal ball
+centre (counter-clockwise positive, x right, y up: dbeta_BL = -theta, dbeta_BR = +theta for the
+bottom, dbeta_TR = -theta, dbeta_TL = +theta for the top, as in Fig. 6; equal rotations are
+Table 2 case (b)); --arc-offset-um moves each flank's arc centre along its contact line
+(+ opens clearance) and --arc-offset-tangential-um across it (+ towards larger beta_i,
+0.143 deg per um); --ball-oversize-um is the ball diameter deviation. With 'paired' the
+geometric (rigid) contact angles of those errors are used. With 'solved' and no geometric
+errors, --dbeta-deg is read as rigid contact-angle deviations, realised by turning each
+flank about the ball centre.
 
 Defaults are the paper's Table 1 (R_B = 5 mm, f = 0.54, beta_0 = 45 deg, E = 210 GPa,
 nu = 0.28, mu = 0.1, v = 10 mm/s); --config FILE takes the [bearing] and [motion] sections of
@@ -44,6 +61,8 @@ Examples:
   tolsim ball                                     # Table 2, case (a), ball 1
   tolsim ball --dbeta-deg -2 2 0 0 --load-n 120 200 --json
   tolsim ball --model analytic --dbeta-deg -1 1 0.5 0 --forces-n 150 60 140 55
+  tolsim ball --static solved                     # case (a), ball 1, loaded angles
+  tolsim ball --static solved --bottom-rotation-deg 2 --load-n 120 200 --json
 """
 
 #: The paper's case study (Table 2, case (a), ball 1): theta = 2 deg, rho = -0.6, N_y = 200 N.
@@ -60,9 +79,10 @@ def add_parser(subparsers, formatter_class=None):
     )
     p.add_argument("--model", default="analytic", choices=sorted(MODELS),
                    help="velocity model")
-    p.add_argument("--dbeta-deg", nargs=4, type=float, metavar=CONTACTS,
-                   default=list(DEFAULT_DBETA_DEG),
-                   help="contact-angle deviations dbeta_i [deg], BL BR TR TL")
+    p.add_argument("--dbeta-deg", nargs=4, type=float, metavar=CONTACTS, default=None,
+                   help="contact-angle deviations dbeta_i [deg], BL BR TR TL (default: "
+                        f"{' '.join(f'{d:g}' for d in DEFAULT_DBETA_DEG)}, unless geometric "
+                        "errors are given)")
     loads = p.add_mutually_exclusive_group()
     loads.add_argument("--forces-n", nargs=4, type=float, metavar=CONTACTS,
                        help="normal contact forces F_i [N], BL BR TR TL")
@@ -72,10 +92,120 @@ def add_parser(subparsers, formatter_class=None):
     p.add_argument("--velocity-mm-s", type=float, default=None,
                    help=f"top-groove velocity v [mm/s] (default {TABLE1_GROOVE_VELOCITY*1e3:g}, "
                         "or the config's)")
+    p.add_argument("--surface", choices=("planar", "curved"), default=None,
+                   help="contact surface of --model full: the paper's plane (default) or the "
+                        "deformed-surface arc of radius 2fD/(2f+1)")
     p.add_argument("--config", metavar="FILE",
                    help="study config (TOML) whose [bearing] and [motion] sections to use")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_static_arguments(p)
     return p
+
+
+#: Geometric-error options (argparse dest) -> (flag, unit, largest magnitude accepted)
+STATIC_ERROR_OPTIONS = {
+    "bottom_rotation_deg": ("--bottom-rotation-deg", "deg", 22.5),
+    "top_rotation_deg": ("--top-rotation-deg", "deg", 22.5),
+    "arc_offset_um": ("--arc-offset-um", "um", 50.0),
+    "arc_offset_tangential_um": ("--arc-offset-tangential-um", "um", 50.0),
+    "ball_oversize_um": ("--ball-oversize-um", "um", 50.0),
+}
+
+
+def _add_static_arguments(p):
+    """Options of the static contact model (tolsim issue 3)."""
+    g = p.add_argument_group("static contact and geometric errors")
+    g.add_argument("--static", choices=("paired", "solved"), default="paired",
+                   help="forces (and angles) from --load-n: the paper's paired approximation, "
+                        "or the solved static equilibrium with Hertz contact")
+    g.add_argument("--bottom-rotation-deg", type=float, metavar="THETA",
+                   help="rotation of the bottom (rail) groove profile about the nominal ball "
+                        "centre [deg], ccw positive: dbeta_BL = -theta, dbeta_BR = +theta")
+    g.add_argument("--top-rotation-deg", type=float, metavar="THETA",
+                   help="rotation of the top (carriage) groove profile [deg], ccw positive: "
+                        "dbeta_TR = -theta, dbeta_TL = +theta")
+    g.add_argument("--arc-offset-um", nargs=4, type=float, metavar=CONTACTS,
+                   help="arc-centre offset of each flank along its contact line [um], "
+                        "+ moves the flank away from the ball (clearance)")
+    g.add_argument("--arc-offset-tangential-um", nargs=4, type=float, metavar=CONTACTS,
+                   help="arc-centre offset of each flank across its contact line [um], "
+                        "+ towards larger beta_i (about 0.143 deg per um for Table 1)")
+    g.add_argument("--ball-oversize-um", type=float, metavar="DD",
+                   help="ball diameter deviation [um], + = oversize (None: 0, a nominal ball)")
+
+
+def _angles_and_forces(args, bearing):
+    """Contact-angle deviations [deg], forces [N], force source, extra output, warnings."""
+    given = {k: getattr(args, k) for k in STATIC_ERROR_OPTIONS if getattr(args, k) is not None}
+    if given and args.dbeta_deg is not None:
+        raise UsageError("give either --dbeta-deg or geometric errors ("
+                         + ", ".join(STATIC_ERROR_OPTIONS[k][0] for k in given) + "), not both")
+    if args.static == "solved" and args.forces_n is not None:
+        raise UsageError("--static solved computes the forces from --load-n; drop --forces-n")
+    dbeta_deg = np.array(DEFAULT_DBETA_DEG if args.dbeta_deg is None else args.dbeta_deg,
+                         dtype=float)
+    if not np.all(np.isfinite(dbeta_deg)):
+        raise UsageError("--dbeta-deg must be four finite angles in degrees")
+    if not given and args.static == "paired":
+        forces, source = _forces(args, bearing)
+        return dbeta_deg, forces, source, {"contact_angle_source": "given"}, []
+    for key, value in given.items():
+        flag, unit, limit = STATIC_ERROR_OPTIONS[key]
+        arr = np.atleast_1d(np.asarray(value, dtype=float))
+        if not (np.all(np.isfinite(arr)) and np.all(np.abs(arr) <= limit)):
+            raise UsageError(f"{flag} must be finite and within +/-{limit:g} {unit}")
+    nx, ny = args.load_n if args.load_n is not None else DEFAULT_LOAD_N
+    if not (math.isfinite(nx) and math.isfinite(ny)):
+        raise UsageError("--load-n must be two finite numbers")
+
+    from tolsim.physics.static import GrooveErrors, solve_static
+
+    dist = bearing.groove_radius - bearing.ball_radius
+    normal = np.array(given.get("arc_offset_um", [0.0] * 4)) * 1e-6
+    tangential = np.array(given.get("arc_offset_tangential_um", [0.0] * 4)) * 1e-6
+    if not given:  # rigid dbeta_i realised by turning each flank about the ball centre
+        dbeta = np.deg2rad(dbeta_deg)
+        tangential = dist * np.sin(dbeta)
+        normal = dist * (1.0 - np.cos(dbeta))
+    errors = GrooveErrors(
+        arc_centre_offset_normal=normal,
+        arc_centre_offset_tangential=tangential,
+        bottom_rotation=np.deg2rad(given.get("bottom_rotation_deg", 0.0)),
+        top_rotation=np.deg2rad(given.get("top_rotation_deg", 0.0)),
+        ball_oversize=given.get("ball_oversize_um", 0.0) * 1e-6,
+    )
+    solved = args.static == "solved"
+    sol = solve_static(nx, ny, errors, bearing, rigid=not solved)
+    if not bool(sol.converged):
+        raise UsageError(f"--load-n {nx:g} {ny:g}: no static equilibrium with compressive "
+                         "contact forces (the load must press the top groove down)")
+    dbeta_deg = np.rad2deg(sol.contact_angle_deviation)
+    if solved:
+        forces, source = sol.normal_force, "solved"
+    else:
+        forces, source = _forces(args, bearing)
+    warnings = []
+    if solved and not bool(sol.four_point):
+        warnings.append(f"static solution in {int(sol.contact_count)}-point contact (a flank "
+                        "carries no force): the analytical velocity models assume four-point "
+                        "contact")
+    extra = {
+        "contact_angle_source": "solved" if solved else "geometric",
+        "static": {
+            "mode": args.static,
+            "load_n": [float(nx), float(ny)],
+            "converged": bool(sol.converged),
+            "four_point": bool(sol.four_point),
+            "contact_count": int(sol.contact_count),
+            "newton_iterations": int(sol.iterations),
+            "residual_n": float(sol.residual),
+            "approach_um": [float(a) * 1e6 for a in sol.approach],
+            "ball_displacement_um": [float(a) * 1e6 for a in sol.ball_displacement],
+            "groove_displacement_um": [float(a) * 1e6 for a in sol.groove_displacement],
+            "errors": {STATIC_ERROR_OPTIONS[k][0].lstrip("-"): v for k, v in given.items()},
+        },
+    }
+    return dbeta_deg, forces, source, extra, warnings
 
 
 def _bearing_and_velocity(args):
@@ -119,16 +249,18 @@ def _forces(args, bearing):
 
 def evaluate(args):
     """Run the model for the parsed arguments; returns the JSON-ready dict."""
-    dbeta_deg = np.array(args.dbeta_deg, dtype=float)
-    if not np.all(np.isfinite(dbeta_deg)):
-        raise UsageError("--dbeta-deg must be four finite angles in degrees")
     bearing, velocity = _bearing_and_velocity(args)
-    forces, force_source = _forces(args, bearing)
+    dbeta_deg, forces, force_source, static_out, warnings = _angles_and_forces(args, bearing)
     dbeta = np.deg2rad(dbeta_deg)
     model = MODELS[args.model]
-    result = model(dbeta, forces, bearing)
+    # options only the full friction model takes (tolsim.physics.friction.full)
+    options = {}
+    if args.model == "full":
+        options = {"groove_velocity": velocity, "surface": args.surface or "planar"}
+    elif args.surface is not None:
+        raise UsageError("--surface applies to --model full only")
+    result = model(dbeta, forces, bearing, **options)
     eps = float(result.velocity_deviation)
-    warnings = []
     if not bool(result.valid):
         warnings.append(f"{VALIDITY_NOTES.get(args.model, 'not valid')}: treat epsilon "
                         "with caution")
@@ -149,10 +281,25 @@ def evaluate(args):
         "valid": bool(result.valid),
         "warnings": warnings,
     }
+    out.update(static_out)
     if result.velocity_deviation_eq22 is not None:
         out["velocity_deviation_eq22"] = float(result.velocity_deviation_eq22)
     if "sliding_contact" in result.extra:
         out["sliding_contact"] = CONTACTS[int(result.extra["sliding_contact"])]
+    if args.model == "full":
+        out.update({
+            "surface": options["surface"],
+            "converged": bool(result.converged),
+            "residual": float(result.residual),
+            "iterations": int(result.iterations),
+            "angular_velocity_rad_s": [float(w) for w in result.angular_velocity],
+            "contact_offset_ratio": [float(c) for c in result.contact_offset_ratio],
+            "spin_to_roll": [float(c) for c in result.spin_to_roll],
+            "drag_force_n": float(result.drag_force),
+        })
+        if not out["converged"]:
+            warnings.append(f"full model did not converge: residual {out['residual']:.3g} "
+                            f"after {out['iterations']} iterations")
     return out
 
 
@@ -173,11 +320,24 @@ def _text(out):
         lines.append(f"epsilon, Eq. (22)     {100 * out['velocity_deviation_eq22']:+.4f} %")
     if "sliding_contact" in out:
         lines.append(f"sliding contact       {out['sliding_contact']}")
+    if "drag_force_n" in out:
+        lines.append(f"drag force            {out['drag_force_n']:.6g} N ({out['surface']} "
+                     f"contact, residual {out['residual']:.2g})")
+        lines.append("c/a                   "
+                     + "  ".join(f"{c:9.4f}" for c in out["contact_offset_ratio"]))
+    if "static" in out:
+        st = out["static"]
+        lines.append(f"static contact        {st['mode']}: {st['contact_count']} loaded flanks, "
+                     f"{st['newton_iterations']} Newton steps, approach [um] "
+                     + " ".join(f"{a:.3f}" for a in st["approach_um"]))
     lines += [f"warning: {w}" for w in out["warnings"]]
     return "\n".join(lines)
 
 
 def run(args):
     out = evaluate(args)
+    if out.get("converged") is False:
+        for w in out["warnings"]:
+            print(f"tolsim ball: warning: {w}", file=sys.stderr)
     print(json.dumps(out, indent=2) if args.json else _text(out))
     return 0

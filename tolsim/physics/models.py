@@ -5,12 +5,13 @@ Every entry has the signature ``model(contact_angle_deviation, normal_force, bea
 a model by name from here, never with an if/elif chain.
 """
 
-from tolsim.physics import analytic
+from tolsim.physics import analytic, friction
 
 MODELS = {
     "eq24": analytic.eq24,
     "analytic": analytic.analytic,
     "point": analytic.point,
+    "full": friction.full,
 }
 
 
@@ -22,6 +23,7 @@ VALIDITY_NOTES = {
                 "|dbeta + dgamma| > 3 deg at some contact",
     "point": "point model undetermined: no sliding contact keeps the others inside their "
              "friction cones, or two candidates tie (equal diagonal forces)",
+    "full": "full friction model did not converge (or a contact carries no force)",
 }
 
 

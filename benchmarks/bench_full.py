@@ -1,0 +1,96 @@
+"""Throughput of the full friction model (tolsim.physics.friction.full).
+
+Prints, measured in this run:
+
+* solves per second of the batch API on 1 thread and on all cores (random balls of the
+  Fig. 7 range: |dbeta| <= 2 deg, |rho| <= 0.6, paired forces), planar and curved;
+* the median single-ball solve time (one call per ball, one thread) at the default grid;
+* Newton iterations (median, max) and the converged fraction;
+* the same ball solved by a straightforward SciPy reference (scipy.integrate.cubature of
+  the friction over each ellipse, scipy.optimize.root on the equilibrium; the twin of
+  tests/test_friction.py) and the speed ratio.
+
+Run: ``python benchmarks/bench_full.py [--balls N]``.
+"""
+
+import argparse
+import pathlib
+import sys
+import time
+
+import numba
+import numpy as np
+
+from tolsim.physics.friction import full
+from tolsim.physics.geometry import paired_forces
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+from test_friction import reference_solve  # noqa: E402  (the SciPy twin lives with the tests)
+
+
+def random_balls(n, seed=2018):
+    rng = np.random.default_rng(np.random.SeedSequence(seed))
+    theta = rng.uniform(-np.deg2rad(2.0), np.deg2rad(2.0), (n, 4))
+    rho = rng.uniform(-0.6, 0.6, n)
+    return theta, paired_forces(rho * 200.0, 200.0)
+
+
+def timed(func, *args, repeat=3, **kwargs):
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = func(*args, **kwargs)
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--balls", type=int, default=20000)
+    parser.add_argument("--reference-balls", type=int, default=1)
+    args = parser.parse_args(argv)
+
+    dbeta, force = random_balls(args.balls)
+    full(dbeta[:2], force[:2])  # compile / load the cache
+    full(dbeta[:2], force[:2], surface="curved")
+    cores = numba.config.NUMBA_NUM_THREADS
+    print(f"full model, {args.balls} random balls (|dbeta| <= 2 deg, |rho| <= 0.6), "
+          f"{cores} cores")
+    rates = {}
+    for surface in ("planar", "curved"):
+        n = args.balls if surface == "planar" else max(1, args.balls // 10)
+        for threads in sorted({1, cores}):
+            numba.set_num_threads(threads)
+            dt, res = timed(full, dbeta[:n], force[:n], surface=surface)
+            rates[surface, threads] = n / dt
+            print(f"  {surface:7s} {threads} thread(s): {n / dt:10.0f} solves/s   "
+                  f"iterations median {np.median(res.iterations):.0f} max "
+                  f"{res.iterations.max()}   converged {res.converged.mean():.4f}")
+    numba.set_num_threads(1)
+    singles = []
+    for k in range(min(500, args.balls)):
+        t0 = time.perf_counter()
+        full(dbeta[k], force[k])
+        singles.append(time.perf_counter() - t0)
+    median_single = float(np.median(singles))
+    print(f"  median single-ball call (planar, 1 thread, incl. Python overhead): "
+          f"{median_single * 1e3:.3f} ms")
+    numba.set_num_threads(cores)
+
+    # SciPy reference on a few balls
+    ref_times, errors = [], []
+    for k in range(args.reference_balls):
+        t0 = time.perf_counter()
+        vb, _ = reference_solve(dbeta[k], force[k], rtol=1e-8, xtol=1e-10)
+        ref_times.append(time.perf_counter() - t0)
+        errors.append(abs((2 * vb / 0.01 - 1) - float(full(dbeta[k], force[k])
+                                                       .velocity_deviation)))
+    ref_time = float(np.mean(ref_times))
+    print(f"  SciPy reference (cubature rtol 1e-8 + optimize.root): {ref_time:.2f} s/ball, "
+          f"max |d epsilon| vs full {max(errors):.1e}")
+    print(f"  speed-up vs SciPy reference: single call {ref_time / median_single:.0f}x, "
+          f"batch on {cores} cores {ref_time * rates['planar', cores]:.0f}x")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,155 @@
+"""Throughput and peak memory of the whole Monte Carlo study pipeline (tolsim issue 5).
+
+Pipeline per ball: block sampling (rail random fields, per-carriage and per-ball sources,
+gaps), the solved static contact model, the analytic epsilon kernel, propagation mode (a) and
+the streamed statistics; the study is ``configs/yaw_moment_tolerances.toml`` (10 balls per
+track) with the spot checks off. Each size runs in a fresh process (after a small warm-up run
+that loads or compiles the Numba kernels), which reports its wall time and its peak resident
+memory (``ru_maxrss``), so the memory of one size does not hide in another's.
+
+The baseline, measured in the same run, is the same pipeline with the two stages that tolsim
+compiles replaced by plain NumPy: the analytic model (Eqs. 17, 18 with ERRATA 8, 21, 23)
+solved as batched 4x4 systems with ``numpy.linalg.solve``, and mode (a) propagation with
+array operations.
+
+The paired static model (the paper's approximation, no solver) is timed as well, to separate
+the cost of the static solver from the rest of the pipeline.
+
+Run: ``python benchmarks/bench_study.py [--sizes 1e6 1e7] [--workers 1 2]
+[--static solved paired]``
+"""
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs" / "yaw_moment_tolerances.toml"
+
+
+def study(balls_total, static_model="solved"):
+    from tolsim.io.config import load_config
+
+    c = load_config(CONFIG)
+    c = replace(c, study=replace(c.study, spot_checks=0, static_model=static_model))
+    return c.with_overrides(samples=max(1, int(balls_total) // c.train.balls))
+
+
+def numpy_analytic(dbeta, force, bearing):
+    """Plain-NumPy analytic model: batched 4x4 solve for dgamma, epsilon from Eq. (23)."""
+    from tolsim.physics.geometry import FRICTION_SIGN, K_F_PAPER
+    from tolsim.physics.hertz import hertz_constants
+
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    r, b0 = bearing.ball_radius, bearing.nominal_contact_angle
+    beta = b0 + dbeta
+    s, c = np.sin(beta), np.cos(beta)
+    a = hc.semi_major_coefficient * np.cbrt(force)
+    q = K_F_PAPER * r * force / a * FRICTION_SIGN  # friction / mu per unit dgamma
+    xx = np.stack([c[:, 0], c[:, 1], -c[:, 2], -c[:, 3]], 1)  # local x axes (x comp.)
+    xy = np.stack([-s[:, 0], s[:, 1], s[:, 2], -s[:, 3]], 1)
+    m = 0.375 * hc.elliptic_e / r * force * a * np.array([1.0, -1.0, -1.0, 1.0])
+    rhs = np.zeros((len(beta), 4))
+    rhs[:, 1] = -(m[:, 0] * s[:, 0] - m[:, 1] * s[:, 1] - m[:, 2] * s[:, 2] + m[:, 3] * s[:, 3])
+    rhs[:, 2] = -(m[:, 0] * c[:, 0] + m[:, 1] * c[:, 1] - m[:, 2] * c[:, 2] - m[:, 3] * c[:, 3])
+    rhs[:, 3] = -(dbeta[:, 0] + dbeta[:, 3] - dbeta[:, 1] - dbeta[:, 2])
+    mat = np.empty((len(beta), 4, 4))
+    mat[:, 0] = q
+    mat[:, 1] = q * xx
+    mat[:, 2] = q * xy
+    mat[:, 3] = [1.0, -1.0, -1.0, 1.0]
+    gamma = np.linalg.solve(mat, rhs[..., None])[..., 0]
+    return 0.5 * np.tan(b0) * (-dbeta[:, 1] - gamma[:, 1] + dbeta[:, 3] + gamma[:, 3])
+
+
+def numpy_pipeline(config):
+    """Baseline: same sampling and static solver, NumPy velocity model and propagation."""
+    from tolsim.study.evaluate import STATIC_MODELS, groove_error_fields, loads_per_ball
+    from tolsim.study.sampling import error_values, n_blocks, sample_block
+
+    total = 0
+    for k in range(n_blocks(config.study.samples, config.study.block_size)):
+        b = sample_block(config, k)
+        values = error_values(config, b)
+        shape = b.initial_position.shape
+        nx, ny = loads_per_ball(config, shape)
+        errors = groove_error_fields(values, shape)
+        st = STATIC_MODELS["solved"](errors, nx.reshape(-1), ny.reshape(-1), config.bearing)
+        eps = numpy_analytic(st.contact_angle_deviation, st.normal_force, config.bearing)
+        eps = eps.reshape(shape)
+        rate = (eps[:, :-1] - eps[:, 1:]) * config.motion.groove_velocity / 2
+        with np.errstate(divide="ignore"):
+            t = np.where(rate > 0, b.initial_gap / rate, np.inf).min(axis=1)
+        total += np.count_nonzero(t <= config.motion.duration)
+    return total
+
+
+def child(balls_total, workers, baseline, static_model):
+    from tolsim.study.runner import run_study
+
+    c = study(balls_total, static_model)
+    run_study(c.with_overrides(samples=2048), workers=workers)  # load / compile kernels
+    start = time.perf_counter()
+    if baseline:
+        numpy_pipeline(c)
+    else:
+        run_study(c, workers=workers)
+    elapsed = time.perf_counter() - start
+    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    balls = c.study.samples * c.train.balls
+    print(json.dumps({"balls": balls, "seconds": elapsed, "peak_mib": peak_kib / 1024,
+                      "child_peak_mib": children / 1024}))
+
+
+def measure(balls, workers=1, baseline=False, static_model="solved"):
+    cmd = [sys.executable, __file__, "--child", str(balls), str(workers), static_model]
+    if baseline:
+        cmd.append("--baseline")
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--sizes", type=float, nargs="+", default=[1e6, 1e7])
+    p.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--baseline-size", type=float, default=1e6)
+    p.add_argument("--static", nargs="+", default=["solved", "paired"],
+                   help="static models to time (the issue's target is for 'solved')")
+    p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    p.add_argument("--baseline", action="store_true", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.child:
+        child(float(args.child[0]), int(args.child[1]), args.baseline, args.child[2])
+        return
+    print(f"tolsim study pipeline: {CONFIG.name} (solved static, analytic epsilon, "
+          f"propagation a), {os.cpu_count()} cores")
+    base = measure(args.baseline_size, baseline=True)
+    base_rate = base["balls"] / base["seconds"]
+    print(f"baseline (solved static, NumPy velocity + propagation): {base['balls']:.2e} balls "
+          f"{base['seconds']:.2f} s  {base_rate / 1e6:.3f} M balls/s  "
+          f"peak {base['peak_mib']:.0f} MiB")
+    for static_model in args.static:
+        for workers in args.workers:
+            for size in args.sizes:
+                r = measure(size, workers, static_model=static_model)
+                rate = r["balls"] / r["seconds"]
+                peak = max(r["peak_mib"], r["child_peak_mib"])
+                ratio = f"({rate / base_rate:.2f}x baseline)  " if static_model == "solved" else ""
+                print(f"{static_model} static, workers {workers}: {r['balls']:.2e} balls  "
+                      f"{r['seconds']:.2f} s  "
+                      f"{rate / 1e6:.3f} M balls/s  {ratio}"
+                      f"peak RSS {peak:.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()

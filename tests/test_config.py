@@ -1,0 +1,188 @@
+"""Study config: TOML -> frozen dataclasses in SI, and one-line errors for bad files."""
+
+import math
+import re
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import stats
+
+from tolsim.io.config import ConfigError, default_config_text, load_config, parse_config
+from tolsim.physics.geometry import Bearing
+from tolsim.study.spec import Distribution
+
+MINIMAL = """\
+[bearing]
+ball_diameter_mm = 10.0
+conformity = 0.54
+
+[motion]
+groove_velocity_mm_per_s = 10.0
+duration_s = 10.0
+
+[train]
+balls = 2
+initial_gap = { distribution = "fixed", value_mm = 0.5 }
+
+[loads]
+normal_load_N = 200.0
+side_force_ratio = [-0.6, 0.6]
+
+[tolerances.bottom_rotation]
+distribution = "normal"
+std_deg = 0.5
+
+[study]
+samples = 100
+seed = 1
+"""
+
+
+def test_minimal_config_in_si():
+    c = parse_config(MINIMAL)
+    # [Lin2018] Table 1 bearing from the defaults and the 10 mm diameter.
+    assert c.bearing == Bearing()
+    assert c.motion.groove_velocity == pytest.approx(0.01, rel=1e-15)
+    assert c.motion.duration == 10.0
+    assert c.train.initial_gap.value == pytest.approx(5e-4, rel=1e-15)
+    assert c.loads.side_load == pytest.approx((-120.0, 120.0), rel=1e-15)
+    (tol,) = c.tolerances
+    assert tol.source == "bottom_rotation" and tol.scope == "rail"
+    assert tol.distribution.std == pytest.approx(math.radians(0.5), rel=1e-15)
+    assert c.study.samples == 100 and c.study.velocity_model == "analytic"
+    assert c.text == MINIMAL
+
+
+def test_stroke_converted_to_duration():
+    text = MINIMAL.replace("duration_s = 10.0", "stroke_mm = 50.0")
+    assert parse_config(text).motion.duration == pytest.approx(5.0, rel=1e-14)
+
+
+def test_yaw_moment_distribution_is_linear_and_balanced():
+    # Rigid carriage: N_x,j = M z_j / sum z_j^2, so sum N_x,j z_j = M and sum N_x,j = 0.
+    text = MINIMAL.replace("side_force_ratio = [-0.6, 0.6]", "yaw_moment_N_m = 12.0").replace(
+        "balls = 2", "balls = 5")
+    c = parse_config(text)
+    z = c.train.slot_positions(2 * c.bearing.ball_radius)
+    nx = np.asarray(c.loads.side_load)
+    assert_allclose(np.sum(nx * z), 12.0, rtol=1e-12)
+    assert_allclose(np.sum(nx), 0.0, atol=1e-9)
+    assert nx[0] < 0 < nx[-1]  # positive yaw: trailing ball pushed to -x
+
+
+def test_default_config_is_packaged_and_valid():
+    c = load_config()
+    assert c.text == default_config_text()
+    assert c.study.samples >= 10_000
+    assert c.train.balls >= 2
+
+
+def test_load_config_is_what_tolsim_ball_needs():
+    c = load_config()
+    assert isinstance(c.bearing, Bearing)
+    assert c.motion.groove_velocity > 0
+
+
+def test_with_overrides():
+    c = parse_config(MINIMAL).with_overrides(samples=7, seed=9)
+    assert (c.study.samples, c.study.seed) == (7, 9)
+    with pytest.raises(ValueError, match="samples"):
+        parse_config(MINIMAL).with_overrides(samples=0)
+
+
+def test_cpk_band_std():
+    # Cpk = min(USL - mu, mu - LSL) / (3 sigma): a centred +/-3 um band at Cpk 1 has sigma = 1 um.
+    text = MINIMAL.replace('distribution = "normal"\nstd_deg = 0.5',
+                           'distribution = "cpk"\nlow_deg = -3\nhigh_deg = 3\ncpk = 1.5')
+    d = parse_config(text).tolerances[0].distribution
+    assert d.std == pytest.approx(math.radians(3) / 4.5, rel=1e-14)
+
+
+def test_distributions_from_normal_match_scipy(rng):
+    z = rng.standard_normal(50_000)
+    # uniform: Phi(z) ~ U(0, 1); KS test against scipy's uniform on [2, 5].
+    u = Distribution("uniform", low=2.0, high=5.0).from_normal(z)
+    assert stats.kstest(u, stats.uniform(2, 3).cdf).pvalue > 1e-3
+    t = Distribution("truncated_normal", mean=1.0, std=2.0, low=0.0, high=3.0).from_normal(z)
+    ref = stats.truncnorm((0 - 1) / 2, (3 - 1) / 2, loc=1, scale=2)
+    assert stats.kstest(t, ref.cdf).pvalue > 1e-3
+    assert t.min() >= 0.0 and t.max() <= 3.0
+    # expected value of the truncated normal against scipy's, to round-off
+    d = Distribution("truncated_normal", mean=1.0, std=2.0, low=0.0, high=3.0)
+    assert d.expected == pytest.approx(ref.mean(), rel=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------
+# Malformed configs: (replace this, with that) -> the error names this key (and line).
+# ---------------------------------------------------------------------------------------------
+BAD = [
+    ("unknown_key", ("conformity = 0.54", "conformity = 0.54\ncolour = 'red'"),
+     "bearing.colour", 4),
+    ("wrong_type", ("balls = 2", "balls = 'two'"), "train.balls", 10),
+    ("float_for_int", ("samples = 100", "samples = 100.5"), "study.samples", 22),
+    ("negative_std", ("std_deg = 0.5", "std_deg = -0.5"), "tolerances.bottom_rotation.std_deg",
+     19),
+    ("missing_section", ("[motion]\ngroove_velocity_mm_per_s = 10.0\nduration_s = 10.0\n", ""),
+     "motion", None),
+    ("missing_unit", ("ball_diameter_mm = 10.0", "ball_diameter = 10.0"),
+     "bearing.ball_diameter", 2),
+    ("wrong_unit", ("duration_s = 10.0", "duration_mm = 10.0"), "motion.duration_mm", 7),
+    ("two_units", ("ball_diameter_mm = 10.0", "ball_diameter_mm = 10.0\nball_diameter_m = 0.01"),
+     "bearing.ball_diameter_m", 2),
+    ("bad_model", ("seed = 1", "seed = 1\nvelocity_model = 'magic'"), "study.velocity_model",
+     24),
+    ("negative_seed", ("seed = 1", "seed = -1"), "study.seed", 23),
+    ("zero_samples", ("samples = 100", "samples = 0"), "study.samples", 22),
+    ("unknown_source", ("[tolerances.bottom_rotation]", "[tolerances.rail_wobble]"),
+     "tolerances.rail_wobble", 17),
+    ("bad_distribution", ('distribution = "normal"', 'distribution = "lognormal"'),
+     "tolerances.bottom_rotation.distribution", 18),
+    ("loads_length", ("side_force_ratio = [-0.6, 0.6]", "side_force_ratio = [-0.6, 0.6, 0.1]"),
+     "loads.side_force_ratio", 15),
+    ("negative_load", ("normal_load_N = 200.0", "normal_load_N = -200.0"),
+     "loads.normal_load_N", 14),
+    ("conformity_range", ("conformity = 0.54", "conformity = 0.45"), "bearing.conformity", 3),
+    ("unknown_section", ("[study]", "[plot]\ncolour = 1\n[study]"), "plot", 21),
+    ("negative_gap", ("value_mm = 0.5", "value_mm = -0.5"), "train.initial_gap.value_mm", 11),
+    ("bool_as_number", ("seed = 1", "seed = true"), "study.seed", 23),
+    ("wrong_scope", ('std_deg = 0.5', 'std_deg = 0.5\nscope = "everywhere"'),
+     "tolerances.bottom_rotation.scope", 20),
+    ("corr_without_rail", ('std_deg = 0.5', 'std_deg = 0.5\nscope = "carriage"\n'
+                           'correlation_length_mm = 5'),
+     "tolerances.bottom_rotation.correlation_length_mm", 21),
+    ("uniform_reversed", ('distribution = "normal"\nstd_deg = 0.5',
+                          'distribution = "uniform"\nlow_deg = 1\nhigh_deg = -1'),
+     "tolerances.bottom_rotation.high_deg", 20),
+    ("syntax", ("balls = 2", "balls = = 2"), "invalid TOML", None),
+    ("stroke_and_duration", ("duration_s = 10.0", "duration_s = 10.0\nstroke_mm = 5"),
+     "motion.stroke_mm", 8),
+]
+
+
+@pytest.mark.parametrize("replace_, key, line", [b[1:] for b in BAD], ids=[b[0] for b in BAD])
+def test_bad_config_one_line_error_naming_key(replace_, key, line):
+    old, new = replace_
+    assert old in MINIMAL
+    text = MINIMAL.replace(old, new, 1)
+    with pytest.raises(ConfigError) as info:
+        parse_config(text, "bad.toml")
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith("bad.toml")
+    assert key in msg
+    if line is not None:
+        assert re.match(rf"bad\.toml:{line}: ", msg), msg
+
+
+def test_count_of_malformed_examples():
+    assert len(BAD) >= 15
+
+
+def test_missing_file_is_config_error(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path / "nope.toml")
+
+
+def test_config_error_is_value_error():
+    assert issubclass(ConfigError, ValueError)

@@ -1,0 +1,147 @@
+"""netCDF output: declared schema, atomic write, round trip with xarray and netCDF4."""
+
+import os
+
+import netCDF4
+import numpy as np
+import pytest
+import xarray as xr
+
+from tolsim import __version__
+from tolsim.io import schema
+from tolsim.io.config import parse_config
+from tolsim.io.netcdf import read_result, result_to_dataset, write_dataset, write_result
+from tolsim.study.runner import run_study
+
+CONFIG = """\
+# a small study
+[bearing]
+ball_diameter_mm = 10.0
+conformity = 0.54
+[motion]
+groove_velocity_mm_per_s = 200.0
+stroke_mm = 100.0
+[train]
+balls = 4
+initial_gap = { distribution = "uniform", low_um = 0.0, high_um = 100.0 }
+[loads]
+normal_load_N = 200.0
+yaw_moment_N_m = 4.0
+[tolerances.bottom_rotation]
+distribution = "normal"
+std_deg = 0.2
+correlation_length_mm = 40.0
+[tolerances.top_rotation]
+distribution = "normal"
+std_deg = 0.1
+[study]
+samples = 500
+seed = 8
+block_size = 128
+spot_checks = 3
+velocity_deviation_limit = 0.004
+"""
+
+
+@pytest.fixture(scope="module")
+def result():
+    return run_study(parse_config(CONFIG, "small.toml"))
+
+
+def test_dataset_follows_schema(result):
+    ds = result_to_dataset(result, history="test")
+    for name, decl in schema.VARIABLES.items():
+        if decl.required:
+            assert ds[name].attrs["units"] == decl.units
+            assert ds[name].attrs["long_name"] == decl.long_name
+    for name in ds.variables:
+        assert "units" in ds[name].attrs and "long_name" in ds[name].attrs
+    a = ds.attrs
+    assert a["Conventions"] == "CF-1.10"
+    assert a["source"] == f"tolsim {__version__}"
+    assert a["seed"] == 8
+    assert a["config"] == CONFIG
+    assert a["history"].endswith(" test")
+    assert int(ds.n_assemblies) == 500 and int(ds.n_balls) == 2000
+    assert float(ds.velocity_deviation_limit) == 0.004
+    assert np.isnan(float(ds.contact_probability_limit))
+    assert ds.sizes["spot_check"] == 3 and ds.sizes["ball"] == 4 and ds.sizes["pair"] == 3
+
+
+def test_round_trip_xarray_and_netcdf4(result, tmp_path):
+    path = tmp_path / "r.nc"
+    ds = write_result(result, path, history="test")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert os.stat(path).st_mode & 0o777 == 0o666 & ~umask  # not mkstemp's 0600
+    assert os.listdir(tmp_path) == ["r.nc"]  # no temporary file left
+    back = read_result(path)
+    xr.testing.assert_identical(ds, back)
+    # netCDF4 alone
+    with netCDF4.Dataset(path) as nc:
+        assert nc.Conventions == "CF-1.10"
+        assert nc.config == CONFIG
+        v = nc.variables["contact_probability"]
+        assert v.units == "1" and v.long_name
+        assert float(v[...]) == float(ds.contact_probability)
+        assert nc.variables["time_to_contact_quantile"].units == "s"
+        np.testing.assert_array_equal(nc.variables["velocity_deviation_histogram"][:],
+                                      ds.velocity_deviation_histogram.values)
+    # the run can be reproduced from the file alone
+    again = parse_config(back.attrs["config"]).with_overrides(seed=int(back.attrs["seed"]))
+    assert again.study == result.config.study
+
+
+def test_schema_rejects_undeclared_and_missing(result):
+    ds = result_to_dataset(result, history="test")
+    with pytest.raises(schema.SchemaError, match="not declared"):
+        schema.validate(ds.assign(extra=1.0))
+    with pytest.raises(schema.SchemaError, match="contact_probability.*missing"):
+        schema.validate(ds.drop_vars("contact_probability"))
+    bad = ds.copy()
+    bad["n_balls"].attrs["units"] = "m"
+    with pytest.raises(schema.SchemaError, match="n_balls"):
+        schema.validate(bad)
+    bad = ds.copy()
+    del bad.attrs["config"]
+    with pytest.raises(schema.SchemaError, match="config"):
+        schema.validate(bad)
+
+
+def test_optional_factor_dimension_is_accepted(result):
+    ds = result_to_dataset(result, history="test")
+    ds = ds.assign_coords(factor=("factor", ["bottom_rotation", "top_rotation"]))
+    ds["sensitivity_total"] = ("factor", [0.7, 0.3])
+    schema.apply_attributes(ds)
+    schema.validate(ds)
+
+
+def test_failed_write_leaves_nothing(result, tmp_path, monkeypatch):
+    path = tmp_path / "r.nc"
+    ds = result_to_dataset(result, history="test")
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", boom)
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_dataset(ds, path)
+    assert os.listdir(tmp_path) == []
+
+
+def test_invalid_dataset_is_not_written(result, tmp_path):
+    ds = result_to_dataset(result, history="test").drop_vars("n_balls")
+    with pytest.raises(schema.SchemaError):
+        write_dataset(ds, tmp_path / "r.nc")
+    assert os.listdir(tmp_path) == []
+
+
+def test_read_result_rejects_other_files(tmp_path):
+    other = tmp_path / "other.nc"
+    xr.Dataset({"x": ("t", [1.0, 2.0])}).to_netcdf(other)
+    with pytest.raises(ValueError, match="not a tolsim study result"):
+        read_result(other)
+    text = tmp_path / "text.nc"
+    text.write_text("hello")
+    with pytest.raises(ValueError, match="cannot open"):
+        read_result(text)

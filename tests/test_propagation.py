@@ -1,0 +1,156 @@
+"""Ball-to-ball contact propagation (tolsim.study.propagation), modes (a) and (b)."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from tolsim.io.config import parse_config
+from tolsim.study.evaluate import evaluate_balls, loads_at
+from tolsim.study.propagation import first_contact_along_track, first_contact_constant
+from tolsim.study.sampling import error_values, sample_block
+
+
+def constant_twin(gap, eps, v, horizon):
+    """Plain-NumPy twin of the mode (a) kernel."""
+    rate = (eps[:, :-1] - eps[:, 1:]) * v / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(rate > 0, gap / rate, np.inf)
+    first = np.argmin(t, axis=1)
+    tmin = t[np.arange(len(t)), first]
+    hit = tmin <= horizon
+    return np.where(hit, tmin, np.inf), np.where(hit, first, -1)
+
+
+def test_constant_kernel_matches_numpy_twin(rng):
+    gap = rng.uniform(0, 1e-4, (5000, 7))
+    eps = rng.normal(0, 2e-3, (5000, 8))
+    eps[rng.random(eps.shape) < 0.01] = np.nan  # invalid balls never close a gap
+    t, pair = first_contact_constant(gap, eps, 0.2, 0.05)
+    t_ref, pair_ref = constant_twin(gap, eps, 0.2, 0.05)
+    assert_allclose(t, t_ref, rtol=1e-15)
+    assert_array_equal(pair, pair_ref)
+    assert 0.1 < np.isfinite(t).mean() < 0.9  # both outcomes are exercised
+
+
+def test_lin2018_case_a_contact_time():
+    # [Lin2018] Sec. 3.2: eps_1 = -eps_2 = 0.754 % (Eq. 26, ERRATA 2), gap 0.1 R_B = 0.5 mm,
+    # v = 10 mm/s: t = gap / ((eps_1 - eps_2) v / 2) = 6.63 s.
+    eps = 0.00754
+    t, pair = first_contact_constant([[0.5e-3]], [[eps, -eps]], 0.01, 10.0)
+    assert_allclose(t, 0.5e-3 / (2 * eps * 0.005), rtol=1e-14)
+    assert_allclose(t, 6.63, atol=0.01)
+    assert pair[0] == 0
+    # the faster ball leading: no contact
+    t, pair = first_contact_constant([[0.5e-3]], [[-eps, eps]], 0.01, 10.0)
+    assert np.isinf(t[0]) and pair[0] == -1
+
+
+@pytest.mark.parametrize("bad", [
+    dict(initial_gap=[[-1e-6]]),
+    dict(velocity_deviation=[[0.0, 0.0, 0.0]]),
+    dict(groove_velocity=0.0),
+    dict(horizon=-1.0),
+])
+def test_constant_validates(bad):
+    args = dict(initial_gap=[[1e-6]], velocity_deviation=[[0.0, 0.0]], groove_velocity=0.1,
+                horizon=1.0)
+    args.update(bad)
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        first_contact_constant(**args)
+
+
+TRAIN = """\
+[bearing]
+ball_diameter_mm = 10.0
+conformity = 0.54
+[motion]
+groove_velocity_mm_per_s = 100.0
+stroke_mm = 400.0
+[train]
+balls = 3
+initial_gap = {{ distribution = "uniform", low_um = 0.0, high_um = 400.0 }}
+[loads]
+normal_load_N = 200.0
+{loads}
+[tolerances.bottom_rotation]
+distribution = "normal"
+std_deg = 0.5
+{field}
+[study]
+samples = 64
+seed = 5
+block_size = 64
+velocity_model = "eq24"
+static_model = "paired"
+propagation = "along_track"
+time_steps = {steps}
+"""
+
+
+def test_along_track_equals_constant_when_epsilon_is_constant():
+    # No rail field and equal loads on every ball: epsilon does not change as the balls roll,
+    # so mode (b) must reproduce the closed form of mode (a) (midpoint rule and linear event
+    # location are exact for constant velocities).
+    per_ball = ('[tolerances.arc_centre_offset_tangential_TL]\ndistribution = "normal"\n'
+                'std_um = 1.0\nscope = "ball"')
+    c = parse_config(TRAIN.format(loads="", field=per_ball, steps=50))
+    b = sample_block(c, 0)
+    v = error_values(c, b)
+    nx, ny = loads_at(c, b.initial_position)
+    state = evaluate_balls(c, v, nx, ny)
+    t_b, pair_b, ok = first_contact_along_track(c, b)
+    t_a, pair_a = first_contact_constant(b.initial_gap, state.velocity_deviation,
+                                         c.motion.groove_velocity, c.motion.duration)
+    assert ok.all()
+    assert 0 < np.isfinite(t_a).sum() < len(t_a)
+    assert_allclose(t_b, t_a, rtol=1e-9)
+    assert_array_equal(pair_b, pair_a)
+
+
+def rk4_reference(c, b, steps):
+    """Independent reference for mode (b): classical RK4 on a fine grid, contact located by
+    linear interpolation of the gap inside the fine step where it changes sign."""
+    v, horizon, d = c.motion.groove_velocity, c.motion.duration, 2 * c.bearing.ball_radius
+
+    def rate(pos, t):
+        nx, ny = loads_at(c, pos - v * t)
+        eps = evaluate_balls(c, error_values(c, b, rail_position=pos), nx, ny)
+        return (1 + eps.velocity_deviation) * v / 2
+
+    h = horizon / steps
+    z = b.initial_position.copy()
+    time = np.full(b.size, np.inf)
+    pair = np.full(b.size, -1)
+    for k in range(steps):
+        t = k * h
+        k1 = rate(z, t)
+        k2 = rate(z + h / 2 * k1, t + h / 2)
+        k3 = rate(z + h / 2 * k2, t + h / 2)
+        k4 = rate(z + h * k3, t + h)
+        new = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        g0, g1 = np.diff(z, axis=1) - d, np.diff(new, axis=1) - d
+        for m in np.flatnonzero(np.isinf(time)):
+            crossing = [(t + h * g0[m, j] / (g0[m, j] - g1[m, j]), j)
+                        for j in range(g0.shape[1]) if g1[m, j] <= 0 < g0[m, j]]
+            if crossing:
+                time[m], pair[m] = min(crossing)
+        z = new
+    return time, pair
+
+
+def test_along_track_matches_rk4_reference():
+    # Varying epsilon (rail random field with 50 mm correlation length, yaw moment along the
+    # carriage): the midpoint rule with 200 steps against RK4 with 1000 steps. Measured
+    # agreement 1.5e-4 of the horizon; tolerance 1e-3 of it (a fifth of one midpoint step).
+    text = TRAIN.format(loads="yaw_moment_N_m = 1.5", field="correlation_length_mm = 50.0",
+                        steps=200).replace("high_um = 400.0", "high_um = 100.0")
+    c = parse_config(text).with_overrides(samples=32)
+    b = sample_block(c, 0)
+    t_b, pair_b, ok = first_contact_along_track(c, b)
+    t_ref, pair_ref = rk4_reference(c, b, 1000)
+    assert ok.all()
+    hit = np.isfinite(t_ref)
+    assert 3 <= hit.sum() < b.size  # both outcomes exercised
+    assert_array_equal(np.isfinite(t_b), hit)
+    assert_array_equal(pair_b, pair_ref)
+    assert_allclose(t_b[hit], t_ref[hit], rtol=0, atol=1e-3 * c.motion.duration)

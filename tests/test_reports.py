@@ -1,0 +1,277 @@
+"""Figures of tolsim.reports: labelled axes with units, no overlapping labels, no global state."""
+
+import base64
+import itertools
+import subprocess
+import sys
+
+import matplotlib
+import numpy as np
+import pytest
+
+from tolsim.reports import paper, style
+from tolsim.reports import study as study_report
+
+
+def _renderer(fig):
+    fig.canvas.draw()
+    return fig.canvas.get_renderer()
+
+
+def _labels(fig):
+    """(name, bbox) of titles, axis labels and legends, for overlap checks."""
+    r = _renderer(fig)
+    items = []
+    if fig._suptitle is not None and fig._suptitle.get_text():
+        items.append(("suptitle", fig._suptitle.get_window_extent(r)))
+    for k, ax in enumerate(fig.axes):
+        for name, text in (("title", ax.title), ("xlabel", ax.xaxis.label),
+                           ("ylabel", ax.yaxis.label)):
+            if text.get_text() and text.get_visible():
+                items.append((f"axes{k}.{name}", text.get_window_extent(r)))
+        leg = ax.get_legend()
+        if leg is not None:
+            items.append((f"axes{k}.legend", leg.get_window_extent(r)))
+    return items
+
+
+def _categorical(fig, axis):
+    """True when the axis has text (not numeric) tick labels, e.g. factor names."""
+    _renderer(fig)
+    for t in axis.get_ticklabels():
+        text = t.get_text().replace("\u2212", "-").strip()
+        if text:
+            try:
+                float(text)
+            except ValueError:
+                return True
+    return False
+
+
+def check_figure(fig, *, units=True):
+    """Every data axes has x and y labels (with a unit in brackets when ``units``), and no
+    title, axis label or legend overlaps another, and axes do not overlap each other."""
+    problems = []
+    for k, ax in enumerate(fig.axes):
+        is_colorbar = hasattr(ax, "_colorbar") or ax.get_label() == "<colorbar>"
+        xl, yl = ax.get_xlabel(), ax.get_ylabel()
+        if is_colorbar:
+            if not (xl or yl):
+                problems.append(f"colorbar {k} has no label")
+            continue
+        if not ax.get_visible() or not ax.has_data():
+            continue
+        twin = any(other is not ax and other.bbox.bounds == ax.bbox.bounds
+                   for other in fig.axes)
+        shared_x = any(o is not ax and o.get_shared_x_axes().joined(ax, o) and o.get_xlabel()
+                       for o in fig.axes)
+        shared_y = any(o is not ax and o.get_shared_y_axes().joined(ax, o) and o.get_ylabel()
+                       for o in fig.axes)
+        if not yl and not shared_y:
+            problems.append(f"axes {k} ({ax.get_title()!r}) has no y label")
+        if not xl and not twin and not shared_x:
+            problems.append(f"axes {k} ({ax.get_title()!r}) has no x label")
+        if units:
+            for lab, axis in ((xl, ax.xaxis), (yl, ax.yaxis)):
+                if lab and "[" not in lab and not _categorical(fig, axis):
+                    problems.append(f"axes {k}: label {lab!r} has no [unit]")
+    items = _labels(fig)
+    for (na, a), (nb, b) in itertools.combinations(items, 2):
+        if a.overlaps(b) and a.intersection(a, b).width > 1 and a.intersection(a, b).height > 1:
+            problems.append(f"{na} overlaps {nb}")
+    r = _renderer(fig)
+    boxes = [(k, ax.get_window_extent(r)) for k, ax in enumerate(fig.axes)]
+    for (ka, a), (kb, b) in itertools.combinations(boxes, 2):
+        if a.bounds == b.bounds:  # twin axes
+            continue
+        inter = a.intersection(a, b)
+        if inter is not None and inter.width > 2 and inter.height > 2:
+            problems.append(f"axes {ka} overlaps axes {kb}")
+    return problems
+
+
+# --------------------------------------------------------------------------------------------
+# paper figures
+# --------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def paper_data_small():
+    from tolsim.study import paper_data
+
+    table = paper.table2_table()
+    curves, slopes = paper_data.fig4_data(offset_ratio=np.linspace(-3, 3, 61))
+    grid = paper_data.fig7_data(np.linspace(-0.8, 0.8, 9), np.linspace(-3, 3, 7))
+    return table, curves, slopes, grid
+
+
+def test_fig4_labels_and_layout(paper_data_small):
+    _, curves, slopes, _ = paper_data_small
+    fig = paper.plot_fig4(curves, slopes)
+    assert check_figure(fig) == []
+    legend = fig.axes[0].get_legend()
+    texts = [t.get_text() for t in legend.get_texts()]
+    # one entry per conformity plus the two line styles
+    assert len(texts) == len(slopes) + 2 and all(f"{c:.2f}" in " ".join(texts)
+                                                 for c in slopes["conformity"])
+
+
+def test_fig7_labels_and_layout(paper_data_small):
+    *_, grid = paper_data_small
+    fig = paper.plot_fig7(grid)
+    assert check_figure(fig) == []
+    assert len([ax for ax in fig.axes if ax.get_label() == "<colorbar>"]) == 2
+
+
+def test_fig9_labels_and_layout(paper_data_small):
+    table = paper_data_small[0]
+    fig = paper.plot_fig9(paper.fig9_data(table))
+    assert check_figure(fig) == []
+
+
+def test_table2_markdown_has_no_negative_zero(paper_data_small):
+    md = paper.table2_markdown(paper_data_small[0])
+    assert "-0.000" not in md and "+0.754" in md
+
+
+# --------------------------------------------------------------------------------------------
+# study figures on a synthetic result (no study run needed)
+# --------------------------------------------------------------------------------------------
+def synthetic_result(rng, limit=0.005):
+    """A Dataset with the result-file variables the report reads, from known draws."""
+    xr = pytest.importorskip("xarray")
+    balls, n_asm = 5, 4000
+    eps = rng.normal(0.0005, 0.0015, size=(n_asm, balls))
+    edges = np.linspace(-0.02, 0.02, 401)
+    hist, _ = np.histogram(eps, edges)
+    t_edges = np.linspace(0, 2.0, 201)
+    t_contact = rng.exponential(3.0, size=n_asm)
+    t_hist, _ = np.histogram(t_contact[t_contact <= 2.0], t_edges)
+    n_contact = int((t_contact <= 2.0).sum())
+    levels = np.array([0.001, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99, 0.999])
+    k = 20
+    full = rng.normal(0, 0.002, k)
+    ds = xr.Dataset(
+        {
+            "velocity_deviation_mean": eps.mean(), "velocity_deviation_std": eps.std(ddof=1),
+            "velocity_deviation_min": eps.min(), "velocity_deviation_max": eps.max(),
+            "velocity_deviation_quantile": ("quantile", np.quantile(eps, levels)),
+            "velocity_deviation_histogram": ("velocity_deviation_bin", hist),
+            "velocity_deviation_underflow": 0, "velocity_deviation_overflow": 0,
+            "velocity_deviation_mean_by_ball": ("ball", eps.mean(axis=0)),
+            "velocity_deviation_std_by_ball": ("ball", eps.std(axis=0, ddof=1)),
+            "side_force_ratio": ("ball", np.linspace(-0.4, 0.4, balls)),
+            "contact_probability": n_contact / n_asm,
+            "contact_probability_ci_lower": 0.9 * n_contact / n_asm,
+            "contact_probability_ci_upper": 1.1 * n_contact / n_asm,
+            "time_to_contact_quantile": ("quantile", np.quantile(t_contact, levels)),
+            "time_to_contact_min": t_contact.min(),
+            "survival_probability": ("time", 1 - np.concatenate([[0], np.cumsum(t_hist)])
+                                     / n_asm),
+            "contact_pair_count": ("pair", np.bincount(rng.integers(0, balls - 1, n_contact),
+                                                       minlength=balls - 1)),
+            "horizon": 2.0, "groove_velocity": 0.2,
+            "n_assemblies": n_asm, "n_assemblies_valid": n_asm, "n_contact": n_contact,
+            "n_balls": eps.size, "n_balls_valid": eps.size, "n_balls_not_converged": 0,
+            "n_balls_loss_of_contact": 0, "n_balls_outside_validity": 0,
+            "velocity_deviation_limit": limit, "contact_probability_limit": 0.5,
+            "spot_check_velocity_deviation_analytic": ("spot_check", full + 1e-5),
+            "spot_check_velocity_deviation_full": ("spot_check", full),
+            "spot_check_valid_analytic": ("spot_check", np.ones(k, np.int8)),
+            "spot_check_valid_full": ("spot_check", np.r_[np.ones(k - 1), 0].astype(np.int8)),
+            "spot_check_rms_difference": 1e-5, "spot_check_max_abs_difference": 1e-5,
+        },
+        coords={
+            "quantile": levels, "ball": np.arange(balls), "pair": np.arange(balls - 1),
+            "time": t_edges, "spot_check": np.arange(k),
+            "velocity_deviation_bin_bounds": (("velocity_deviation_bin", "bounds"),
+                                              np.stack([edges[:-1], edges[1:]], axis=1)),
+        },
+        attrs={"title": "tolsim Monte Carlo tolerance study: synthetic.toml",
+               "velocity_model": "analytic", "spot_check_status": "20 balls re-solved"},
+    )
+    return ds
+
+
+def test_study_figures_labels_and_layout(rng):
+    ds = synthetic_result(rng)
+    for plot in (study_report.plot_velocity_deviation, study_report.plot_contact,
+                 study_report.plot_spot_checks):
+        fig = plot(ds)
+        assert check_figure(fig) == [], plot.__name__
+    q = study_report.quality.dataset_quality(ds)
+    fig = study_report.plot_quality(ds, q)
+    assert check_figure(fig) == []
+    # the quality annotation states the computed Cpk
+    text = " ".join(t.get_text() for t in fig.axes[0].texts)
+    assert f"Cpk = {q['velocity_deviation_cpk']:.2f}" in text
+
+
+def test_sensitivity_figure(rng):
+    from scipy import stats
+
+    from tolsim.study.sensitivity import sobol_sensitivity
+
+    res = sobol_sensitivity(lambda x: {"velocity_deviation": x @ [1.0, 0.5, 0.1],
+                                       "contact": (x @ [1.0, 0.5, 0.1] > 1).astype(float)},
+                            [stats.norm()] * 3, 256, rng, factors=["a_long_name", "b", "c"],
+                            n_resamples=100)
+    fig = study_report.plot_sensitivity(res)
+    assert check_figure(fig) == []
+    # ranked: the largest total effect at the top (last y tick)
+    labels = [t.get_text() for t in fig.axes[0].get_yticklabels()]
+    assert labels[-1] == "a long name"
+
+
+def test_check_figure_catches_problems():
+    # The checker itself must be able to fail: no labels, and a legend over a title.
+    fig, ax = style.new_figure(4, 3)
+    ax.plot([0, 1], [0, 1], label="x")
+    assert any("no y label" in p for p in check_figure(fig))
+    ax.set_xlabel("time")
+    ax.set_ylabel("y [m]")
+    assert any("no [unit]" in p for p in check_figure(fig))
+
+
+# --------------------------------------------------------------------------------------------
+# style and layers
+# --------------------------------------------------------------------------------------------
+def test_no_global_matplotlib_state():
+    before = dict(matplotlib.rcParams)
+    backend = matplotlib.get_backend()
+    fig, ax = style.new_figure()
+    ax.plot([0, 1], [1, 2])
+    png = style.render_png(fig)
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert matplotlib.get_backend() == backend
+    assert dict(matplotlib.rcParams) == before
+    uri = style.data_uri(png)
+    assert base64.b64decode(uri.split(",", 1)[1]) == png
+
+
+def test_layers_physics_and_study_do_not_import_plotting():
+    # tolsim.study.sensitivity and .quality are NumPy/SciPy only (team layering rule).
+    code = ("import sys, tolsim.study.sensitivity, tolsim.study.quality; "
+            "bad = [m for m in ('matplotlib', 'xarray', 'tomllib') if m in sys.modules]; "
+            "print(bad); sys.exit(1 if bad else 0)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_quality_and_verdict_on_the_page(rng, tmp_path):
+    # The synthetic result through the whole report (no sensitivity): the quality section
+    # shows the Cpk computed from the file's mean/std and the contact-probability verdict.
+    from tolsim.io import schema
+
+    ds = synthetic_result(rng)
+    ds.attrs.update({a: "x" for a in schema.GLOBAL_ATTRIBUTES if a not in ds.attrs})
+    ds.attrs.update(Conventions="CF-1.10", seed=1, config="")
+    path = tmp_path / "synthetic.nc"
+    ds.to_netcdf(path)
+    out = study_report.make_report(path, tmp_path / "rep", sensitivity=False)
+    page = open(out.html, encoding="utf-8").read()
+    mean, std = float(ds.velocity_deviation_mean), float(ds.velocity_deviation_std)
+    cpk = (0.005 - abs(mean)) / (3 * std)
+    assert f"{cpk:.3f}" in page
+    p, hi = float(ds.contact_probability), float(ds.contact_probability_ci_upper)
+    assert ("meets" if hi < 0.5 else "fails" if p > 0.5 else "inconclusive") in page
+    assert set(out.figures) == {"velocity_deviation", "contact", "spot_checks", "quality"}

@@ -1,0 +1,266 @@
+"""Sobol' sensitivity indices (tolsim.study.sensitivity) on cases with known answers."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import stats
+from scipy.stats import sobol_indices
+
+from tolsim.study.sensitivity import (
+    CONTACT,
+    VELOCITY_DEVIATION,
+    indices_from_evaluations,
+    sobol_sensitivity,
+    study_factors,
+    study_sensitivity,
+)
+
+# Linear model Y = sum a_i X_i, X_i ~ N(0, s_i^2) independent: Var(Y) = sum a_i^2 s_i^2 and
+# S_i = S_Ti = a_i^2 s_i^2 / Var(Y) (no interactions). Unequal shares, one small and one null.
+COEFFS = np.array([1.0, 2.0, 0.5, 0.3, 0.0])
+STDS = np.array([1.0, 0.5, 2.0, 1.0, 3.0])
+LINEAR_TRUE = (COEFFS * STDS) ** 2 / np.sum((COEFFS * STDS) ** 2)  # 0.32, 0.32, 0.32, 0.029, 0
+
+
+def _gen(*key):
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(20181109, spawn_key=key)))
+
+
+def _inside(ci, value):
+    return (ci[..., 0] <= value + 1e-12) & (value <= ci[..., 1] + 1e-12)
+
+
+def test_linear_known_answer_inside_confidence_intervals():
+    # Analytic answer above; the estimates must lie within their own 95 % intervals' reach:
+    # every true index inside its interval, and the intervals narrow enough to mean something.
+    dists = [stats.norm(0.0, s) for s in STDS]
+    res = sobol_sensitivity(lambda x: x @ COEFFS, dists, 4096, _gen(0),
+                            factors=[f"x{i}" for i in range(5)])
+    assert res.first_order.shape == (1, 5) and res.evaluations == 4096 * 7
+    assert np.all(_inside(res.first_order_ci[0], LINEAR_TRUE)), (res.first_order_ci,
+                                                                 LINEAR_TRUE)
+    assert np.all(_inside(res.total_ci[0], LINEAR_TRUE)), (res.total_ci, LINEAR_TRUE)
+    assert np.all(res.total_ci[0, :, 1] - res.total_ci[0, :, 0] < 0.06)
+    assert np.all(res.first_order_ci[0, :, 1] - res.first_order_ci[0, :, 0] < 0.08)
+    # the null factor has exactly zero total effect (f(A) == f(AB_4) row by row)
+    assert res.total[0, 4] == 0.0
+    # variance: sum a_i^2 s_i^2 = 3.09; sampling error of a variance at n = 8192 is ~1.6 %
+    assert_allclose(res.variance[0], np.sum((COEFFS * STDS) ** 2), rtol=0.06)
+    assert [r[0] for r in res.ranking()][:3] != [] and res.ranking()[-1][0] == "x4"
+
+
+def test_linear_interval_coverage():
+    # The 95 % bootstrap intervals must cover the analytic answer about 95 % of the time.
+    # 60 independent repetitions x 8 non-degenerate indices; measured 0.95 when written.
+    # Binomial (if independent) sd of the mean is 0.01; the bounds are > 5 sd away.
+    dists = [stats.norm(0.0, s) for s in STDS[:4]]
+    truth = (COEFFS[:4] * STDS[:4]) ** 2 / np.sum((COEFFS[:4] * STDS[:4]) ** 2)
+    hits = []
+    for k in range(60):
+        res = sobol_sensitivity(lambda x: x @ COEFFS[:4], dists, 512, _gen(1, k),
+                                n_resamples=400)
+        hits.append(np.concatenate([_inside(res.first_order_ci[0], truth),
+                                    _inside(res.total_ci[0], truth)]))
+    coverage = np.mean(hits)
+    assert 0.88 <= coverage <= 0.995, coverage
+
+
+def test_grouped_factors_and_marginal_kinds():
+    # Y = X0 + 2 X1 + X2 with groups {0, 1} and {2}: S_{01} = (1 + 4 * 0.25) / V, S_2 = 4 / V
+    # for X0 ~ N(0, 1), X1 ~ U(-sqrt(3)/2*..): use unit-variance-free explicit variances below.
+    from tolsim.study.spec import Distribution
+
+    dists = [stats.norm(0.0, 1.0),                      # var 1
+             Distribution("uniform", low=-0.5, high=0.5),  # var 1/12 (tolsim from_normal)
+             stats.norm(0.0, 2.0)]                      # var 4
+    coef = np.array([1.0, 2.0, 1.0])
+    var = np.array([1.0, 1.0 / 12.0, 4.0]) * coef**2
+    truth = np.array([var[0] + var[1], var[2]]) / var.sum()
+    res = sobol_sensitivity(lambda x: x @ coef, dists, 4096, _gen(2), groups=[[0, 1], [2]],
+                            factors=["pair", "single"])
+    assert res.factors == ("pair", "single")
+    assert np.all(_inside(res.first_order_ci[0], truth)), (res.first_order_ci, truth)
+    assert np.all(_inside(res.total_ci[0], truth)), (res.total_ci, truth)
+
+
+def test_pooled_replicates_are_variance_weighted_average():
+    # Two replicate columns: column 0 = X0 + X1 (S = 0.5, 0.5, Var 2), column 1 = 3 X0
+    # (S = 1, 0, Var 9). Pooled: S_0 = (0.5*2 + 1*9) / 11 = 10/11, S_1 = 1/11.
+    dists = [stats.norm(), stats.norm()]
+    res = sobol_sensitivity(lambda x: np.stack([x[:, 0] + x[:, 1], 3 * x[:, 0]], axis=1),
+                            dists, 4096, _gen(3))
+    truth = np.array([10.0 / 11.0, 1.0 / 11.0])
+    assert np.all(_inside(res.total_ci[0], truth)), (res.total_ci, truth)
+    assert np.all(_inside(res.first_order_ci[0], truth)), (res.first_order_ci, truth)
+
+
+def test_ishigami_function():
+    # Ishigami & Homma (1990), a = 7, b = 0.1, X_i ~ U(-pi, pi); analytic indices from
+    # Saltelli et al., Global Sensitivity Analysis: The Primer (2008), Sec. 4.9:
+    # S = (0.3139, 0.4424, 0), S_T = (0.5576, 0.4424, 0.2437). Non-linear, with interaction.
+    def ishigami(x):
+        return np.sin(x[:, 0]) + 7 * np.sin(x[:, 1]) ** 2 + 0.1 * x[:, 2] ** 4 * np.sin(x[:, 0])
+
+    dists = [stats.uniform(-np.pi, 2 * np.pi)] * 3
+    res = sobol_sensitivity(ishigami, dists, 1 << 14, _gen(4), n_resamples=500)
+    s_true = np.array([0.3139, 0.4424, 0.0])
+    st_true = np.array([0.5576, 0.4424, 0.2437])
+    assert np.all(_inside(res.first_order_ci[0], s_true)), (res.first_order_ci, s_true)
+    assert np.all(_inside(res.total_ci[0], st_true)), (res.total_ci, st_true)
+    assert_allclose(res.total[0], st_true, atol=0.03)
+
+
+def test_estimator_twin_scipy_sobol_indices(rng):
+    # Same evaluations into scipy.stats.sobol_indices (dict form, method saltelli_2010):
+    # identical point estimates (same estimator) for one unpooled, all-finite output.
+    n, d = 512, 4
+    f_a, f_b = rng.normal(size=n), rng.normal(size=n)
+    f_ab = rng.normal(size=(d, n)) * 0.5 + f_a
+    ref = sobol_indices(func={"f_A": f_a[None], "f_B": f_b[None], "f_AB": f_ab[:, None, :]},
+                        n=n)
+    ours = indices_from_evaluations(f_a, f_b, f_ab, rng, n_resamples=0)
+    assert_allclose(ours["first_order"], np.ravel(ref.first_order), rtol=1e-12, atol=1e-14)
+    assert_allclose(ours["total"], np.ravel(ref.total_order), rtol=1e-12, atol=1e-14)
+
+
+def test_non_finite_evaluations_are_excluded(rng):
+    n = 400
+    f_a, f_b = rng.normal(size=n), rng.normal(size=n)
+    f_ab = np.stack([f_a + 0.1 * rng.normal(size=n), f_b])
+    clean = indices_from_evaluations(f_a[:300], f_b[:300], f_ab[:, :300], rng, n_resamples=0)
+    f_a2 = f_a.copy()
+    f_a2[300:350] = np.nan
+    f_ab2 = f_ab.copy()
+    f_ab2[1, 350:] = np.inf
+    dirty = indices_from_evaluations(f_a2, f_b, f_ab2, rng, n_resamples=0)
+    assert dirty["excluded"] == 100 and dirty["used"] == 300
+    assert_allclose(dirty["first_order"], clean["first_order"], rtol=1e-12)
+    assert_allclose(dirty["total"], clean["total"], rtol=1e-12)
+
+
+def test_constant_output_gives_nan_indices(rng):
+    res = sobol_sensitivity(lambda x: np.zeros(len(x)), [stats.norm()] * 2, 64, rng)
+    assert np.all(np.isnan(res.first_order)) and np.all(np.isnan(res.total))
+
+
+@pytest.mark.parametrize("kwargs, word", [
+    (dict(n=1), "n ="),
+    (dict(rng=0), "rng"),
+    (dict(groups=[[0], [0]]), "groups"),
+    (dict(factors=["a"]), "factors"),
+    (dict(confidence_level=1.5), "confidence_level"),
+    (dict(sampler=[object()]), "dists[0]"),
+])
+def test_validation(kwargs, word):
+    args = dict(func=lambda x: x.sum(axis=1), sampler=[stats.norm()] * 2, n=16,
+                rng=np.random.default_rng(0))
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=word.replace("[", r"\[")):
+        sobol_sensitivity(args.pop("func"), args.pop("sampler"), args.pop("n"),
+                          args.pop("rng"), **args)
+
+
+# --------------------------------------------------------------------------------------------
+# On a tolsim study
+# --------------------------------------------------------------------------------------------
+CONFIG_LINEAR = """
+[bearing]
+ball_diameter_mm = 10.0
+conformity = 0.54
+nominal_contact_angle_deg = 45.0
+youngs_modulus_GPa = 210.0
+poisson_ratio = 0.28
+friction_coefficient = 0.1
+[motion]
+groove_velocity_mm_per_s = 10.0
+duration_s = 10.0
+[train]
+balls = 2
+initial_gap = { distribution = "fixed", value_mm = 0.5 }
+[loads]
+normal_load_N = 200.0
+side_force_ratio = [0.0, 0.0]
+[tolerances.bottom_rotation]
+distribution = "normal"
+std_deg = 0.2
+scope = "carriage"
+[tolerances.top_rotation]
+distribution = "normal"
+std_deg = 0.1
+scope = "carriage"
+[tolerances.ball_oversize]
+distribution = "fixed"
+value_um = 0.0
+[study]
+samples = 16
+seed = 7
+velocity_model = "eq24"
+static_model = "paired"
+"""
+
+
+def _config(text):
+    config_module = pytest.importorskip("tolsim.io.config",
+                                        reason="tolsim.io.config (issue 5) not installed")
+    return config_module.parse_config(text, "test.toml")
+
+
+def test_study_sensitivity_linear_rotations():
+    # rho = 0 (equal forces), paired static, eq24: Eq. (24) with F1 = F2 reads
+    # eps = tan(b0)/4 * [(-dBL + dTR) + (-dBR + dTL)] and the rotations enter as
+    # dBL = -tb, dBR = +tb, dTR = -tt, dTL = +tt, so eps = tan(b0)/4 * [(tb - tt) + (tt - tb)]
+    # = 0 for every draw: the output has zero variance and the indices are undefined (NaN).
+    config = _config(CONFIG_LINEAR)
+    assert study_factors(config) == ("bottom_rotation", "top_rotation")
+    res = study_sensitivity(config, samples=256, n_resamples=200)
+    k = res.output_index(VELOCITY_DEVIATION)
+    assert res.variance[k] == 0.0 or res.variance[k] < 1e-30
+    assert np.all(np.isnan(res.first_order[k]))
+
+
+CONFIG_SIDE = CONFIG_LINEAR.replace(
+    "side_force_ratio = [0.0, 0.0]", "side_force_ratio = [-0.6, 0.6]").replace(
+    "value_mm = 0.5 }", "value_mm = 0.05 }")
+
+
+def test_study_sensitivity_known_shares_under_side_load():
+    # With rho = -/+0.6 the diagonals differ (F1^(2/3) != F2^(2/3)) and Eq. (24) becomes
+    # eps = (tan b0 / 2) (w1 (tb - tt) + w2 (tt - tb)) = (tan b0 / 2)(w1 - w2)(tb - tt),
+    # w = F^(2/3) / (F1^(2/3) + F2^(2/3)). Linear in (tb, tt) with equal and opposite
+    # coefficients, so the shares follow from the variances: S(bottom) = 0.2^2 / (0.2^2 +
+    # 0.1^2) = 0.8, S(top) = 0.2, for the eps of either ball.
+    config = _config(CONFIG_SIDE)
+    res = study_sensitivity(config, samples=1024, n_resamples=400)
+    k = res.output_index(VELOCITY_DEVIATION)
+    truth = np.array([0.8, 0.2])
+    assert np.all(_inside(res.first_order_ci[k], truth)), (res.first_order_ci[k], truth)
+    assert np.all(_inside(res.total_ci[k], truth)), (res.total_ci[k], truth)
+    # Contact (trailing ball faster by (eps_1 - eps_2) v/2 over 10 s against a 0.05 mm gap)
+    # is the event (tb - tt) > threshold, a function of tb - tt only: it is not additive, but
+    # both factors matter and the total effects lie in [0, 1] up to sampling noise, with the
+    # bottom rotation (4x the variance) the larger driver.
+    c = res.output_index(CONTACT)
+    assert res.used[c] == 1024
+    assert 0.05 < res.mean[c] < 0.95, res.mean[c]
+    assert np.all(res.total[c] > -0.05) and np.all(res.total[c] < 1.05), res.total[c]
+    assert res.total[c, 0] > res.total[c, 1]
+    assert res.ranking(CONTACT)[0][0] == "bottom_rotation"
+    # reproducible
+    again = study_sensitivity(config, samples=1024, n_resamples=400)
+    assert_allclose(again.total, res.total, rtol=0, atol=0)
+
+
+def test_sensitivity_variables_for_the_result_file():
+    from tolsim.study.sensitivity import SENSITIVITY_VARIABLES, sensitivity_variables
+
+    config = _config(CONFIG_SIDE)
+    res = study_sensitivity(config, samples=64, n_resamples=50)
+    out = sensitivity_variables(res)
+    assert set(out) == set(SENSITIVITY_VARIABLES) | {"factor"}
+    assert list(out["factor"]) == list(res.factors)
+    k = res.output_index(CONTACT)
+    assert_allclose(out["sensitivity_contact_total"], res.total[k])
+    assert_allclose(out["sensitivity_total_ci_upper"],
+                    res.total_ci[res.output_index(VELOCITY_DEVIATION), :, 1])
+    # the two names the schema already declares keep their dims
+    assert SENSITIVITY_VARIABLES["sensitivity_total"][0] == ("factor",)

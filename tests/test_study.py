@@ -1,0 +1,289 @@
+"""The study pipeline: reproducibility, resuming, streamed statistics, an independent check."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from scipy.special import ndtr
+from scipy.stats import binomtest
+
+from tolsim.io.config import parse_config
+from tolsim.study.evaluate import evaluate_balls, rigid_angle_deviation
+from tolsim.study.runner import StudyInterrupted, run_study
+from tolsim.study.statistics import Accumulator, clopper_pearson, histogram_quantiles
+
+STUDY = """\
+[bearing]
+ball_diameter_mm = 10.0
+conformity = 0.54
+[motion]
+groove_velocity_mm_per_s = 200.0
+stroke_mm = 100.0
+[train]
+balls = 6
+initial_gap = { distribution = "uniform", low_um = 0.0, high_um = 100.0 }
+[loads]
+normal_load_N = 200.0
+yaw_moment_N_m = 6.0
+[tolerances.bottom_rotation]
+distribution = "normal"
+std_deg = 0.2
+correlation_length_mm = 40.0
+[tolerances.top_rotation]
+distribution = "cpk"
+low_deg = -0.3
+high_deg = 0.3
+cpk = 1.0
+[tolerances.arc_centre_offset_tangential_TL]
+distribution = "normal"
+std_um = 1.0
+[study]
+samples = 3000
+seed = 11
+block_size = 128
+velocity_model = "analytic"
+static_model = "{static}"
+propagation = "{propagation}"
+sampling = "{sampling}"
+time_steps = 40
+spot_checks = 0
+"""
+
+
+def make(static="paired", propagation="constant", sampling="random", **over):
+    text = (STUDY.replace("{static}", static).replace("{propagation}", propagation)
+            .replace("{sampling}", sampling))
+    c = parse_config(text)
+    return c.with_overrides(**over) if over else c
+
+
+def state_arrays(result):
+    s = result.statistics.state()
+    return {k: np.asarray(v) for k, v in s.items()}
+
+
+def assert_identical(a, b):
+    sa, sb = state_arrays(a), state_arrays(b)
+    assert sa.keys() == sb.keys()
+    for k in sa:
+        assert_array_equal(sa[k], sb[k], err_msg=k)  # bit-identical, NaN == NaN
+
+
+@pytest.mark.parametrize("static, propagation, sampling", [
+    ("paired", "constant", "random"),
+    ("solved", "constant", "sobol"),
+    ("paired", "along_track", "lhs"),
+])
+def test_bit_identical_whatever_the_chunking(static, propagation, sampling):
+    c = make(static, propagation, sampling,
+             samples=1000 if propagation == "constant" else 300)
+    ref = run_study(c, chunk_blocks=1)
+    for chunk in (3, 100):
+        assert_identical(ref, run_study(c, chunk_blocks=chunk))
+    assert ref.statistics.n_assemblies == c.study.samples
+
+
+def test_bit_identical_with_two_worker_processes():
+    c = make("solved", samples=2000)
+    assert_identical(run_study(c, chunk_blocks=2), run_study(c, workers=2, chunk_blocks=3))
+
+
+def test_seed_changes_result():
+    a = run_study(make(samples=500))
+    b = run_study(make(samples=500, seed=12))
+    assert a.statistics.eps_mean != b.statistics.eps_mean
+
+
+def test_resume_after_interruption_is_bit_identical(tmp_path):
+    c = make(samples=2000)
+    ckpt = tmp_path / "out.nc.partial"
+    with pytest.raises(StudyInterrupted):
+        run_study(c, chunk_blocks=2, checkpoint_path=str(ckpt), max_blocks=5)
+    assert ckpt.exists()
+    resumed = run_study(c, chunk_blocks=3, checkpoint_path=str(ckpt))
+    assert resumed.resumed_blocks == 6  # 5 requested, stopped at the end of a 2-block chunk
+    assert_identical(resumed, run_study(c))
+    # a checkpoint of a different study is ignored
+    other = run_study(make(samples=2000, seed=99), checkpoint_path=str(ckpt))
+    assert other.resumed_blocks == 0
+
+
+def test_statistics_match_direct_numpy():
+    # The streamed accumulator against NumPy on all balls at once.
+    c = make(samples=700)
+    res = run_study(c, chunk_blocks=2).statistics
+    from tolsim.study.evaluate import loads_per_ball
+    from tolsim.study.propagation import first_contact_constant
+    from tolsim.study.sampling import error_values, sample_block
+
+    eps, times = [], []
+    for k in range(6):
+        b = sample_block(c, k)
+        nx, ny = loads_per_ball(c, b.initial_position.shape)
+        s = evaluate_balls(c, error_values(c, b), nx, ny)
+        t, _ = first_contact_constant(b.initial_gap, s.velocity_deviation, 0.2,
+                                      c.motion.duration)
+        assert s.valid.all()
+        eps.append(s.velocity_deviation)
+        times.append(t)
+    eps, times = np.concatenate(eps), np.concatenate(times)
+    assert res.n_balls == eps.size == res.n_balls_valid
+    assert_allclose(res.velocity_deviation_mean, eps.mean(), rtol=1e-12)
+    assert_allclose(res.velocity_deviation_std, eps.std(ddof=1), rtol=1e-12)
+    assert_allclose(res.ball_mean, eps.mean(axis=0), rtol=1e-12)
+    assert_array_equal(res.eps_histogram, np.histogram(eps, res.eps_edges)[0])
+    assert res.n_contact == np.isfinite(times).sum()
+    assert res.time_min == times.min()
+    # Quantiles from the histogram: within one bin of the empirical quantile, i.e. of the
+    # order statistics that bracket it (documented accuracy).
+    levels = (0.01, 0.5, 0.99)
+
+    def check(q, x, width):
+        lower = np.quantile(x, levels, method="lower") - width
+        upper = np.quantile(x, levels, method="higher") + width
+        assert np.all((lower <= q) & (q <= upper)), (lower, q, upper)
+
+    check(res.velocity_deviation_quantiles(levels), eps, res.eps_edges[1] - res.eps_edges[0])
+    check(res.time_to_contact_quantiles(levels), times[np.isfinite(times)], res.time_edges[1])
+    surv = res.survival()
+    assert_allclose(surv[-1], 1 - res.n_contact / res.n_assemblies_valid, rtol=1e-15)
+    assert np.all(np.diff(surv) <= 0)
+
+
+def test_histogram_quantiles_uniform_exact():
+    # Uniform data in equal bins: linear interpolation is exact for a uniform density.
+    counts = np.full(10, 100)
+    edges = np.linspace(0.0, 1.0, 11)
+    assert_allclose(histogram_quantiles(counts, edges, [0.05, 0.5, 0.93]), [0.05, 0.5, 0.93],
+                    rtol=1e-12)
+    assert np.isnan(histogram_quantiles(counts, edges, [0.01], underflow=20)[0])
+
+
+@pytest.mark.parametrize("k, n", [(0, 16), (5, 40), (593, 1000), (1000, 1000)])
+def test_clopper_pearson_matches_scipy(k, n):
+    # Twin: scipy.stats.binomtest(...).proportion_ci(method="exact"), to its solver tolerance.
+    ref = binomtest(k, n).proportion_ci(0.95, method="exact")
+    p, lo, hi = clopper_pearson(k, n)
+    assert p == k / n
+    assert_allclose([lo, hi], [ref.low, ref.high], rtol=1e-6, atol=1e-12)
+
+
+def test_monte_carlo_contact_probability_against_closed_form():
+    # Independent calculation: two balls, rho = 0 (F_1 = F_2), only a per-ball tangential
+    # offset t of the TL arc centre, t ~ N(0, s^2). Rigid mapping dbeta_TL = t / (R_G - R_B)
+    # and Eq. (24) at equal forces: eps = tan(b0)/2 * dbeta_TL / 2 = t / (4 d), d = R_G - R_B.
+    # eps_0 - eps_1 ~ N(0, 2 (s / 4d)^2); the pair touches within T iff
+    # (eps_0 - eps_1) v T / 2 >= g, so P = 1 - Phi(2 g / (v T) / (sqrt(2) s / (4 d))).
+    text = """\
+[bearing]
+ball_diameter_mm = 10.0
+conformity = 0.54
+[motion]
+groove_velocity_mm_per_s = 100.0
+duration_s = 1.0
+[train]
+balls = 2
+initial_gap = { distribution = "fixed", value_um = 50.0 }
+[loads]
+normal_load_N = 200.0
+[tolerances.arc_centre_offset_tangential_TL]
+distribution = "normal"
+std_um = 2.0
+scope = "ball"
+[study]
+samples = 20000
+seed = 314
+velocity_model = "eq24"
+static_model = "paired"
+"""
+    c = parse_config(text)
+    d = c.bearing.groove_radius - c.bearing.ball_radius
+    sigma_diff = np.sqrt(2) * 2e-6 / (4 * d)
+    p_exact = 1 - ndtr(2 * 50e-6 / (0.1 * 1.0) / sigma_diff)
+    res = run_study(c).statistics
+    p, lo, hi = res.contact_probability()
+    assert res.n_assemblies_valid == 20000
+    assert 0.05 < p_exact < 0.5  # a case with both outcomes
+    assert lo <= p_exact <= hi, (p, lo, hi, p_exact)
+
+
+def test_invalid_balls_are_counted_and_excluded():
+    # Side force ratio 0.9 on one ball: eq24 is outside its validity (diagonal force ratio
+    # below 0.25), so that ball and its train leave the statistics and are counted.
+    text = make().text.replace("yaw_moment_N_m = 6.0",
+                               "side_force_ratio = [0, 0, 0, 0, 0, 0.9]")
+    c = parse_config(text.replace('velocity_model = "analytic"', 'velocity_model = "eq24"'))
+    c = c.with_overrides(samples=300)
+    res = run_study(c).statistics
+    assert res.n_balls == 1800
+    assert res.n_outside_validity == 300 and res.n_balls_valid == 1500
+    assert res.n_assemblies_valid == 0 and res.n_contact == 0
+    assert np.isnan(res.contact_probability()[0])
+    assert res.ball_count[-1] == 0 and np.all(res.ball_count[:-1] == 300)
+
+
+def test_rigid_mapping_matches_static_rigid_solution():
+    # The 'paired' angles against tolsim.physics.static.solve_static(rigid=True). A profile
+    # rotation about the ball centre maps exactly (dbeta = -/+ theta, [Lin2018] Sec. 3.1);
+    # with tangential offsets as well the mapping is the first-order term, so the two agree to
+    # second order in the angles (|dbeta| <= 0.014 here: measured 3.5e-5, bound max|dbeta|^2).
+    static = pytest.importorskip("tolsim.physics.static")
+    from tolsim.physics.geometry import TABLE1
+
+    rng = np.random.default_rng(3)
+    n = 200
+    errors = {"arc_centre_offset_tangential": rng.normal(0, 1e-6, (n, 4)),
+              "arc_centre_offset_normal": np.zeros((n, 4)),
+              "bottom_rotation": rng.normal(0, 0.005, n), "top_rotation": rng.normal(0, 0.005, n),
+              "bottom_offset": np.zeros((n, 2)), "top_offset": np.zeros((n, 2)),
+              "ball_oversize": np.zeros(n)}
+    ref = static.solve_static(0.0, 200.0, static.GrooveErrors(**errors), TABLE1, rigid=True)
+    dbeta = rigid_angle_deviation({k: v.copy() for k, v in errors.items()}, TABLE1)
+    bound = np.max(np.abs(dbeta)) ** 2  # 1.9e-4 rad here
+    assert_allclose(dbeta, ref.contact_angle_deviation, rtol=0, atol=bound)
+    rotations = dict(errors, arc_centre_offset_tangential=np.zeros((n, 4)))
+    ref = static.solve_static(0.0, 200.0, static.GrooveErrors(**rotations), TABLE1, rigid=True)
+    dbeta = rigid_angle_deviation({k: v.copy() for k, v in rotations.items()}, TABLE1)
+    assert_allclose(dbeta, ref.contact_angle_deviation, rtol=1e-9, atol=1e-15)
+
+
+def test_accumulator_state_round_trip():
+    res = run_study(make(samples=300)).statistics
+    again = Accumulator.from_state(res.state())
+    for k, v in res.state().items():
+        assert_array_equal(v, again.state()[k])
+
+
+def test_spot_checks_with_full_model():
+    friction = pytest.importorskip("tolsim.physics.friction")
+    assert hasattr(friction, "full")
+    text = make().text.replace("spot_checks = 0", "spot_checks = 4")
+    r = run_study(parse_config(text).with_overrides(samples=200))
+    sc = r.spot_checks
+    assert len(sc.ball_index) == 4 and sc.velocity_deviation_full.shape == (4,)
+    both = sc.valid_analytic & sc.valid_full
+    assert both.sum() >= 3
+    # analytic vs full for |rho| <= 0.3 and fractions of a degree: the paper's Fig. 7(d) shows
+    # differences well below 0.05 percentage points in this range.
+    diff = sc.velocity_deviation_analytic[both] - sc.velocity_deviation_full[both]
+    assert np.max(np.abs(diff)) < 5e-4
+
+
+def test_ctrl_c_keeps_a_checkpoint(tmp_path):
+    # A KeyboardInterrupt (here raised from the progress callback after 4 blocks) saves the
+    # merged blocks; the rerun completes them to the same result as an uninterrupted run.
+    c = make(samples=1500)
+    ckpt = tmp_path / "out.nc.partial"
+    calls = []
+
+    def progress(n):
+        calls.append(n)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_study(c, chunk_blocks=1, progress=progress, checkpoint_path=str(ckpt),
+                  checkpoint_interval=1e9)
+    assert ckpt.exists()
+    resumed = run_study(c, checkpoint_path=str(ckpt))
+    assert resumed.resumed_blocks == 4
+    assert_identical(resumed, run_study(c))

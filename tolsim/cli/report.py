@@ -1,0 +1,78 @@
+"""``tolsim report``: a self-contained HTML report of a study result file.
+
+A thin layer over :func:`tolsim.reports.study.make_report`.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+from tolsim.cli import UsageError
+
+DESCRIPTION = """\
+Write an HTML report (report.html, figures embedded, plus the PNGs) of a result file of
+'tolsim run': what was studied (config and provenance), the epsilon distribution with any spec
+limit, the contact probability with its confidence interval, the survival curve of the time to
+first contact, analytic-versus-full spot checks, the tolerances that drive the risk (Sobol'
+indices) and, with a limit on |epsilon|, the fraction out of spec and Cpk.
+
+When the file holds no sensitivity indices they are computed from the config stored in the
+file (same seed); --sensitivity-samples sets the cost, --no-sensitivity skips it.
+
+examples:
+  tolsim run configs/yaw_moment_tolerances.toml -o yaw.nc
+  tolsim report yaw.nc -o yaw-report
+"""
+
+
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise UsageError(f"expected an integer >= 2, got {text!r}") from None
+    if value < 2:
+        raise UsageError(f"expected an integer >= 2, got {text!r}")
+    return value
+
+
+def add_parser(subparsers, formatter_class=None):
+    p = subparsers.add_parser("report", help="HTML report of a study result file",
+                              description=DESCRIPTION, formatter_class=formatter_class)
+    p.add_argument("result", metavar="RESULTS.nc", help="result file of 'tolsim run'")
+    p.add_argument("-o", "--out", metavar="DIR", default=argparse.SUPPRESS,
+                   help="output folder (default: RESULTS-report next to the file)")
+    p.add_argument("--sensitivity-samples", type=_positive_int, metavar="N",
+                   default=argparse.SUPPRESS,
+                   help="assemblies per base sample of the Sobol' analysis (default 1024, "
+                        "64 for along-track propagation)")
+    p.add_argument("--no-sensitivity", action="store_true",
+                   help="do not compute sensitivity indices missing from the file")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    return p
+
+
+def run(args) -> int:
+    from tolsim.reports.study import NotAResult, make_report
+
+    out = getattr(args, "out", None) or os.path.splitext(args.result)[0] + "-report"
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise UsageError(f"--out {out} exists and is not a folder")
+    started = time.perf_counter()
+
+    def say(msg):
+        if not args.quiet:
+            print(f"[{time.perf_counter() - started:5.1f} s] {msg}", file=sys.stderr)
+
+    try:
+        result = make_report(args.result, out, sensitivity=not args.no_sensitivity,
+                             sensitivity_samples=getattr(args, "sensitivity_samples", None),
+                             progress=say)
+    except NotAResult as exc:
+        raise UsageError(str(exc)) from None
+    except OSError as exc:
+        raise UsageError(f"cannot write to {out}: {exc}") from None
+    if not args.quiet:
+        print(f"wrote {result.html} and {len(result.figures)} figures "
+              f"({time.perf_counter() - started:.1f} s)")
+    return 0

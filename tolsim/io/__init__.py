@@ -1,0 +1,12 @@
+"""I/O layer: the TOML study config (:mod:`~tolsim.io.config`), the declared netCDF schema
+(:mod:`~tolsim.io.schema`) and the result writer/reader (:mod:`~tolsim.io.netcdf`).
+
+Typical use, without the command line::
+
+    from tolsim.io.config import load_config
+    from tolsim.io.netcdf import write_result
+    from tolsim.study.runner import run_study
+
+    result = run_study(load_config("configs/yaw_moment_tolerances.toml"))
+    write_result(result, "yaw.nc")
+"""

@@ -1,0 +1,456 @@
+"""Study configuration: TOML (read with :mod:`tomllib`) -> validated frozen dataclasses.
+
+Every dimensional key carries its unit as a suffix (``ball_diameter_mm``, ``std_um``,
+``yaw_moment_N_m``); values are converted to SI once, here, and nothing downstream sees a
+unit again. Any problem raises :class:`ConfigError`, a :class:`ValueError` whose message is
+one line naming the file, the line (where it can be found) and the key, e.g.::
+
+    study.toml:12: tolerances.top_rotation.std_deg = -0.1 must be >= 0
+
+The sections and their keys are documented in ``tolsim/data/default.toml`` (the packaged
+default study) and in ``configs/*.toml``.
+"""
+
+import math
+import re
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from tolsim.physics.geometry import Bearing
+from tolsim.study.spec import (
+    DISTRIBUTIONS,
+    PROPAGATIONS,
+    SAMPLINGS,
+    SCOPES,
+    SOURCES,
+    STATIC_MODELS,
+    VELOCITY_MODELS,
+    Distribution,
+    Loads,
+    Motion,
+    StudyConfig,
+    StudySettings,
+    Tolerance,
+    Train,
+)
+
+__all__ = ["ConfigError", "StudyConfig", "default_config_text", "load_config", "parse_config"]
+
+#: Unit suffixes of config keys: quantity kind -> {suffix: factor to SI}.
+UNITS = {
+    "length": {"m": 1.0, "mm": 1e-3, "um": 1e-6},
+    "angle": {"rad": 1.0, "mrad": 1e-3, "deg": math.pi / 180.0, "arcmin": math.pi / 10800.0},
+    "force": {"N": 1.0, "kN": 1e3},
+    "moment": {"N_m": 1.0, "N_mm": 1e-3},
+    "pressure": {"Pa": 1.0, "MPa": 1e6, "GPa": 1e9},
+    "velocity": {"m_per_s": 1.0, "mm_per_s": 1e-3},
+    "time": {"s": 1.0, "min": 60.0},
+    "dimensionless": {"": 1.0},
+}
+
+
+
+class ConfigError(ValueError):
+    """A bad study configuration; the message is one line naming the key (file:line: key)."""
+
+
+# --------------------------------------------------------------------------------------------
+# Reader
+# --------------------------------------------------------------------------------------------
+class _Source:
+    """The TOML text, for error messages with file and line."""
+
+    def __init__(self, text, path):
+        self.text, self.path = text, path
+        self.lines = text.splitlines()
+
+    def line_of(self, table, key=None):
+        """Line number (1-based) of ``key`` in ``[table]`` (or of the header), else None."""
+        header = re.compile(r"^\s*\[\s*([A-Za-z0-9_.\s\"]+?)\s*\]\s*(#.*)?$")
+        current, found_header = "", None
+        for number, line in enumerate(self.lines, 1):
+            m = header.match(line)
+            if m:
+                current = ".".join(p.strip().strip('"') for p in m.group(1).split("."))
+                if current == table and found_header is None:
+                    found_header = number
+                continue
+            if key is not None:
+                if current == table and re.match(rf"^\s*{re.escape(key)}\s*=", line):
+                    return number
+                # dotted parent tables (a.b.key = ...)
+                rel = (table + "." + key)[len(current) + 1 :] if current else table + "." + key
+                if table.startswith(current) and re.match(rf"^\s*{re.escape(rel)}\s*=", line):
+                    return number
+        return found_header
+
+    def error(self, table, key, message):
+        """A ConfigError 'file:line: table.key message'."""
+        line = self.line_of(table, key)
+        if line is None and key is not None:  # key is itself a [table.key] header
+            line = self.line_of(f"{table}.{key}" if table else key)
+        if line is None and "." in table:  # inline table: point at its parent key
+            parent, _, last = table.rpartition(".")
+            line = self.line_of(parent, last)
+        where = f"{self.path}:{line}" if line else self.path
+        name = f"{table}.{key}" if key else table
+        return ConfigError(f"{where}: {name} {message}")
+
+
+class _Table:
+    """One TOML table being read: typed getters with units; unknown keys are errors."""
+
+    def __init__(self, data, name, source):
+        if not isinstance(data, dict):
+            raise source.error(name, None, f"must be a table, got {type(data).__name__}")
+        self.data, self.name, self.source = data, name, source
+        self.used = set()
+
+    def error(self, key, message):
+        return self.source.error(self.name, key, message)
+
+    def has(self, key):
+        return key in self.data
+
+    def _number(self, key, value, *, integer=False):
+        ok_types = (int,) if integer else (int, float)
+        if isinstance(value, bool) or not isinstance(value, ok_types):
+            kind = "an integer" if integer else "a number"
+            raise self.error(key, f"= {value!r} must be {kind}, got {type(value).__name__}")
+        if not math.isfinite(value):
+            raise self.error(key, f"= {value!r} must be finite")
+        return value
+
+    def quantity(self, name, kind, *, default=None, required=True, allow_list=False,
+                 minimum=None, positive=False):
+        """Read ``name_<unit>`` and return it in SI (a float, or a tuple with allow_list)."""
+        units = UNITS[kind]
+        keys = [f"{name}_{u}" if u else name for u in units]
+        present = [k for k in keys if k in self.data]
+        if len(present) > 1:
+            raise self.error(present[1], f"given together with {present[0]}: use one")
+        if not present:
+            if name in self.data and kind != "dimensionless":
+                raise self.error(name, f"needs a unit suffix: one of {', '.join(keys)}")
+            for k in self.data:
+                if k.startswith(f"{name}_") and k[len(name) + 1 :] not in UNITS:
+                    raise self.error(k, f"has an unknown unit suffix (use one of "
+                                        f"{', '.join(keys)})")
+            if required and default is None:
+                raise self.error(keys[0] if kind == "dimensionless" else f"{name}_<unit>",
+                                 f"is missing (one of {', '.join(keys)})")
+            return default
+        key = present[0]
+        self.used.add(key)
+        factor = units[key[len(name) + 1 :] if key != name else ""]
+        raw = self.data[key]
+        values = raw if (allow_list and isinstance(raw, list)) else [raw]
+        if allow_list and isinstance(raw, list) and not raw:
+            raise self.error(key, "must not be an empty list")
+        out = []
+        for v in values:
+            v = self._number(key, v)
+            if positive and not v > 0:
+                raise self.error(key, f"= {v!r} must be > 0")
+            if minimum is not None and v < minimum:
+                raise self.error(key, f"= {v!r} must be >= {minimum}")
+            out.append(float(v) * factor)
+        return tuple(out) if (allow_list and isinstance(raw, list)) else out[0]
+
+    def key_for(self, name, kind):
+        """The key actually used for quantity ``name`` (``name_<unit>`` if absent)."""
+        for u in UNITS[kind]:
+            if (f"{name}_{u}" if u else name) in self.data:
+                return f"{name}_{u}" if u else name
+        return f"{name}_<unit>"
+
+    def integer(self, key, *, default=None, minimum=None):
+        if key not in self.data:
+            if default is None:
+                raise self.error(key, "is missing")
+            return default
+        self.used.add(key)
+        v = self._number(key, self.data[key], integer=True)
+        if minimum is not None and v < minimum:
+            raise self.error(key, f"= {v!r} must be >= {minimum}")
+        return int(v)
+
+    def string(self, key, choices, *, default=None):
+        if key not in self.data:
+            if default is None:
+                raise self.error(key, f"is missing (one of {', '.join(choices)})")
+            return default
+        self.used.add(key)
+        v = self.data[key]
+        if not isinstance(v, str):
+            raise self.error(key, f"= {v!r} must be a string, one of {', '.join(choices)}")
+        if v not in choices:
+            raise self.error(key, f"= {v!r} is not one of {', '.join(choices)}")
+        return v
+
+    def boolean(self, key, *, default=False):
+        if key not in self.data:
+            return default
+        self.used.add(key)
+        v = self.data[key]
+        if not isinstance(v, bool):
+            raise self.error(key, f"= {v!r} must be true or false")
+        return v
+
+    def table(self, key, *, required=True):
+        if key not in self.data:
+            if required:
+                raise self.source.error(f"{self.name}.{key}" if self.name else key, None,
+                                        "section is missing")
+            return None
+        self.used.add(key)
+        return _Table(self.data[key], f"{self.name}.{key}" if self.name else key, self.source)
+
+    def finish(self):
+        """Raise on the first key that was not read."""
+        for key in self.data:
+            if key not in self.used:
+                raise self.error(key, "is not a known key")
+
+
+def _distribution(table: _Table, kind: str) -> Distribution:
+    """Read a distribution table; values in SI of the quantity ``kind``."""
+    name = table.string("distribution", DISTRIBUTIONS)
+    q = lambda key, **kw: table.quantity(key, kind, **kw)  # noqa: E731
+    if name == "fixed":
+        d = Distribution("fixed", value=q("value"))
+    elif name == "normal":
+        d = Distribution("normal", mean=q("mean", default=0.0), std=q("std", minimum=0.0))
+    elif name == "uniform":
+        low, high = q("low"), q("high")
+        if not high > low:
+            raise table.error(table.key_for("high", kind),
+                              f"= {high!r} must be greater than low ({low!r}) [SI]")
+        d = Distribution("uniform", low=low, high=high)
+    elif name == "truncated_normal":
+        mean, std = q("mean", default=0.0), q("std", positive=True)
+        low, high = q("low"), q("high")
+        if not high > low:
+            raise table.error(table.key_for("high", kind),
+                              f"= {high!r} must be greater than low ({low!r}) [SI]")
+        d = Distribution("truncated_normal", mean=mean, std=std, low=low, high=high)
+    else:  # cpk
+        low, high = q("low"), q("high")
+        if not high > low:
+            raise table.error(table.key_for("high", kind),
+                              f"= {high!r} must be greater than low ({low!r}) [SI]")
+        mean = q("mean", default=0.5 * (low + high))
+        if not low < mean < high:
+            raise table.error(table.key_for("mean", kind), f"= {mean!r} must lie inside the band")
+        cpk = table.quantity("cpk", "dimensionless", positive=True)
+        std = min(high - mean, mean - low) / (3.0 * cpk)
+        d = Distribution("cpk", mean=mean, std=std, low=low, high=high, cpk=cpk,
+                         truncate=table.boolean("truncate"))
+    return d
+
+
+def _bearing(t: _Table) -> Bearing:
+    diameter = t.quantity("ball_diameter", "length", positive=True)
+    values = dict(
+        ball_radius=0.5 * diameter,
+        conformity=t.quantity("conformity", "dimensionless"),
+        nominal_contact_angle=t.quantity("nominal_contact_angle", "angle",
+                                         default=math.pi / 4),
+        youngs_modulus=t.quantity("youngs_modulus", "pressure", default=210e9, positive=True),
+        poisson_ratio=t.quantity("poisson_ratio", "dimensionless", default=0.28),
+        friction_coefficient=t.quantity("friction_coefficient", "dimensionless", default=0.1,
+                                        minimum=0.0),
+    )
+    t.finish()
+    try:
+        return Bearing(**values)
+    except ValueError as exc:  # Bearing names the field
+        field_name = str(exc).split(" ", 1)[0]
+        key = {"ball_radius": "ball_diameter"}.get(field_name, field_name)
+        kind = {"nominal_contact_angle": "angle", "youngs_modulus": "pressure",
+                "ball_diameter": "length"}.get(key, "dimensionless")
+        raise t.error(t.key_for(key, kind), f"= {values.get(field_name)!r} [SI] is out of "
+                                            "range") from None
+
+
+def _motion(t: _Table) -> Motion:
+    v = t.quantity("groove_velocity", "velocity", positive=True)
+    has_stroke = any(t.has(f"stroke_{u}") for u in UNITS["length"])
+    has_duration = any(t.has(f"duration_{u}") for u in UNITS["time"])
+    if has_stroke and has_duration:
+        raise t.error(t.key_for("stroke", "length"), "given together with duration: use one")
+    if has_stroke:
+        duration = t.quantity("stroke", "length", positive=True) / v
+    else:
+        duration = t.quantity("duration", "time", positive=True)
+    t.finish()
+    return Motion(groove_velocity=v, duration=duration)
+
+
+def _train(t: _Table, bearing: Bearing) -> Train:
+    balls = t.integer("balls", minimum=1)
+    gap_table = t.table("initial_gap")
+    gap = _distribution(gap_table, "length")
+    gap_table.finish()
+    if gap.kind == "fixed" and gap.value < 0:
+        raise gap_table.error(gap_table.key_for("value", "length"),
+                              f"= {gap.value!r} m must be >= 0")
+    if gap.kind in ("uniform", "truncated_normal") and gap.low < 0:
+        raise gap_table.error(gap_table.key_for("low", "length"),
+                              f"= {gap.low!r} m must be >= 0 (gaps cannot overlap)")
+    pitch = 2.0 * bearing.ball_radius + max(gap.expected, 0.0)
+    length = t.quantity("loaded_zone_length", "length", default=balls * pitch, positive=True)
+    t.finish()
+    return Train(balls=balls, initial_gap=gap, loaded_zone_length=length)
+
+
+def _loads(t: _Table, train: Train, bearing: Bearing) -> Loads:
+    n = train.balls
+
+    def per_ball(value, key):
+        if isinstance(value, tuple):
+            if len(value) != n:
+                raise t.error(key, f"has {len(value)} values but train.balls = {n}")
+            return np.asarray(value)
+        return np.full(n, value)
+
+    normal = per_ball(t.quantity("normal_load", "force", allow_list=True, positive=True),
+                      "normal_load_<unit>")
+    has_ratio = t.has("side_force_ratio")
+    has_side = any(t.has(f"side_load_{u}") for u in UNITS["force"])
+    if has_ratio and has_side:
+        raise t.error("side_force_ratio", "given together with side_load: use one")
+    if has_ratio:
+        ratio = t.quantity("side_force_ratio", "dimensionless", allow_list=True)
+        side = normal * per_ball(ratio, "side_force_ratio")
+    else:
+        total = t.quantity("side_load", "force", default=0.0, allow_list=True)
+        side = per_ball(total, "side_load_<unit>")
+    yaw = t.quantity("yaw_moment", "moment", default=0.0)
+    if yaw:
+        z = train.slot_positions(2.0 * bearing.ball_radius)
+        if n < 2:
+            raise t.error("yaw_moment_<unit>", "needs train.balls >= 2")
+        side = side + yaw * z / np.sum(z * z)
+    t.finish()
+    return Loads(normal_load=tuple(map(float, normal)), side_load=tuple(map(float, side)),
+                 yaw_moment=float(yaw))
+
+
+def _tolerances(t: _Table | None) -> tuple:
+    if t is None:
+        return ()
+    out = []
+    for source in list(t.data):
+        if source not in SOURCES:
+            raise t.error(source, f"is not a known error source ({', '.join(SOURCES)})")
+        sub = t.table(source)
+        kind, side = SOURCES[source]
+        dist = _distribution(sub, kind)
+        scope = sub.string("scope", SCOPES, default=side)
+        if side != "ball" and scope == "rail" and side == "carriage":
+            raise sub.error("scope", "= 'rail' but this is a carriage-side error source")
+        if side == "ball" and scope != "ball":
+            raise sub.error("scope", f"= {scope!r} but this is a per-ball error source")
+        corr = sub.quantity("correlation_length", "length", default=0.0, minimum=0.0)
+        if corr and scope != "rail":
+            raise sub.error(sub.key_for("correlation_length", "length"),
+                            "applies only with scope = 'rail'")
+        sub.finish()
+        out.append(Tolerance(source, dist, scope, corr))
+    t.finish()
+    return tuple(out)
+
+
+def _study(t: _Table) -> StudySettings:
+    lo_hi = t.quantity("velocity_deviation_range", "dimensionless", allow_list=True,
+                       default=(-0.02, 0.02))
+    if not (isinstance(lo_hi, tuple) and len(lo_hi) == 2 and lo_hi[1] > lo_hi[0]):
+        raise t.error("velocity_deviation_range", f"= {lo_hi!r} must be [low, high], low < high")
+    s = StudySettings(
+        samples=t.integer("samples", minimum=1),
+        seed=t.integer("seed", minimum=0),
+        block_size=t.integer("block_size", default=1024, minimum=1),
+        velocity_model=t.string("velocity_model", VELOCITY_MODELS, default="analytic"),
+        static_model=t.string("static_model", STATIC_MODELS, default="paired"),
+        propagation=t.string("propagation", PROPAGATIONS, default="constant"),
+        sampling=t.string("sampling", SAMPLINGS, default="random"),
+        spot_checks=t.integer("spot_checks", default=0, minimum=0),
+        time_steps=t.integer("time_steps", default=200, minimum=1),
+        velocity_deviation_range=tuple(lo_hi),
+        velocity_deviation_bins=t.integer("velocity_deviation_bins", default=400, minimum=1),
+        time_bins=t.integer("time_bins", default=200, minimum=1),
+        velocity_deviation_limit=t.quantity("velocity_deviation_limit", "dimensionless",
+                                            default=0.0, minimum=0.0),
+        contact_probability_limit=t.quantity("contact_probability_limit", "dimensionless",
+                                             default=0.0, minimum=0.0),
+    )
+    if s.contact_probability_limit > 1:
+        raise t.error("contact_probability_limit", "must be <= 1")
+    t.finish()
+    return s
+
+
+def parse_config(text: str, path: str = "<string>") -> StudyConfig:
+    """Validate a study given as TOML text.
+
+    Parameters
+    ----------
+    text : str
+        The TOML document.
+    path : str
+        Name used in error messages.
+
+    Returns
+    -------
+    StudyConfig
+
+    Raises
+    ------
+    ConfigError
+        One line: ``path:line: section.key problem``.
+    """
+    source = _Source(text, path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML: {' '.join(str(exc).split())}") from None
+    root = _Table(data, "", source)
+    bearing = _bearing(root.table("bearing"))
+    motion = _motion(root.table("motion"))
+    train = _train(root.table("train"), bearing)
+    loads = _loads(root.table("loads"), train, bearing)
+    tolerances = _tolerances(root.table("tolerances", required=False))
+    study = _study(root.table("study"))
+    for key in data:
+        if key not in root.used:
+            raise source.error(key, None, "is not a known section (bearing, motion, train, "
+                                          "loads, tolerances, study)")
+    return StudyConfig(bearing, motion, train, loads, tolerances, study, text, path)
+
+
+def default_config_text() -> str:
+    """The TOML text of the packaged default study (``tolsim/data/default.toml``)."""
+    return resources.files("tolsim").joinpath("data/default.toml").read_text(encoding="utf-8")
+
+
+def load_config(path=None) -> StudyConfig:
+    """Read and validate a study config file (the packaged default when ``path`` is None).
+
+    Raises
+    ------
+    ConfigError
+        For a missing or unreadable file or any invalid content (one line, names the key).
+    """
+    if path is None:
+        return parse_config(default_config_text(), "default.toml")
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc.__class__.__name__}: "
+                          f"{getattr(exc, 'strerror', None) or exc}") from None
+    return parse_config(text, str(path))

@@ -1,0 +1,193 @@
+"""Study results to and from netCDF (via xarray), following :mod:`tolsim.io.schema`.
+
+:func:`write_result` builds the Dataset, validates it against the schema and writes it to a
+temporary file in the output folder, then renames it over the target (:func:`os.replace`,
+atomic on POSIX), so a crash never leaves a truncated result. :func:`read_result` opens a file
+and checks that it is a tolsim result.
+"""
+
+import os
+import shlex
+import sys
+import tempfile
+from datetime import UTC, datetime
+
+import numpy as np
+import xarray as xr
+
+from tolsim import __version__
+from tolsim.io import schema
+from tolsim.physics.geometry import CONTACTS
+from tolsim.study.statistics import QUANTILES
+
+
+def _nan_if_zero(value):
+    return float(value) if value else float("nan")
+
+
+def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
+    """The Dataset of a :class:`tolsim.study.runner.StudyResult` (validated).
+
+    Parameters
+    ----------
+    result : StudyResult
+    history : str, optional
+        Command line to record (default: this process's argv).
+    """
+    cfg = result.config
+    acc = result.statistics
+    st = cfg.study
+    levels = np.asarray(QUANTILES)
+    p, lo, hi = acc.contact_probability()
+    t_q = acc.time_to_contact_quantiles(levels)
+    n_ball = acc.ball_count
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ball_std = np.where(n_ball > 1, np.sqrt(acc.ball_m2 / np.maximum(n_ball - 1, 1)),
+                            np.nan)
+        ball_mean = np.where(n_ball > 0, acc.ball_mean, np.nan)
+    eps_edges, time_edges = acc.eps_edges, acc.time_edges
+    sc = result.spot_checks
+    both = sc.valid_analytic & sc.valid_full
+    diff = sc.velocity_deviation_analytic[both] - sc.velocity_deviation_full[both]
+    balls = cfg.train.balls
+    data = {
+        "velocity_deviation_mean": acc.velocity_deviation_mean,
+        "velocity_deviation_std": acc.velocity_deviation_std,
+        "velocity_deviation_min": acc.eps_min if acc.n_balls_valid else np.nan,
+        "velocity_deviation_max": acc.eps_max if acc.n_balls_valid else np.nan,
+        "velocity_deviation_quantile": (("quantile",), acc.velocity_deviation_quantiles(levels)),
+        "velocity_deviation_histogram": (("velocity_deviation_bin",), acc.eps_histogram),
+        "velocity_deviation_underflow": acc.eps_underflow,
+        "velocity_deviation_overflow": acc.eps_overflow,
+        "velocity_deviation_mean_by_ball": (("ball",), ball_mean),
+        "velocity_deviation_std_by_ball": (("ball",), ball_std),
+        "normal_load": (("ball",), np.asarray(cfg.loads.normal_load)),
+        "side_load": (("ball",), np.asarray(cfg.loads.side_load)),
+        "side_force_ratio": (("ball",), cfg.loads.side_force_ratio),
+        "contact_probability": p,
+        "contact_probability_ci_lower": lo,
+        "contact_probability_ci_upper": hi,
+        "time_to_contact_quantile": (("quantile",), t_q),
+        "travel_to_contact_quantile": (("quantile",), t_q * cfg.motion.groove_velocity),
+        "time_to_contact_min": acc.time_min if acc.n_contact else np.nan,
+        "time_to_contact_max": acc.time_max if acc.n_contact else np.nan,
+        "time_to_contact_histogram": (("time_bin",), acc.time_histogram),
+        "survival_probability": (("time",), acc.survival()),
+        "contact_pair_count": (("pair",), acc.pair_count[: max(balls - 1, 0)]),
+        "horizon": cfg.motion.duration,
+        "groove_velocity": cfg.motion.groove_velocity,
+        "n_assemblies": acc.n_assemblies,
+        "n_assemblies_valid": acc.n_assemblies_valid,
+        "n_contact": acc.n_contact,
+        "n_balls": acc.n_balls,
+        "n_balls_valid": acc.n_balls_valid,
+        "n_balls_not_converged": acc.n_not_converged,
+        "n_balls_loss_of_contact": acc.n_loss_of_contact,
+        "n_balls_outside_validity": acc.n_outside_validity,
+        "velocity_deviation_limit": _nan_if_zero(st.velocity_deviation_limit),
+        "contact_probability_limit": _nan_if_zero(st.contact_probability_limit),
+        "spot_check_ball_index": (("spot_check",), sc.ball_index.astype(np.int64)),
+        "spot_check_contact_angle_deviation": (("spot_check", "contact"),
+                                               sc.contact_angle_deviation.reshape(-1, 4)),
+        "spot_check_normal_force": (("spot_check", "contact"), sc.normal_force.reshape(-1, 4)),
+        "spot_check_velocity_deviation_analytic": (("spot_check",),
+                                                   sc.velocity_deviation_analytic),
+        "spot_check_velocity_deviation_full": (("spot_check",), sc.velocity_deviation_full),
+        "spot_check_valid_analytic": (("spot_check",), sc.valid_analytic.astype(np.int8)),
+        "spot_check_valid_full": (("spot_check",), sc.valid_full.astype(np.int8)),
+        "spot_check_n_valid": np.int64(both.sum()),
+        "spot_check_rms_difference": float(np.sqrt(np.mean(diff**2))) if diff.size else np.nan,
+        "spot_check_max_abs_difference": float(np.max(np.abs(diff))) if diff.size else np.nan,
+    }
+    coords = {
+        "quantile": (("quantile",), levels),
+        "velocity_deviation_bin": (("velocity_deviation_bin",),
+                                   0.5 * (eps_edges[:-1] + eps_edges[1:])),
+        "velocity_deviation_bin_bounds": (("velocity_deviation_bin", "bounds"),
+                                          np.stack([eps_edges[:-1], eps_edges[1:]], axis=1)),
+        "time": (("time",), time_edges),
+        "time_bin": (("time_bin",), 0.5 * (time_edges[:-1] + time_edges[1:])),
+        "time_bin_bounds": (("time_bin", "bounds"),
+                            np.stack([time_edges[:-1], time_edges[1:]], axis=1)),
+        "ball": (("ball",), np.arange(balls, dtype=np.int64)),
+        "pair": (("pair",), np.arange(max(balls - 1, 0), dtype=np.int64)),
+        "spot_check": (("spot_check",), np.arange(len(sc.ball_index), dtype=np.int64)),
+        "contact": (("contact",), np.array(CONTACTS)),
+    }
+    ds = xr.Dataset(data, coords=coords)
+    if history is None:
+        history = " ".join(shlex.quote(a) for a in [os.path.basename(sys.argv[0])] + sys.argv[1:])
+    now = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    ds.attrs = {
+        "Conventions": schema.CONVENTIONS,
+        "title": f"tolsim Monte Carlo tolerance study: {os.path.basename(cfg.path)}",
+        "source": f"tolsim {__version__}",
+        "history": f"{now} {history}",
+        "seed": int(st.seed),
+        "config": cfg.text,
+        "tolsim_schema": schema.SCHEMA_VERSION,
+        "references": "B. Lin, C. E. Okwudire, M. Duan, J. S. Wou, IMECE2018-88033",
+        "samples": int(st.samples),
+        "block_size": int(st.block_size),
+        "velocity_model": st.velocity_model,
+        "static_model": st.static_model,
+        "propagation": st.propagation,
+        "sampling": st.sampling,
+        "spot_check_status": result.spot_checks.status,
+        "velocity_deviation_quantile_resolution": float(eps_edges[1] - eps_edges[0]),
+        "time_to_contact_quantile_resolution": float(time_edges[1] - time_edges[0]),
+        "contact_probability_interval": "Clopper-Pearson, 95 %, over valid trains",
+        "elapsed_seconds": float(result.elapsed),
+        "workers": int(result.workers),
+    }
+    schema.apply_attributes(ds)
+    return schema.validate(ds)
+
+
+def write_dataset(ds: xr.Dataset, path) -> None:
+    """Validate ``ds`` and write it to ``path`` through a temporary file and a rename."""
+    schema.validate(ds)
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
+                               dir=folder)
+    os.close(fd)
+    try:
+        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual file mode
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def write_result(result, path, *, history: str | None = None) -> xr.Dataset:
+    """Write a study result to netCDF (atomic); return the Dataset written."""
+    ds = result_to_dataset(result, history=history)
+    write_dataset(ds, path)
+    return ds
+
+
+def read_result(path) -> xr.Dataset:
+    """Open a tolsim result file (loaded into memory) and check it against the schema.
+
+    Raises
+    ------
+    ValueError
+        If the file cannot be opened or is not a tolsim study result.
+    """
+    try:
+        with xr.open_dataset(path, engine="netcdf4") as ds:
+            ds = ds.load()
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: cannot open as netCDF: {exc}") from None
+    if "tolsim_schema" not in ds.attrs:
+        raise ValueError(f"{path}: not a tolsim study result (no tolsim_schema attribute)")
+    try:
+        schema.validate(ds)
+    except schema.SchemaError as exc:
+        raise ValueError(f"{path}: not a valid tolsim study result: {exc}") from None
+    return ds

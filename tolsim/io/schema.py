@@ -1,0 +1,179 @@
+"""The one declared schema of a tolsim study result file (netCDF, CF-1.10).
+
+Every variable the writer may put in a result file is declared here with its dimensions,
+``units`` (UDUNITS; ``1`` for dimensionless values and counts) and ``long_name``;
+:func:`validate` checks a Dataset against the declaration before it is written and when a
+file is read back. Variables marked ``required=False`` are optional (e.g. the sensitivity
+variables along the ``factor`` dimension that the report issue adds); a variable that is not
+declared is an error, so the schema stays the single place that defines the file.
+
+Dimensions: ``quantile`` (levels), ``velocity_deviation_bin`` (histogram bins of epsilon),
+``time`` (survival-curve times = the edges of the time bins), ``time_bin``, ``ball`` (position
+in the train, 0 = trailing), ``pair`` (adjacent pairs, named by their trailing ball),
+``spot_check``, ``contact`` (BL, BR, TR, TL), ``bounds`` (2), ``factor`` (tolerance sources,
+optional).
+"""
+
+from dataclasses import dataclass
+
+#: Value of the ``Conventions`` global attribute.
+CONVENTIONS = "CF-1.10"
+#: Global attribute that marks a tolsim result (``tolsim_schema``) and its version.
+SCHEMA_VERSION = "1"
+#: Required global attributes (all strings except ``seed``).
+GLOBAL_ATTRIBUTES = ("Conventions", "title", "source", "history", "seed", "config",
+                     "tolsim_schema")
+
+
+class SchemaError(ValueError):
+    """A Dataset that does not follow the declared schema."""
+
+
+@dataclass(frozen=True)
+class Variable:
+    """Declaration of one variable: dims, units, long_name, dtype kind, required."""
+
+    dims: tuple
+    units: str
+    long_name: str
+    kind: str = "f"  # numpy dtype kind: f float, i integer, U/O/S string
+    required: bool = True
+
+
+V = Variable
+_Q = ("quantile",)
+_SC = ("spot_check",)
+
+COORDINATES = {
+    "quantile": V(_Q, "1", "quantile level"),
+    "velocity_deviation_bin": V(("velocity_deviation_bin",), "1",
+                                "centre of a velocity deviation histogram bin"),
+    "velocity_deviation_bin_bounds": V(("velocity_deviation_bin", "bounds"), "1",
+                                       "edges of a velocity deviation histogram bin"),
+    "time": V(("time",), "s", "time since the start of the stroke"),
+    "time_bin": V(("time_bin",), "s", "centre of a time-to-contact histogram bin"),
+    "time_bin_bounds": V(("time_bin", "bounds"), "s", "edges of a time-to-contact histogram bin"),
+    "ball": V(("ball",), "1", "ball position in the train (0 = trailing end)", "i"),
+    "pair": V(("pair",), "1", "adjacent ball pair, named by its trailing ball", "i"),
+    "spot_check": V(_SC, "1", "spot check number", "i"),
+    "contact": V(("contact",), "1", "contact (BL, BR, TR, TL)", "U"),
+    "factor": V(("factor",), "1", "tolerance source", "U", required=False),
+}
+
+DATA_VARIABLES = {
+    # epsilon
+    "velocity_deviation_mean": V((), "1", "mean ball velocity deviation epsilon over valid balls"),
+    "velocity_deviation_std": V((), "1", "standard deviation of epsilon over valid balls"),
+    "velocity_deviation_min": V((), "1", "smallest epsilon of a valid ball"),
+    "velocity_deviation_max": V((), "1", "largest epsilon of a valid ball"),
+    "velocity_deviation_quantile": V(_Q, "1", "quantile of epsilon (from the histogram)"),
+    "velocity_deviation_histogram": V(("velocity_deviation_bin",), "1",
+                                      "number of valid balls per epsilon bin", "i"),
+    "velocity_deviation_underflow": V((), "1", "valid balls below the histogram range", "i"),
+    "velocity_deviation_overflow": V((), "1", "valid balls above the histogram range", "i"),
+    "velocity_deviation_mean_by_ball": V(("ball",), "1", "mean epsilon per train position"),
+    "velocity_deviation_std_by_ball": V(("ball",), "1",
+                                        "standard deviation of epsilon per train position"),
+    # loads
+    "normal_load": V(("ball",), "N", "load N_y pressing the top groove down, per ball"),
+    "side_load": V(("ball",), "N", "lateral load N_x on the top groove, per ball"),
+    "side_force_ratio": V(("ball",), "1", "side force ratio rho = N_x / N_y per ball"),
+    # contact
+    "contact_probability": V((), "1",
+                             "probability of ball-to-ball contact within the horizon per train"),
+    "contact_probability_ci_lower": V((), "1",
+                                      "lower end of the 95 % Clopper-Pearson interval"),
+    "contact_probability_ci_upper": V((), "1",
+                                      "upper end of the 95 % Clopper-Pearson interval"),
+    "time_to_contact_quantile": V(_Q, "s", "quantile of the time to first contact, given "
+                                           "contact within the horizon"),
+    "travel_to_contact_quantile": V(_Q, "m", "quantile of the carriage travel to first "
+                                             "contact, given contact within the horizon"),
+    "time_to_contact_min": V((), "s", "earliest first contact"),
+    "time_to_contact_max": V((), "s", "latest first contact within the horizon"),
+    "time_to_contact_histogram": V(("time_bin",), "1",
+                                   "number of trains per time-to-first-contact bin", "i"),
+    "survival_probability": V(("time",), "1", "probability of no contact by time t"),
+    "contact_pair_count": V(("pair",), "1", "first contacts per adjacent pair", "i"),
+    "horizon": V((), "s", "duration of the stroke considered"),
+    "groove_velocity": V((), "m s-1", "velocity v of the top groove (carriage)"),
+    # counts
+    "n_assemblies": V((), "1", "number of assemblies (trains) sampled", "i"),
+    "n_assemblies_valid": V((), "1", "trains whose balls are all valid", "i"),
+    "n_contact": V((), "1", "valid trains with a contact within the horizon", "i"),
+    "n_balls": V((), "1", "number of balls evaluated", "i"),
+    "n_balls_valid": V((), "1", "balls inside every validity limit", "i"),
+    "n_balls_not_converged": V((), "1", "balls whose static solution did not converge", "i"),
+    "n_balls_loss_of_contact": V((), "1", "balls with a contact force <= 0", "i"),
+    "n_balls_outside_validity": V((), "1",
+                                  "balls outside the velocity model's validity limits", "i"),
+    # spec limits (NaN: none)
+    "velocity_deviation_limit": V((), "1", "specification limit on |epsilon|"),
+    "contact_probability_limit": V((), "1", "specification limit on the contact probability"),
+    # spot checks
+    "spot_check_ball_index": V(_SC, "1", "global index of the spot-checked ball "
+                                         "(assembly * balls + ball)", "i"),
+    "spot_check_contact_angle_deviation": V(_SC + ("contact",), "rad",
+                                            "loaded contact angle deviation of the ball"),
+    "spot_check_normal_force": V(_SC + ("contact",), "N", "contact force of the ball"),
+    "spot_check_velocity_deviation_analytic": V(_SC, "1", "epsilon from the study's model"),
+    "spot_check_velocity_deviation_full": V(_SC, "1", "epsilon from the full friction model"),
+    "spot_check_valid_analytic": V(_SC, "1", "1 if the study's model is valid for the ball",
+                                   "i"),
+    "spot_check_valid_full": V(_SC, "1", "1 if the full model converged and is valid", "i"),
+    "spot_check_n_valid": V((), "1", "spot checks valid in both models", "i"),
+    "spot_check_rms_difference": V((), "1", "RMS of epsilon analytic - full over valid checks"),
+    "spot_check_max_abs_difference": V((), "1", "largest |epsilon analytic - full|"),
+    # sensitivity (issue 6)
+    "sensitivity_first_order": V(("factor",), "1", "first-order variance-based index",
+                                 required=False),
+    "sensitivity_total": V(("factor",), "1", "total-effect variance-based index",
+                           required=False),
+}
+
+VARIABLES = {**COORDINATES, **DATA_VARIABLES}
+
+
+def apply_attributes(ds):
+    """Set ``units`` and ``long_name`` of every declared variable in ``ds`` (in place)."""
+    for name, var in ds.variables.items():
+        decl = VARIABLES.get(name)
+        if decl is not None:
+            var.attrs["units"] = decl.units
+            var.attrs["long_name"] = decl.long_name
+    # No CF ``bounds`` attribute on the bin centres: with it, xarray drops the ``units`` of the
+    # bounds variables on writing (CF 7.1 lets bounds inherit units), and every variable of a
+    # tolsim file carries its own units.
+    return ds
+
+
+def validate(ds):
+    """Check a Dataset against the schema; raise :class:`SchemaError` naming the problem."""
+    for name, decl in VARIABLES.items():
+        if name not in ds.variables:
+            if decl.required:
+                raise SchemaError(f"variable {name!r} is missing")
+            continue
+        var = ds.variables[name]
+        if tuple(var.dims) != decl.dims:
+            raise SchemaError(f"variable {name!r} has dims {tuple(var.dims)}, "
+                              f"expected {decl.dims}")
+        kind = var.dtype.kind
+        ok = kind in ("U", "O", "S") if decl.kind == "U" else kind == decl.kind or (
+            decl.kind == "i" and kind == "u")
+        if not ok:
+            raise SchemaError(f"variable {name!r} has dtype {var.dtype}, expected kind "
+                              f"{decl.kind!r}")
+        for attr in ("units", "long_name"):
+            if var.attrs.get(attr) != getattr(decl, attr):
+                raise SchemaError(f"variable {name!r} attribute {attr!r} is "
+                                  f"{var.attrs.get(attr)!r}, expected {getattr(decl, attr)!r}")
+    for name in ds.variables:
+        if name not in VARIABLES:
+            raise SchemaError(f"variable {name!r} is not declared in tolsim.io.schema")
+    for attr in GLOBAL_ATTRIBUTES:
+        if attr not in ds.attrs:
+            raise SchemaError(f"global attribute {attr!r} is missing")
+    if ds.attrs["Conventions"] != CONVENTIONS:
+        raise SchemaError(f"Conventions is {ds.attrs['Conventions']!r}, expected {CONVENTIONS!r}")
+    return ds

@@ -1,0 +1,963 @@
+"""The comprehensive friction model ("full model") of one ball in four-point contact.
+
+One ball between a fixed bottom groove and a top groove moving at v along the rail (z), with
+given contact angles beta_i and normal forces F_i ([Lin2018] Sec. 2, Fig. 2). Unknowns: the
+ball velocity v_B and its angular velocity Omega = (omega_x, omega_y[, omega_z]). Nothing is
+linearised:
+
+* **Kinematics** (Eqs. 1-9). The slip of the ball over groove i at a point r of the contact is
+  dv = v_B z + Omega x r - V_i z (V = 0 bottom, v top), projected on the contact's tangent
+  plane. Planar contact (default, as in the paper): r = R p_i + x x_i + z z_i, and the slip
+  field is a rotation omega_i = Omega . y_i about the zero-velocity point (c_i, d_i) (Eq. 8),
+  c_i = (v_B - V_i - R Omega . x_i) / omega_i, d_i = -R omega_z / omega_i.
+  Curved contact (``surface="curved"``): the contact follows the deformed-surface radius
+  R_d = 2 f D / (2 f + 1) in the cross-section ([Harris2007], after [Jones1959]),
+  r = (h + sqrt(R_d^2 - x^2)) p_i + x x_i + z z_i with h = sqrt(R^2 - a^2) - sqrt(R_d^2 - a^2)
+  (the ellipse's edges lie on the undeformed ball), so the rolling radius varies across the
+  ellipse (Heathcote slip).
+* **Friction** (Eq. 11-13). Coulomb: traction -mu sigma dv/|dv| on the ball, with the Hertz
+  pressure sigma = sigma_0 sqrt(1 - x^2/a^2 - z^2/b^2), sigma_0 = 3 F / (2 pi a b) (Eq. 11;
+  the ellipse lies in the x-z plane, a across the groove, ERRATA 3-4). Forces and moments
+  about the ball centre are the full 3-D sums of r x dF: the moment of contact i is
+  -R f_i x_i - M_i y_i + R f_x,i z (planar), which is where ERRATA 8's sign comes from.
+* **Equilibrium** (Eq. 18 in full nonlinear form): sum of z forces, x and y moments (and the
+  z moment when omega_z is free) vanish. Normal forces pass through the ball centre.
+
+Quadrature (the direction field is singular at the zero-velocity point). The integrals are
+taken in polar coordinates *centred on the zero-velocity point*, in the coordinates
+(x/a, z/b) where the ellipse is the unit disc. For planar contact the slip direction is
+constant along each ray, so the radial integrals of the Hertz pressure are closed-form
+(``_ray_moments``); only the angular integral is numerical:
+
+* pole inside the ellipse: the angular integrand is smooth and periodic; the trapezoidal rule
+  on a mapped angle tan(phi) = tan(chi) / q, q = (b/a)^0.3, clusters nodes where the
+  direction field turns fast (phi ~ +-90 deg for a long thin ellipse); exponential
+  convergence;
+* pole outside: the rays cover a cone of half-angle asin(1/|P|); Gauss-Legendre on it (the
+  integrand vanishes linearly at the cone's edges and is analytic inside).
+
+For the curved surface the pole is the exact zero of the slip field (a quadratic), the
+direction still varies along each ray, and the radial integral uses Gauss-Legendre in
+theta (s = cos theta, which absorbs the sqrt of the pressure at the edge).
+
+The equilibrium is solved per ball by a damped Newton method (central-difference Jacobian,
+backtracking line search, Levenberg-Marquardt fallback) from pure rolling at the contact
+centres (least squares over the four contacts). The equations are the gradient of the
+dissipated power D(v_B, Omega) = sum int mu sigma |slip| dA, which is convex, so a step is
+also accepted when it decreases D (Armijo). Non-convergence is a flag (``converged``), never
+an exception.
+
+Known limit: near two-point contact (e.g. |rho| > 0.94 at theta = 3 deg with paired
+forces) the heavily loaded pair tends to *stick* (zero spin and zero slip at the centre):
+the minimum of D sits on a kink where the friction is set-valued, the smooth residual cannot
+vanish, and the ball is returned with ``converged = False`` (residual ~1e-2).
+
+References
+----------
+.. [Lin2018] B. Lin, C. E. Okwudire, M. Duan, J. S. Wou, IMECE2018-88033.
+.. [Jones1959] A. B. Jones, "Ball motion and sliding friction in ball bearings", J. Basic
+   Eng. 81 (1959) 1-12.
+.. [Harris2007] T. A. Harris, M. N. Kotzalas, Advanced Concepts of Bearing Technology, 5th
+   ed., CRC Press, 2007, Ch. 2 (rolling radius on the deformed surface).
+.. [LeblancNelias2007] A. Leblanc, D. Nelias, "Ball motion and sliding friction in a
+   four-contact-point ball bearing", J. Tribol. 129 (2007) 801-808.
+"""
+
+import operator
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from numba import prange
+
+from tolsim._jit import jit, pjit
+from tolsim.physics.analytic import VelocityResult, _as_ball_arrays
+from tolsim.physics.geometry import (
+    SIDE_SIGN_X,
+    SIDE_SIGN_Y,
+    TABLE1,
+    ZERO_VELOCITY_SIGN,
+    Bearing,
+)
+from tolsim.physics.hertz import hertz_constants
+
+#: Default number of angular nodes per contact (full circle; see the convergence study in
+#: ``tests/test_friction.py::test_grid_convergence`` and the module docstring).
+DEFAULT_ANGULAR_NODES = 32
+#: Default number of radial nodes per ray for the curved surface.
+DEFAULT_RADIAL_NODES = 8
+#: Exponent k of the angle map tan(phi) = tan(chi) / (b/a)^k (chosen by experiment: 0.3
+#: gives the fastest convergence for b/a = 0.1-0.3).
+ANGLE_MAP_EXPONENT = 0.3
+#: Default tolerance on the normalised equilibrium residual max|load| / (mu sum F).
+DEFAULT_TOLERANCE = 1e-10
+#: Default iteration cap of the Newton solver.
+DEFAULT_MAX_ITER = 60
+#: |pole|/a beyond which a contact is treated as pure sliding (uniform slip direction).
+_SLIDING_POLE = 1e7
+#: Relative step of the central-difference Jacobian (unknowns scaled by v and v/R).
+_FD_STEP = 1e-6
+#: Names of the surface models.
+SURFACES = ("planar", "curved")
+
+
+# --------------------------------------------------------------------------------------------
+# Quadrature grid
+# --------------------------------------------------------------------------------------------
+@lru_cache(maxsize=32)
+def quadrature_grid(angular_nodes, radial_nodes, ellipticity):
+    """Nodes and weights of the polar quadrature about the zero-velocity point.
+
+    Parameters
+    ----------
+    angular_nodes : int
+        Nodes of the mapped trapezoidal rule over the full circle (pole inside); the cone
+        rule (pole outside) uses ``max(8, angular_nodes // 2)`` Gauss-Legendre nodes.
+    radial_nodes : int
+        Gauss-Legendre nodes in theta along each ray (curved surface only).
+    ellipticity : float
+        b/a [-] (sets the angle map).
+
+    Returns
+    -------
+    tuple of ndarray
+        (cos phi, sin phi, weight) inside, (x, weight) of Gauss-Legendre on [-1, 1] for the
+        cone, (t, weight) of Gauss-Legendre on [0, 1] for the radial rule.
+    """
+    q = ellipticity**ANGLE_MAP_EXPONENT
+    chi = 2.0 * np.pi * np.arange(angular_nodes) / angular_nodes
+    phi = np.arctan2(np.sin(chi), q * np.cos(chi))
+    dphi = q / (q * q * np.cos(chi) ** 2 + np.sin(chi) ** 2)
+    w_in = 2.0 * np.pi / angular_nodes * dphi
+    xo, wo = np.polynomial.legendre.leggauss(max(8, angular_nodes // 2))
+    xr, wr = np.polynomial.legendre.leggauss(radial_nodes)
+    out = (np.cos(phi), np.sin(phi), w_in, xo, wo, 0.5 * (xr + 1.0), 0.5 * wr)
+    for arr in out:
+        arr.setflags(write=False)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Kernels: typed loops, no checks.
+# --------------------------------------------------------------------------------------------
+@jit(inline="always")
+def _ray_moments(beta, disc, inside):
+    """Closed-form radial integrals along one ray in the unit disc.
+
+    For a ray u = P + r e from the pole P, with beta = P . e and disc = beta^2 + 1 - |P|^2
+    (> 0), 1 - |u|^2 = (r_2 - r)(r - r_1). Returns I_k = int sqrt(1 - |u|^2) r^k dr over the
+    part of the ray inside the disc with r >= 0, for k = 1, 2 (r = m + h s,
+    int sqrt(1 - s^2) s^j ds from s0 to 1 in closed form).
+    """
+    h = np.sqrt(disc)
+    m = -beta
+    if inside:
+        s0 = beta / h if h > 0.0 else 1.0
+        s0 = min(1.0, max(-1.0, s0))
+        rt = np.sqrt(max(0.0, 1.0 - s0 * s0))
+        asn = np.arcsin(s0)
+        j0 = 0.5 * (0.5 * np.pi - s0 * rt - asn)
+        j1 = rt * rt * rt / 3.0
+        j2 = 0.125 * (0.5 * np.pi - s0 * (2.0 * s0 * s0 - 1.0) * rt - asn)
+    else:
+        j0 = 0.5 * np.pi
+        j1 = 0.0
+        j2 = 0.125 * np.pi
+    h2 = h * h
+    i1 = h2 * (m * j0 + h * j1)
+    i2 = h2 * (m * m * j0 + 2.0 * m * h * j1 + h2 * j2)
+    return i1, i2
+
+
+@jit
+def planar_contact_integrals(pt, ps, a, b, cin, sin_, win, xo, wo, out):
+    """Friction integrals of one planar contact for a pole at (x, z) = (pt a, ps b).
+
+    Writes S = (S_x, S_z, S_n, S_d) into ``out`` such that, with omega_i the spin and
+    sigma_0 = 3F/(2 pi a b), the friction force on the ball along x_i and z_i and its moment
+    about the contact normal y_i are mu sigma_0 a b sgn(omega_i) (S_x, S_z, S_n) (Eqs. 12-13
+    without the small-offset assumption; S_n [m], S_x and S_z [-]), and the dissipated power
+    int mu sigma |slip| dA is mu sigma_0 a b |omega_i| S_d (S_d [m]).
+    """
+    pp = pt * pt + ps * ps
+    sx = 0.0
+    sz = 0.0
+    sn = 0.0
+    sd = 0.0
+    c = pt * a
+    d = ps * b
+    if pp <= 1.0:
+        for j in range(cin.shape[0]):
+            e1 = cin[j]
+            e2 = sin_[j]
+            beta = pt * e1 + ps * e2
+            disc = beta * beta + 1.0 - pp
+            i1, i2 = _ray_moments(beta, disc, True)
+            ll = np.sqrt(b * b * e2 * e2 + a * a * e1 * e1)
+            w = win[j]
+            sx -= w * b * e2 / ll * i1
+            sz += w * a * e1 / ll * i1
+            sn -= w * ((d * b * e2 + c * a * e1) * i1 / ll + ll * i2)
+            sd += w * ll * i2
+    else:
+        rp = np.sqrt(pp)
+        half = np.arcsin(1.0 / rp)
+        base = np.arctan2(ps, pt) + np.pi
+        for j in range(xo.shape[0]):
+            ang = half * xo[j]
+            phi = base + ang
+            e1 = np.cos(phi)
+            e2 = np.sin(phi)
+            sa = rp * np.sin(ang)
+            disc = 1.0 - sa * sa
+            if disc <= 0.0:
+                continue
+            beta = -rp * np.cos(ang)
+            i1, i2 = _ray_moments(beta, disc, False)
+            ll = np.sqrt(b * b * e2 * e2 + a * a * e1 * e1)
+            w = half * wo[j]
+            sx -= w * b * e2 / ll * i1
+            sz += w * a * e1 / ll * i1
+            sn -= w * ((d * b * e2 + c * a * e1) * i1 / ll + ll * i2)
+            sd += w * ll * i2
+    out[0] = sx
+    out[1] = sz
+    out[2] = sn
+    out[3] = sd
+
+
+@pjit
+def contact_friction_kernel(offset_ratio, lateral_ratio, semi_major, semi_minor, cin, sin_, win,
+                            xo, wo, out):
+    """Normalised friction of planar contacts: out[k] = (f_x, f_z, M_O) / (sgn(omega) mu F).
+
+    M_O is the resisting spin moment of Eq. (13) [m] (positive at c/a = 0, Eq. 14).
+    """
+    scale = 1.5 / np.pi  # sigma_0 a b / F
+    for k in prange(offset_ratio.shape[0]):
+        s3 = np.empty(4)
+        pt = offset_ratio[k]
+        ps = lateral_ratio[k]
+        if np.hypot(pt, ps) > _SLIDING_POLE:
+            # pure sliding: slip along (-d, c) direction of the centre, friction opposes it
+            # (Eq. 15)
+            a = semi_major[k]
+            b = semi_minor[k]
+            ux = -ps * b
+            uz = pt * a
+            un = np.hypot(ux, uz)
+            out[k, 0] = -ux / un
+            out[k, 1] = -uz / un
+            out[k, 2] = 0.0
+            continue
+        planar_contact_integrals(pt, ps, semi_major[k], semi_minor[k], cin, sin_, win, xo, wo,
+                                 s3)
+        out[k, 0] = scale * s3[0]
+        out[k, 1] = scale * s3[1]
+        out[k, 2] = -scale * s3[2]
+
+
+@jit
+def _curved_pole(vrel, w, om, omz, a, b, rd, h):
+    """Zero of the slip on the curved surface, normalised (x0/a, z0/b); (0, 0) if none."""
+    # u_z(x) = vrel - (h + S) w - x om = 0, S = sqrt(rd^2 - x^2); squared: quadratic in x.
+    k = vrel - h * w
+    aa = om * om + w * w
+    best = 0.0
+    found = False
+    if aa > 0.0:
+        disc = w * w * (aa * rd * rd - k * k)
+        if disc >= 0.0:
+            sq = np.sqrt(disc)
+            for sgn in (-1.0, 1.0):
+                x = (k * om + sgn * sq) / aa
+                if abs(x) < rd and (k - x * om) * w >= 0.0:
+                    if (not found) or abs(x) < abs(best):
+                        best = x
+                        found = True
+    if not found:
+        return 0.0, 0.0, False
+    s = np.sqrt(rd * rd - best * best)
+    den = s * om - best * w
+    z = 0.0
+    if den != 0.0:
+        z = -omz * ((h + s) * s + best * best) / den
+    return best / a, z / b, True
+
+
+@jit
+def _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_scale, curved,
+                rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact):
+    """Friction loads on one ball (R = 1, v = 1 units; mu = 1).
+
+    state = (v_B, omega_x, omega_y, omega_z). Writes loads = (F_z, M_x, M_y, M_z, D), D the
+    dissipated power (the equilibrium is the minimum of D, a convex function), and per
+    contact ``contact[i] = (c_i/a_i, d_i/b_i, F_z,i, omega_i, roll_i)``.
+    """
+    vb = state[0]
+    wx = state[1]
+    wy = state[2]
+    wz = state[3]
+    fz_tot = 0.0
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    power = 0.0
+    s3 = np.empty(4)
+    for i in range(4):
+        f = force[i]
+        a = semi_major[i]
+        b = semi_minor[i]
+        yx = -px[i]
+        yy = -py[i]
+        xx = yy  # x_i = y_i x z = (y_y, -y_x)
+        xy = -yx
+        om = wx * yx + wy * yy  # spin about the inward normal
+        wr_ = wx * xx + wy * xy  # rolling component about x_i
+        u0 = vb - vgroove[i] - wr_
+        contact[i, 3] = om
+        contact[i, 4] = wr_
+        if f <= 0.0:
+            contact[i, 0] = np.nan
+            contact[i, 1] = np.nan
+            contact[i, 2] = 0.0
+            continue
+        if not curved:
+            # pole (c, d) of the rotation field; pure sliding if it is (nearly) at infinity
+            if abs(om) * _SLIDING_POLE * a > np.hypot(u0, wz):
+                pt = u0 / om / a
+                ps = -wz / om / b
+                planar_contact_integrals(pt, ps, a, b, cin, sin_, win, xo, wo, s3)
+                scale = sigma_scale * f * (1.0 if om > 0.0 else -1.0)
+                fx = scale * s3[0]
+                fz = scale * s3[1]
+                mn = scale * s3[2]
+                power += sigma_scale * f * abs(om) * s3[3]
+            else:
+                pt = np.inf
+                ps = 0.0
+                slip = np.hypot(u0, wz)
+                if slip > 0.0:
+                    fx = -f * wz / slip
+                    fz = -f * u0 / slip
+                else:
+                    fx = 0.0
+                    fz = 0.0
+                mn = 0.0
+                power += f * slip
+            fz_tot += fz
+            mx += -fz * xx + mn * yx
+            my += -fz * xy + mn * yy
+            mz += fx
+            contact[i, 0] = pt
+            contact[i, 1] = ps
+            contact[i, 2] = fz
+        else:
+            pt, ps, ok = _curved_pole(vb - vgroove[i], wr_, om, wz, a, b, rd, hoff[i])
+            pp = pt * pt + ps * ps
+            sig0 = sigma_scale * f  # mu sigma_0 a b, with mu = 1
+            ffx = 0.0
+            ffy = 0.0
+            ffz = 0.0
+            gx = 0.0
+            gy = 0.0
+            gz = 0.0
+            if pp <= 1.0:
+                nang = cin.shape[0]
+            else:
+                nang = xo.shape[0]
+                rp = np.sqrt(pp)
+                half = np.arcsin(1.0 / rp)
+                base = np.arctan2(ps, pt) + np.pi
+            for j in range(nang):
+                if pp <= 1.0:
+                    e1 = cin[j]
+                    e2 = sin_[j]
+                    beta = pt * e1 + ps * e2
+                    disc = beta * beta + 1.0 - pp
+                    wang = win[j]
+                    s0 = beta / np.sqrt(disc) if disc > 0.0 else 1.0
+                    s0 = min(1.0, max(-1.0, s0))
+                else:
+                    ang = half * xo[j]
+                    e1 = np.cos(base + ang)
+                    e2 = np.sin(base + ang)
+                    sa = rp * np.sin(ang)
+                    disc = 1.0 - sa * sa
+                    beta = -rp * np.cos(ang)
+                    wang = half * wo[j]
+                    s0 = -1.0
+                if disc <= 0.0:
+                    continue
+                hh = np.sqrt(disc)
+                m = -beta
+                th0 = np.arccos(s0)
+                for k in range(tr.shape[0]):
+                    th = th0 * tr[k]
+                    st = np.sin(th)
+                    r = m + hh * np.cos(th)
+                    wgt = wang * th0 * wr[k] * disc * st * st * r  # sqrt(1-|u|^2) r dr dphi
+                    x = a * (pt + r * e1)
+                    z = b * (ps + r * e2)
+                    s = np.sqrt(rd * rd - x * x)
+                    rad = hoff[i] + s
+                    uz = vb - vgroove[i] - rad * wr_ - x * om
+                    ut = (wz * (rad * s + x * x) + z * (s * om - x * wr_)) / rd
+                    un = np.hypot(ut, uz)
+                    if un == 0.0:
+                        continue
+                    # tangent t = (s x_i - x p_i)/rd; traction -sig0 (ut t + uz z)/|u|
+                    tx = (s * xx - x * px[i]) / rd
+                    ty = (s * xy - x * py[i]) / rd
+                    q = -sig0 * wgt / un
+                    dfx = q * ut * tx
+                    dfy = q * ut * ty
+                    dfz = q * uz
+                    rx = rad * px[i] + x * xx
+                    ry = rad * py[i] + x * xy
+                    ffx += dfx
+                    ffy += dfy
+                    ffz += dfz
+                    power += sig0 * wgt * un
+                    gx += ry * dfz - z * dfy
+                    gy += z * dfx - rx * dfz
+                    gz += rx * dfy - ry * dfx
+            fz_tot += ffz
+            mx += gx
+            my += gy
+            mz += gz
+            contact[i, 0] = pt if ok else np.nan
+            contact[i, 1] = ps if ok else np.nan
+            contact[i, 2] = ffz
+    loads[0] = fz_tot
+    loads[1] = mx
+    loads[2] = my
+    loads[3] = mz
+    loads[4] = power
+
+
+@jit(inline="always")
+def _solve_small(jac, rhs, n, out):
+    """Gaussian elimination with partial pivoting of an n x n system (n <= 4); False if
+    singular."""
+    a = jac.copy()
+    b = rhs.copy()
+    for k in range(n):
+        piv = k
+        for r in range(k + 1, n):
+            if abs(a[r, k]) > abs(a[piv, k]):
+                piv = r
+        if a[piv, k] == 0.0 or not np.isfinite(a[piv, k]):
+            return False
+        if piv != k:
+            for c in range(n):
+                tmp = a[k, c]
+                a[k, c] = a[piv, c]
+                a[piv, c] = tmp
+            tmp = b[k]
+            b[k] = b[piv]
+            b[piv] = tmp
+        for r in range(k + 1, n):
+            fac = a[r, k] / a[k, k]
+            for c in range(k, n):
+                a[r, c] -= fac * a[k, c]
+            b[r] -= fac * b[k]
+    for k in range(n - 1, -1, -1):
+        acc = b[k]
+        for c in range(k + 1, n):
+            acc -= a[k, c] * out[c]
+        out[k] = acc / a[k, k]
+    return True
+
+
+@jit
+def _residual(state, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale, curved,
+              rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res):
+    """Normalised equilibrium residual (F_z, M_x, M_y[, M_z]) / sum F; returns max |res|."""
+    _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_scale, curved, rd,
+                hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact)
+    total = force[0] + force[1] + force[2] + force[3]
+    worst = 0.0
+    for k in range(nunk):
+        res[k] = loads[k] / total
+        worst = max(worst, abs(res[k]))
+    if not np.isfinite(worst):
+        worst = np.inf
+    return worst
+
+
+@jit
+def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff, free_spin,
+               tol, max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info):
+    """Damped Newton solve of the equilibrium of one ball (R = 1, v = 1, mu = 1).
+
+    Writes the solution into ``state`` (v_B, omega_x, omega_y, omega_z), the per-contact
+    quantities into ``contact`` and (residual, iterations, converged) into ``info``.
+    """
+    px = np.empty(4)
+    py = np.empty(4)
+    vgroove = np.array([0.0, 0.0, 1.0, 1.0])
+    sxs = (-1.0, 1.0, 1.0, -1.0)
+    sys_ = (-1.0, -1.0, 1.0, 1.0)
+    for i in range(4):
+        px[i] = sxs[i] * np.sin(beta[i])
+        py[i] = sys_[i] * np.cos(beta[i])
+    nunk = 4 if free_spin else 3
+    total = force[0] + force[1] + force[2] + force[3]
+    # Start: pure rolling at the contact centres, v_B + w_x p_y - w_y p_x = V_i (least
+    # squares over the contacts that carry load).
+    ata = np.zeros((3, 3))
+    atb = np.zeros(3)
+    for i in range(4):
+        if force[i] > 0.0:
+            row = (1.0, py[i], -px[i])
+            for r in range(3):
+                atb[r] += row[r] * vgroove[i]
+                for c in range(3):
+                    ata[r, c] += row[r] * row[c]
+    x0 = np.zeros(3)
+    state[:] = 0.0
+    if _solve_small(ata, atb, 3, x0):
+        state[0] = x0[0]
+        state[1] = x0[1]
+        state[2] = x0[2]
+    else:
+        state[0] = 0.5
+        state[1] = 0.5 / np.cos(beta[0])
+    loads = np.empty(5)
+    res = np.empty(4)
+    res_new = np.empty(4)
+    trial = np.empty(4)
+    jac = np.empty((nunk, nunk))
+    step = np.zeros(4)
+    rp = np.empty(4)
+    rm = np.empty(4)
+    work = np.empty((4, 5))
+    worst = _residual(state, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
+                      curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res)
+    dis = loads[4]
+    it = 0
+    converged = worst <= tol
+    while not converged and it < max_iter:
+        it += 1
+        # central-difference Jacobian
+        for c in range(nunk):
+            hstep = _FD_STEP * max(1.0, abs(state[c]))
+            trial[:] = state
+            trial[c] = state[c] + hstep
+            _residual(trial, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
+                      curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rp)
+            trial[c] = state[c] - hstep
+            _residual(trial, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
+                      curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rm)
+            for r in range(nunk):
+                jac[r, c] = (rp[r] - rm[r]) / (2.0 * hstep)
+        neg = np.empty(nunk)
+        for r in range(nunk):
+            neg[r] = -res[r]
+        merit = 0.0
+        for r in range(nunk):
+            merit += res[r] * res[r]
+        accepted = False
+        new = worst
+        # 1) Newton step with backtracking on the sum of squares
+        if _solve_small(jac, neg, nunk, step):
+            t = 1.0
+            for _ls in range(8):
+                for c in range(nunk):
+                    trial[c] = state[c] + t * step[c]
+                if nunk == 3:
+                    trial[3] = 0.0
+                new = _residual(trial, nunk, px, py, vgroove, force, semi_major, semi_minor,
+                                sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
+                                loads, work, res_new)
+                msum = 0.0
+                slope = 0.0  # directional derivative of D: gradient = -loads
+                for r in range(nunk):
+                    msum += res_new[r] * res_new[r]
+                    slope -= res[r] * step[r] * total
+                if (msum < (1.0 - 1e-4 * t) * merit or new <= tol
+                        or loads[4] <= dis + 1e-4 * t * slope):
+                    accepted = True
+                    break
+                t *= 0.5
+        # 2) Levenberg-Marquardt steps (near two-point contact the Jacobian is nearly singular:
+        #    the sliding contacts' forces saturate at mu F)
+        if not accepted:
+            jtj = np.empty((nunk, nunk))
+            jtr = np.empty(nunk)
+            big = 0.0
+            for c in range(nunk):
+                jtr[c] = 0.0
+                for r in range(nunk):
+                    jtr[c] -= jac[r, c] * res[r]
+                for d in range(nunk):
+                    acc = 0.0
+                    for r in range(nunk):
+                        acc += jac[r, c] * jac[r, d]
+                    jtj[c, d] = acc
+                big = max(big, jtj[c, c])
+            lam = 1e-6
+            damped = np.empty((nunk, nunk))
+            for _lm in range(30):
+                for c in range(nunk):
+                    for d in range(nunk):
+                        damped[c, d] = jtj[c, d]
+                    damped[c, c] += lam * (jtj[c, c] + 1e-12 * big)
+                if _solve_small(damped, jtr, nunk, step):
+                    for c in range(nunk):
+                        trial[c] = state[c] + step[c]
+                    if nunk == 3:
+                        trial[3] = 0.0
+                    new = _residual(trial, nunk, px, py, vgroove, force, semi_major,
+                                    semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win,
+                                    xo, wo, tr, wr, loads, work, res_new)
+                    msum = 0.0
+                    slope = 0.0
+                    for r in range(nunk):
+                        msum += res_new[r] * res_new[r]
+                        slope -= res[r] * step[r] * total
+                    if msum < merit or new <= tol or loads[4] <= dis + 1e-4 * slope:
+                        accepted = True
+                        break
+                lam *= 10.0
+        if not accepted:
+            break
+        state[:] = trial
+        for r in range(nunk):
+            res[r] = res_new[r]
+        worst = new
+        dis = loads[4]
+        converged = worst <= tol
+    # final per-contact quantities at the accepted state
+    worst = _residual(state, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
+                      curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res)
+    info[0] = worst
+    info[1] = it
+    info[2] = 1.0 if worst <= tol else 0.0
+
+
+@pjit
+def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_coefficient,
+                curved, rd, free_spin, tol, max_iter, cin, sin_, win, xo, wo, tr, wr,
+                out_state, out_contact, out_info):
+    """Solve the full model for n balls in parallel (R = 1, v = 1, mu = 1 units).
+
+    Lengths are in units of R_B (``semi_*_coefficient`` and ``rd`` already divided by R_B).
+    """
+    sigma_scale = 1.5 / np.pi  # mu sigma_0 a b / F with mu = 1
+    for n in prange(dbeta.shape[0]):
+        beta = np.empty(4)
+        a = np.empty(4)
+        b = np.empty(4)
+        hoff = np.empty(4)
+        for i in range(4):
+            beta[i] = nominal_angle + dbeta[n, i]
+            f13 = np.cbrt(force[n, i])
+            a[i] = semi_major_coefficient * f13
+            b[i] = semi_minor_coefficient * f13
+            # curved surface: centre of the deformed arc at h p_i (edges on the ball)
+            hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
+                                                                          - a[i] * a[i]))
+        state = np.zeros(4)
+        contact = np.empty((4, 5))
+        info = np.zeros(3)
+        npos = 0
+        for i in range(4):
+            if force[n, i] > 0.0:
+                npos += 1
+        if npos < 3:
+            for k in range(4):
+                out_state[n, k] = np.nan
+                for m in range(5):
+                    out_contact[n, k, m] = np.nan
+            out_info[n, 0] = np.inf
+            out_info[n, 1] = 0.0
+            out_info[n, 2] = 0.0
+            continue
+        _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
+                   max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
+        for k in range(4):
+            out_state[n, k] = state[k]
+            for m in range(5):
+                out_contact[n, k, m] = contact[k, m]
+        out_info[n, 0] = info[0]
+        out_info[n, 1] = info[1]
+        out_info[n, 2] = info[2]
+
+
+# --------------------------------------------------------------------------------------------
+# Public API
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class FullResult(VelocityResult):
+    """Result of the full friction model for n balls.
+
+    Besides the fields of :class:`~tolsim.physics.analytic.VelocityResult`
+    (``zero_velocity_offset`` holds dgamma_i = s_i c_i / R_B [rad], ERRATA 6;
+    ``velocity_deviation_eq22`` is None; ``valid`` is ``converged`` with four positive forces).
+
+    Attributes
+    ----------
+    ball_velocity : ndarray, shape (n,)
+        v_B [m/s].
+    angular_velocity : ndarray, shape (n, 3)
+        Omega = (omega_x, omega_y, omega_z) [rad/s].
+    contact_offset_ratio : ndarray, shape (n, 4)
+        c_i / a_i [-], the zero-velocity point's offset from the contact centre along x_i.
+    spin_to_roll : ndarray, shape (n, 4)
+        |omega_i| / |Omega - omega_i y_i| [-]: spin about the contact normal over the rolling
+        angular velocity (tan beta_0 in the nominal case).
+    drag_force : ndarray, shape (n,)
+        Friction force of the ball on the moving (top) groove, along -z [N] (the bearing's
+        friction per ball).
+    residual : ndarray, shape (n,)
+        max |equilibrium load| / (mu sum F) at the returned state [-] (moments over R_B).
+    converged : ndarray of bool, shape (n,)
+        residual <= tol.
+    iterations : ndarray of int, shape (n,)
+        Newton iterations.
+    """
+
+    ball_velocity: np.ndarray
+    angular_velocity: np.ndarray
+    contact_offset_ratio: np.ndarray
+    spin_to_roll: np.ndarray
+    drag_force: np.ndarray
+    residual: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+
+
+def _parse_grid(grid):
+    if grid is None:
+        return DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES
+    if np.ndim(grid) == 0:
+        grid = (grid, DEFAULT_RADIAL_NODES)
+    try:
+        n_ang, n_rad = (operator.index(g) for g in grid)
+    except (TypeError, ValueError):
+        raise ValueError(f"grid must be None, an int or (angular, radial), got {grid!r}") from None
+    if n_ang < 8 or n_rad < 2:
+        raise ValueError(f"grid = {grid!r}: need >= 8 angular and >= 2 radial nodes (integers)")
+    return n_ang, n_rad
+
+
+def contact_friction(contact_offset_ratio, semi_major, semi_minor, *, lateral_offset_ratio=0.0,
+                     grid=None):
+    """Friction force and spin moment of one planar contact ([Lin2018] Eqs. 12-15, Fig. 4).
+
+    Coulomb friction mu sigma (Eq. 11) against the rotational slip field omega_i about the
+    zero-velocity point (c, d) (Eq. 8), integrated exactly over the Hertz ellipse (no
+    linearisation); normalised by sgn(omega_i) mu F as in Fig. 4.
+
+    Parameters
+    ----------
+    contact_offset_ratio : array_like
+        c/a, offset of the zero-velocity point along the semi-major axis [-].
+    semi_major, semi_minor : array_like
+        a (across the groove) and b (along the rail) [m]; broadcast with the ratio.
+    lateral_offset_ratio : array_like
+        d/b, offset along the rail (non-zero only when omega_z != 0) [-].
+    grid : None or int
+        Angular nodes (default ``DEFAULT_ANGULAR_NODES``).
+
+    Returns
+    -------
+    force_x, force_z : ndarray
+        f_x / (sgn mu F) and f_z / (sgn mu F) [-], friction on the ball along x_i and z_i.
+    spin_moment : ndarray
+        M_O / (sgn mu F) [m], the resisting spin moment about the contact normal (Eq. 13,
+        equal to 3/8 a E(e) at c = d = 0, Eq. 14).
+    """
+    n_ang, _ = _parse_grid(grid)
+    try:
+        arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (
+            contact_offset_ratio, lateral_offset_ratio, semi_major, semi_minor)))
+    except ValueError:
+        raise ValueError("contact_offset_ratio, lateral_offset_ratio, semi_major and "
+                         "semi_minor do not broadcast") from None
+    names = ("contact_offset_ratio", "lateral_offset_ratio", "semi_major", "semi_minor")
+    for name, arr in zip(names, arrays, strict=True):
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite")
+    ratio, lateral, a, b = (np.ascontiguousarray(arr.ravel()) for arr in arrays)
+    if np.any(a <= 0) or np.any(b <= 0) or np.any(b > a):
+        raise ValueError("need 0 < semi_minor <= semi_major")
+    shape = arrays[0].shape
+    cin, sin_, win, xo, wo, _, _ = quadrature_grid(n_ang, 2, float(np.median(b / a)))
+    out = np.empty((ratio.size, 3))
+    contact_friction_kernel(ratio, lateral, a, b, cin, sin_, win, xo, wo, out)
+    return out[:, 0].reshape(shape), out[:, 1].reshape(shape), out[:, 2].reshape(shape)
+
+
+def friction_loads(ball_velocity, angular_velocity, contact_angle, normal_force,
+                   bearing: Bearing = TABLE1, *, groove_velocity=0.01, surface="planar",
+                   grid=None):
+    """Resultant friction loads on one ball in a given motion (the residual of Eq. 18).
+
+    Parameters
+    ----------
+    ball_velocity : float
+        v_B [m/s].
+    angular_velocity : array_like, shape (3,)
+        Omega [rad/s].
+    contact_angle : array_like, shape (4,)
+        beta_i [rad].
+    normal_force : array_like, shape (4,)
+        F_i [N].
+    bearing, groove_velocity, surface, grid
+        As in :func:`full`.
+
+    Returns
+    -------
+    force_z : float
+        Sum of the friction forces on the ball along z [N].
+    moment : ndarray, shape (3,)
+        Friction moment on the ball about its centre [N m].
+    contact_force_z : ndarray, shape (4,)
+        Friction force on the ball along z at each contact [N].
+    dissipated_power : float
+        sum int mu sigma |slip| dA [W]; the equilibrium of :func:`full` minimises it.
+    """
+    if surface not in SURFACES:
+        raise ValueError(f"surface = {surface!r}; choose one of {SURFACES}")
+    if not (np.isfinite(groove_velocity) and groove_velocity > 0):
+        raise ValueError(f"groove_velocity = {groove_velocity!r} must be finite and > 0")
+    omega = np.asarray(angular_velocity, dtype=np.float64)
+    beta = np.asarray(contact_angle, dtype=np.float64)
+    force = np.asarray(normal_force, dtype=np.float64)
+    if omega.shape != (3,) or beta.shape != (4,) or force.shape != (4,):
+        raise ValueError("angular_velocity must have shape (3,), contact_angle and "
+                         "normal_force shape (4,)")
+    if np.any(force < 0) or not np.all(np.isfinite(force)):
+        raise ValueError("normal_force must be finite and >= 0")
+    n_ang, n_rad = _parse_grid(grid)
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    radius, v = bearing.ball_radius, float(groove_velocity)
+    a = hc.semi_major_coefficient * np.cbrt(force) / radius
+    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
+    rd = deformed_surface_radius(bearing) / radius
+    hoff = np.sqrt(1.0 - a * a) - np.sqrt(rd * rd - a * a)
+    state = np.array([ball_velocity / v, *(omega * radius / v)])
+    px = SIDE_SIGN_X * np.sin(beta)
+    py = SIDE_SIGN_Y * np.cos(beta)
+    loads = np.empty(5)
+    contact = np.empty((4, 5))
+    grid_arrays = quadrature_grid(n_ang, n_rad, hc.ellipticity)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        _ball_loads(state, px, py, np.array([0.0, 0.0, 1.0, 1.0]), force, a, b, 1.5 / np.pi,
+                    surface == "curved", rd, hoff, *grid_arrays, loads, contact)
+    mu = bearing.friction_coefficient
+    return mu * loads[0], mu * radius * loads[1:4], mu * contact[:, 2], mu * v * loads[4]
+
+
+def deformed_surface_radius(bearing: Bearing = TABLE1):
+    """Radius of the deformed contact surface in the cross-section, 2 f D / (2 f + 1) [m].
+
+    ([Harris2007] Ch. 2, after [Jones1959]; D = 2 R_B the ball diameter.)
+    """
+    f = bearing.conformity
+    return 2.0 * f * (2.0 * bearing.ball_radius) / (2.0 * f + 1.0)
+
+
+def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
+         groove_velocity=0.01, surface="planar", free_spin=False, grid=None,
+         tol=DEFAULT_TOLERANCE, max_iter=DEFAULT_MAX_ITER) -> FullResult:
+    """Velocity and friction of balls from the comprehensive friction model.
+
+    Solves the quasi-static equilibrium of each ball (z force, x and y moments, and the z
+    moment when ``free_spin``) under Coulomb friction integrated over the four Hertz
+    ellipses ([Lin2018] Eqs. 1-13 and 18, nothing linearised; see the module docstring).
+    Balls are solved in parallel over all cores.
+
+    Parameters
+    ----------
+    contact_angle_deviation : array_like, shape (..., 4)
+        dbeta_i [rad], BL, BR, TR, TL.
+    normal_force : array_like, shape (..., 4)
+        F_i [N] (>= 0; a zero force removes the contact and makes the result invalid).
+    bearing : Bearing
+        Geometry, material and friction coefficient.
+    groove_velocity : float
+        v, velocity of the top groove [m/s] (> 0). epsilon does not depend on it.
+    surface : {"planar", "curved"}
+        Contact surface: the paper's plane, or the deformed-surface arc of radius
+        2 f D / (2 f + 1).
+    free_spin : bool
+        Leave omega_z free (and enforce the z moment); otherwise omega_z = 0 as in the paper.
+    grid : None, int or (int, int)
+        Angular nodes (and radial nodes, curved surface only); None for the defaults
+        ``DEFAULT_ANGULAR_NODES``, ``DEFAULT_RADIAL_NODES``.
+    tol : float
+        Convergence tolerance on the normalised residual max|load| / (mu sum F) [-].
+    max_iter : int
+        Maximum Newton iterations.
+
+    Returns
+    -------
+    FullResult
+        ``valid`` is ``converged`` and all four forces positive. Non-convergence never raises.
+    """
+    if surface not in SURFACES:
+        raise ValueError(f"surface = {surface!r}; choose one of {SURFACES}")
+    if not (np.isfinite(groove_velocity) and groove_velocity > 0):
+        raise ValueError(f"groove_velocity = {groove_velocity!r} must be finite and > 0")
+    if not (np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol = {tol!r} must be finite and > 0")
+    if not (int(max_iter) == max_iter and max_iter >= 1):
+        raise ValueError(f"max_iter = {max_iter!r} must be a positive integer")
+    n_ang, n_rad = _parse_grid(grid)
+    dbeta, force, shape = _as_ball_arrays(contact_angle_deviation, normal_force)
+    beta = bearing.nominal_contact_angle + dbeta
+    if np.any((beta <= 0) | (beta >= np.pi / 2)):
+        raise ValueError("contact_angle_deviation puts a contact angle outside (0, 90) deg")
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    radius = bearing.ball_radius
+    if np.any(hc.semi_major_coefficient * np.cbrt(force) >= 0.5 * radius):
+        raise ValueError("normal_force too large: the contact ellipse exceeds R_B / 2")
+    cin, sin_, win, xo, wo, tr, wr = quadrature_grid(n_ang, n_rad, hc.ellipticity)
+    n = len(dbeta)
+    state = np.empty((n, 4))
+    contact = np.empty((n, 4, 5))
+    info = np.empty((n, 3))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        full_kernel(dbeta, force, bearing.nominal_contact_angle,
+                    hc.semi_major_coefficient / radius, hc.semi_minor_coefficient / radius,
+                    surface == "curved", deformed_surface_radius(bearing) / radius,
+                    bool(free_spin), float(tol), int(max_iter), cin, sin_, win, xo, wo, tr, wr,
+                    state, contact, info)
+    v = float(groove_velocity)
+    mu = bearing.friction_coefficient
+    converged = info[:, 2] > 0.5
+    ratio = contact[:, :, 0]
+    gamma = ZERO_VELOCITY_SIGN * ratio * (hc.semi_major_coefficient * np.cbrt(force)) / radius
+    om = contact[:, :, 3]
+    roll = contact[:, :, 4]
+    # omega_i y_i removed from Omega leaves the in-plane part along x_i (omega_x, omega_y) and
+    # omega_z; |Omega - omega_i y_i| = hypot(roll_i, omega_z).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        spin_to_roll = np.abs(om) / np.hypot(roll, state[:, 3:4])
+    drag = mu * (contact[:, 2, 2] + contact[:, 3, 2])
+    valid = converged & np.all(force > 0, axis=1)
+    eps = 2.0 * state[:, 0] - 1.0
+
+    def shaped(arr, *tail):
+        return arr.reshape(shape + tail)
+
+    return FullResult(
+        velocity_deviation=shaped(eps),
+        valid=shaped(valid),
+        zero_velocity_offset=shaped(gamma, 4),
+        velocity_deviation_eq22=None,
+        ball_velocity=shaped(state[:, 0] * v),
+        angular_velocity=shaped(state[:, 1:] * v / radius, 3),
+        contact_offset_ratio=shaped(ratio, 4),
+        spin_to_roll=shaped(spin_to_roll, 4),
+        drag_force=shaped(drag),
+        residual=shaped(info[:, 0]),
+        converged=shaped(converged),
+        iterations=shaped(info[:, 1].astype(np.int64)),
+    )

@@ -1,0 +1,14 @@
+"""Figures and reports (matplotlib), the top of the tolsim layers below the CLI.
+
+* :mod:`tolsim.reports.paper`: the source paper's Fig. 4, 7 and 9 and Table 2 reproduced
+  from the models (``tolsim paper``).
+* :mod:`tolsim.reports.study`: the HTML report of a study result file (``tolsim report``).
+
+Figures are built on :class:`matplotlib.figure.Figure` objects directly, never through
+``pyplot``: no global state, no GUI backend, nothing to close, and the caller's backend is
+left alone. PNGs are rendered by the Agg canvas.
+"""
+
+from tolsim.reports.style import new_figure, save_png
+
+__all__ = ["new_figure", "save_png"]

@@ -1,0 +1,619 @@
+"""The source paper reproduced: Fig. 4, Fig. 7, Fig. 9 and Table 2 of [Lin2018] (``tolsim paper``).
+
+:func:`make_paper` computes everything from the models (:mod:`tolsim.study.paper_data`,
+:mod:`tolsim.physics.analytic`, :mod:`tolsim.study.propagation`) and writes
+
+* ``fig4.png``: normalised friction force f_z/(mu F) and spin moment M_O/(mu F R_B) against
+  c/a for four conformities, (a) full range, (b) zoom with the fitted k_f;
+* ``fig7.png``: epsilon over rho and theta from (a) the full model, (b) the prior point
+  model, (c) the analytical formula (Eq. 24 / 26), (d) full minus formula;
+* ``fig9.png``: deviation of ball position from v t / 2 for the two balls of Sec. 3.2,
+  (a) colliding (contact time marked), (b) mitigated;
+* ``table2.csv`` and ``table2.md``: Table 2 with the paper's values beside ours;
+* ``README.md``: what matches, what does not, by how much and why; every number in it is
+  computed at generation time.
+
+The paper's figures are not in its text extraction, so the figures are compared with the
+statements of its text and with Table 2, which it prints.
+
+Reference: [Lin2018] B. Lin, C. E. Okwudire, M. Duan, J. S. Wou, IMECE2018-88033.
+"""
+
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from tolsim import __version__
+from tolsim.physics.geometry import K_F_PAPER, TABLE1, TABLE1_GROOVE_VELOCITY
+from tolsim.reports.style import (
+    LIMIT_COLOUR,
+    SERIES_COLOURS,
+    new_figure,
+    save_png,
+    styled,
+)
+from tolsim.study import paper_data
+from tolsim.study.propagation import first_contact_constant
+
+#: Sec. 3.2: initial gap between the two balls, 0.1 R_B [m].
+FIG9_GAP = 0.1 * TABLE1.ball_radius
+#: Horizon of Fig. 9 [s].
+FIG9_DURATION = 10.0
+#: Region where the text says the formula matches the comprehensive model closely
+#: (issue 4's acceptance region): |rho| <= 0.4 and |theta| <= 1 deg.
+AGREEMENT_REGION = (0.4, 1.0)
+#: Which of the paper's Table 2 columns each of our models is compared with.
+PAPER_COLUMN = {"full": "Leblanc", "full-curved": "Leblanc", "analytic": "formula",
+                "eq24": "formula"}
+#: Acceptance tolerances on Table 2 [percentage points]: the formula is printed to two
+#: decimals (rounding: 0.005 pp); the Leblanc column must be met by the full model with the
+#: solved static contact to 0.03 pp (issue 4); case (b) is exactly 0.
+TABLE2_TOLERANCE_PP = {"formula": 0.005, "Leblanc": 0.03, "zero": 1e-9}
+
+#: Grids of the full run and of ``quick`` (tests).
+GRIDS = {
+    False: {"fig4_points": 601, "fig7_rho": np.linspace(-0.8, 0.8, 33),
+            "fig7_theta": np.linspace(-3.0, 3.0, 25)},
+    True: {"fig4_points": 121, "fig7_rho": np.linspace(-0.8, 0.8, 9),
+           "fig7_theta": np.linspace(-3.0, 3.0, 7)},
+}
+
+
+@dataclass
+class PaperOutputs:
+    """What :func:`make_paper` wrote and the numbers behind the README."""
+
+    folder: str
+    files: list = field(default_factory=list)
+    table2: pd.DataFrame | None = None
+    summary: dict = field(default_factory=dict)
+    elapsed: float = 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# Table 2
+# --------------------------------------------------------------------------------------------
+def table2_table(data: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Table 2 with our epsilon and the paper's value side by side.
+
+    Parameters
+    ----------
+    data : DataFrame, optional
+        :func:`tolsim.study.paper_data.table2_data` (computed if not given).
+
+    Returns
+    -------
+    DataFrame
+        Columns case, ball, side_force_ratio, forces (paired / static), model,
+        velocity_deviation_percent, paper_column (Leblanc or formula), paper_percent,
+        difference_pp (ours - paper), converged. Sorted by case, ball, forces, model.
+    """
+    data = paper_data.table2_data() if data is None else data
+    ours = data[data["forces"] != "paper"].copy()
+    paper = data[data["forces"] == "paper"]
+    lookup = {(r.case, r.ball, r.model): r.velocity_deviation_percent
+              for r in paper.itertuples()}
+    ours["paper_column"] = ours["model"].map(PAPER_COLUMN)
+    ours["paper_percent"] = [lookup[(c, b, p)] for c, b, p in
+                             zip(ours["case"], ours["ball"], ours["paper_column"], strict=True)]
+    ours["difference_pp"] = ours["velocity_deviation_percent"] - ours["paper_percent"]
+    cols = ["case", "ball", "side_force_ratio", "forces", "model", "velocity_deviation_percent",
+            "paper_column", "paper_percent", "difference_pp", "converged"]
+    order = {m: i for i, m in enumerate(("eq24", "analytic", "full", "full-curved"))}
+    ours = ours.assign(_m=ours["model"].map(order)).sort_values(
+        ["case", "ball", "forces", "_m"], kind="stable")
+    return ours[cols].reset_index(drop=True)
+
+
+MODEL_LABELS = {
+    "eq24": "formula, Eq. (24)",
+    "analytic": "analytic (4 forces, Eqs. 17, 18, 21)",
+    "full": "full model, planar contact",
+    "full-curved": "full model, curved contact",
+}
+FORCE_LABELS = {"paired": "paired F1, F2 (Sec. 3.1)", "static": "solved static contact"}
+
+
+def _signed(x, digits):
+    """``+0.123`` formatting without a negative zero."""
+    v = round(float(x), digits)
+    return f"{v if v != 0 else 0.0:+.{digits}f}"
+
+
+def table2_markdown(table: pd.DataFrame) -> str:
+    """Table 2 as a Markdown table (values in %)."""
+    lines = [
+        "| Case | Ball | ρ | Contact forces and angles | Model | ε [%] | Paper [%] "
+        "(column) | Ours − paper [pp] |",
+        "|---|---|---|---|---|---:|---:|---:|",
+    ]
+    for r in table.itertuples():
+        flag = "" if r.converged else " (not converged)"
+        lines.append(
+            f"| ({r.case}) | {r.ball} | {r.side_force_ratio:+.1f} | {FORCE_LABELS[r.forces]} | "
+            f"{MODEL_LABELS.get(r.model, r.model)}{flag} | "
+            f"{_signed(r.velocity_deviation_percent, 3)} | {_signed(r.paper_percent, 2)} "
+            f"({r.paper_column}) | {_signed(r.difference_pp, 3)} |")
+    return "\n".join(lines) + "\n"
+
+
+def table2_checks(table: pd.DataFrame) -> list:
+    """The like-for-like comparisons with the paper and whether each is within tolerance.
+
+    * formula: ``eq24`` with paired forces against the paper's formula column (tolerance
+      :data:`TABLE2_TOLERANCE_PP` ``formula``);
+    * Leblanc: ``full`` (planar) with the solved static contact against Leblanc's column
+      (``Leblanc``);
+    * case (b): every model and forces exactly 0 (``zero``).
+
+    Returns
+    -------
+    list of dict
+        keys: what, case, ball, ours, paper, difference, tolerance, ok.
+    """
+    checks = []
+
+    def add(what, rows, tol):
+        for r in rows.itertuples():
+            checks.append({"what": what, "case": r.case, "ball": r.ball,
+                           "ours": r.velocity_deviation_percent, "paper": r.paper_percent,
+                           "difference": r.difference_pp, "tolerance": tol,
+                           "ok": bool(abs(r.difference_pp) <= tol and r.converged)})
+
+    a = table[table["case"] == "a"]
+    add("formula (Eq. 24, paired forces) vs paper's formula",
+        a[(a["model"] == "eq24") & (a["forces"] == "paired")], TABLE2_TOLERANCE_PP["formula"])
+    add("full model (planar, solved static contact) vs Leblanc",
+        a[(a["model"] == "full") & (a["forces"] == "static")], TABLE2_TOLERANCE_PP["Leblanc"])
+    b = table[table["case"] == "b"]
+    # case (b): per ball, the row of largest |epsilon| over every model and force source
+    worst = b.loc[b["velocity_deviation_percent"].abs().groupby(b["ball"]).idxmax()]
+    worst = worst.assign(converged=[bool(b[b["ball"] == k]["converged"].all())
+                                    for k in worst["ball"]])
+    add("case (b): largest magnitude of ε over every model and force source vs 0", worst,
+        TABLE2_TOLERANCE_PP["zero"])
+    return checks
+
+
+# --------------------------------------------------------------------------------------------
+# Fig. 4
+# --------------------------------------------------------------------------------------------
+@styled
+def plot_fig4(curves: pd.DataFrame, slopes: pd.DataFrame):
+    """Fig. 4: (a) f_z/(mu F) and M_O/(mu F R_B) against c/a; (b) zoom with k_f."""
+    fig, (ax_a, ax_b) = new_figure(11.0, 4.6, ncols=2)
+    conformities = list(slopes["conformity"])
+    for k, f in enumerate(conformities):
+        c = curves[curves["conformity"] == f]
+        ell = float(slopes.loc[slopes["conformity"] == f, "ellipticity"].iloc[0])
+        colour = SERIES_COLOURS[k]
+        label = f"f = {f:.2f} (b/a = {ell:.2f})"
+        for ax in (ax_a, ax_b):
+            ax.plot(c["offset_ratio"], c["force"], color=colour, lw=1.6, label=label)
+            ax.plot(c["offset_ratio"], c["moment"], color=colour, lw=1.2, ls="--")
+    # zoom: the fit range, the paper's k_f and ours
+    x = np.linspace(-0.5, 0.5, 11)
+    fit = slopes.iloc[-1]
+    ax_b.plot(x, K_F_PAPER * x, color="k", ls=":", lw=1.8,
+              label=f"paper's linear fit, k_f = {K_F_PAPER:.2f}")
+    ax_b.axvspan(-0.5, 0.5, color="0.85", alpha=0.4, lw=0)
+    ax_b.set_xlim(-0.75, 0.75)
+    ax_b.set_ylim(-1.0, 1.0)
+    ax_b.text(0.03, 0.04,
+              "fitted k_f over |c/a| ≤ 0.5 (grey band):\n" + "\n".join(
+                  f"  f = {r.conformity:.2f}: {r.fitted_slope:.3f} (slope at 0: "
+                  f"{r.slope_at_zero:.3f})" for r in slopes.itertuples()),
+              transform=ax_b.transAxes, fontsize=8, va="bottom", ha="left",
+              bbox=dict(boxstyle="round", fc="white", ec="0.7", alpha=0.9))
+    ax_a.set_title("(a) full range")
+    ax_b.set_title(f"(b) zoom near c/a = 0 (f = {fit.conformity:.2f}: "
+                   f"k_f = {fit.fitted_slope:.3f})")
+    for ax in (ax_a, ax_b):
+        ax.set_xlabel("zero-velocity offset c/a [-]")
+        ax.axhline(0, color="0.5", lw=0.6)
+        ax.axvline(0, color="0.5", lw=0.6)
+    ax_a.set_ylabel("normalised friction  f_z/(μF)  and  M_O/(μF R_B)  [-]")
+    ax_b.set_ylabel("normalised friction [-]")
+    handles, labels = ax_a.get_legend_handles_labels()
+    from matplotlib.lines import Line2D
+
+    handles = handles + [Line2D([], [], color="0.3", lw=1.6),
+                              Line2D([], [], color="0.3", lw=1.2, ls="--")]
+    labels = labels + ["force f_z/(μF)", "spin moment M_O/(μF R_B)"]
+    ax_a.legend(handles, labels, loc="upper right", framealpha=0.9)
+    hb, lb = ax_b.get_legend_handles_labels()
+    ax_b.legend([hb[-1]], [lb[-1]], loc="upper right", framealpha=0.9)
+    fig.suptitle("Fig. 4: Coulomb friction of one Hertz contact against the offset of the "
+                 f"zero-velocity point (F = {100 * np.sqrt(0.5) * 2:.0f} N, Table 1 ball)")
+    return fig
+
+
+# --------------------------------------------------------------------------------------------
+# Fig. 7
+# --------------------------------------------------------------------------------------------
+def _grid(df, column):
+    rho = np.unique(df["side_force_ratio"])
+    theta = np.unique(df["theta_deg"])
+    z = df.pivot(index="theta_deg", columns="side_force_ratio", values=column)
+    return rho, theta, z.loc[theta, rho].to_numpy(dtype=float)
+
+
+@styled
+def plot_fig7(grid: pd.DataFrame):
+    """Fig. 7: epsilon maps over rho and theta and the full-minus-formula difference."""
+    fig, axes = new_figure(10.5, 8.0, nrows=2, ncols=2, sharex=True, sharey=True)
+    panels = [("full", "(a) full model (planar contact); lines: ε in %"),
+              ("point", "(b) prior point-contact model [11]"),
+              ("eq24", "(c) analytical formula, Eq. (24)")]
+    vmax = max(np.nanmax(np.abs(grid[c])) for c, _ in panels)
+    step = 0.25 if vmax > 1.0 else 0.1
+    top = step * np.ceil(vmax / step)
+    levels = np.arange(-top, top + step / 2, step)
+    for ax, (col, title) in zip(axes.flat[:3], panels, strict=True):
+        rho, theta, z = _grid(grid, col)
+        cs = ax.contourf(rho, theta, np.ma.masked_invalid(z), levels=levels, cmap="RdBu_r",
+                         extend="both")
+        lines = ax.contour(rho, theta, np.ma.masked_invalid(z), colors="0.25",
+                           levels=[-2.0, -1.5, -1.0, -0.5, -0.25, 0.25, 0.5, 1.0, 1.5, 2.0],
+                           linewidths=0.6)
+        ax.clabel(lines, fmt="%g", fontsize=7, inline_spacing=2)
+        ax.set_title(title)
+    cbar = fig.colorbar(cs, ax=axes[0, :], shrink=0.95, pad=0.02)
+    cbar.set_label("ε [%], panels (a) to (c)")
+    rho, theta, d = _grid(grid, "full_minus_eq24")
+    dmax = float(np.nanmax(np.abs(d)))
+    dtop = max(0.05, 0.05 * np.ceil(dmax / 0.05))
+    dlev = np.linspace(-dtop, dtop, 2 * int(round(dtop / 0.05)) + 1)
+    if len(dlev) < 7:
+        dlev = np.linspace(-dtop, dtop, 11)
+    ax = axes[1, 1]
+    cs = ax.contourf(rho, theta, d, levels=dlev, cmap="PuOr_r", extend="both")
+    ax.contour(rho, theta, np.abs(d), levels=[0.05], colors="k", linewidths=0.8,
+               linestyles="--")
+    r0, t0 = AGREEMENT_REGION
+    ax.add_patch(_rectangle(-r0, -t0, 2 * r0, 2 * t0))
+    ax.set_title("(d) full model − formula\n(dashed: |Δ| = 0.05 pp; dotted box: "
+                 "|ρ| ≤ 0.4, |θ| ≤ 1°)", fontsize=10)
+    cbar = fig.colorbar(cs, ax=axes[1, :], shrink=0.95, pad=0.02)
+    cbar.set_label("(d) full − formula [pp]")
+    for ax in axes[1, :]:
+        ax.set_xlabel("side force ratio ρ = N_x/N_y [-]")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("bottom groove rotation θ [deg]")
+    fig.suptitle("Fig. 7: ball velocity deviation, Δβ = (−θ, θ, 0, 0), paired forces, "
+                 "N_y = 200 N (Table 1)")
+    return fig
+
+
+def _rectangle(x, y, w, h):
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((x, y), w, h, fill=False, ec="k", lw=1.0, ls=":",
+                     label="|ρ| ≤ 0.4, |θ| ≤ 1°")
+
+
+# --------------------------------------------------------------------------------------------
+# Fig. 9
+# --------------------------------------------------------------------------------------------
+def fig9_data(table: pd.DataFrame, gap=FIG9_GAP, groove_velocity=TABLE1_GROOVE_VELOCITY,
+              duration=FIG9_DURATION) -> pd.DataFrame:
+    """Epsilon of the two balls and their first contact, per case and model (Sec. 3.2).
+
+    Contact times come from :func:`tolsim.study.propagation.first_contact_constant` (mode a:
+    constant epsilon, closed form t = gap / ((eps_1 - eps_2) v / 2)).
+
+    Returns
+    -------
+    DataFrame
+        Columns case, source ("formula" = Eq. 24 with paired forces, "full" = full model with
+        the solved static contact), eps_1, eps_2 [-], contact_time [s] (inf: none within
+        ``duration``).
+    """
+    rows = []
+    for case in ("a", "b"):
+        for source, model, forces in (("formula", "eq24", "paired"),
+                                      ("full", "full", "static")):
+            sel = table[(table["case"] == case) & (table["model"] == model)
+                        & (table["forces"] == forces)].sort_values("ball")
+            eps = sel["velocity_deviation_percent"].to_numpy() / 100.0
+            t, _ = first_contact_constant(np.array([[gap]]), eps[None, :], groove_velocity,
+                                          duration)
+            rows.append({"case": case, "source": source, "eps_1": eps[0], "eps_2": eps[1],
+                         "contact_time": float(t[0])})
+    return pd.DataFrame(rows)
+
+
+@styled
+def plot_fig9(data: pd.DataFrame, gap=FIG9_GAP, groove_velocity=TABLE1_GROOVE_VELOCITY,
+              duration=FIG9_DURATION):
+    """Fig. 9: deviation of ball position from v t/2, (a) colliding, (b) mitigated."""
+    fig, axes = new_figure(11.0, 4.4, ncols=2, sharey=True)
+    t = np.linspace(0.0, duration, 501)
+    half = 0.5 * groove_velocity
+    styles = {"formula": dict(ls="-", lw=1.8), "full": dict(ls="--", lw=1.3)}
+    titles = {"a": "(a) case (a): top groove perfect → balls collide",
+              "b": "(b) case (b): Δβ_TR = Δβ_BL, Δβ_TL = Δβ_BR → no contact"}
+    for ax, case in zip(axes, ("a", "b"), strict=True):
+        for r in data[data["case"] == case].itertuples():
+            stop = t <= r.contact_time
+            src = "formula Eq. (24)" if r.source == "formula" else "full model"
+            y1 = 1e3 * r.eps_1 * half * t
+            y2 = 1e3 * (gap + r.eps_2 * half * t)
+            ax.plot(t[stop], y1[stop], color=SERIES_COLOURS[0], **styles[r.source],
+                    label=f"ball 1 (ρ = −0.6), {src}: ε₁ = {100 * r.eps_1:+.3f} %")
+            ax.plot(t[stop], y2[stop], color=SERIES_COLOURS[1], **styles[r.source],
+                    label=f"ball 2 (ρ = +0.6) + initial gap, {src}: "
+                          f"ε₂ = {100 * r.eps_2:+.3f} %")
+            if np.isfinite(r.contact_time):
+                tc = r.contact_time
+                yc = 1e3 * r.eps_1 * half * tc
+                ax.plot([tc], [yc], "o", color=LIMIT_COLOUR, ms=6, zorder=5)
+                ax.axvline(tc, color=LIMIT_COLOUR, lw=0.8, ls=styles[r.source]["ls"])
+                ytext = 0.45 if r.source == "formula" else 0.05
+                ax.annotate(f"contact, {src}:\nt = {tc:.2f} s", (tc, yc),
+                            xytext=(7.4, ytext), fontsize=8.5,
+                            arrowprops=dict(arrowstyle="->", color=LIMIT_COLOUR, lw=0.8))
+        ax.set_title(titles[case], fontsize=10)
+        ax.set_xlabel("time t [s]")
+        ax.set_xlim(0, duration)
+        ax.legend(loc="lower right" if case == "a" else "center right", fontsize=7.5,
+                  framealpha=0.9)
+    axes[0].set_ylabel("deviation of position from v t/2 [mm]")
+    axes[0].set_ylim(-0.25, 0.75)
+    fig.suptitle("Fig. 9: two balls on one track, θ = 2°, ρ = ∓0.6, v = 10 mm/s\n"
+                 "ball 2 is drawn shifted by the initial gap Δd₀ = 0.1 R_B, so the balls touch "
+                 "where the lines meet", fontsize=10.5)
+    return fig
+
+
+# --------------------------------------------------------------------------------------------
+# README
+# --------------------------------------------------------------------------------------------
+def _fig7_summary(grid):
+    d = grid["full_minus_eq24"].to_numpy()
+    k = int(np.nanargmax(np.abs(d)))
+    r0, t0 = AGREEMENT_REGION
+    inside = (grid["side_force_ratio"].abs() <= r0 + 1e-12) & (grid["theta_deg"].abs()
+                                                               <= t0 + 1e-12)
+    dp = (grid["full"] - grid["point"]).abs()
+    return {
+        "points": len(grid),
+        "full_converged": int(grid["full_converged"].sum()),
+        "max_abs_full_minus_formula_pp": float(np.abs(d[k])),
+        "max_at_rho": float(grid["side_force_ratio"].iloc[k]),
+        "max_at_theta_deg": float(grid["theta_deg"].iloc[k]),
+        "max_abs_in_region_pp": float(np.nanmax(np.abs(d[inside.to_numpy()]))),
+        "max_abs_full_minus_point_pp": float(np.nanmax(dp)),
+        "median_abs_full_minus_point_pp": float(np.nanmedian(dp)),
+        "median_abs_full_minus_formula_pp": float(np.nanmedian(np.abs(d))),
+        "max_abs_full_pp": float(np.nanmax(np.abs(grid["full"]))),
+        "point_nan": int(grid["point"].isna().sum()),
+    }
+
+
+def _fig4_summary(curves, slopes):
+    dev, moment = [], []
+    for r in slopes.itertuples():
+        c = curves[(curves["conformity"] == r.conformity)]
+        inside = c["offset_ratio"].abs() <= paper_data.KF_FIT_RANGE + 1e-12
+        x = c["offset_ratio"][inside]
+        dev.append(float(np.max(np.abs(c["force"][inside] - r.fitted_slope * x))))
+        moment.append(float(c["moment"].abs().max()))
+    return {"max_nonlinearity": max(dev), "max_moment": max(moment)}
+
+
+def readme_text(table, checks, slopes, grid, fig9, grids, elapsed, curves=None) -> str:
+    """README.md of the reproduction (numbers from the arguments only)."""
+    f7 = _fig7_summary(grid)
+    ok_all = all(c["ok"] for c in checks)
+    fa = fig9[(fig9["case"] == "a") & (fig9["source"] == "formula")].iloc[0]
+    fu = fig9[(fig9["case"] == "a") & (fig9["source"] == "full")].iloc[0]
+    b_any = fig9[fig9["case"] == "b"]["contact_time"]
+    eq26 = 0.5 * np.deg2rad(2.0) * (1 - 4.0 ** (2 / 3)) / (1 + 4.0 ** (2 / 3))
+    t_eq26 = FIG9_GAP / (2 * abs(eq26) * 0.5 * TABLE1_GROOVE_VELOCITY)
+    lines = [
+        "# The paper reproduced: Lin et al., IMECE2018-88033",
+        "",
+        f"Generated by `tolsim paper` (tolsim {__version__}) in {elapsed:.0f} s. Every number "
+        "below is computed by that command from the models; nothing is typed in by hand "
+        "except the paper's own printed values (Table 2, k_f = −1.38).",
+        "",
+        "Files: `fig4.png`, `fig7.png`, `fig9.png`, `table2.csv`, `table2.md`.",
+        "",
+        "The text extraction of the paper has no figures, so Fig. 4, 7 and 9 are checked "
+        "against what the paper's text says about them, and against Table 2, which it "
+        "prints. Bearing: Table 1 (R_B = 5 mm, f = 0.54, E = 210 GPa per ERRATA 1, ν = 0.28, "
+        "μ = 0.1, N_y = 200 N, v = 10 mm/s).",
+        "",
+        "## Table 2",
+        "",
+        "Overall: **" + ("every like-for-like value is within tolerance" if ok_all else
+                         "SOME VALUES ARE OUT OF TOLERANCE (see the list)") + "**.",
+        "",
+        "| Comparison | Case | Ball | Ours [%] | Paper [%] | Difference [pp] | "
+        "Tolerance [pp] | Within |",
+        "|---|---|---|---:|---:|---:|---:|---|",
+    ]
+    for c in checks:
+        ours = f"{c['ours']:+.1e}" if c["paper"] == 0 else _signed(c["ours"], 3)
+        diff = f"{c['difference']:+.1e}" if c["paper"] == 0 else _signed(c["difference"], 3)
+        lines.append(f"| {c['what']} | ({c['case']}) | {c['ball']} | {ours} | "
+                     f"{_signed(c['paper'], 2)} | {diff} | {c['tolerance']:g} | "
+                     f"{'yes' if c['ok'] else '**no**'} |")
+    a = table[table["case"] == "a"]
+    b_max = float(table[table["case"] == "b"]["velocity_deviation_percent"].abs().max())
+
+    def val(model, forces, ball):
+        return float(a[(a["model"] == model) & (a["forces"] == forces)
+                       & (a["ball"] == ball)]["velocity_deviation_percent"].iloc[0])
+
+    lines += [
+        "",
+        "Why the numbers are what they are:",
+        "",
+        f"* **Formula column.** Eq. (26) with the exponent corrected (ERRATA 2) gives "
+        f"ε = ±{100 * abs(eq26):.3f} %, printed as ±0.75 %. The analytic model with four "
+        f"forces reduces to it exactly with paired forces ({val('analytic', 'paired', 1):+.3f} "
+        f"/ {val('analytic', 'paired', 2):+.3f} %).",
+        f"* **Leblanc column, asymmetric +0.85 / −0.77 %.** With the paired forces our full "
+        f"model is symmetric ({val('full', 'paired', 1):+.3f} / {val('full', 'paired', 2):+.3f} "
+        f"%), as the ERRATA note on Table 2 expects for paired forces. The asymmetry appears "
+        f"when the "
+        f"loaded contact angles and forces of the static solution (elastic approach, no "
+        f"preload) are used: {val('full', 'static', 1):+.3f} / {val('full', 'static', 2):+.3f} "
+        f"% (planar contact), {val('full-curved', 'static', 1):+.3f} / "
+        f"{val('full-curved', 'static', 2):+.3f} % (curved contact). The remaining "
+        "difference to Leblanc's values is expected: our comprehensive model is not "
+        "Leblanc & Nelias' (no lubricant, planar Hertz ellipse, Coulomb friction, our static "
+        "model has no preload and rigid grooves besides the Hertz contacts), and the paper "
+        "prints two decimals.",
+        f"* With the solved static contact the formula itself gives "
+        f"{val('eq24', 'static', 1):+.3f} / {val('eq24', 'static', 2):+.3f} %: part of the "
+        "asymmetry is captured by Eq. (24) once it is fed with the loaded angles and forces.",
+        f"* **Case (b)** (top groove matched to the bottom) gives ε = 0 for every model and "
+        f"force source: largest |ε| {b_max:.1e} %.",
+        "",
+        "## Fig. 4: friction of one contact against c/a",
+        "",
+        "The paper fits k_f = −1.38 to the normalised force over |c/a| < 0.5 and says the "
+        "four conformities give nearly the same curves. Ours (least-squares slope through "
+        "the origin over |c/a| ≤ 0.5, and the slope at c/a = 0, ERRATA 7), with the "
+        "normalised Eq. (14) spin moment M_O/(μF R_B) at c/a = 0:",
+        "",
+        "| Conformity f | b/a | fitted k_f | k_f − (−1.38) | slope at 0 | M_O/(μF R_B) at 0 |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in slopes.itertuples():
+        lines.append(f"| {r.conformity:.2f} | {r.ellipticity:.3f} | {r.fitted_slope:.3f} | "
+                     f"{r.fitted_slope - K_F_PAPER:+.3f} | {r.slope_at_zero:.3f} | "
+                     f"{r.spin_moment_eq14:.4f} |")
+    worst_kf = float(np.max(np.abs(slopes["fitted_slope"] - K_F_PAPER)))
+    lines += [
+        "",
+        f"All four fitted slopes are within {worst_kf:.3f}"
+        " of the paper's −1.38, and they differ from each other by "
+        f"{np.ptp(slopes['fitted_slope']):.3f}, which supports the paper's choice of one k_f. "
+        "The conformities are not listed in the paper; we use 0.51 to 0.54 (see "
+        "`tolsim/study/paper_data.py`)." + ("" if curves is None else (
+            " As the paper says, the force is almost linear for |c/a| < 0.5: it departs "
+            "from the fitted line by at most {max_nonlinearity:.3f} (in units of μF) there. "
+            "The normalised spin moment never exceeds {max_moment:.3f}, small next to the "
+            "force (up to 1) except near c/a = 0, where the force vanishes.").format(
+                **_fig4_summary(curves, slopes))),
+        "",
+        "## Fig. 7: ε over ρ and θ",
+        "",
+        f"Grid: {len(np.unique(grid['side_force_ratio']))} values of ρ in [−0.8, 0.8] × "
+        f"{len(np.unique(grid['theta_deg']))} values of θ in [−3°, 3°]; the full model "
+        f"converged at {f7['full_converged']} of {f7['points']} points.",
+        "",
+        f"* Full model vs formula: largest |difference| {f7['max_abs_full_minus_formula_pp']:.3f}"
+        f" pp, at ρ = {f7['max_at_rho']:+.2f}, θ = {f7['max_at_theta_deg']:+.2f}° (|ε| of "
+        f"the full model reaches {f7['max_abs_full_pp']:.2f} % on the grid); median "
+        f"{f7['median_abs_full_minus_formula_pp']:.3f} pp. Inside |ρ| ≤ 0.4, |θ| ≤ 1° the "
+        f"largest difference is {f7['max_abs_in_region_pp']:.4f} pp. This is the paper's "
+        "statement: the difference only becomes noticeable at large |ρ| and |θ|, where the "
+        "contact tends to two-point contact and the small Δβ + Δγ assumption fails.",
+        f"* Full model vs the prior point-contact model: largest |difference| "
+        f"{f7['max_abs_full_minus_point_pp']:.2f} pp, median "
+        f"{f7['median_abs_full_minus_point_pp']:.2f} pp; the paper calls that model "
+        "\"in gross error\", and it is." + (f" The point model is undetermined at "
+                                            f"{f7['point_nan']} grid points (blank)."
+                                            if f7["point_nan"] else ""),
+        "* The full model here is ours (planar contact, paired forces), not Leblanc's, so "
+        "panel (a) is what the paper's Fig. 7(a) would show if Leblanc's model were replaced "
+        "by ours.",
+        "",
+        "## Fig. 9: ball-to-ball contact",
+        "",
+        f"Two balls, initial gap 0.1 R_B = {1e3 * FIG9_GAP:.2f} mm, v = 10 mm/s. With "
+        f"constant ε per ball the trailing ball closes the gap at "
+        "t = gap / ((ε₁ − ε₂) v/2):",
+        "",
+        f"* formula (Eq. 24, paired forces): ε₁ = {100 * fa.eps_1:+.3f} %, ε₂ = "
+        f"{100 * fa.eps_2:+.3f} %, contact at **t = {fa.contact_time:.2f} s** "
+        f"(Eq. 26 by hand: {t_eq26:.2f} s);",
+        f"* full model (solved static contact): ε₁ = {100 * fu.eps_1:+.3f} %, ε₂ = "
+        f"{100 * fu.eps_2:+.3f} %, contact at t = {fu.contact_time:.2f} s.",
+        f"* Case (b): {'no contact' if np.all(np.isinf(b_any)) else 'CONTACT'} within "
+        f"{FIG9_DURATION:.0f} s (ε₁ = ε₂ = 0), as in the paper's Fig. 9(b).",
+        "",
+        "The paper's text gives no contact time; the figure is missing from the extraction.",
+        "",
+        "## Reproduce",
+        "",
+        "```",
+        "tolsim paper --out reports/paper",
+        "```",
+        "",
+        f"Grids: Fig. 4 {grids['fig4_points']} points in c/a ∈ [−3, 3]; Fig. 7 as above.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------------
+# Driver
+# --------------------------------------------------------------------------------------------
+def make_paper(folder="reports/paper", *, quick=False, progress=None) -> PaperOutputs:
+    """Compute and write the reproduction of [Lin2018] into ``folder``.
+
+    Parameters
+    ----------
+    folder : str or path
+        Output folder (created if missing).
+    quick : bool
+        Coarse grids (for tests); the files are the same, the figures coarser.
+    progress : callable, optional
+        Called with a short message before each step.
+
+    Returns
+    -------
+    PaperOutputs
+    """
+    started = time.perf_counter()
+    say = progress or (lambda msg: None)
+    os.makedirs(folder, exist_ok=True)
+    grids = GRIDS[bool(quick)]
+    out = PaperOutputs(os.fspath(folder))
+
+    def path(name):
+        p = os.path.join(folder, name)
+        out.files.append(p)
+        return p
+
+    say("Table 2 (full model, static contact)")
+    table = table2_table(paper_data.table2_data())
+    table.to_csv(path("table2.csv"), index=False, float_format="%.6g")
+    with open(path("table2.md"), "w", encoding="utf-8") as fh:
+        fh.write("# Table 2 of Lin et al. (2018), reproduced\n\n"
+                 "ε of the two balls of Sec. 3.2 (θ = 2°, ρ = ∓0.6, N_y = 200 N). Case (a): "
+                 "top groove perfect; case (b): Δβ_TR = −θ, Δβ_TL = θ. The paper column is "
+                 "Leblanc's model for the full model and the derived formula for Eq. (24) and "
+                 "the analytic model.\n\n")
+        fh.write(table2_markdown(table))
+    checks = table2_checks(table)
+
+    say("Fig. 4")
+    curves, slopes = paper_data.fig4_data(
+        offset_ratio=np.linspace(-3.0, 3.0, grids["fig4_points"]))
+    save_png(plot_fig4(curves, slopes), path("fig4.png"))
+
+    say("Fig. 7 (full model over the rho-theta grid)")
+    grid = paper_data.fig7_data(grids["fig7_rho"], grids["fig7_theta"])
+    save_png(plot_fig7(grid), path("fig7.png"))
+
+    say("Fig. 9")
+    f9 = fig9_data(table)
+    save_png(plot_fig9(f9), path("fig9.png"))
+
+    out.elapsed = time.perf_counter() - started
+    with open(path("README.md"), "w", encoding="utf-8") as fh:
+        fh.write(readme_text(table, checks, slopes, grid, f9, grids, out.elapsed, curves))
+    out.table2 = table
+    out.summary = {"table2_checks": checks, "fig7": _fig7_summary(grid),
+                   "fig9": f9.to_dict("records"), "fig4": slopes.to_dict("records")}
+    return out

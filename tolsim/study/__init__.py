@@ -1,0 +1,8 @@
+"""Study layer: sampling, evaluation, propagation and streamed statistics (+ physics).
+
+:mod:`~tolsim.study.spec` (the study description), :mod:`~tolsim.study.sampling` (blocks of
+reproducible draws), :mod:`~tolsim.study.evaluate` (static model and velocity kernel
+registries), :mod:`~tolsim.study.propagation` (ball-to-ball contact, modes a and b),
+:mod:`~tolsim.study.statistics` (mergeable accumulators) and :mod:`~tolsim.study.runner`
+(:func:`~tolsim.study.runner.run_study`). Never imports tomllib, xarray or matplotlib.
+"""

@@ -1,0 +1,326 @@
+"""Evaluation of balls: error sources and loads -> static contact -> velocity deviation.
+
+Two registries, picked by name from the config (no if/elif chains):
+
+``STATIC_MODELS``
+    name -> ``f(errors, side_load, normal_load, bearing) -> StaticResult`` with the loaded
+    contact angle deviations dbeta_i and forces F_i per ball.
+
+    * ``paired``: the paper's paired forces (Sec. 3.1, :func:`paired_forces`) and the rigid
+      mapping of the angular error sources (rotations, Sec. 3.1; tangential arc-centre
+      offsets, dbeta_i = t_i / (R_G - R_B)). Normal arc offsets, groove offsets and ball
+      oversize do not change the angles to first order in this model and are ignored.
+    * ``rigid``, ``solved``: :func:`tolsim.physics.static.solve_static` (``rigid=True``: the
+      geometric contact angles; else the elastic load-controlled solution).
+    * ``linearised``: :func:`tolsim.physics.static.linearised_static` about the error-free
+      state at each distinct ball load (:func:`linearised_static`).
+
+``VELOCITY_KERNELS``
+    name -> ``f(dbeta, force, bearing, out_eps, out_valid)`` calling the Numba kernels of
+    :mod:`tolsim.physics.analytic` directly on preallocated arrays.
+
+A ball is *valid* when its static solution converged, all four forces are > 0 and the velocity
+model's own validity flags hold; invalid balls are counted by cause and kept out of the
+statistics.
+"""
+
+import importlib
+from contextlib import contextmanager
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numba
+import numpy as np
+
+from tolsim.physics.analytic import (
+    MAX_ANGLE_SUM,
+    MAX_ZERO_VELOCITY_RATIO,
+    MIN_DIAGONAL_FORCE_RATIO,
+    analytic_kernel,
+    eq24_kernel,
+)
+from tolsim.physics.geometry import K_F_PAPER, paired_forces
+from tolsim.physics.hertz import hertz_constants
+
+CONTACTS = ("BL", "BR", "TR", "TL")
+
+
+def static_module():
+    """:mod:`tolsim.physics.static` if it is installed, else None."""
+    try:
+        return importlib.import_module("tolsim.physics.static")
+    except ImportError:
+        return None
+
+
+def friction_module():
+    """:mod:`tolsim.physics.friction` if it is installed, else None."""
+    try:
+        return importlib.import_module("tolsim.physics.friction")
+    except ImportError:
+        return None
+
+
+# --------------------------------------------------------------------------------------------
+# Error sources -> GrooveErrors fields
+# --------------------------------------------------------------------------------------------
+def groove_error_fields(values: dict, shape) -> dict:
+    """Assemble the :class:`tolsim.physics.static.GrooveErrors` fields from source values.
+
+    Parameters
+    ----------
+    values : dict
+        source name (:data:`tolsim.study.spec.SOURCES`) -> ndarray of ``shape`` [m or rad].
+    shape : tuple
+        Shape of one per-ball array, e.g. (assemblies, balls).
+
+    Returns
+    -------
+    dict
+        Flattened over balls (n = prod(shape)): ``arc_centre_offset_normal`` and
+        ``arc_centre_offset_tangential`` (n, 4) [m], ``bottom_rotation``, ``top_rotation``
+        (n,) [rad], ``bottom_offset``, ``top_offset`` (n, 2) [m], ``ball_oversize`` (n,) [m].
+    """
+    n = int(np.prod(shape))
+    zero = np.zeros(n)
+
+    def get(name):
+        v = values.get(name)
+        return zero if v is None else np.ascontiguousarray(v, dtype=np.float64).reshape(n)
+
+    return {
+        "arc_centre_offset_normal": np.stack(
+            [get(f"arc_centre_offset_normal_{c}") for c in CONTACTS], axis=-1),
+        "arc_centre_offset_tangential": np.stack(
+            [get(f"arc_centre_offset_tangential_{c}") for c in CONTACTS], axis=-1),
+        "bottom_rotation": get("bottom_rotation"),
+        "top_rotation": get("top_rotation"),
+        "bottom_offset": np.stack([get("bottom_offset_x"), get("bottom_offset_y")], axis=-1),
+        "top_offset": np.stack([get("top_offset_x"), get("top_offset_y")], axis=-1),
+        "ball_oversize": get("ball_oversize"),
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Static models
+# --------------------------------------------------------------------------------------------
+@dataclass
+class StaticResult:
+    """Loaded contact state of n balls: dbeta (n, 4) [rad], force (n, 4) [N], converged (n,)."""
+
+    contact_angle_deviation: np.ndarray
+    normal_force: np.ndarray
+    converged: np.ndarray
+
+
+def rigid_angle_deviation(errors: dict, bearing) -> np.ndarray:
+    """Contact angle deviations of rigid grooves from rotations and tangential arc offsets.
+
+    dbeta_BL = -theta_b, dbeta_BR = +theta_b ([Lin2018] Sec. 3.1, Fig. 6), likewise
+    dbeta_TR = -theta_t, dbeta_TL = +theta_t for the top groove, plus t_i / (R_G - R_B) for
+    a tangential offset t_i of arc centre i (positive toward increasing beta_i; the contact
+    lies on the line through the ball and arc centres, which are R_G - R_B apart).
+
+    Returns
+    -------
+    ndarray, shape (n, 4)
+        dbeta_i [rad].
+    """
+    centre_distance = bearing.groove_radius - bearing.ball_radius
+    dbeta = errors["arc_centre_offset_tangential"] / centre_distance
+    dbeta[:, 0] -= errors["bottom_rotation"]
+    dbeta[:, 1] += errors["bottom_rotation"]
+    dbeta[:, 2] -= errors["top_rotation"]
+    dbeta[:, 3] += errors["top_rotation"]
+    return dbeta
+
+
+def paired_static(errors, side_load, normal_load, bearing) -> StaticResult:
+    """``paired``: paired forces ([Lin2018] Sec. 3.1) and rigid angle deviations."""
+    dbeta = rigid_angle_deviation(errors, bearing)
+    force = np.ascontiguousarray(
+        paired_forces(side_load, normal_load, bearing.nominal_contact_angle))
+    return StaticResult(dbeta, force, np.ones(len(dbeta), dtype=bool))
+
+
+def _static_solver(function="solve_static", **options):
+    def solve(errors, side_load, normal_load, bearing):
+        module = static_module()
+        if module is None or not hasattr(module, function):
+            raise ValueError(f"this static model needs tolsim.physics.static.{function}, "
+                             "which is not available; use static_model = 'paired' or 'solved'")
+        sol = getattr(module, function)(side_load, normal_load,
+                                        module.GrooveErrors(**errors), bearing, **options)
+        return StaticResult(
+            np.ascontiguousarray(sol.contact_angle_deviation, dtype=np.float64),
+            np.ascontiguousarray(sol.normal_force, dtype=np.float64),
+            np.asarray(sol.converged, dtype=bool),
+        )
+
+    return solve
+
+
+#: Most distinct (N_x, N_y) pairs linearised separately; beyond it, one point at the mean load.
+MAX_LINEARISATION_POINTS = 32
+
+
+@lru_cache(maxsize=256)
+def _static_sensitivity(side_load, normal_load, bearing):
+    return static_module().static_sensitivity(side_load, normal_load, None, bearing)
+
+
+def linearised_static(errors, side_load, normal_load, bearing) -> StaticResult:
+    """``linearised``: first-order static solution about the error-free state.
+
+    One sensitivity matrix (:func:`tolsim.physics.static.static_sensitivity`) per distinct
+    per-ball load (N_x, N_y), computed once and cached; more than
+    :data:`MAX_LINEARISATION_POINTS` distinct loads (along-track propagation) share one
+    linearisation at the mean load, with the load deviations through its load columns. No
+    convergence check: ``converged`` is True; a force <= 0 counts as loss of contact.
+    """
+    module = static_module()
+    if module is None or not hasattr(module, "linearised_static"):
+        raise ValueError("static_model = 'linearised' needs tolsim.physics.static."
+                         "linearised_static, which is not available")
+    loads = np.stack([side_load, normal_load], axis=1)
+    points, inverse = np.unique(loads, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    if len(points) > MAX_LINEARISATION_POINTS:
+        points, inverse = loads.mean(axis=0, keepdims=True), np.zeros(len(loads), np.int64)
+    n = len(loads)
+    dbeta, force = np.empty((n, 4)), np.empty((n, 4))
+    for k, (nx, ny) in enumerate(points):
+        sel = inverse == k
+        sub = module.GrooveErrors(**{name: v[sel] for name, v in errors.items()})
+        sens = _static_sensitivity(float(nx), float(ny), bearing)
+        dbeta[sel], force[sel] = module.linearised_static(sens, side_load[sel],
+                                                          normal_load[sel], sub)
+    return StaticResult(dbeta, force, np.ones(n, dtype=bool))
+
+
+STATIC_MODELS = {
+    "paired": paired_static,
+    "rigid": _static_solver(rigid=True),
+    "solved": _static_solver(),
+    "linearised": linearised_static,
+}
+
+
+# --------------------------------------------------------------------------------------------
+# Velocity kernels
+# --------------------------------------------------------------------------------------------
+def _eq24(dbeta, force, bearing, out_eps, out_valid):
+    eq24_kernel(dbeta, force, bearing.nominal_contact_angle, MIN_DIAGONAL_FORCE_RATIO,
+                MAX_ANGLE_SUM, out_eps, out_valid)
+
+
+def _analytic(dbeta, force, bearing, out_eps, out_valid):
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    n = len(dbeta)
+    eps22 = np.empty(n)
+    gamma = np.empty((n, 4))
+    analytic_kernel(dbeta, force, bearing.nominal_contact_angle, bearing.ball_radius,
+                    hc.semi_major_coefficient, hc.elliptic_e, K_F_PAPER,
+                    MAX_ZERO_VELOCITY_RATIO, MAX_ANGLE_SUM, out_eps, eps22, gamma, out_valid)
+
+
+VELOCITY_KERNELS = {"eq24": _eq24, "analytic": _analytic}
+
+
+# --------------------------------------------------------------------------------------------
+# Balls
+# --------------------------------------------------------------------------------------------
+#: Below this many balls the parallel kernels run on one thread: launching the thread pool
+#: costs more than it saves (along-track steps evaluate a block of balls at a time).
+SERIAL_BELOW = 4096
+
+
+@contextmanager
+def _serial_if_small(n):
+    if n >= SERIAL_BELOW:
+        yield
+        return
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(threads)
+
+
+@dataclass
+class BallState:
+    """Evaluated balls, each array of shape ``shape`` (+ (4,) for per-contact arrays).
+
+    ``velocity_deviation`` is NaN where the ball is not ``valid``; ``cause`` counts why.
+    """
+
+    velocity_deviation: np.ndarray
+    valid: np.ndarray
+    converged: np.ndarray
+    loss_of_contact: np.ndarray
+    contact_angle_deviation: np.ndarray
+    normal_force: np.ndarray
+
+
+def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
+    """Velocity deviation of balls from their error-source values and loads.
+
+    Parameters
+    ----------
+    config : StudyConfig
+    values : dict
+        source -> ndarray of the common per-ball shape [m or rad].
+    side_load, normal_load : ndarray
+        N_x and N_y per ball [N], same shape (or broadcastable).
+
+    Returns
+    -------
+    BallState
+    """
+    shape = np.broadcast_shapes(np.shape(side_load), np.shape(normal_load),
+                                *(np.shape(v) for v in values.values()))
+    n = int(np.prod(shape))
+    errors = groove_error_fields({k: np.broadcast_to(v, shape) for k, v in values.items()},
+                                 shape)
+    nx = np.broadcast_to(side_load, shape).reshape(n)
+    ny = np.broadcast_to(normal_load, shape).reshape(n)
+    with _serial_if_small(n):
+        static = STATIC_MODELS[config.study.static_model](errors, nx, ny, config.bearing)
+        force = static.normal_force
+        loss = static.converged & ~(force.min(axis=1) > 0.0)
+        eps = np.empty(n)
+        valid = np.empty(n, dtype=np.bool_)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            VELOCITY_KERNELS[config.study.velocity_model](
+                static.contact_angle_deviation, np.maximum(force, 0.0), config.bearing, eps,
+                valid)
+    valid &= static.converged & ~loss & np.isfinite(eps)
+    eps[~valid] = np.nan
+    return BallState(
+        eps.reshape(shape), valid.reshape(shape), static.converged.reshape(shape),
+        loss.reshape(shape), static.contact_angle_deviation.reshape(shape + (4,)),
+        force.reshape(shape + (4,)),
+    )
+
+
+def loads_per_ball(config, shape):
+    """Per-ball (N_x, N_y) [N] of the config's train, broadcast to (assemblies, balls)."""
+    return (np.broadcast_to(np.asarray(config.loads.side_load), shape),
+            np.broadcast_to(np.asarray(config.loads.normal_load), shape))
+
+
+def loads_at(config, carriage_position):
+    """(N_x, N_y) [N] at positions along the carriage [m] (along-track propagation).
+
+    The per-ball loads of the config are taken at the nominal slot positions and
+    interpolated linearly between them (constant beyond the end slots).
+    """
+    slots = config.train.slot_positions(2.0 * config.bearing.ball_radius)
+    nx = np.asarray(config.loads.side_load)
+    ny = np.asarray(config.loads.normal_load)
+    if len(slots) == 1:
+        return (np.full(np.shape(carriage_position), nx[0]),
+                np.full(np.shape(carriage_position), ny[0]))
+    return np.interp(carriage_position, slots, nx), np.interp(carriage_position, slots, ny)

@@ -1,0 +1,146 @@
+"""Ball-to-ball contact in a track: propagation of ball positions ([Lin2018] Sec. 3.2).
+
+Balls of one track are numbered from the trailing end (ball 0) to the leading end; the top
+groove moves at +v along z and a ball's centre at v_B = (1 + epsilon) v / 2. Pair j is the
+trailing ball j and the leading ball j + 1, with gap g_j = z_{j+1} - z_j - 2 R_B. The pair
+touches when the gap closes.
+
+(a) ``constant``: epsilon constant per ball over the horizon (the paper's Fig. 9). The gap
+    closes at dg_j/dt = -(eps_j - eps_{j+1}) v / 2, so pair j touches at
+    t_j = g_j / ((eps_j - eps_{j+1}) v / 2) when eps_j > eps_{j+1}; the first contact of the
+    train is min_j t_j (no other ball can touch before an adjacent pair does).
+(b) ``along_track``: epsilon of each ball is re-evaluated as it rolls past rail-side errors
+    (rail random fields, read at the ball's rail position) and through the carriage's load
+    distribution (read at its position in the carriage), integrated with the explicit
+    midpoint rule; a contact event is located by linear interpolation of the gap within the
+    step in which it changes sign (exact for piecewise-constant epsilon).
+
+Travel to contact is the carriage travel v t [m].
+"""
+
+import numpy as np
+from numba import prange
+
+from tolsim._jit import pjit
+from tolsim.study.evaluate import evaluate_balls, loads_at
+from tolsim.study.sampling import error_values
+
+
+@pjit
+def constant_contact_kernel(gap, velocity_deviation, half_speed, horizon, out_time, out_pair):
+    """Mode (a): first contact time per train (inf and -1 when none within the horizon)."""
+    for m in prange(gap.shape[0]):
+        best = np.inf
+        pair = -1
+        for j in range(gap.shape[1]):
+            rate = (velocity_deviation[m, j] - velocity_deviation[m, j + 1]) * half_speed
+            if rate > 0.0:
+                t = gap[m, j] / rate
+                if t < best:
+                    best = t
+                    pair = j
+        if best <= horizon:
+            out_time[m] = best
+            out_pair[m] = pair
+        else:
+            out_time[m] = np.inf
+            out_pair[m] = -1
+
+
+def first_contact_constant(initial_gap, velocity_deviation, groove_velocity, horizon):
+    """First ball-to-ball contact of trains with constant epsilon per ball (mode a).
+
+    Parameters
+    ----------
+    initial_gap : array_like, shape (m, balls - 1)
+        Gaps between adjacent balls at t = 0 [m], >= 0.
+    velocity_deviation : array_like, shape (m, balls)
+        epsilon per ball [-], ball 0 trailing; NaN balls never close a gap.
+    groove_velocity : float
+        v [m/s], > 0.
+    horizon : float
+        Duration considered [s], > 0.
+
+    Returns
+    -------
+    time : ndarray, shape (m,)
+        Time of the first contact [s], inf if none within the horizon.
+    pair : ndarray of int, shape (m,)
+        Trailing ball of the touching pair, -1 if none.
+    """
+    gap = np.ascontiguousarray(initial_gap, dtype=np.float64)
+    eps = np.ascontiguousarray(velocity_deviation, dtype=np.float64)
+    if gap.ndim != 2 or eps.ndim != 2 or eps.shape != (gap.shape[0], gap.shape[1] + 1):
+        raise ValueError(f"initial_gap {gap.shape} and velocity_deviation {eps.shape} must "
+                         "have shapes (m, balls - 1) and (m, balls)")
+    if np.any(gap < 0) or not np.all(np.isfinite(gap)):
+        raise ValueError("initial_gap must be finite and >= 0")
+    if not (np.isfinite(groove_velocity) and groove_velocity > 0):
+        raise ValueError(f"groove_velocity = {groove_velocity!r} must be > 0")
+    if not horizon > 0:
+        raise ValueError(f"horizon = {horizon!r} must be > 0")
+    time = np.empty(len(gap))
+    pair = np.empty(len(gap), dtype=np.int64)
+    constant_contact_kernel(gap, eps, 0.5 * groove_velocity, float(horizon), time, pair)
+    return time, pair
+
+
+def first_contact_along_track(config, block, initial_state=None):
+    """First contact of the trains of a block with epsilon re-evaluated along the track (b).
+
+    Parameters
+    ----------
+    config : StudyConfig
+    block : tolsim.study.sampling.Block
+    initial_state : BallState, optional
+        The balls at t = 0 (evaluated here if not given).
+
+    Returns
+    -------
+    time : ndarray (size,)
+        [s], inf if no contact within the horizon.
+    pair : ndarray of int (size,)
+    valid : ndarray of bool (size,)
+        False for a train in which some ball was invalid at some evaluation.
+    """
+    v = config.motion.groove_velocity
+    horizon = config.motion.duration
+    steps = config.study.time_steps
+    dt = horizon / steps
+    diameter = 2.0 * config.bearing.ball_radius
+    size = block.size
+
+    def velocity(position, t):
+        values = error_values(config, block, rail_position=position)
+        nx, ny = loads_at(config, position - v * t)
+        state = evaluate_balls(config, values, nx, ny)
+        return state.velocity_deviation, state.valid
+
+    position = block.initial_position.copy()
+    time = np.full(size, np.inf)
+    pair = np.full(size, -1, dtype=np.int64)
+    valid = np.ones(size, dtype=bool)
+    t = 0.0
+    for k in range(steps):
+        if k == 0 and initial_state is not None:
+            eps1, ok1 = initial_state.velocity_deviation, initial_state.valid
+        else:
+            eps1, ok1 = velocity(position, t)
+        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(eps1)) * 0.5 * v
+        eps2, ok2 = velocity(mid, t + 0.5 * dt)
+        valid &= ok1.all(axis=1) & ok2.all(axis=1)
+        new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
+        gap_old = np.diff(position, axis=1) - diameter
+        gap_new = np.diff(new, axis=1) - diameter
+        closing = (gap_new <= 0.0) & (gap_old > gap_new)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(gap_old <= 0.0, 0.0, gap_old / (gap_old - gap_new))
+        tc = np.where(closing, t + frac * dt, np.inf)
+        first = np.argmin(tc, axis=1)
+        tmin = tc[np.arange(size), first]
+        hit = np.isfinite(tmin) & ~np.isfinite(time)
+        time[hit] = tmin[hit]
+        pair[hit] = first[hit]
+        position = new
+        t = (k + 1) * dt
+    return time, pair, valid
