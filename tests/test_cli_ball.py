@@ -77,3 +77,13 @@ def test_help_teaches():
     assert code == 0
     for word in ("BL BR TR TL", "--load-n", "Examples", "eq24", "analytic", "point"):
         assert word in out
+
+
+def test_two_point_contact_gives_strict_json_with_warning(capsys):
+    # N_x = 1.5 N_y unloads a diagonal pair in the solved static contact: the analytic model
+    # is undefined there; the JSON stays strict (null, not NaN) and the ball is flagged.
+    assert main(["ball", "--static", "solved", "--load-n", "300", "200", "--json"]) == 0
+    text = capsys.readouterr().out
+    assert "NaN" not in text
+    out = json.loads(text)
+    assert out["valid"] is False and out["warnings"]

@@ -157,6 +157,8 @@ BAD = [
     ("syntax", ("balls = 2", "balls = = 2"), "invalid TOML", None),
     ("stroke_and_duration", ("duration_s = 10.0", "duration_s = 10.0\nstroke_mm = 5"),
      "motion.stroke_mm", 8),
+    ("sensitivity_one_sample", ("seed = 1", "seed = 1\nsensitivity_samples = 1"),
+     "study.sensitivity_samples", 24),
 ]
 
 

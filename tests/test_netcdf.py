@@ -145,3 +145,29 @@ def test_read_result_rejects_other_files(tmp_path):
     text.write_text("hello")
     with pytest.raises(ValueError, match="cannot open"):
         read_result(text)
+
+
+def test_sensitivity_and_quality_stored_and_round_trip(tmp_path):
+    # [study] sensitivity_samples switches on the Sobol' analysis in the run; the indices go
+    # into the file along 'factor' (one entry per random tolerance source and the initial
+    # gap), and a limit on |epsilon| adds the quality-engineering figures. Indices are
+    # shares of variance: within [0, 1] up to estimator noise (0.1 here, 128 samples).
+    text = CONFIG.replace("spot_checks = 3", "spot_checks = 0\nsensitivity_samples = 128")
+    res = run_study(parse_config(text, "small.toml"))
+    path = tmp_path / "sens.nc"
+    write_result(res, path)
+    back = read_result(path)
+    factors = list(back["factor"].values)
+    assert {"bottom_rotation", "top_rotation", "initial_gap"} <= set(factors)
+    for name in ("sensitivity_first_order", "sensitivity_total", "sensitivity_total_ci_lower",
+                 "sensitivity_contact_total"):
+        values = back[name].values
+        assert values.shape == (len(factors),)
+        assert np.all(values > -0.1) and np.all(values < 1.1), name
+        assert back[name].attrs["units"] == "1" and back[name].attrs["long_name"]
+    total = back["sensitivity_total"].to_series()
+    # epsilon does not depend on the initial gap at all
+    assert abs(total["initial_gap"]) < 1e-12
+    assert back.attrs["sensitivity_samples"] == 128
+    assert 0.0 <= float(back["velocity_deviation_out_of_spec_fraction"]) <= 1.0
+    assert np.isfinite(float(back["velocity_deviation_cpk"]))

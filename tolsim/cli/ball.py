@@ -334,10 +334,24 @@ def _text(out):
     return "\n".join(lines)
 
 
+def _strict_json(value):
+    """NaN/inf (an undefined quantity, e.g. dgamma at an unloaded contact) -> null."""
+    if isinstance(value, dict):
+        return {k: _strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict_json(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def run(args):
     out = evaluate(args)
     if out.get("converged") is False:
         for w in out["warnings"]:
             print(f"tolsim ball: warning: {w}", file=sys.stderr)
-    print(json.dumps(out, indent=2) if args.json else _text(out))
+    if args.json:
+        print(json.dumps(_strict_json(out), indent=2, allow_nan=False))
+    else:
+        print(_text(out))
     return 0

@@ -120,6 +120,23 @@ def summary(ds, output, elapsed) -> str:
             f"max {100 * float(ds.spot_check_max_abs_difference):.4f} % (of v/2)")
     else:
         lines.append(f"spot checks: {a['spot_check_status']}")
+    if "velocity_deviation_out_of_spec_fraction" in ds:
+        from tolsim.study.quality import format_fraction
+
+        line = (f"|epsilon| > {_pct(float(ds.velocity_deviation_limit))}: " + format_fraction(
+            float(ds.velocity_deviation_out_of_spec_fraction),
+            float(ds.velocity_deviation_out_of_spec_ci_lower),
+            float(ds.velocity_deviation_out_of_spec_ci_upper)) + " of balls")
+        if "velocity_deviation_cpk" in ds:
+            line += f", Cpk {float(ds.velocity_deviation_cpk):.3f}"
+        lines.append(line)
+    if "sensitivity_total" in ds.variables and ds.sizes.get("factor", 0):
+        for var, what in (("sensitivity_total", "epsilon"),
+                          ("sensitivity_contact_total", "contact")):
+            if var in ds:
+                ranked = ds[var].to_series().sort_values(ascending=False).head(3)
+                lines.append(f"drivers of {what} (total Sobol' index): " + ", ".join(
+                    f"{name} {value:.2f}" for name, value in ranked.items()))
     rate = int(ds.n_balls) / elapsed if elapsed > 0 else float("nan")
     lines.append(f"wrote {output} ({elapsed:.1f} s, {rate:,.0f} balls/s)")
     return "\n".join(lines)

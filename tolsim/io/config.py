@@ -387,7 +387,10 @@ def _study(t: _Table) -> StudySettings:
                                             default=0.0, minimum=0.0),
         contact_probability_limit=t.quantity("contact_probability_limit", "dimensionless",
                                              default=0.0, minimum=0.0),
+        sensitivity_samples=t.integer("sensitivity_samples", default=0, minimum=0),
     )
+    if s.sensitivity_samples == 1:
+        raise t.error("sensitivity_samples", "must be 0 (off) or >= 2")
     if s.contact_probability_limit > 1:
         raise t.error("contact_probability_limit", "must be <= 1")
     t.finish()

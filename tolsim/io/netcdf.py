@@ -18,6 +18,8 @@ import xarray as xr
 from tolsim import __version__
 from tolsim.io import schema
 from tolsim.physics.geometry import CONTACTS
+from tolsim.study.quality import dataset_quality
+from tolsim.study.sensitivity import sensitivity_variables
 from tolsim.study.statistics import QUANTILES
 
 
@@ -140,6 +142,13 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "elapsed_seconds": float(result.elapsed),
         "workers": int(result.workers),
     }
+    if result.sensitivity is not None:
+        variables = sensitivity_variables(result.sensitivity)
+        ds = ds.assign_coords(factor=("factor", variables.pop("factor")))
+        ds = ds.assign({name: (("factor",), values) for name, values in variables.items()})
+        ds.attrs["sensitivity_samples"] = int(st.sensitivity_samples)
+    quality = {k: v for k, v in dataset_quality(ds).items() if not k.startswith("_")}
+    ds = ds.assign({name: float(value) for name, value in quality.items()})
     schema.apply_attributes(ds)
     return schema.validate(ds)
 

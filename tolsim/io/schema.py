@@ -16,6 +16,9 @@ optional).
 
 from dataclasses import dataclass
 
+from tolsim.study.quality import QUALITY_VARIABLES
+from tolsim.study.sensitivity import SENSITIVITY_VARIABLES
+
 #: Value of the ``Conventions`` global attribute.
 CONVENTIONS = "CF-1.10"
 #: Global attribute that marks a tolsim result (``tolsim_schema``) and its version.
@@ -124,11 +127,12 @@ DATA_VARIABLES = {
     "spot_check_n_valid": V((), "1", "spot checks valid in both models", "i"),
     "spot_check_rms_difference": V((), "1", "RMS of epsilon analytic - full over valid checks"),
     "spot_check_max_abs_difference": V((), "1", "largest |epsilon analytic - full|"),
-    # sensitivity (issue 6)
-    "sensitivity_first_order": V(("factor",), "1", "first-order variance-based index",
-                                 required=False),
-    "sensitivity_total": V(("factor",), "1", "total-effect variance-based index",
-                           required=False),
+    # sensitivity and quality-engineering figures (issue 6): declared in the study modules
+    # that compute them, optional here
+    **{name: V(dims, units, long_name, required=False)
+       for name, (dims, units, long_name) in SENSITIVITY_VARIABLES.items()},
+    **{name: V((), units, long_name, required=False)
+       for name, (units, long_name) in QUALITY_VARIABLES.items()},
 }
 
 VARIABLES = {**COORDINATES, **DATA_VARIABLES}

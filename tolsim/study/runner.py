@@ -69,6 +69,7 @@ class StudyResult:
     workers: int = 1
     resumed_blocks: int = 0
     meta: dict = field(default_factory=dict)
+    sensitivity: object = None  # tolsim.study.sensitivity.SensitivityResult, if asked for
 
 
 class StudyInterrupted(RuntimeError):
@@ -275,8 +276,15 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
             executor.shutdown(wait=True, cancel_futures=True)
     elapsed = time.perf_counter() - started
     spots = finish_spot_checks(config, _concat_spots(spot_parts))
-    return StudyResult(config, acc, spots, elapsed, workers, resumed,
-                       {"spot_check_seconds": time.perf_counter() - started - elapsed})
+    meta = {"spot_check_seconds": time.perf_counter() - started - elapsed}
+    sensitivity = None
+    if config.study.sensitivity_samples:
+        from tolsim.study.sensitivity import study_sensitivity
+
+        t0 = time.perf_counter()
+        sensitivity = study_sensitivity(config, samples=config.study.sensitivity_samples)
+        meta["sensitivity_seconds"] = time.perf_counter() - t0
+    return StudyResult(config, acc, spots, elapsed, workers, resumed, meta, sensitivity)
 
 
 def finish_spot_checks(config, rows: dict) -> SpotChecks:

@@ -222,6 +222,10 @@ class StudySettings:
         Spec limit on |epsilon| [-] (0: none); stored for reports.
     contact_probability_limit : float
         Spec limit on P(contact) [-] (0: none); stored for reports.
+    sensitivity_samples : int
+        Base sample size of the variance-based sensitivity analysis run after the study
+        (0: none); it costs sensitivity_samples (d + 2) extra assemblies for d random
+        tolerance sources (:func:`tolsim.study.sensitivity.study_sensitivity`).
     """
 
     samples: int = 10_000
@@ -238,6 +242,7 @@ class StudySettings:
     time_bins: int = 200
     velocity_deviation_limit: float = 0.0
     contact_probability_limit: float = 0.0
+    sensitivity_samples: int = 0
 
 
 @dataclass(frozen=True)
