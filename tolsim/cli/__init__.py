@@ -29,6 +29,25 @@ class UsageError(Exception):
     """Bad user input: reported as one line and exit code 2."""
 
 
+def integer_at_least(minimum, what):
+    """An argparse ``type`` accepting whole numbers >= ``minimum``.
+
+    A bad value becomes ``argument --flag: expected <what>, got '...'`` (argparse names the
+    flag), reported as one line with exit code 2.
+    """
+
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < minimum:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+        return value
+
+    return parse
+
+
 class Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line and exit code 2 (no usage dump)."""
 

@@ -8,7 +8,7 @@ import os
 import sys
 import time
 
-from tolsim.cli import UsageError
+from tolsim.cli import UsageError, integer_at_least
 
 DESCRIPTION = """\
 Write an HTML report (report.html, figures embedded, plus the PNGs) of a result file of
@@ -26,14 +26,7 @@ examples:
 """
 
 
-def _positive_int(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise UsageError(f"expected an integer >= 2, got {text!r}") from None
-    if value < 2:
-        raise UsageError(f"expected an integer >= 2, got {text!r}")
-    return value
+_sample_count = integer_at_least(2, "an integer >= 2")
 
 
 def add_parser(subparsers, formatter_class=None):
@@ -42,7 +35,7 @@ def add_parser(subparsers, formatter_class=None):
     p.add_argument("result", metavar="RESULTS.nc", help="result file of 'tolsim run'")
     p.add_argument("-o", "--out", metavar="DIR", default=argparse.SUPPRESS,
                    help="output folder (default: RESULTS-report next to the file)")
-    p.add_argument("--sensitivity-samples", type=_positive_int, metavar="N",
+    p.add_argument("--sensitivity-samples", type=_sample_count, metavar="N",
                    default=argparse.SUPPRESS,
                    help="assemblies per base sample of the Sobol' analysis (default 1024, "
                         "64 for along-track propagation)")

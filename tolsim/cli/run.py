@@ -9,7 +9,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from tolsim.cli import UsageError
+from tolsim.cli import UsageError, integer_at_least
 
 DESCRIPTION = """\
 Run a Monte Carlo tolerance study: sample assemblies (tolerances, gaps), solve each ball's
@@ -27,24 +27,8 @@ examples:
 """
 
 
-def _positive_int(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise UsageError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise UsageError(f"expected a positive integer, got {text!r}")
-    return value
-
-
-def _seed(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise UsageError(f"--seed expects a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise UsageError(f"--seed expects a non-negative integer, got {text!r}")
-    return value
+_positive_int = integer_at_least(1, "a positive integer")
+_seed = integer_at_least(0, "a non-negative integer")
 
 
 def add_parser(subparsers, formatter_class=None):

@@ -23,7 +23,8 @@ for computing sample variances", Stanford CS report STAN-CS-79-773 (1979).
 """
 
 import numpy as np
-from scipy.stats import beta as beta_distribution
+
+from tolsim.study.quality import clopper_pearson_interval
 
 #: Quantile levels stored for epsilon and time to contact [-].
 QUANTILES = (0.001, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99, 0.999)
@@ -278,10 +279,5 @@ def clopper_pearson(successes: int, trials: int, confidence: float = 0.95):
     -------
     (p, lower, upper) : floats, NaN when ``trials`` is 0.
     """
-    if trials == 0:
-        return float("nan"), float("nan"), float("nan")
-    alpha = 1.0 - confidence
-    k, n = successes, trials
-    lower = 0.0 if k == 0 else float(beta_distribution.ppf(alpha / 2, k, n - k + 1))
-    upper = 1.0 if k == n else float(beta_distribution.ppf(1 - alpha / 2, k + 1, n - k))
-    return k / n, lower, upper
+    lower, upper = clopper_pearson_interval(successes, trials, confidence)
+    return (successes / trials if trials else float("nan")), lower, upper
