@@ -11,8 +11,6 @@ JIT = dict(nogil=True, cache=True, fastmath=False, error_model="numpy")
 #: Options for kernels that loop over balls with ``numba.prange``.
 PJIT = dict(JIT, parallel=True)
 
-njit = numba.njit
-
 
 def jit(func=None, **overrides):
     """Decorate a serial kernel with the project defaults."""
