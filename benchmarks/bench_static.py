@@ -2,9 +2,13 @@
 
 Solves the load-controlled static problem (:func:`tolsim.physics.static.solve_static`) for
 many balls with tolerance-sized random errors and loads, and prints balls per second on all
-Numba threads and on one, the Newton iterations, the memory of the result, and the ratio to a
-plain SciPy baseline (``scipy.optimize.root`` ball by ball on the same equations, as in
-``tests/test_static.py``) measured in the same run.
+Numba threads and on one (and with the vectorised path switched off), the Newton iterations,
+the memory of the result, and the ratio to a plain SciPy baseline (``scipy.optimize.root``
+ball by ball on the same equations, as in ``tests/test_static.py``) measured in the same run.
+
+Like ``tolsim run`` (:func:`tolsim.study.runner.retain_freed_memory`), the benchmark lets
+glibc keep freed memory: otherwise each call's fresh output arrays are paid for in page
+faults, which on a small VM bound the two-thread figure near the one-thread one.
 
 Run: ``python benchmarks/bench_static.py [--balls 1000000] [--repeat 3]``
 """
@@ -24,6 +28,7 @@ from tolsim.physics.static import (
     solve_static,
     static_sensitivity,
 )
+from tolsim.study.runner import retain_freed_memory
 
 SX = np.array([-1.0, 1.0, 1.0, -1.0])
 SY = np.array([-1.0, -1.0, 1.0, 1.0])
@@ -111,6 +116,7 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=20181)
     args = parser.parse_args(argv)
 
+    retained = retain_freed_memory()
     nx, ny, errors = sample(args.balls, args.seed)
     threads = numba.get_num_threads()
     t0 = time.perf_counter()
@@ -124,6 +130,8 @@ def main(argv=None):
     numba.set_num_threads(1)
     t_one, _ = best_time(lambda: solve_static(nx, ny, errors), args.repeat)
     numba.set_num_threads(threads)
+    t_scalar, scalar = best_time(lambda: solve_static(nx, ny, errors, vectorised=False),
+                                 args.repeat)
     t_rigid, _ = best_time(lambda: solve_static(nx, ny, errors, rigid=True), args.repeat)
     sens = static_sensitivity(0.0, 200.0)
     t_lin, (lin_db, _) = best_time(lambda: linearised_static(sens, nx, ny, errors), 1)
@@ -141,11 +149,17 @@ def main(argv=None):
 
     print(f"balls                     {args.balls}")
     print(f"numba threads             {threads}")
+    print(f"freed memory retained     {retained} (glibc mallopt, as in tolsim run)")
     print(f"solve_static (elastic)    {rate / 1e6:.2f} M balls/s on {threads} threads "
           f"({t_all:.3f} s), {args.balls / t_one / 1e6:.2f} M balls/s on 1 thread")
     print(f"  CPU time per ball       {t_cpu / args.balls * 1e6:.3f} us (all threads; "
           f"{args.balls / t_cpu / 1e6:.2f} M balls per CPU-second; wall-clock figures "
           f"depend on what else the machine runs)")
+    print(f"  scalar path only        {args.balls / t_scalar / 1e6:.2f} M balls/s on {threads} "
+          f"threads (vectorised=False): the vectorised path is {t_scalar / t_all:.1f}x faster; "
+          f"max |dbeta difference| "
+          f"{np.max(np.abs(scalar.contact_angle_deviation - sol.contact_angle_deviation)):.1e} "
+          f"rad")
     print(f"solve_static (rigid)      {args.balls / t_rigid / 1e6:.2f} M balls/s")
     err = np.abs(lin_db - sol.contact_angle_deviation)
     print(f"linearised_static         {args.balls / t_lin / 1e6:.2f} M balls/s "

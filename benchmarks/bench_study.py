@@ -3,7 +3,8 @@
 Pipeline per ball: block sampling (rail random fields, per-carriage and per-ball sources,
 gaps), the solved static contact model, the analytic epsilon kernel, propagation mode (a) and
 the streamed statistics; the study is ``configs/yaw_moment_tolerances.toml`` (10 balls per
-track) with the spot checks off. Each size runs in a fresh process (after a small warm-up run
+track) with the spot checks and the Sobol' sensitivity analysis (separate post-processing
+steps with their own cost) off. Each size runs in a fresh process (after a small warm-up run
 that loads or compiles the Numba kernels), which reports its wall time and its peak resident
 memory (``ru_maxrss``), so the memory of one size does not hide in another's.
 
@@ -38,7 +39,8 @@ def study(balls_total, static_model="solved"):
     from tolsim.io.config import load_config
 
     c = load_config(CONFIG)
-    c = replace(c, study=replace(c.study, spot_checks=0, static_model=static_model))
+    c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0,
+                                 static_model=static_model))
     return c.with_overrides(samples=max(1, int(balls_total) // c.train.balls))
 
 

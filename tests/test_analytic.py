@@ -291,3 +291,23 @@ def test_shapes_broadcast():
     res = A.analytic(np.zeros((3, 2, 4)), np.full(4, 100.0))
     assert res.velocity_deviation.shape == (3, 2)
     assert res.zero_velocity_offset.shape == (3, 2, 4)
+
+
+def test_analytic_kernel_skips_eq22_and_gamma_on_request(rng):
+    # A study passes empty eq22 / dgamma outputs: epsilon and validity are bit-identical.
+    n = 1000
+    dbeta = rng.normal(0, np.deg2rad(0.5), (n, 4))
+    force = rng.uniform(20.0, 300.0, (n, 4))
+    hc = hertz_constants(TABLE1.ball_radius, TABLE1.conformity, TABLE1.youngs_modulus,
+                         TABLE1.poisson_ratio)
+    args = (dbeta, force, TABLE1.nominal_contact_angle, TABLE1.ball_radius,
+            hc.semi_major_coefficient, hc.elliptic_e, K_F_PAPER, A.MAX_ZERO_VELOCITY_RATIO,
+            A.MAX_ANGLE_SUM)
+    eps, eps22, gamma, valid = np.empty(n), np.empty(n), np.empty((n, 4)), np.empty(n, bool)
+    A.analytic_kernel(*args, eps, eps22, gamma, valid)
+    eps_s, valid_s = np.empty(n), np.empty(n, bool)
+    A.analytic_kernel(*args, eps_s, np.empty(0), np.empty((0, 4)), valid_s)
+    assert np.array_equal(eps, eps_s) and np.array_equal(valid, valid_s)
+    beta = TABLE1.nominal_contact_angle + dbeta + gamma  # Eq. (22) was computed
+    assert_allclose(eps22, [A.eq22_velocity_deviation(b[0], b[1], b[3]) for b in beta],
+                    rtol=1e-12, atol=1e-15)

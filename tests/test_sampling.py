@@ -149,3 +149,28 @@ def test_spot_checks_are_seeded_and_unique():
     assert_array_equal(a, b)
     assert len(np.unique(a)) == 25 and a.max() < 1000 * 5
     assert not np.array_equal(a, choose_spot_checks(config(seed=43)))
+
+
+@pytest.mark.parametrize("propagation", ["constant", "along_track"])
+def test_blocks_drawn_together_equal_blocks_drawn_alone(propagation):
+    # A chunk draws each block from its own generator and transforms the draws together:
+    # bit-identical to drawing the blocks one by one (1000 samples: the last of the four
+    # blocks of 256 is partial), for the draws, the rail fields, gaps, positions and the
+    # error-source values.
+    c = config(propagation=propagation)
+    together = sample_block(c, 0, 4)
+    alone = [sample_block(c, k) for k in range(4)]
+    assert together.size == 1000 and together.start == 0
+    for name in together.normals:
+        assert_array_equal(together.normals[name],
+                           np.concatenate([b.normals[name] for b in alone]), err_msg=name)
+    for name in together.fields:
+        assert_array_equal(together.fields[name].values,
+                           np.concatenate([b.fields[name].values for b in alone]))
+    assert_array_equal(together.initial_gap, np.concatenate([b.initial_gap for b in alone]))
+    assert_array_equal(together.initial_position,
+                       np.concatenate([b.initial_position for b in alone]))
+    v = error_values(c, together)
+    parts = [error_values(c, b) for b in alone]
+    for name in v:
+        assert_array_equal(v[name], np.concatenate([p[name] for p in parts]), err_msg=name)

@@ -158,6 +158,26 @@ def test_histogram_quantiles_uniform_exact():
     assert np.isnan(histogram_quantiles(counts, edges, [0.01], underflow=20)[0])
 
 
+def test_equal_width_histogram_counts_like_the_edge_array(rng):
+    # The accumulator bins with NumPy's equal-width path; the counts must be those of the
+    # edge array, including values exactly on an edge or one ulp either side.
+    from tolsim.study.statistics import _uniform_histogram
+
+    for lo, hi, bins in ((-0.02, 0.02, 400), (0.0, 7.3, 1000), (-1e-3, 3e-3, 37)):
+        edges = np.linspace(lo, hi, bins + 1)
+        x = np.concatenate([rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo), 50_000),
+                            edges, np.nextafter(edges, np.inf), np.nextafter(edges, -np.inf)])
+        assert_array_equal(_uniform_histogram(x, edges), np.histogram(x, bins=edges)[0])
+
+
+def test_static_result_four_point_from_forces():
+    from tolsim.study.evaluate import StaticResult
+
+    force = np.array([[1.0, 2.0, 3.0, 4.0], [1.0, 0.0, 3.0, 4.0], [1.0, 2.0, 3.0, -1e-9]])
+    r = StaticResult(np.zeros((3, 4)), force, np.ones(3, bool))
+    assert_array_equal(r.four_point, [True, False, False])
+
+
 @pytest.mark.parametrize("k, n", [(0, 16), (5, 40), (593, 1000), (1000, 1000)])
 def test_clopper_pearson_matches_scipy(k, n):
     # Twin: scipy.stats.binomtest(...).proportion_ci(method="exact"), to its solver tolerance.
@@ -287,3 +307,13 @@ def test_ctrl_c_keeps_a_checkpoint(tmp_path):
     resumed = run_study(c, checkpoint_path=str(ckpt))
     assert resumed.resumed_blocks == 4
     assert_identical(resumed, run_study(c))
+
+
+def test_retain_freed_memory_only_on_glibc():
+    import platform
+
+    from tolsim.study.runner import retain_freed_memory
+
+    glibc = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
+    assert retain_freed_memory() is glibc
+    assert retain_freed_memory() is glibc  # idempotent

@@ -33,7 +33,7 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import jit, pjit
-from tolsim.physics._fastmath import cbrt_nonnegative
+from tolsim.physics._fastmath import cbrt_nonnegative, sin_cos_near
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing
 from tolsim.physics.hertz import hertz_constants
 
@@ -166,6 +166,8 @@ def analytic_kernel(
 
     ``dbeta``, ``force``: C-contiguous (n, 4) float64. The cube roots F_i^(1/3) (for a_i) are
     taken for all balls at once with the vectorised cube root, then the per-ball solve runs.
+    ``out_eps22`` of length 0 skips Eq. (22), ``out_gamma`` with 0 rows skips storing dgamma
+    (a study needs neither).
     """
     force_cbrt = cbrt_nonnegative(force)
     _analytic_solve(dbeta, force, force_cbrt, nominal_angle, ball_radius,
@@ -180,16 +182,15 @@ def _analytic_solve(
 ):
     """Per-ball closed-form solve of Eqs. (17), (18), (21); epsilon from (23) and (22)."""
     half_tan = 0.5 * np.tan(nominal_angle)
+    sin_b0, cos_b0 = np.sin(nominal_angle), np.cos(nominal_angle)
+    with_eq22 = out_eps22.shape[0] > 0
+    with_gamma = out_gamma.shape[0] > 0
     for n in prange(dbeta.shape[0]):
         # Contact angles and axes. x_i, y_i components (global x, y), order BL, BR, TR, TL.
-        b0 = nominal_angle + dbeta[n, 0]
-        b1 = nominal_angle + dbeta[n, 1]
-        b2 = nominal_angle + dbeta[n, 2]
-        b3 = nominal_angle + dbeta[n, 3]
-        s0, c0 = np.sin(b0), np.cos(b0)
-        s1, c1 = np.sin(b1), np.cos(b1)
-        s2, c2 = np.sin(b2), np.cos(b2)
-        s3, c3 = np.sin(b3), np.cos(b3)
+        s0, c0 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 0])
+        s1, c1 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 1])
+        s2, c2 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 2])
+        s3, c3 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 3])
         # local x axes: BL (c,-s) BR (c,s) TR (-c,s) TL (-c,-s)
         x0, y0 = c0, -s0
         x1, y1 = c1, s1
@@ -234,12 +235,16 @@ def _analytic_solve(
         g1 = (p1 + t * n1) / q1
         g2 = (p2 + t * n2) / q2
         g3 = (t * n3) / q3
-        out_gamma[n, 0] = g0
-        out_gamma[n, 1] = g1
-        out_gamma[n, 2] = g2
-        out_gamma[n, 3] = g3
+        if with_gamma:
+            out_gamma[n, 0] = g0
+            out_gamma[n, 1] = g1
+            out_gamma[n, 2] = g2
+            out_gamma[n, 3] = g3
         out_eps[n] = half_tan * (-dbeta[n, 1] - g1 + dbeta[n, 3] + g3)
-        out_eps22[n] = eq22_velocity_deviation(b0 + g0, b1 + g1, b3 + g3)
+        if with_eq22:
+            out_eps22[n] = eq22_velocity_deviation(nominal_angle + dbeta[n, 0] + g0,
+                                                   nominal_angle + dbeta[n, 1] + g1,
+                                                   nominal_angle + dbeta[n, 3] + g3)
         ok = ok and ball_radius * abs(g0) <= max_ratio * a0
         ok = ok and ball_radius * abs(g1) <= max_ratio * a1
         ok = ok and ball_radius * abs(g2) <= max_ratio * a2

@@ -82,22 +82,26 @@ def groove_error_fields(values: dict, shape) -> dict:
         (n,) [rad], ``bottom_offset``, ``top_offset`` (n, 2) [m], ``ball_oversize`` (n,) [m].
     """
     n = int(np.prod(shape))
-    zero = np.zeros(n)
 
-    def get(name):
-        v = values.get(name)
-        return zero if v is None else np.ascontiguousarray(v, dtype=np.float64).reshape(n)
+    def group(names):
+        # filled column by column with broadcasting: no per-source copies, no stacking
+        out = np.empty(tuple(shape) + (len(names),))
+        for i, name in enumerate(names):
+            out[..., i] = values.get(name, 0.0)
+        return out.reshape(n, len(names))
+
+    def single(name):
+        return group([name])[:, 0]
 
     return {
-        "arc_centre_offset_normal": np.stack(
-            [get(f"arc_centre_offset_normal_{c}") for c in CONTACTS], axis=-1),
-        "arc_centre_offset_tangential": np.stack(
-            [get(f"arc_centre_offset_tangential_{c}") for c in CONTACTS], axis=-1),
-        "bottom_rotation": get("bottom_rotation"),
-        "top_rotation": get("top_rotation"),
-        "bottom_offset": np.stack([get("bottom_offset_x"), get("bottom_offset_y")], axis=-1),
-        "top_offset": np.stack([get("top_offset_x"), get("top_offset_y")], axis=-1),
-        "ball_oversize": get("ball_oversize"),
+        "arc_centre_offset_normal": group([f"arc_centre_offset_normal_{c}" for c in CONTACTS]),
+        "arc_centre_offset_tangential": group(
+            [f"arc_centre_offset_tangential_{c}" for c in CONTACTS]),
+        "bottom_rotation": single("bottom_rotation"),
+        "top_rotation": single("top_rotation"),
+        "bottom_offset": group(["bottom_offset_x", "bottom_offset_y"]),
+        "top_offset": group(["top_offset_x", "top_offset_y"]),
+        "ball_oversize": single("ball_oversize"),
     }
 
 
@@ -106,11 +110,19 @@ def groove_error_fields(values: dict, shape) -> dict:
 # --------------------------------------------------------------------------------------------
 @dataclass
 class StaticResult:
-    """Loaded contact state of n balls: dbeta (n, 4) [rad], force (n, 4) [N], converged (n,)."""
+    """Loaded contact state of n balls: dbeta (n, 4) [rad], force (n, 4) [N], converged (n,),
+    and four_point (n,): all four forces > 0 (computed from the forces if not given)."""
 
     contact_angle_deviation: np.ndarray
     normal_force: np.ndarray
     converged: np.ndarray
+    four_point: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.four_point is None:
+            f = self.normal_force  # column by column: a reduction over axis 1 is slow
+            self.four_point = (f[:, 0] > 0.0) & (f[:, 1] > 0.0) & (f[:, 2] > 0.0) & (
+                f[:, 3] > 0.0)
 
 
 def rigid_angle_deviation(errors: dict, bearing) -> np.ndarray:
@@ -155,6 +167,7 @@ def _static_solver(function="solve_static", **options):
             np.ascontiguousarray(sol.contact_angle_deviation, dtype=np.float64),
             np.ascontiguousarray(sol.normal_force, dtype=np.float64),
             np.asarray(sol.converged, dtype=bool),
+            np.asarray(sol.four_point, dtype=bool),
         )
 
     return solve
@@ -217,9 +230,7 @@ def _eq24(dbeta, force, bearing, out_eps, out_valid):
 def _analytic(dbeta, force, bearing, out_eps, out_valid):
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                          bearing.poisson_ratio)
-    n = len(dbeta)
-    eps22 = np.empty(n)
-    gamma = np.empty((n, 4))
+    eps22, gamma = np.empty(0), np.empty((0, 4))  # not needed: skipped
     analytic_kernel(dbeta, force, bearing.nominal_contact_angle, bearing.ball_radius,
                     hc.semi_major_coefficient, hc.elliptic_e, K_F_PAPER,
                     MAX_ZERO_VELOCITY_RATIO, MAX_ANGLE_SUM, out_eps, eps22, gamma, out_valid)
@@ -289,7 +300,7 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
     with _serial_if_small(n):
         static = STATIC_MODELS[config.study.static_model](errors, nx, ny, config.bearing)
         force = static.normal_force
-        loss = static.converged & ~(force.min(axis=1) > 0.0)
+        loss = static.converged & ~static.four_point
         eps = np.empty(n)
         valid = np.empty(n, dtype=np.bool_)
         with np.errstate(divide="ignore", invalid="ignore"):

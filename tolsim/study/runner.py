@@ -16,7 +16,7 @@ result. The caller deletes the checkpoint after writing the final output.
 import hashlib
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -120,31 +120,45 @@ def _concat_spots(parts):
     return {k: np.concatenate([p[k] for p in parts]) for k in SPOT_FIELDS}
 
 
-def run_chunk(config, block_indices, spot_indices):
-    """Evaluate consecutive blocks; return [(block, Accumulator, spot rows)] in order."""
-    blocks = [sample_block(config, k) for k in block_indices]
+def _block_sizes(config, block_indices):
+    st = config.study
+    return [min(st.block_size, st.samples - k * st.block_size) for k in block_indices]
+
+
+def draw_chunk(config, block_indices):
+    """The draws and error-source values of consecutive blocks (constant propagation)."""
+    block = sample_block(config, block_indices[0], len(block_indices))
+    return block, error_values(config, block)
+
+
+def run_chunk(config, block_indices, spot_indices, drawn=None):
+    """Evaluate consecutive blocks; return [(block, Accumulator, spot rows)] in order.
+
+    ``drawn``: ``draw_chunk(config, block_indices)`` when the caller has it already
+    (constant propagation only).
+    """
     out = []
     balls = config.train.balls
     if config.study.propagation == "constant":
-        # One kernel pass over the whole chunk, then split per block.
-        values = [error_values(config, b) for b in blocks]
-        merged = {s: np.concatenate([v[s] for v in values]) for s in values[0]}
-        gaps = np.concatenate([b.initial_gap for b in blocks])
-        shape = gaps.shape[:1] + (balls,)
+        # One pass over the whole chunk, then split per block.
+        block, values = drawn if drawn is not None else draw_chunk(config, block_indices)
+        shape = block.initial_gap.shape[:1] + (balls,)
         nx, ny = loads_per_ball(config, shape)
-        state = evaluate_balls(config, merged, nx, ny)
-        t, pair = first_contact_constant(gaps, state.velocity_deviation,
+        state = evaluate_balls(config, values, nx, ny)
+        t, pair = first_contact_constant(block.initial_gap, state.velocity_deviation,
                                          config.motion.groove_velocity, config.motion.duration)
         offset = 0
-        for b in blocks:
-            sl = slice(offset, offset + b.size)
+        for index, size in zip(block_indices, _block_sizes(config, block_indices), strict=True):
+            sl = slice(offset, offset + size)
             sub = BallState(*(getattr(state, f)[sl] for f in BallState.__dataclass_fields__))
             acc = Accumulator.for_config(config)
             acc.add(sub, t[sl], pair[sl])
-            out.append((b.index, acc, _spot_rows(sub, b.start * balls, spot_indices)))
-            offset += b.size
+            start = index * config.study.block_size
+            out.append((index, acc, _spot_rows(sub, start * balls, spot_indices)))
+            offset += size
     else:
-        for b in blocks:
+        for k in block_indices:
+            b = sample_block(config, k)
             values = error_values(config, b)
             # loads at the carriage positions, as during the integration
             nx, ny = loads_at(config, b.initial_position)
@@ -156,9 +170,58 @@ def run_chunk(config, block_indices, spot_indices):
     return out
 
 
+def _prefetched(config, chunks, spot_indices):
+    """``run_chunk`` over the chunks in order, drawing chunk i + 1 in a second thread while
+    chunk i is evaluated (NumPy's generators and ufuncs and the Numba kernels release the
+    GIL, so drawing overlaps the kernels). The draws are the same as without the thread."""
+    if config.study.propagation != "constant" or len(chunks) < 2:
+        for c in chunks:
+            yield run_chunk(config, c, spot_indices)
+        return
+    with ThreadPoolExecutor(1, thread_name_prefix="tolsim-draw") as pool:
+        pending = pool.submit(draw_chunk, config, chunks[0])
+        for i, c in enumerate(chunks):
+            drawn = pending.result()
+            if i + 1 < len(chunks):
+                pending = pool.submit(draw_chunk, config, chunks[i + 1])
+            yield run_chunk(config, c, spot_indices, drawn)
+
+
+#: glibc ``mallopt`` parameters and the values :func:`retain_freed_memory` sets.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_MMAP_THRESHOLD = 32 << 20  # the largest glibc accepts on 64-bit systems
+_TRIM_THRESHOLD = 1 << 30
+
+
+def retain_freed_memory() -> bool:
+    """Let glibc keep freed memory for reuse instead of returning it to the system.
+
+    Every chunk of a study allocates the same few hundred MB of arrays and frees them. By
+    default glibc serves arrays of this size with fresh ``mmap`` pages and trims the heap on
+    free, so every chunk pays a page fault (and zeroing) per 4 kB touched, serialised in the
+    kernel across the Numba threads; on a 2-core VM that was about a quarter of the run time
+    (``benchmarks/bench_study.py``). With allocations up to 32 MB from the heap and no
+    trimming below 1 GB the second chunk reuses the first one's pages. Peak memory does not
+    change; the process just keeps it until it exits. Returns False (and does nothing) where
+    the C library is not glibc.
+    """
+    import ctypes
+    import platform
+
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD)
+                    and libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
+    except (OSError, AttributeError):
+        return False
+
+
 def _worker_init(threads):
     import numba
 
+    retain_freed_memory()
     numba.set_num_threads(threads)
 
 
@@ -214,6 +277,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     """
     if not (isinstance(workers, int) and workers >= 1):
         raise ValueError(f"workers = {workers!r} must be a positive integer")
+    retain_freed_memory()
     st = config.study
     total_blocks = n_blocks(st.samples, st.block_size)
     chunk_blocks = chunk_blocks or default_chunk_blocks(config)
@@ -236,7 +300,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     chunks = [list(range(i, min(i + chunk_blocks, total_blocks)))
               for i in range(next_block, total_blocks, chunk_blocks)]
     if workers == 1:
-        results = (run_chunk(config, c, spot_indices) for c in chunks)
+        results = _prefetched(config, chunks, spot_indices)
         executor = None
     else:
         import multiprocessing

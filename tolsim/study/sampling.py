@@ -35,6 +35,8 @@ import numpy as np
 from scipy.special import ndtri
 from scipy.stats import qmc
 
+from tolsim._jit import jit
+
 #: Grid points per correlation length of a rail random field.
 FIELD_POINTS_PER_CORRELATION_LENGTH = 16
 #: Upper bound on the grid points of one rail field (the spacing grows beyond it).
@@ -145,80 +147,131 @@ def field_extent(config, initial_span):
     return -initial_span - pad, initial_span + travel + pad
 
 
-def sample_block(config, index: int) -> Block:
-    """Draw block ``index`` of a study.
+def _field_grid(config):
+    """(origin, spacing, points) of the rail-field grid (``along_track`` propagation)."""
+    lo, hi = field_extent(config, nominal_span(config))
+    grid = {}
+    for t in config.tolerances:
+        if t.scope == "rail" and t.correlation_length > 0:
+            points = int(np.ceil((hi - lo) / t.correlation_length
+                                 * FIELD_POINTS_PER_CORRELATION_LENGTH)) + 2
+            points = min(max(points, 2), MAX_FIELD_POINTS)
+            grid[t.source] = (lo, (hi - lo) / (points - 1), points)
+    return grid
+
+
+@jit
+def _ar1_kernel(phi, scale, innovations, out):
+    wide = phi.shape[0] > 1
+    for r in range(out.shape[0]):
+        rp = r if wide else 0
+        out[r, 0] = innovations[r, 0]
+        for j in range(1, out.shape[1]):
+            out[r, j] = phi[rp, j - 1] * out[r, j - 1] + scale[rp, j - 1] * innovations[r, j]
+
+
+def _ar1(phi, scale, innovations):
+    """Rows of the stationary AR(1) recursion x_0 = z_0, x_j = phi_j x_(j-1) + scale_j z_j.
+
+    ``phi``, ``scale``: shape (rows or 1, columns - 1). Compiled: a column-by-column NumPy
+    loop streams the whole chunk through the cache once per column.
+    """
+    out = np.empty_like(innovations)
+    _ar1_kernel(phi, scale, innovations, out)
+    return out
+
+
+def block_size_of(config, index: int) -> int:
+    """Assemblies in block ``index`` (the last block of a study may be partial)."""
+    st = config.study
+    size = min(st.block_size, st.samples - index * st.block_size)
+    if size <= 0:
+        raise ValueError(f"block {index} is beyond samples = {st.samples}")
+    return size
+
+
+def _draw_widths(config, grid):
+    """Name -> columns of each standard normal draw of a block, in the documented order."""
+    balls = config.train.balls
+    widths = {"factors": len(per_assembly_sources(config))}
+    widths.update({t.source: balls for t in config.tolerances if t.scope == "ball"})
+    widths["gap"] = max(balls - 1, 0)
+    for source, (_, _, points) in grid.items():
+        widths[source] = balls if config.study.propagation == "constant" else points
+    return widths
+
+
+def _draw(config, index, widths, out, row):
+    """Draw block ``index`` into rows row.. of the arrays ``out`` (name -> array)."""
+    st = config.study
+    size_full = st.block_size
+    size = block_size_of(config, index)
+    rng = block_generator(st.seed, index)
+    for name, width in widths.items():
+        dest = out[name][row : row + size]
+        if width == 0:  # nothing to draw (the generator does not advance)
+            continue
+        if name == "factors" and st.sampling != "random":
+            dest[:] = ndtri(_unit_design(st.sampling, rng, size_full, width))[:size]
+        elif size == size_full:
+            rng.standard_normal(out=dest)  # straight into the chunk: no copy
+        else:  # a partial last block still draws a whole block
+            dest[:] = rng.standard_normal((size_full, width))[:size]
+    return size
+
+
+def sample_block(config, index: int, count: int = 1) -> Block:
+    """Draw block ``index`` of a study, or the ``count`` consecutive blocks from it as one.
+
+    Each block draws from its own generator (module docstring); the draws of the blocks are
+    then transformed together, so the result for an assembly is the same whether its block
+    is drawn alone or with others.
 
     Parameters
     ----------
     config : tolsim.study.spec.StudyConfig
     index : int
-        Block number (0-based).
+        Block number (0-based) of the first block.
+    count : int
+        Number of consecutive blocks.
 
     Returns
     -------
     Block
+        ``index`` and ``start`` of the first block, ``size`` of all of them together.
     """
     st = config.study
-    size_full = st.block_size
-    start = index * size_full
-    size = min(size_full, st.samples - start)
-    if size <= 0:
-        raise ValueError(f"block {index} is beyond samples = {st.samples}")
-    rng = block_generator(st.seed, index)
-    balls = config.train.balls
-    normals = {}
-
-    # 1. per-assembly factors
-    factors = per_assembly_sources(config)
-    if factors:
-        d = len(factors)
-        if st.sampling == "random":
-            z = rng.standard_normal((size_full, d))
-        else:
-            z = ndtri(_unit_design(st.sampling, rng, size_full, d))
-        for j, t in enumerate(factors):
-            normals[t.source] = z[:size, j : j + 1]
-    # 2. per-ball sources
-    for t in config.tolerances:
-        if t.scope == "ball":
-            normals[t.source] = rng.standard_normal((size_full, balls))[:size]
-    # 4 (drawn before the fields so that a field's grid size cannot shift the gaps)
-    gap_z = rng.standard_normal((size_full, max(balls - 1, 0)))[:size]
-    gaps = np.maximum(config.train.initial_gap.from_normal(gap_z), 0.0)
+    grid = _field_grid(config)
+    widths = _draw_widths(config, grid)
+    size = sum(block_size_of(config, k) for k in range(index, index + count))
+    raw = {name: np.empty((size, width)) for name, width in widths.items()}
+    row = 0
+    for k in range(index, index + count):
+        row += _draw(config, k, widths, raw, row)
+    draws = {t.source: raw["factors"][:, j : j + 1]
+             for j, t in enumerate(per_assembly_sources(config))}
+    draws.update({t.source: raw[t.source] for t in config.tolerances if t.scope == "ball"})
+    gaps = np.maximum(config.train.initial_gap.from_normal(raw["gap"]), 0.0)
     pitch = 2.0 * config.bearing.ball_radius + gaps
     position = np.concatenate([np.zeros((size, 1)), np.cumsum(pitch, axis=1)], axis=1)
     position -= position.mean(axis=1, keepdims=True)
-    # 3. rail fields
     fields = {}
-    lo, hi = field_extent(config, nominal_span(config))
     for t in config.tolerances:
-        if not (t.scope == "rail" and t.correlation_length > 0):
+        if t.source not in grid:
             continue
+        innovations = raw[t.source]
         ell = t.correlation_length
         if st.propagation == "constant":
             # Exact: the Ornstein-Uhlenbeck process sampled at the ball centres themselves
             # (Markov, so each ball conditions on the one behind it).
-            innovations = rng.standard_normal((size_full, balls))[:size]
             phi = np.exp(-np.diff(position, axis=1) / ell)
-            values = np.empty((size, balls))
-            values[:, 0] = innovations[:, 0]
-            for j in range(1, balls):
-                p = phi[:, j - 1]
-                values[:, j] = p * values[:, j - 1] + np.sqrt(1.0 - p * p) * innovations[:, j]
-            normals[t.source] = values
+            draws[t.source] = _ar1(phi, np.sqrt(1.0 - phi * phi), innovations)
             continue
-        points = int(np.ceil((hi - lo) / ell * FIELD_POINTS_PER_CORRELATION_LENGTH)) + 2
-        points = min(max(points, 2), MAX_FIELD_POINTS)
-        spacing = (hi - lo) / (points - 1)
-        phi = np.exp(-spacing / ell)
-        innovations = rng.standard_normal((size_full, points))[:size]
-        values = np.empty((size, points))
-        values[:, 0] = innovations[:, 0]
-        scale = np.sqrt(1.0 - phi * phi)
-        for k in range(1, points):
-            values[:, k] = phi * values[:, k - 1] + scale * innovations[:, k]
-        fields[t.source] = RailField(lo, spacing, values)
-    return Block(index, start, size, normals, fields, gaps, position)
+        origin, spacing, points = grid[t.source]
+        phi = np.full((1, points - 1), np.exp(-spacing / ell))
+        values = _ar1(phi, np.sqrt(1.0 - phi * phi), innovations)
+        fields[t.source] = RailField(origin, spacing, values)
+    return Block(index, index * st.block_size, size, draws, fields, gaps, position)
 
 
 def error_values(config, block: Block, rail_position=None):

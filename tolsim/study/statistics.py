@@ -40,6 +40,16 @@ def _merge_moments(n_a, mean_a, m2_a, n_b, mean_b, m2_b):
     return n, mean, np.where(n > 0, m2, 0.0)
 
 
+def _uniform_histogram(x, edges):
+    """Counts of x in the equal-width bins ``edges`` (= np.linspace(lo, hi, bins + 1)).
+
+    NumPy's equal-width path (bin count and range instead of the edge array): the same counts,
+    since it rebuilds the edges with the same linspace and corrects the computed index against
+    them, but no sort.
+    """
+    return np.histogram(x, bins=len(edges) - 1, range=(edges[0], edges[-1]))[0].astype(np.int64)
+
+
 class Accumulator:
     """Mergeable statistics of a set of trains (see the module docstring).
 
@@ -135,7 +145,7 @@ class Accumulator:
             lo, hi = self.eps_edges[0], self.eps_edges[-1]
             block.eps_underflow = np.int64(np.count_nonzero(x < lo))
             block.eps_overflow = np.int64(np.count_nonzero(x > hi))
-            block.eps_histogram = np.histogram(x, bins=self.eps_edges)[0].astype(np.int64)
+            block.eps_histogram = _uniform_histogram(x, self.eps_edges)
         cnt = valid.sum(axis=0).astype(np.int64)
         block.ball_count = cnt
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -153,7 +163,7 @@ class Accumulator:
             th = t[hit]
             block.time_min = float(th.min())
             block.time_max = float(th.max())
-            block.time_histogram = np.histogram(th, bins=self.time_edges)[0].astype(np.int64)
+            block.time_histogram = _uniform_histogram(th, self.time_edges)
             pairs = contact_pair[ok][hit]
             block.pair_count = np.bincount(pairs, minlength=len(self.pair_count)).astype(
                 np.int64)
