@@ -8,6 +8,11 @@ steps with their own cost) off. Each size runs in a fresh process (after a small
 that loads or compiles the Numba kernels), which reports its wall time and its peak resident
 memory (``ru_maxrss``), so the memory of one size does not hide in another's.
 
+The pipeline is timed as ``tolsim run`` runs it (:func:`tolsim.study.runner.run_study`): with
+one worker the Numba kernels use every core and the next chunk is drawn in a thread
+meanwhile; the process keeps freed memory for reuse (``retain_freed_memory``). With two
+workers each process starts in 1-2 s, which the 1e6 figure includes.
+
 The baseline, measured in the same run, is the same pipeline with the two stages that tolsim
 compiles replaced by plain NumPy: the analytic model (Eqs. 17, 18 with ERRATA 8, 21, 23)
 solved as batched 4x4 systems with ``numpy.linalg.solve``, and mode (a) propagation with

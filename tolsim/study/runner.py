@@ -30,7 +30,13 @@ from tolsim.study.evaluate import (
     loads_per_ball,
 )
 from tolsim.study.propagation import first_contact_along_track, first_contact_constant
-from tolsim.study.sampling import choose_spot_checks, error_values, n_blocks, sample_block
+from tolsim.study.sampling import (
+    block_size_of,
+    choose_spot_checks,
+    error_values,
+    n_blocks,
+    sample_block,
+)
 from tolsim.study.statistics import Accumulator
 
 #: Balls evaluated together in one chunk (sets the default ``chunk_blocks``).
@@ -120,11 +126,6 @@ def _concat_spots(parts):
     return {k: np.concatenate([p[k] for p in parts]) for k in SPOT_FIELDS}
 
 
-def _block_sizes(config, block_indices):
-    st = config.study
-    return [min(st.block_size, st.samples - k * st.block_size) for k in block_indices]
-
-
 def draw_chunk(config, block_indices):
     """The draws and error-source values of consecutive blocks (constant propagation)."""
     block = sample_block(config, block_indices[0], len(block_indices))
@@ -148,7 +149,8 @@ def run_chunk(config, block_indices, spot_indices, drawn=None):
         t, pair = first_contact_constant(block.initial_gap, state.velocity_deviation,
                                          config.motion.groove_velocity, config.motion.duration)
         offset = 0
-        for index, size in zip(block_indices, _block_sizes(config, block_indices), strict=True):
+        for index in block_indices:
+            size = block_size_of(config, index)
             sl = slice(offset, offset + size)
             sub = BallState(*(getattr(state, f)[sl] for f in BallState.__dataclass_fields__))
             acc = Accumulator.for_config(config)
@@ -199,7 +201,7 @@ def retain_freed_memory() -> bool:
     Every chunk of a study allocates the same few hundred MB of arrays and frees them. By
     default glibc serves arrays of this size with fresh ``mmap`` pages and trims the heap on
     free, so every chunk pays a page fault (and zeroing) per 4 kB touched, serialised in the
-    kernel across the Numba threads; on a 2-core VM that was about a quarter of the run time
+    kernel across the Numba threads; on a 2-core VM that was 15-22 % of a study's run time
     (``benchmarks/bench_study.py``). With allocations up to 32 MB from the heap and no
     trimming below 1 GB the second chunk reuses the first one's pages. Peak memory does not
     change; the process just keeps it until it exits. Returns False (and does nothing) where
@@ -338,6 +340,8 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     finally:
         if executor is not None:
             executor.shutdown(wait=True, cancel_futures=True)
+        else:
+            results.close()  # stops the drawing thread of an unfinished run
     elapsed = time.perf_counter() - started
     spots = finish_spot_checks(config, _concat_spots(spot_parts))
     meta = {"spot_check_seconds": time.perf_counter() - started - elapsed}
