@@ -175,7 +175,9 @@ def run_chunk(config, block_indices, spot_indices, drawn=None):
 def _prefetched(config, chunks, spot_indices):
     """``run_chunk`` over the chunks in order, drawing chunk i + 1 in a second thread while
     chunk i is evaluated (NumPy's generators and ufuncs and the Numba kernels release the
-    GIL, so drawing overlaps the kernels). The draws are the same as without the thread."""
+    GIL, so drawing overlaps the kernels). The draws are the same as without the thread.
+    Drawing must not launch parallel (``prange``) kernels: Numba's ``workqueue`` threading
+    layer, the fallback where no OpenMP or TBB is installed, cannot run two at once."""
     if config.study.propagation != "constant" or len(chunks) < 2:
         for c in chunks:
             yield run_chunk(config, c, spot_indices)
