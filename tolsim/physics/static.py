@@ -999,6 +999,14 @@ def _error_items(errors, bearing):
     return items
 
 
+def _kernel_outputs(n):
+    """Output arrays of the static kernels for n balls: dbeta, F, delta (n, 4); ball and
+    groove displacement or load (n, 2); converged, iterations, contact count, residual."""
+    return (np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 2)),
+            np.empty((n, 2)), np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64),
+            np.empty(n, dtype=np.int64), np.empty(n))
+
+
 def _check_solver_options(tol, max_iter):
     if not (np.isfinite(tol) and 0 < tol < 1):
         raise ValueError(f"tol = {tol!r} must be in (0, 1)")
@@ -1056,12 +1064,7 @@ def solve_static(side_load, normal_load, errors: GrooveErrors | None = None,
     nx, ny, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize = arrays
     nx, ny, rot_b, rot_t, oversize = (a[:, 0] for a in (nx, ny, rot_b, rot_t, oversize))
     n = int(np.prod(shape))
-    dbeta, force, approach = np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4))
-    ball, groove = np.empty((n, 2)), np.empty((n, 2))
-    conv = np.empty(n, dtype=np.bool_)
-    iters = np.empty(n, dtype=np.int64)
-    count = np.empty(n, dtype=np.int64)
-    resid = np.empty(n)
+    dbeta, force, approach, ball, groove, conv, iters, count, resid = _kernel_outputs(n)
     dist = bearing.groove_radius - bearing.ball_radius
     static_load_kernel(nx, ny, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize,
                        bearing.nominal_contact_angle, dist, _hertz_k(bearing), bool(rigid),
@@ -1109,12 +1112,7 @@ def solve_static_displacement(groove_displacement, errors: GrooveErrors | None =
         raise ValueError(f"groove_displacement must stay within +/-{0.25 * dist:.3g} m")
     rot_b, rot_t, oversize = (a[:, 0] for a in (rot_b, rot_t, oversize))
     n = int(np.prod(shape))
-    dbeta, force, approach = np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4))
-    ball, load = np.empty((n, 2)), np.empty((n, 2))
-    conv = np.empty(n, dtype=np.bool_)
-    iters = np.empty(n, dtype=np.int64)
-    count = np.empty(n, dtype=np.int64)
-    resid = np.empty(n)
+    dbeta, force, approach, ball, load, conv, iters, count, resid = _kernel_outputs(n)
     static_displacement_kernel(disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize,
                                bearing.nominal_contact_angle, dist, _hertz_k(bearing),
                                float(tol), int(max_iter), dbeta, force, approach, ball, load,
