@@ -21,6 +21,11 @@ array operations.
 The paired static model (the paper's approximation, no solver) is timed as well, to separate
 the cost of the static solver from the rest of the pipeline.
 
+The cost of re-solving balls outside the fast model's validity with the full friction model
+(issue "Honest numbers") is reported on the packaged default study and on
+``configs/known_answer.toml`` at sigma = 2 deg: balls/s, how many balls were re-solved and the
+share of the run time their re-solves took.
+
 Run: ``python benchmarks/bench_study.py [--sizes 1e6 1e7] [--workers 1 2]
 [--static solved paired]``
 """
@@ -37,7 +42,10 @@ from pathlib import Path
 
 import numpy as np
 
-CONFIG = Path(__file__).resolve().parent.parent / "configs" / "yaw_moment_tolerances.toml"
+ROOT = Path(__file__).resolve().parent.parent
+CONFIG = ROOT / "configs" / "yaw_moment_tolerances.toml"
+RESOLVE_STUDIES = {"default": ROOT / "tolsim" / "data" / "default.toml",
+                   "known_answer": ROOT / "configs" / "known_answer.toml"}
 
 
 def study(balls_total, static_model="solved"):
@@ -117,10 +125,32 @@ def child(balls_total, workers, baseline, static_model):
                       "child_peak_mib": children / 1024}))
 
 
-def measure(balls, workers=1, baseline=False, static_model="solved"):
+def resolve_child(name, balls_total):
+    """One run of a re-solve study; prints balls, seconds, re-solved balls and their time."""
+    from tolsim.io.config import load_config
+    from tolsim.study.runner import run_study
+
+    c = load_config(RESOLVE_STUDIES[name])
+    c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0))
+    run_study(c.with_overrides(samples=2048))  # load / compile kernels
+    c = c.with_overrides(samples=max(1, int(balls_total) // c.train.balls))
+    start = time.perf_counter()
+    acc = run_study(c).statistics
+    elapsed = time.perf_counter() - start
+    print(json.dumps({"balls": int(acc.n_balls), "seconds": elapsed,
+                      "resolved": int(acc.n_resolved_full),
+                      "outside": int(acc.n_outside_validity),
+                      "resolve_seconds": acc.resolve_seconds,
+                      "unresolved_trains": int(acc.n_unresolved),
+                      "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+
+
+def measure(balls, workers=1, baseline=False, static_model="solved", resolve=None):
     cmd = [sys.executable, __file__, "--child", str(balls), str(workers), static_model]
     if baseline:
         cmd.append("--baseline")
+    if resolve:
+        cmd += ["--resolve", resolve]
     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -134,9 +164,15 @@ def main():
                    help="static models to time (the issue's target is for 'solved')")
     p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     p.add_argument("--baseline", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--resolve", help=argparse.SUPPRESS)
+    p.add_argument("--resolve-size", type=float, default=1e6,
+                   help="balls of the re-solve cost runs (default and known-answer studies)")
     args = p.parse_args()
     if args.child:
-        child(float(args.child[0]), int(args.child[1]), args.baseline, args.child[2])
+        if args.resolve:
+            resolve_child(args.resolve, float(args.child[0]))
+        else:
+            child(float(args.child[0]), int(args.child[1]), args.baseline, args.child[2])
         return
     print(f"tolsim study pipeline: {CONFIG.name} (solved static, analytic epsilon, "
           f"propagation a), {os.cpu_count()} cores")
@@ -156,6 +192,14 @@ def main():
                       f"{r['seconds']:.2f} s  "
                       f"{rate / 1e6:.3f} M balls/s  {ratio}"
                       f"peak RSS {peak:.0f} MiB")
+    print("re-solves with the full model (balls outside the fast model's validity):")
+    for name in RESOLVE_STUDIES:
+        r = measure(args.resolve_size, resolve=name)
+        print(f"  {name}: {r['balls']:.2e} balls  {r['seconds']:.2f} s  "
+              f"{r['balls'] / r['seconds'] / 1e6:.3f} M balls/s  re-solved {r['resolved']} of "
+              f"{r['outside']} outside validity ({r['resolved'] / r['balls']:.2%} of balls) in "
+              f"{r['resolve_seconds']:.2f} s ({r['resolve_seconds'] / r['seconds']:.0%} of the "
+              f"run); unresolved trains {r['unresolved_trains']}; peak {r['peak_mib']:.0f} MiB")
 
 
 if __name__ == "__main__":

@@ -92,7 +92,8 @@ def test_report_uses_stored_sensitivity(results, tmp_path):
         iter(results.values()))
     with xr.open_dataset(nc) as ds:
         ds = ds.load().drop_dims("factor", errors="ignore")  # replace any computed indices
-    ds = ds.assign_coords(factor=("factor", np.array(["alpha_source", "beta_source"])))
+    ds = ds.assign_coords(factor=("factor", [0, 1]),
+                          factor_name=("factor", np.array(["alpha_source", "beta_source"])))
     ds["sensitivity_first_order"] = ("factor", np.array([0.1, 0.6]))
     ds["sensitivity_total"] = ("factor", np.array([0.2, 0.7]))
     ds["sensitivity_total_ci_lower"] = ("factor", np.array([0.15, 0.65]))

@@ -47,8 +47,11 @@ def semi_axes(force, bearing=TABLE1):
 
 
 def reference_contact_loads(i, beta, force, ball_velocity, omega, groove_velocity, bearing,
-                            surface, rtol=1e-10):
-    """Friction force and moment about the ball centre of contact i, by adaptive cubature."""
+                            surface, rtol=1e-10, atol_scale=1e-13):
+    """Friction force and moment about the ball centre of contact i, by adaptive cubature.
+
+    Absolute tolerance atol_scale F R_B on every component (forces, moments, power).
+    """
     radius = bearing.ball_radius
     a, b = semi_axes(force, bearing)
     p = np.array([SIDE_X[i] * np.sin(beta), SIDE_Y[i] * np.cos(beta), 0.0])
@@ -81,14 +84,14 @@ def reference_contact_loads(i, beta, force, ball_velocity, omega, groove_velocit
         return np.concatenate([df, np.cross(r, df), power[:, None]], axis=1)
 
     res = cubature(integrand, [0.0, 0.0], [np.pi / 2, 2 * np.pi], rtol=rtol,
-                   atol=1e-13 * force * radius, max_subdivisions=100000)
+                   atol=atol_scale * force * radius, max_subdivisions=100000)
     return res.estimate
 
 
 def reference_loads(ball_velocity, omega, beta, force, groove_velocity=0.01, bearing=TABLE1,
-                    surface="planar", rtol=1e-10):
+                    surface="planar", rtol=1e-10, atol_scale=1e-13):
     parts = [reference_contact_loads(i, beta[i], force[i], ball_velocity, omega,
-                                     groove_velocity, bearing, surface, rtol)
+                                     groove_velocity, bearing, surface, rtol, atol_scale)
              for i in range(4)]
     total = np.sum(parts, axis=0)
     return total[2], total[3:6], np.array([q[2] for q in parts]), total[6]
@@ -440,11 +443,35 @@ def test_cli_ball_full_json(capsys):
 
     assert main(["ball", "--model", "full", "--surface", "curved", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    # default ball = Table 2 case (a) ball 1 with paired forces: curved full model +0.7816 %
-    # (planar 0.7889 %), see test_lin2018_table2_case_a_leblanc_static for the static case
+    # Wiring: the default ball is Table 2 case (a) ball 1 (theta = 2 deg, rho = -0.6, N_y =
+    # 200 N, paired forces) of Table 1, so the CLI reports what full() gives for it (1e-12 pp).
+    # The value itself is checked against the SciPy reference in the next test.
     assert out["model"] == "full" and out["surface"] == "curved" and out["converged"]
-    assert_allclose(out["velocity_deviation_percent"], 0.7816, atol=1e-3)
+    lib = full(CASE_A, paired_forces(-0.6 * 200.0, 200.0), surface="curved")
+    assert_allclose(out["velocity_deviation_percent"], 100 * lib.velocity_deviation,
+                    rtol=0, atol=1e-12)
+    assert_allclose(out["drag_force_n"], lib.drag_force, rtol=1e-12)
     assert out["drag_force_n"] > 0 and out["warnings"] == []
+
+
+@pytest.mark.slow
+def test_curved_case_a_against_scipy_reference():
+    # Independent value for the curved full model at Table 2 case (a), ball 1, paired forces:
+    # the SciPy twin above (3-D slip and r x dF integrated by scipy.integrate.cubature on the
+    # deformed surface, equilibrium by scipy.optimize.root from pure rolling), ~7 s.
+    # Reference accuracy: cubature rtol 1e-7, atol 1e-6 F R_B gives +0.78157171 %, within
+    # 3e-8 pp of atol 1e-13 F R_B (+0.78157174 %, 2 min). The kernel's default grid is within
+    # 1e-6 relative (8e-7 pp) of a 512 x 64 grid (test_grid_convergence); tolerance 1e-5 pp.
+    # (Lin2018 Table 2's Leblanc +0.85 % is no reference for this ball: with the paired
+    # forces a full model is symmetric, +-0.78-0.79 %; the printed asymmetry comes from the
+    # loaded static contact, ERRATA notes and tests/test_paper_data.py.)
+    force = paired_forces(-0.6 * 200.0, 200.0)
+    vb, _ = reference_solve(CASE_A, force, surface="curved", rtol=1e-7, atol_scale=1e-6,
+                            xtol=1e-9)
+    eps_ref = 100 * (2 * vb / 0.01 - 1)
+    res = full(CASE_A, force, surface="curved")
+    assert res.converged
+    assert_allclose(100 * res.velocity_deviation, eps_ref, rtol=0, atol=1e-5)
 
 
 def test_cli_ball_full_non_convergence_warns(capsys, monkeypatch):

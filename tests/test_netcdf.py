@@ -110,7 +110,8 @@ def test_schema_rejects_undeclared_and_missing(result):
 
 def test_optional_factor_dimension_is_accepted(result):
     ds = result_to_dataset(result, history="test")
-    ds = ds.assign_coords(factor=("factor", ["bottom_rotation", "top_rotation"]))
+    ds = ds.assign_coords(factor=("factor", [0, 1]),
+                          factor_name=("factor", ["bottom_rotation", "top_rotation"]))
     ds["sensitivity_total"] = ("factor", [0.7, 0.3])
     schema.apply_attributes(ds)
     schema.validate(ds)
@@ -157,7 +158,8 @@ def test_sensitivity_and_quality_stored_and_round_trip(tmp_path):
     path = tmp_path / "sens.nc"
     write_result(res, path)
     back = read_result(path)
-    factors = list(back["factor"].values)
+    factors = list(back["factor_name"].values)  # the names; factor is an integer index
+    assert list(back["factor"].values) == list(range(len(factors)))
     assert {"bottom_rotation", "top_rotation", "initial_gap"} <= set(factors)
     for name in ("sensitivity_first_order", "sensitivity_total", "sensitivity_total_ci_lower",
                  "sensitivity_contact_total"):
@@ -165,7 +167,7 @@ def test_sensitivity_and_quality_stored_and_round_trip(tmp_path):
         assert values.shape == (len(factors),)
         assert np.all(values > -0.1) and np.all(values < 1.1), name
         assert back[name].attrs["units"] == "1" and back[name].attrs["long_name"]
-    total = back["sensitivity_total"].to_series()
+    total = back["sensitivity_total"].swap_dims(factor="factor_name").to_series()
     # epsilon does not depend on the initial gap at all
     assert abs(total["initial_gap"]) < 1e-12
     assert back.attrs["sensitivity_samples"] == 128

@@ -98,7 +98,7 @@ def test_along_track_equals_constant_when_epsilon_is_constant():
     v = error_values(c, b)
     nx, ny = loads_at(c, b.initial_position)
     state = evaluate_balls(c, v, nx, ny)
-    t_b, pair_b, ok = first_contact_along_track(c, b)
+    t_b, pair_b, ok, _ = first_contact_along_track(c, b)
     t_a, pair_a = first_contact_constant(b.initial_gap, state.velocity_deviation,
                                          c.motion.groove_velocity, c.motion.duration)
     assert ok.all()
@@ -146,7 +146,7 @@ def test_along_track_matches_rk4_reference():
                         steps=200).replace("high_um = 400.0", "high_um = 100.0")
     c = parse_config(text).with_overrides(samples=32)
     b = sample_block(c, 0)
-    t_b, pair_b, ok = first_contact_along_track(c, b)
+    t_b, pair_b, ok, _ = first_contact_along_track(c, b)
     t_ref, pair_ref = rk4_reference(c, b, 1000)
     assert ok.all()
     hit = np.isfinite(t_ref)

@@ -164,8 +164,8 @@ def synthetic_result(rng, limit=0.005):
             "contact_probability_ci_upper": 1.1 * n_contact / n_asm,
             "time_to_contact_quantile": ("quantile", np.quantile(t_contact, levels)),
             "time_to_contact_min": t_contact.min(),
-            "survival_probability": ("time", 1 - np.concatenate([[0], np.cumsum(t_hist)])
-                                     / n_asm),
+            "survival_probability": ("elapsed_time",
+                                     1 - np.concatenate([[0], np.cumsum(t_hist)]) / n_asm),
             "contact_pair_count": ("pair", np.bincount(rng.integers(0, balls - 1, n_contact),
                                                        minlength=balls - 1)),
             "horizon": 2.0, "groove_velocity": 0.2,
@@ -181,7 +181,7 @@ def synthetic_result(rng, limit=0.005):
         },
         coords={
             "quantile": levels, "ball": np.arange(balls), "pair": np.arange(balls - 1),
-            "time": t_edges, "spot_check": np.arange(k),
+            "elapsed_time": t_edges, "spot_check": np.arange(k),
             "velocity_deviation_bin_bounds": (("velocity_deviation_bin", "bounds"),
                                               np.stack([edges[:-1], edges[1:]], axis=1)),
         },

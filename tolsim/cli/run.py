@@ -59,6 +59,10 @@ def add_parser(subparsers, formatter_class=None):
     return p
 
 
+#: Share of unresolved trains above which the summary warns.
+UNRESOLVED_WARNING = 1e-3
+
+
 def _pct(x):
     return f"{100 * x:+.3f} %"
 
@@ -72,7 +76,7 @@ def summary(ds, output, elapsed) -> str:
     def at(var, level):
         return float(var.sel(quantile=level, method="nearest"))
 
-    n_asm, n_valid = int(ds.n_assemblies), int(ds.n_assemblies_valid)
+    n_asm, n_unres = int(ds.n_assemblies), int(ds.n_assemblies_unresolved)
     balls = ds.sizes["ball"]
     lines = [
         f"study: {a['title'].split(': ', 1)[-1]}  {n_asm} assemblies x {balls} balls  "
@@ -88,17 +92,36 @@ def summary(ds, output, elapsed) -> str:
         f"{float(ds.contact_probability):.4f}  95 % CI "
         f"[{float(ds.contact_probability_ci_lower):.4f}, "
         f"{float(ds.contact_probability_ci_upper):.4f}]  "
-        f"({int(ds.n_contact)} of {n_valid} valid trains)",
+        f"({int(ds.n_contact)} of {n_asm - n_unres} trains whose outcome is known)",
     ]
+    if n_unres:
+        lines.append(
+            f"  bounds over all {n_asm} trains, with the {n_unres} unresolved ones counted "
+            f"as no contact / contact: [{float(ds.contact_probability_bound_lower):.4f}, "
+            f"{float(ds.contact_probability_bound_upper):.4f}], 95 % interval "
+            f"[{float(ds.contact_probability_bounds_ci_lower):.4f}, "
+            f"{float(ds.contact_probability_bounds_ci_upper):.4f}]")
+    lines.append(f"propagation: {a['propagation_assumption']}")
+    if a.get("propagation_caveat"):
+        lines.append(f"  note: {a['propagation_caveat']}")
     if int(ds.n_contact):
         lines.append(
             f"time to first contact: earliest {float(ds.time_to_contact_min):.4g} s, "
-            f"median {at(tq, 0.5):.4g} s, 95 % by {at(tq, 0.95):.4g} s (given contact)")
+            f"median {at(tq, 0.5):.4g} s, 95 % by {at(tq, 0.95):.4g} s (given contact, "
+            "resolved trains)")
+    n_balls = int(ds.n_balls)
+    n_unresolved_balls = n_balls - int(ds.n_balls_valid)
     lines.append(
-        f"invalid: {int(ds.n_balls) - int(ds.n_balls_valid)} of {int(ds.n_balls)} balls "
-        f"(static not converged {int(ds.n_balls_not_converged)}, loss of contact "
-        f"{int(ds.n_balls_loss_of_contact)}, outside model validity "
-        f"{int(ds.n_balls_outside_validity)}); {n_asm - n_valid} trains excluded")
+        f"balls: {int(ds.n_balls_outside_validity)} of {n_balls} outside the "
+        f"{a['velocity_model']} model's validity, {int(ds.n_balls_resolved_full)} of them "
+        f"re-solved with the full model ({float(a['full_model_resolve_seconds']):.2f} s); "
+        f"unresolved {n_unresolved_balls} (static not converged "
+        f"{int(ds.n_balls_not_converged)}, loss of contact {int(ds.n_balls_loss_of_contact)}, "
+        f"full model failed {int(ds.n_balls_full_failed)}); unresolved trains u = {n_unres}")
+    if n_asm and n_unres / n_asm > UNRESOLVED_WARNING:
+        lines.append(
+            f"warning: {n_unres} of {n_asm} trains ({100 * n_unres / n_asm:.2g} %) are "
+            "unresolved; P(contact) is known only within the bounds above")
     n_sc = ds.sizes["spot_check"]
     if n_sc and int(ds.spot_check_n_valid):
         lines.append(
@@ -121,7 +144,9 @@ def summary(ds, output, elapsed) -> str:
         for var, what in (("sensitivity_total", "epsilon"),
                           ("sensitivity_contact_total", "contact")):
             if var in ds:
-                ranked = ds[var].to_series().sort_values(ascending=False).head(3)
+                # indexed by the source names (the factor_name label), not the factor index
+                by_name = ds[var].swap_dims(factor="factor_name").to_series()
+                ranked = by_name.sort_values(ascending=False).head(3)
                 lines.append(f"drivers of {what} (total Sobol' index): " + ", ".join(
                     f"{name} {value:.2f}" for name, value in ranked.items()))
     rate = int(ds.n_balls) / elapsed if elapsed > 0 else float("nan")

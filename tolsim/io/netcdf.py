@@ -18,6 +18,7 @@ import xarray as xr
 from tolsim import __version__
 from tolsim.io import schema
 from tolsim.physics.geometry import CONTACTS
+from tolsim.study.propagation import propagation_assumption, propagation_caveat
 from tolsim.study.quality import dataset_quality
 from tolsim.study.sensitivity import sensitivity_variables
 from tolsim.study.statistics import QUANTILES
@@ -41,6 +42,7 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
     st = cfg.study
     levels = np.asarray(QUANTILES)
     p, lo, hi = acc.contact_probability()
+    bounds = acc.contact_probability_bounds()
     t_q = acc.time_to_contact_quantiles(levels)
     n_ball = acc.ball_count
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -69,23 +71,34 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "contact_probability": p,
         "contact_probability_ci_lower": lo,
         "contact_probability_ci_upper": hi,
+        "contact_probability_bound_lower": bounds[0],
+        "contact_probability_bound_upper": bounds[1],
+        "contact_probability_bounds_ci_lower": bounds[2],
+        "contact_probability_bounds_ci_upper": bounds[3],
         "time_to_contact_quantile": (("quantile",), t_q),
         "travel_to_contact_quantile": (("quantile",), t_q * cfg.motion.groove_velocity),
         "time_to_contact_min": acc.time_min if acc.n_contact else np.nan,
         "time_to_contact_max": acc.time_max if acc.n_contact else np.nan,
         "time_to_contact_histogram": (("time_bin",), acc.time_histogram),
-        "survival_probability": (("time",), acc.survival()),
+        "survival_probability": (("elapsed_time",), acc.survival()),
         "contact_pair_count": (("pair",), acc.pair_count[: max(balls - 1, 0)]),
         "horizon": cfg.motion.duration,
         "groove_velocity": cfg.motion.groove_velocity,
         "n_assemblies": acc.n_assemblies,
         "n_assemblies_valid": acc.n_assemblies_valid,
+        "n_assemblies_unresolved": acc.n_unresolved,
         "n_contact": acc.n_contact,
         "n_balls": acc.n_balls,
         "n_balls_valid": acc.n_balls_valid,
         "n_balls_not_converged": acc.n_not_converged,
         "n_balls_loss_of_contact": acc.n_loss_of_contact,
         "n_balls_outside_validity": acc.n_outside_validity,
+        "n_balls_resolved_full": acc.n_resolved_full,
+        "n_balls_full_failed": acc.n_full_failed,
+        "assembly_count": np.int64(acc.cluster.count),
+        "assembly_total_mean": (("assembly_total",), acc.cluster.mean),
+        "assembly_total_comoment": (("assembly_total", "assembly_total_b"),
+                                    acc.cluster.comoment),
         "velocity_deviation_limit": _nan_if_zero(st.velocity_deviation_limit),
         "contact_probability_limit": _nan_if_zero(st.contact_probability_limit),
         "spot_check_ball_index": (("spot_check",), sc.ball_index.astype(np.int64)),
@@ -107,14 +120,16 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
                                    0.5 * (eps_edges[:-1] + eps_edges[1:])),
         "velocity_deviation_bin_bounds": (("velocity_deviation_bin", "bounds"),
                                           np.stack([eps_edges[:-1], eps_edges[1:]], axis=1)),
-        "time": (("time",), time_edges),
+        "elapsed_time": (("elapsed_time",), time_edges),
         "time_bin": (("time_bin",), 0.5 * (time_edges[:-1] + time_edges[1:])),
         "time_bin_bounds": (("time_bin", "bounds"),
                             np.stack([time_edges[:-1], time_edges[1:]], axis=1)),
         "ball": (("ball",), np.arange(balls, dtype=np.int64)),
         "pair": (("pair",), np.arange(max(balls - 1, 0), dtype=np.int64)),
         "spot_check": (("spot_check",), np.arange(len(sc.ball_index), dtype=np.int64)),
-        "contact": (("contact",), np.array(CONTACTS)),
+        # CF coordinate variables are numeric: an index, and the names as a label variable
+        "contact": (("contact",), np.arange(len(CONTACTS), dtype=np.int64)),
+        "contact_name": (("contact",), np.array(CONTACTS)),
     }
     ds = xr.Dataset(data, coords=coords)
     if history is None:
@@ -138,13 +153,21 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "spot_check_status": result.spot_checks.status,
         "velocity_deviation_quantile_resolution": float(eps_edges[1] - eps_edges[0]),
         "time_to_contact_quantile_resolution": float(time_edges[1] - time_edges[0]),
-        "contact_probability_interval": "Clopper-Pearson, 95 %, over valid trains",
+        "contact_probability_interval": (
+            "Clopper-Pearson, 95 %, over the trains whose outcome is known; bounds "
+            "[k/N, (k+u)/N] over all N trains with u unresolved, and the interval covering "
+            "them"),
+        "full_model_resolve_seconds": float(acc.resolve_seconds),
+        "propagation_assumption": propagation_assumption(st.propagation),
+        "propagation_caveat": propagation_caveat(cfg),
         "elapsed_seconds": float(result.elapsed),
         "workers": int(result.workers),
     }
     if result.sensitivity is not None:
         variables = sensitivity_variables(result.sensitivity)
-        ds = ds.assign_coords(factor=("factor", variables.pop("factor")))
+        names = variables.pop("factor")
+        ds = ds.assign_coords(factor=("factor", np.arange(len(names), dtype=np.int64)),
+                              factor_name=("factor", names))
         ds = ds.assign({name: (("factor",), values) for name, values in variables.items()})
         ds.attrs["sensitivity_samples"] = int(st.sensitivity_samples)
     quality = {k: v for k, v in dataset_quality(ds).items() if not k.startswith("_")}
@@ -154,8 +177,15 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
 
 
 def write_dataset(ds: xr.Dataset, path) -> None:
-    """Validate ``ds`` and write it to ``path`` through a temporary file and a rename."""
+    """Validate ``ds`` and write it to ``path`` through a temporary file and a rename.
+
+    Coordinates are written without ``_FillValue`` (CF 2.5.1; xarray adds one to every float
+    variable by default): they never hold missing values.
+    """
     schema.validate(ds)
+    ds = ds.copy(deep=False)  # shallow: the encodings below do not touch the caller's Dataset
+    for name in ds.coords:
+        ds.variables[name].encoding["_FillValue"] = None
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",

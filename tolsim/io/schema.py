@@ -8,10 +8,19 @@ variables along the ``factor`` dimension that the report issue adds); a variable
 declared is an error, so the schema stays the single place that defines the file.
 
 Dimensions: ``quantile`` (levels), ``velocity_deviation_bin`` (histogram bins of epsilon),
-``time`` (survival-curve times = the edges of the time bins), ``time_bin``, ``ball`` (position
-in the train, 0 = trailing), ``pair`` (adjacent pairs, named by their trailing ball),
-``spot_check``, ``contact`` (BL, BR, TR, TL), ``bounds`` (2), ``factor`` (tolerance sources,
-optional).
+``elapsed_time`` (survival-curve times since the start of the stroke = the edges of the time
+bins), ``time_bin``, ``ball`` (position in the train, 0 = trailing), ``pair`` (adjacent pairs,
+named by their trailing ball), ``spot_check``, ``contact`` (4), ``bounds`` (2), ``factor``
+(tolerance sources, optional).
+
+The file passes the CF checker (``compliance-checker --test=cf:1.10``, see
+``tests/test_cf_compliance.py``): coordinate variables are numeric, strictly monotonic and
+without ``_FillValue`` (:func:`tolsim.io.netcdf.write_dataset`); the names along ``contact``
+(BL, BR, TR, TL) and ``factor`` are string label variables ``contact_name`` / ``factor_name``
+(CF 6.1 labels, auxiliary coordinates listed in the ``coordinates`` attribute of the variables
+along those dimensions) beside integer index coordinates. The stroke time is ``elapsed_time``,
+not ``time``: it is a duration in ``s``, not a CF time coordinate (``units`` "... since
+<epoch>", ``standard_name = "time"``), and a variable named ``time`` is taken for one.
 """
 
 from dataclasses import dataclass
@@ -22,7 +31,7 @@ from tolsim.study.sensitivity import SENSITIVITY_VARIABLES
 #: Value of the ``Conventions`` global attribute.
 CONVENTIONS = "CF-1.10"
 #: Global attribute that marks a tolsim result (``tolsim_schema``) and its version.
-SCHEMA_VERSION = "1"
+SCHEMA_VERSION = "2"  # 2: elapsed_time, contact_name, factor_name
 #: Required global attributes (all strings except ``seed``).
 GLOBAL_ATTRIBUTES = ("Conventions", "title", "source", "history", "seed", "config",
                      "tolsim_schema")
@@ -53,14 +62,17 @@ COORDINATES = {
                                 "centre of a velocity deviation histogram bin"),
     "velocity_deviation_bin_bounds": V(("velocity_deviation_bin", "bounds"), "1",
                                        "edges of a velocity deviation histogram bin"),
-    "time": V(("time",), "s", "time since the start of the stroke"),
+    "elapsed_time": V(("elapsed_time",), "s", "time since the start of the stroke"),
     "time_bin": V(("time_bin",), "s", "centre of a time-to-contact histogram bin"),
     "time_bin_bounds": V(("time_bin", "bounds"), "s", "edges of a time-to-contact histogram bin"),
     "ball": V(("ball",), "1", "ball position in the train (0 = trailing end)", "i"),
     "pair": V(("pair",), "1", "adjacent ball pair, named by its trailing ball", "i"),
     "spot_check": V(_SC, "1", "spot check number", "i"),
-    "contact": V(("contact",), "1", "contact (BL, BR, TR, TL)", "U"),
-    "factor": V(("factor",), "1", "tolerance source", "U", required=False),
+    "contact": V(("contact",), "1", "contact index (names in contact_name)", "i"),
+    "contact_name": V(("contact",), "1", "contact (BL, BR, TR, TL)", "U"),
+    "factor": V(("factor",), "1", "tolerance source index (names in factor_name)", "i",
+                required=False),
+    "factor_name": V(("factor",), "1", "tolerance source", "U", required=False),
 }
 
 DATA_VARIABLES = {
@@ -83,11 +95,22 @@ DATA_VARIABLES = {
     "side_force_ratio": V(("ball",), "1", "side force ratio rho = N_x / N_y per ball"),
     # contact
     "contact_probability": V((), "1",
-                             "probability of ball-to-ball contact within the horizon per train"),
+                             "probability of ball-to-ball contact within the horizon per "
+                             "train, over the trains whose outcome is known"),
     "contact_probability_ci_lower": V((), "1",
                                       "lower end of the 95 % Clopper-Pearson interval"),
     "contact_probability_ci_upper": V((), "1",
                                       "upper end of the 95 % Clopper-Pearson interval"),
+    "contact_probability_bound_lower": V((), "1", "lower partial-identification bound of the "
+                                         "contact probability: unresolved trains without "
+                                         "contact"),
+    "contact_probability_bound_upper": V((), "1", "upper partial-identification bound of the "
+                                         "contact probability: unresolved trains with "
+                                         "contact"),
+    "contact_probability_bounds_ci_lower": V((), "1", "lower end of the 95 % Clopper-Pearson "
+                                             "interval of the lower bound"),
+    "contact_probability_bounds_ci_upper": V((), "1", "upper end of the 95 % Clopper-Pearson "
+                                             "interval of the upper bound"),
     "time_to_contact_quantile": V(_Q, "s", "quantile of the time to first contact, given "
                                            "contact within the horizon"),
     "travel_to_contact_quantile": V(_Q, "m", "quantile of the carriage travel to first "
@@ -96,20 +119,35 @@ DATA_VARIABLES = {
     "time_to_contact_max": V((), "s", "latest first contact within the horizon"),
     "time_to_contact_histogram": V(("time_bin",), "1",
                                    "number of trains per time-to-first-contact bin", "i"),
-    "survival_probability": V(("time",), "1", "probability of no contact by time t"),
+    "survival_probability": V(("elapsed_time",), "1", "probability of no contact by time t"),
     "contact_pair_count": V(("pair",), "1", "first contacts per adjacent pair", "i"),
     "horizon": V((), "s", "duration of the stroke considered"),
     "groove_velocity": V((), "m s-1", "velocity v of the top groove (carriage)"),
     # counts
     "n_assemblies": V((), "1", "number of assemblies (trains) sampled", "i"),
-    "n_assemblies_valid": V((), "1", "trains whose balls are all valid", "i"),
-    "n_contact": V((), "1", "valid trains with a contact within the horizon", "i"),
+    "n_assemblies_valid": V((), "1", "trains whose balls are all resolved", "i"),
+    "n_assemblies_unresolved": V((), "1", "trains with an unresolved ball and no certain "
+                                          "contact", "i"),
+    "n_contact": V((), "1", "trains with a contact within the horizon", "i"),
     "n_balls": V((), "1", "number of balls evaluated", "i"),
-    "n_balls_valid": V((), "1", "balls inside every validity limit", "i"),
+    "n_balls_valid": V((), "1", "balls with a resolved epsilon (fast or full model)", "i"),
     "n_balls_not_converged": V((), "1", "balls whose static solution did not converge", "i"),
     "n_balls_loss_of_contact": V((), "1", "balls with a contact force <= 0", "i"),
-    "n_balls_outside_validity": V((), "1",
-                                  "balls outside the velocity model's validity limits", "i"),
+    "n_balls_outside_validity": V((), "1", "balls outside the fast velocity model's validity "
+                                           "limits, sent to the full model", "i"),
+    "n_balls_resolved_full": V((), "1", "balls re-solved with the full friction model", "i"),
+    "n_balls_full_failed": V((), "1", "balls outside the fast model's validity that the full "
+                                      "model could not solve", "i"),
+    # per-assembly totals (tolsim.study.estimators.CLUSTER_COLUMNS): the assembly as the
+    # sampling unit of ball-level proportions and Cpk
+    "assembly_count": V((), "1", "number of assemblies behind the per-assembly moments", "i"),
+    "assembly_total_mean": V(("assembly_total",), "1",
+                             "mean over assemblies of the per-assembly totals: valid balls, "
+                             "balls with |epsilon| above the limit, sum of epsilon, sum of "
+                             "epsilon squared"),
+    "assembly_total_comoment": V(("assembly_total", "assembly_total_b"), "1",
+                                 "sum over assemblies of the products of the deviations of "
+                                 "the per-assembly totals from their means"),
     # spec limits (NaN: none)
     "velocity_deviation_limit": V((), "1", "specification limit on |epsilon|"),
     "contact_probability_limit": V((), "1", "specification limit on the contact probability"),

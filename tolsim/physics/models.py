@@ -5,6 +5,8 @@ Every entry has the signature ``model(contact_angle_deviation, normal_force, bea
 a model by name from here, never with an if/elif chain.
 """
 
+import numpy as np
+
 from tolsim.physics import analytic, friction
 
 MODELS = {
@@ -17,10 +19,19 @@ MODELS = {
 
 #: What ``valid == False`` means for each model (shown to users next to the flag).
 VALIDITY_NOTES = {
-    "eq24": "outside Eq. (24)'s regime: a zero force, diagonal force ratio < 0.25 or "
-            "|dbeta| > 3 deg",
-    "analytic": "outside the linearised model's regime: a zero force, |c/a| > 0.5 or "
-                "|dbeta + dgamma| > 3 deg at some contact",
+    "eq24": (f"outside Eq. (24)'s error budget ({100 * analytic.VALIDITY_ERROR_BUDGET:g} pp "
+             "against the full model): a zero force, diagonal force ratio < "
+             f"{analytic.MIN_DIAGONAL_FORCE_RATIO:g}, |dbeta| > "
+             f"{np.rad2deg(analytic.MAX_ANGLE_DEVIATION):g} deg, pairing asymmetry > "
+             f"{analytic.MAX_PAIRING_ASYMMETRY:g} or |eps| > "
+             f"{100 * analytic.MAX_EQ24_VELOCITY_DEVIATION:g} %; a study re-solves such "
+             "balls with the full model"),
+    "analytic": (f"outside the linearised model's error budget "
+                 f"({100 * analytic.VALIDITY_ERROR_BUDGET:g} pp against the full model): a "
+                 f"zero force, |c/a| > {analytic.MAX_ZERO_VELOCITY_RATIO:g} or |dbeta + dgamma| "
+                 f"> {np.rad2deg(analytic.MAX_ANGLE_SUM):g} deg at some contact, or |eps| > "
+                 f"{100 * analytic.MAX_VELOCITY_DEVIATION:g} %; a study re-solves such balls "
+                 "with the full model"),
     "point": "point model undetermined: no sliding contact keeps the others inside their "
              "friction cones, or two candidates tie (equal diagonal forces)",
     "full": "full friction model did not converge (or a contact carries no force)",

@@ -37,7 +37,8 @@ from tolsim.reports.style import (
     styled,
 )
 from tolsim.study import quality
-from tolsim.study.quality import format_fraction, wilson_interval
+from tolsim.study.estimators import wilson_interval
+from tolsim.study.quality import format_fraction
 
 #: Default base-sample size of the sensitivity analysis per propagation mode (the cost is
 #: samples x (factors + 2) assemblies; along-track propagation is ~100x dearer per assembly).
@@ -136,15 +137,18 @@ class _FileSensitivity:
 
 
 def sensitivity_from_file(ds):
-    """The indices stored in the file (``factor`` dimension), or None.
+    """The indices stored in the file (``factor`` dimension, names in ``factor_name``), or None.
 
     Reads the variables of :data:`tolsim.study.sensitivity.SENSITIVITY_VARIABLES`: epsilon's
     ``sensitivity_first_order`` / ``sensitivity_total`` and, when present, the contact
     indicator's ``sensitivity_contact_*`` and the ``*_ci_lower`` / ``*_ci_upper`` ends.
     """
-    if "sensitivity_total" not in ds.variables or "factor" not in ds.variables:
+    # the source names: the factor_name label (schema 2), or the string factor coordinate of
+    # older files
+    label = "factor_name" if "factor_name" in ds.variables else "factor"
+    if "sensitivity_total" not in ds.variables or label not in ds.variables:
         return None
-    factors = tuple(str(f) for f in np.asarray(ds["factor"]))
+    factors = tuple(str(f) for f in np.asarray(ds[label]))
     d = len(factors)
 
     def get(name):
@@ -260,7 +264,8 @@ def plot_velocity_deviation(ds):
 def plot_contact(ds):
     """Survival curve with a pointwise band; P(contact) and its CI; first-contact pairs."""
     fig, (ax, ax_p, ax_pair) = new_figure(12.0, 4.2, ncols=3, width_ratios=[1.7, 0.7, 1.0])
-    t = np.asarray(ds["time"], dtype=float)
+    # the survival curve's times: elapsed_time (schema 2), time in older files
+    t = np.asarray(ds[ds["survival_probability"].dims[0]], dtype=float)
     s = np.asarray(ds["survival_probability"], dtype=float)
     n = _i(ds, "n_assemblies_valid")
     v = _f(ds, "groove_velocity")
@@ -270,7 +275,7 @@ def plot_contact(ds):
         ax.fill_between(t, 1 - band[:, 1], 1 - band[:, 0], step="post", color="0.8",
                         label="95 % interval (Wilson, pointwise)")
     ax.step(t, s, where="post", color=MODEL_COLOURS["full"], lw=1.8,
-            label=f"P(no contact by t), {n:,} valid trains")
+            label=f"P(no contact by t), {n:,} resolved trains")
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlim(t[0], t[-1])
     ax.set_xlabel("time since the start of the stroke t [s]")
@@ -511,7 +516,7 @@ def _tolerance_rows(ds):
 
 def _html(ds, figures, sens, sens_source, q, path):
     a = ds.attrs
-    n_asm, n_valid = _i(ds, "n_assemblies"), _i(ds, "n_assemblies_valid")
+    n_asm = _i(ds, "n_assemblies")
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
         f"<title>{html.escape(a.get('title', 'tolsim report'))}</title>",
@@ -552,11 +557,21 @@ def _html(ds, figures, sens, sens_source, q, path):
     verdict = quality.contact_probability_verdict(p, hi, plimit)
     cls = "good" if verdict.startswith("meets") else "bad" if verdict.startswith(
         "fails") else ""
+    n_unres = _i(ds, "n_assemblies_unresolved")
+    bounds = [_f(ds, f"contact_probability_{x}") for x in (
+        "bound_lower", "bound_upper", "bounds_ci_lower", "bounds_ci_upper")]
     parts += [
         "<h2>2. Results at a glance</h2><table>",
         _row("P(ball-to-ball contact within the stroke)",
-             f"{format_fraction(p, lo, hi)}  ({_i(ds, 'n_contact'):,} of {n_valid:,} valid "
-             "trains; Clopper-Pearson)"),
+             f"{format_fraction(p, lo, hi)}  ({_i(ds, 'n_contact'):,} of "
+             f"{n_asm - n_unres:,} trains whose outcome is known; Clopper-Pearson)"),
+        *([_row(f"bounds over all {n_asm:,} trains ({n_unres:,} unresolved counted as no "
+                "contact / contact)",
+                f"{format_fraction(bounds[0])} to {format_fraction(bounds[1])} (95 % interval "
+                f"{format_fraction(bounds[2])} to {format_fraction(bounds[3])})")]
+          if n_unres else []),
+        _row("propagation model", a.get("propagation_assumption", a.get("propagation", "?")),
+             False),
         _row("earliest / median first contact (given contact)",
              f"{_f(ds, 'time_to_contact_min'):.4g} s / {med:.4g} s"
              if _i(ds, "n_contact") else "no contact"),
@@ -564,12 +579,17 @@ def _html(ds, figures, sens, sens_source, q, path):
                              f"{100 * _f(ds, 'velocity_deviation_std'):.3f} %"),
         _row("ε range", f"{_pct(_f(ds, 'velocity_deviation_min'))} to "
                         f"{_pct(_f(ds, 'velocity_deviation_max'))}"),
-        _row("invalid balls (static not converged / loss of contact / outside model "
-             "validity)", f"{_i(ds, 'n_balls_not_converged')} / "
-                          f"{_i(ds, 'n_balls_loss_of_contact')} / "
-                          f"{_i(ds, 'n_balls_outside_validity')}; {n_asm - n_valid} trains "
-                          "excluded"),
+        _row(f"balls outside the {a.get('velocity_model', '?')} model's validity, "
+             "re-solved with the full model",
+             f"{_i(ds, 'n_balls_resolved_full'):,} of {_i(ds, 'n_balls_outside_validity'):,} "
+             f"in {float(a.get('full_model_resolve_seconds', 0.0)):.2f} s"),
+        _row("unresolved balls (static not converged / loss of contact / full model failed)",
+             f"{_i(ds, 'n_balls_not_converged')} / {_i(ds, 'n_balls_loss_of_contact')} / "
+             f"{_i(ds, 'n_balls_full_failed')}; {n_unres} trains unresolved (none left out: "
+             "see the bounds)"),
         "</table>",
+        *([f"<p class='verdict'>{html.escape(a['propagation_caveat'])}</p>"]
+          if a.get("propagation_caveat") else []),
         f"<p class='verdict {cls}'>Contact-probability spec: {html.escape(verdict)}.</p>",
     ]
 
@@ -590,16 +610,24 @@ def _html(ds, figures, sens, sens_source, q, path):
         prop, cap = q["_proportion"], q["_capability"]
         limit = 100 * _f(ds, "velocity_deviation_limit")
         parts += ["<table>", _row("spec limit", f"|ε| ≤ {limit:.4g} %"),
-                  _row("balls out of spec", f"{prop.text()} ({prop.method})")]
+                  _row("balls out of spec", f"{prop.text()} ({prop.method}"
+                       + (f"; design effect {prop.design_effect:.2f}"
+                          if np.isfinite(getattr(prop, "design_effect", np.nan)) else "")
+                       + ")")]
         if cap is not None:
             parts += [_row("Cpk = (L − |μ|)/(3σ)", f"{cap.cpk:.3f} (95 % CI {cap.cpk_lower:.3f} "
-                                                   f"to {cap.cpk_upper:.3f}, Bissell)"),
+                                                   f"to {cap.cpk_upper:.3f}, {cap.method})"),
                       _row("Cp = L/(3σ)", f"{cap.cp:.3f}"),
                       _row("percentile Cpk (ISO 22514-2)", f"{cap.cpk_percentile:.3f}"),
                       _row("out of spec if ε were normal", format_fraction(
                           cap.normal_out_of_spec))]
         parts.append("</table>")
-        parts.append("<p class='muted'>Cpk: distance from the mean of ε to the nearer spec "
+        parts.append("<p class='muted'>Balls of one assembly share its rail and carriage "
+                     "errors, so they are correlated: the intervals take the assembly as the "
+                     "sampling unit (ratio estimator with Korn &amp; Graubard's effective "
+                     "sample size for the fraction out of spec, delta method over assemblies "
+                     "for Cpk; Cochran, Sampling Techniques, 1977, Ch. 6 and 9). "
+                     "Cpk: distance from the mean of ε to the nearer spec "
                      "limit in units of 3σ; 1.33 means 4σ. Where the two Cpk differ, ε is "
                      "not normal and the percentile index is the one to use. "
                      "Fractions below 0.1 % are shown in ppm.</p>")

@@ -19,12 +19,22 @@ Two registries, picked by name from the config (no if/elif chains):
     name -> ``f(dbeta, force, bearing, out_eps, out_valid)`` calling the Numba kernels of
     :mod:`tolsim.physics.analytic` directly on preallocated arrays.
 
-A ball is *valid* when its static solution converged, all four forces are > 0 and the velocity
-model's own validity flags hold; invalid balls are counted by cause and kept out of the
-statistics.
+Every ball counts. A ball whose static solution converged with all four forces > 0 but which
+lies outside the fast model's validity (the error-budget thresholds of
+:mod:`tolsim.physics.analytic`) is re-solved with the full friction model
+(:func:`tolsim.physics.friction.full`, batched over the balls that need it), and its epsilon
+enters the train like any other. Only a ball that no model can solve stays *unresolved*
+(epsilon NaN): its static solve did not converge, it lost a contact, or ``full`` could not
+take it (did not converge, or a contact angle or ellipse outside the model's range). The
+statistics count unresolved balls by cause and bound the probabilities over their trains
+(:mod:`tolsim.study.statistics`); none is silently dropped. Since invalid balls are re-solved,
+the fast model's thresholds trade speed against accuracy, not truth against bias.
+
+``velocity_model = "full"`` evaluates every ball with the full model (slow; for checks).
 """
 
 import importlib
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
@@ -33,7 +43,11 @@ import numba
 import numpy as np
 
 from tolsim.physics.analytic import (
+    MAX_ANGLE_DEVIATION,
     MAX_ANGLE_SUM,
+    MAX_EQ24_VELOCITY_DEVIATION,
+    MAX_PAIRING_ASYMMETRY,
+    MAX_VELOCITY_DEVIATION,
     MAX_ZERO_VELOCITY_RATIO,
     MIN_DIAGONAL_FORCE_RATIO,
     analytic_kernel,
@@ -224,7 +238,8 @@ STATIC_MODELS = {
 # --------------------------------------------------------------------------------------------
 def _eq24(dbeta, force, bearing, out_eps, out_valid):
     eq24_kernel(dbeta, force, bearing.nominal_contact_angle, MIN_DIAGONAL_FORCE_RATIO,
-                MAX_ANGLE_SUM, out_eps, out_valid)
+                MAX_ANGLE_DEVIATION, MAX_PAIRING_ASYMMETRY, MAX_EQ24_VELOCITY_DEVIATION,
+                out_eps, out_valid)
 
 
 def _analytic(dbeta, force, bearing, out_eps, out_valid):
@@ -233,10 +248,61 @@ def _analytic(dbeta, force, bearing, out_eps, out_valid):
     eps22, gamma = np.empty(0), np.empty((0, 4))  # not needed: skipped
     analytic_kernel(dbeta, force, bearing.nominal_contact_angle, bearing.ball_radius,
                     hc.semi_major_coefficient, hc.elliptic_e, K_F_PAPER,
-                    MAX_ZERO_VELOCITY_RATIO, MAX_ANGLE_SUM, out_eps, eps22, gamma, out_valid)
+                    MAX_ZERO_VELOCITY_RATIO, MAX_ANGLE_SUM, MAX_VELOCITY_DEVIATION, out_eps,
+                    eps22, gamma, out_valid)
 
 
-VELOCITY_KERNELS = {"eq24": _eq24, "analytic": _analytic}
+def _full(dbeta, force, bearing, out_eps, out_valid):
+    """The full friction model on every ball it can take (see :func:`full_velocity`)."""
+    out_eps[:], out_valid[:] = full_velocity(dbeta, force, bearing)
+
+
+VELOCITY_KERNELS = {"eq24": _eq24, "analytic": _analytic, "full": _full}
+
+#: Codes of :attr:`BallState.model`: which model gave a ball's epsilon.
+MODEL_FAST, MODEL_FULL, MODEL_UNRESOLVED = 0, 1, -1
+
+
+def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
+    """epsilon of balls from :func:`tolsim.physics.friction.full`, never raising.
+
+    Balls that ``full`` cannot take (fewer than four positive forces, a loaded contact angle
+    outside (0, 90) deg, a contact ellipse wider than R_B / 2) and balls for which it does not
+    converge come back with ``ok`` False and epsilon NaN. epsilon does not depend on
+    ``groove_velocity``.
+
+    Parameters
+    ----------
+    dbeta, force : ndarray, shape (n, 4)
+        [rad], [N].
+    bearing : Bearing
+
+    Returns
+    -------
+    eps : ndarray (n,)
+    ok : ndarray of bool (n,)
+    """
+    module = friction_module()
+    n = len(dbeta)
+    eps = np.full(n, np.nan)
+    ok = np.zeros(n, dtype=bool)
+    if n == 0 or module is None or not hasattr(module, "full"):
+        return eps, ok
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    beta = bearing.nominal_contact_angle + dbeta
+    with np.errstate(invalid="ignore"):
+        takes = (np.all(np.isfinite(dbeta), axis=1) & np.all(np.isfinite(force), axis=1)
+                 & np.all(force > 0.0, axis=1) & np.all((beta > 0) & (beta < 0.5 * np.pi), axis=1)
+                 & np.all(hc.semi_major_coefficient * np.cbrt(force)
+                          < 0.5 * bearing.ball_radius, axis=1))
+    idx = np.flatnonzero(takes)
+    if len(idx):
+        res = module.full(dbeta[idx], force[idx], bearing, groove_velocity=groove_velocity)
+        good = np.asarray(res.valid, dtype=bool) & np.isfinite(res.velocity_deviation)
+        eps[idx[good]] = res.velocity_deviation[good]
+        ok[idx[good]] = True
+    return eps, ok
 
 
 # --------------------------------------------------------------------------------------------
@@ -264,7 +330,10 @@ def _serial_if_small(n):
 class BallState:
     """Evaluated balls, each array of shape ``shape`` (+ (4,) for per-contact arrays).
 
-    ``velocity_deviation`` is NaN where the ball is not ``valid``; ``cause`` counts why.
+    ``velocity_deviation`` is NaN where the ball is unresolved (``valid`` False); ``model``
+    says which model gave it (:data:`MODEL_FAST`, :data:`MODEL_FULL` for a ball outside the
+    fast model's validity re-solved with the full model, :data:`MODEL_UNRESOLVED`).
+    ``resolve_seconds`` is the time spent in the full-model re-solves [s].
     """
 
     velocity_deviation: np.ndarray
@@ -273,10 +342,22 @@ class BallState:
     loss_of_contact: np.ndarray
     contact_angle_deviation: np.ndarray
     normal_force: np.ndarray
+    model: np.ndarray
+    resolve_seconds: float = 0.0
+
+    def rows(self, sl):
+        """The balls of the assemblies ``sl`` (a slice of the first axis)."""
+        return BallState(self.velocity_deviation[sl], self.valid[sl], self.converged[sl],
+                         self.loss_of_contact[sl], self.contact_angle_deviation[sl],
+                         self.normal_force[sl], self.model[sl], 0.0)
 
 
 def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
     """Velocity deviation of balls from their error-source values and loads.
+
+    The static model gives each ball's loaded contact state, the study's velocity model its
+    epsilon; balls outside that model's validity are re-solved with the full model (see the
+    module docstring).
 
     Parameters
     ----------
@@ -297,22 +378,35 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
                                  shape)
     nx = np.broadcast_to(side_load, shape).reshape(n)
     ny = np.broadcast_to(normal_load, shape).reshape(n)
+    resolve_seconds = 0.0
     with _serial_if_small(n):
         static = STATIC_MODELS[config.study.static_model](errors, nx, ny, config.bearing)
         force = static.normal_force
-        loss = static.converged & ~static.four_point
+        dbeta = static.contact_angle_deviation
+        solvable = static.converged & static.four_point
         eps = np.empty(n)
         valid = np.empty(n, dtype=np.bool_)
         with np.errstate(divide="ignore", invalid="ignore"):
             VELOCITY_KERNELS[config.study.velocity_model](
-                static.contact_angle_deviation, np.maximum(force, 0.0), config.bearing, eps,
-                valid)
-    valid &= static.converged & ~loss & np.isfinite(eps)
+                dbeta, np.maximum(force, 0.0), config.bearing, eps, valid)
+        valid &= solvable & np.isfinite(eps)
+        model = np.where(valid, np.int8(MODEL_FAST), np.int8(MODEL_UNRESOLVED))
+        redo = np.flatnonzero(solvable & ~valid)
+        if len(redo) and config.study.velocity_model != "full":
+            t0 = time.perf_counter()
+            eps_full, ok = full_velocity(dbeta[redo], force[redo], config.bearing,
+                                         config.motion.groove_velocity)
+            resolve_seconds = time.perf_counter() - t0
+            eps[redo] = eps_full
+            valid[redo] = ok
+            model[redo[ok]] = MODEL_FULL
+    if config.study.velocity_model == "full":
+        model[valid] = MODEL_FULL
     eps[~valid] = np.nan
     return BallState(
         eps.reshape(shape), valid.reshape(shape), static.converged.reshape(shape),
-        loss.reshape(shape), static.contact_angle_deviation.reshape(shape + (4,)),
-        force.reshape(shape + (4,)),
+        (static.converged & ~static.four_point).reshape(shape), dbeta.reshape(shape + (4,)),
+        force.reshape(shape + (4,)), model.reshape(shape), resolve_seconds,
     )
 
 

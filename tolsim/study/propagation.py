@@ -15,6 +15,13 @@ touches when the gap closes.
     midpoint rule; a contact event is located by linear interpolation of the gap within the
     step in which it changes sign (exact for piecewise-constant epsilon).
 
+Unresolved balls (epsilon NaN: no model could solve them, :mod:`tolsim.study.evaluate`) never
+close a gap: a contact is reported only for a pair whose two balls are resolved (in mode (b):
+at every evaluation so far, since an unresolved step leaves the ball's position unknown from
+then on). A reported contact is therefore certain; whether the train's first contact is
+known, or whether it touches at all when no resolved pair does, is for the statistics to
+bound (:mod:`tolsim.study.statistics`).
+
 Travel to contact is the carriage travel v t [m].
 """
 
@@ -24,6 +31,40 @@ from numba import prange
 from tolsim._jit import pjit
 from tolsim.study.evaluate import evaluate_balls, loads_at
 from tolsim.study.sampling import error_values
+
+#: What each propagation model assumes, in one sentence (summary, report, netCDF attribute).
+PROPAGATION_ASSUMPTIONS = {
+    "constant": ("constant: each ball keeps the epsilon of its position at the start of the "
+                 "stroke (the paper's Fig. 9); rail errors along the track and the load "
+                 "distribution of the carriage do not change it"),
+    "along_track": ("along_track: epsilon is re-evaluated as each ball rolls past the rail "
+                    "errors and through the carriage's load distribution (midpoint rule, "
+                    "study.time_steps steps)"),
+}
+
+
+def propagation_assumption(propagation: str) -> str:
+    """The one-sentence assumption of a propagation model (:data:`PROPAGATION_ASSUMPTIONS`)."""
+    return PROPAGATION_ASSUMPTIONS[propagation]
+
+
+def propagation_caveat(config) -> str:
+    """A sentence for studies whose epsilon changes along the track but which use
+    ``constant``: rail random fields (a rail-scope source with a correlation length) or loads
+    that vary between the balls. Empty otherwise."""
+    if config.study.propagation != "constant":
+        return ""
+    fields = [t.source for t in config.tolerances
+              if t.scope == "rail" and t.correlation_length > 0 and t.distribution.is_random]
+    loads = (len(set(np.atleast_1d(config.loads.side_load))) > 1
+             or len(set(np.atleast_1d(config.loads.normal_load))) > 1)
+    causes = ([f"rail random fields ({', '.join(fields)})"] if fields else []) + (
+        ["loads that vary along the train"] if loads else [])
+    if not causes:
+        return ""
+    return (f"This study has {' and '.join(causes)}, so a ball's epsilon changes as it moves "
+            "along the track; the constant propagation keeps each ball's starting value. "
+            "propagation = \"along_track\" answers with the change included.")
 
 
 @pjit
@@ -101,7 +142,9 @@ def first_contact_along_track(config, block, initial_state=None):
         [s], inf if no contact within the horizon.
     pair : ndarray of int (size,)
     valid : ndarray of bool (size,)
-        False for a train in which some ball was invalid at some evaluation.
+        False for a train in which some ball was unresolved at some evaluation.
+    resolve_seconds : float
+        Time spent re-solving balls with the full model during the integration [s].
     """
     v = config.motion.groove_velocity
     horizon = config.motion.duration
@@ -110,16 +153,20 @@ def first_contact_along_track(config, block, initial_state=None):
     diameter = 2.0 * config.bearing.ball_radius
     size = block.size
 
+    resolve_seconds = 0.0
+
     def velocity(position, t):
+        nonlocal resolve_seconds
         values = error_values(config, block, rail_position=position)
         nx, ny = loads_at(config, position - v * t)
         state = evaluate_balls(config, values, nx, ny)
+        resolve_seconds += state.resolve_seconds
         return state.velocity_deviation, state.valid
 
     position = block.initial_position.copy()
     time = np.full(size, np.inf)
     pair = np.full(size, -1, dtype=np.int64)
-    valid = np.ones(size, dtype=bool)
+    ball_ok = np.ones(position.shape, dtype=bool)  # resolved at every evaluation so far
     t = 0.0
     for k in range(steps):
         if k == 0 and initial_state is not None:
@@ -128,11 +175,11 @@ def first_contact_along_track(config, block, initial_state=None):
             eps1, ok1 = velocity(position, t)
         mid = position + 0.5 * dt * (1.0 + np.nan_to_num(eps1)) * 0.5 * v
         eps2, ok2 = velocity(mid, t + 0.5 * dt)
-        valid &= ok1.all(axis=1) & ok2.all(axis=1)
+        ball_ok &= ok1 & ok2
         new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
         gap_old = np.diff(position, axis=1) - diameter
         gap_new = np.diff(new, axis=1) - diameter
-        closing = (gap_new <= 0.0) & (gap_old > gap_new)
+        closing = (gap_new <= 0.0) & (gap_old > gap_new) & ball_ok[:, :-1] & ball_ok[:, 1:]
         with np.errstate(divide="ignore", invalid="ignore"):
             frac = np.where(gap_old <= 0.0, 0.0, gap_old / (gap_old - gap_new))
         tc = np.where(closing, t + frac * dt, np.inf)
@@ -143,4 +190,4 @@ def first_contact_along_track(config, block, initial_state=None):
         pair[hit] = first[hit]
         position = new
         t = (k + 1) * dt
-    return time, pair, valid
+    return time, pair, ball_ok.all(axis=1), resolve_seconds

@@ -27,6 +27,12 @@ Definitions
       Cpk_percentile = min((USL - m) / (q_hi - m), (m - LSL) / (m - q_lo))
 
   When the two differ, the percentile index is the one to believe.
+* **Independent balls.** Both intervals above take the balls as independent. The balls of
+  one assembly are correlated (they share the rail and carriage errors), which makes them
+  too narrow; :func:`tolsim.study.estimators.cluster_proportion` and
+  :func:`tolsim.study.estimators.cluster_capability` give the intervals with the assembly
+  as the sampling unit (cluster ratio estimator, delta method, Korn-Graubard effective
+  sample size).
 * **Spec limit on the contact probability** P_max: the study meets it with 95 % confidence
   when the upper end of the interval of P(contact) is below P_max.
 
@@ -42,16 +48,28 @@ References
    Wiley, 2009.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.special import ndtr, ndtri
-from scipy.stats import beta as beta_distribution
+
+# the result types, the binomial intervals and the histogram quantiles live in
+# tolsim.study.estimators (no tolsim imports, so tolsim.study.statistics can use them too);
+# re-exported here
+from tolsim.study.estimators import (  # noqa: F401
+    PPM_BELOW,
+    Capability,
+    ClusterMoments,
+    Proportion,
+    _check_counts,
+    clopper_pearson_interval,
+    cluster_capability,
+    cluster_proportion,
+    format_fraction,
+    histogram_quantiles,
+    wilson_interval,
+)
 
 #: Quantile levels of the percentile capability index (mu -+ 3 sigma of a normal) [-].
 PERCENTILE_LEVELS = (ndtr(-3.0), 0.5, ndtr(3.0))
-#: Fractions below this are shown in ppm.
-PPM_BELOW = 1e-3
 INTERVALS = ("wilson", "clopper-pearson")
 
 #: Declarations of the result-file variables of this module (name -> (units, long_name)),
@@ -60,113 +78,24 @@ QUALITY_VARIABLES = {
     "velocity_deviation_out_of_spec_fraction": (
         "1", "fraction of valid balls with |epsilon| above the limit"),
     "velocity_deviation_out_of_spec_ci_lower": (
-        "1", "lower end of the 95 % Wilson interval of the fraction out of spec"),
+        "1", "lower end of the 95 % interval of the fraction out of spec, assemblies as the "
+             "sampling unit"),
     "velocity_deviation_out_of_spec_ci_upper": (
-        "1", "upper end of the 95 % Wilson interval of the fraction out of spec"),
+        "1", "upper end of the 95 % interval of the fraction out of spec, assemblies as the "
+             "sampling unit"),
     "velocity_deviation_cp": ("1", "process potential Cp = L / (3 sigma) of epsilon"),
     "velocity_deviation_cpk": ("1", "process capability Cpk = (L - |mu|) / (3 sigma) of "
                                     "epsilon"),
-    "velocity_deviation_cpk_ci_lower": ("1", "lower end of Bissell's 95 % interval of Cpk"),
-    "velocity_deviation_cpk_ci_upper": ("1", "upper end of Bissell's 95 % interval of Cpk"),
+    "velocity_deviation_cpk_ci_lower": ("1", "lower end of the 95 % interval of Cpk, delta "
+                                             "method over assemblies"),
+    "velocity_deviation_cpk_ci_upper": ("1", "upper end of the 95 % interval of Cpk, delta "
+                                             "method over assemblies"),
     "velocity_deviation_cpk_percentile": (
         "1", "percentile (ISO 22514-2) capability index of epsilon"),
 }
 
 
-@dataclass(frozen=True)
-class Proportion:
-    """A proportion with its confidence interval.
-
-    Attributes
-    ----------
-    fraction, lower, upper : float
-        Estimate and interval ends [-] (NaN when ``trials`` is 0).
-    successes : float
-        Count (may be fractional when split from a histogram bin).
-    trials : int
-    confidence_level : float
-    method : str
-    """
-
-    fraction: float
-    lower: float
-    upper: float
-    successes: float
-    trials: int
-    confidence_level: float
-    method: str
-
-    def text(self, digits=3) -> str:
-        """The proportion and interval, in ppm when small, else in %."""
-        return format_fraction(self.fraction, self.lower, self.upper, digits)
-
-
-def format_fraction(fraction, lower=None, upper=None, digits=3) -> str:
-    """'12.3 ppm [4.1, 28.7] ppm' below :data:`PPM_BELOW`, else '1.23 % [...] %'."""
-    if fraction is None or not np.isfinite(fraction):
-        return "n/a"
-    ppm = max(fraction, upper if upper is not None and np.isfinite(upper) else 0) < PPM_BELOW
-    scale, unit = (1e6, "ppm") if ppm else (1e2, "%")
-    body = f"{scale * fraction:.{digits}g} {unit}"
-    if lower is not None and upper is not None and np.isfinite(lower) and np.isfinite(upper):
-        body += f" (95 % CI {scale * lower:.{digits}g} to {scale * upper:.{digits}g} {unit})"
-    return body
-
-
-def wilson_interval(successes, trials, confidence_level=0.95):
-    """Wilson score interval of a binomial proportion ([Wilson1927]).
-
-    Parameters
-    ----------
-    successes : float
-        k, 0 <= k <= n (a non-integer k is accepted, for split histogram bins).
-    trials : int
-        n.
-    confidence_level : float
-
-    Returns
-    -------
-    (lower, upper) : floats [-], NaN when n = 0.
-    """
-    k, n = float(successes), int(trials)
-    _check_counts(k, n, confidence_level)
-    if n == 0:
-        return float("nan"), float("nan")
-    z = float(ndtri(0.5 + confidence_level / 2))
-    p = k / n
-    denom = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
-def clopper_pearson_interval(successes, trials, confidence_level=0.95):
-    """Exact (Clopper-Pearson) interval of a binomial proportion ([ClopperPearson1934]).
-
-    Returns
-    -------
-    (lower, upper) : floats [-], NaN when n = 0.
-    """
-    k, n = float(successes), int(trials)
-    _check_counts(k, n, confidence_level)
-    if n == 0:
-        return float("nan"), float("nan")
-    alpha = 1.0 - confidence_level
-    lower = 0.0 if k <= 0 else float(beta_distribution.ppf(alpha / 2, k, n - k + 1))
-    upper = 1.0 if k >= n else float(beta_distribution.ppf(1 - alpha / 2, k + 1, n - k))
-    return lower, upper
-
-
 _INTERVAL_FUNCTIONS = {"wilson": wilson_interval, "clopper-pearson": clopper_pearson_interval}
-
-
-def _check_counts(k, n, confidence_level):
-    if n < 0:
-        raise ValueError(f"trials = {n!r} must be >= 0")
-    if not (0 <= k <= n) or not np.isfinite(k):
-        raise ValueError(f"successes = {k!r} must be within [0, trials = {n}]")
-    if not 0 < confidence_level < 1:
-        raise ValueError(f"confidence_level = {confidence_level!r} must be in (0, 1)")
 
 
 def proportion(successes, trials, confidence_level=0.95, method="wilson") -> Proportion:
@@ -239,35 +168,6 @@ def out_of_spec_from_histogram(counts, edges, limit, underflow=0, overflow=0,
                       f"{method}, widened over {int(straddling)} values in the bins at the limit")
 
 
-@dataclass(frozen=True)
-class Capability:
-    """Capability of epsilon against |epsilon| <= L (see the module docstring).
-
-    Attributes
-    ----------
-    limit : float
-        L [-].
-    cp, cpk : float
-        Normal-theory indices [-].
-    cpk_lower, cpk_upper : float
-        Bissell's interval of Cpk [-].
-    cpk_percentile : float
-        Percentile index [-] (NaN when the quantiles are not available).
-    normal_out_of_spec : float
-        Fraction out of spec if epsilon were normal with this mu and sigma [-].
-    n : int
-    """
-
-    limit: float
-    cp: float
-    cpk: float
-    cpk_lower: float
-    cpk_upper: float
-    cpk_percentile: float
-    normal_out_of_spec: float
-    n: int
-
-
 def capability(mean, std, n, limit, quantiles=None, confidence_level=0.95) -> Capability:
     """Cp, Cpk (with Bissell's interval) and the percentile Cpk of epsilon for |eps| <= L.
 
@@ -334,6 +234,15 @@ def dataset_quality(ds) -> dict:
     """The quality variables (:data:`QUALITY_VARIABLES`) of a result Dataset (needs no xarray:
     any mapping of name -> array-like with the result-file variables works).
 
+    Balls of one assembly share its rail and carriage errors and are correlated, so the
+    intervals treat the assembly as the sampling unit: the fraction out of spec is the ratio
+    estimator over assemblies with Korn & Graubard's effective sample size
+    (:func:`tolsim.study.estimators.cluster_proportion`), Cp and Cpk have delta-method
+    intervals over assemblies (:func:`~tolsim.study.estimators.cluster_capability`), from the
+    per-assembly moments the file stores. A file without them (schema 1) gets the
+    independent-ball intervals of the histogram (Wilson, Bissell), which are too narrow for
+    correlated balls.
+
     Returns
     -------
     dict
@@ -341,8 +250,6 @@ def dataset_quality(ds) -> dict:
         :class:`Proportion` and :class:`Capability` under ``"_proportion"`` and
         ``"_capability"``.
     """
-    from tolsim.study.statistics import histogram_quantiles
-
     limit = float(np.asarray(ds["velocity_deviation_limit"]))
     if not (np.isfinite(limit) and limit > 0):
         return {}
@@ -351,12 +258,19 @@ def dataset_quality(ds) -> dict:
     edges = np.concatenate([bounds[:, 0], bounds[-1:, 1]])
     under = int(np.asarray(ds["velocity_deviation_underflow"]))
     over = int(np.asarray(ds["velocity_deviation_overflow"]))
-    prop = out_of_spec_from_histogram(counts, edges, limit, under, over)
     quants = histogram_quantiles(counts, edges, PERCENTILE_LEVELS, under, over)
     n = int(np.asarray(ds["n_balls_valid"]))
-    cap = capability(float(np.asarray(ds["velocity_deviation_mean"])),
-                     float(np.asarray(ds["velocity_deviation_std"])), n, limit, quants) \
-        if n > 1 and np.isfinite(float(np.asarray(ds["velocity_deviation_std"]))) else None
+    if "assembly_total_mean" in ds:
+        moments = ClusterMoments(int(np.asarray(ds["assembly_count"])),
+                                 np.asarray(ds["assembly_total_mean"], dtype=float),
+                                 np.asarray(ds["assembly_total_comoment"], dtype=float))
+        prop = cluster_proportion(moments)
+        cap = cluster_capability(moments, limit, quantiles=quants) if n > 1 else None
+    else:
+        prop = out_of_spec_from_histogram(counts, edges, limit, under, over)
+        std = float(np.asarray(ds["velocity_deviation_std"]))
+        cap = capability(float(np.asarray(ds["velocity_deviation_mean"])), std, n, limit,
+                         quants) if n > 1 and np.isfinite(std) else None
     out = {
         "velocity_deviation_out_of_spec_fraction": prop.fraction,
         "velocity_deviation_out_of_spec_ci_lower": prop.lower,

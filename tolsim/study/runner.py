@@ -23,6 +23,7 @@ import numpy as np
 
 from tolsim import __version__
 from tolsim.study.evaluate import (
+    MODEL_FAST,
     BallState,
     evaluate_balls,
     friction_module,
@@ -111,12 +112,15 @@ def _spot_rows(state: BallState, start_ball: int, spot_indices) -> dict:
     if len(idx) == 0:
         return _empty_spot()
     local = idx - start_ball
+    fast = state.model.reshape(-1)[local] == MODEL_FAST
     return {
         "ball_index": idx.astype(np.int64),
         "contact_angle_deviation": state.contact_angle_deviation.reshape(-1, 4)[local],
         "normal_force": state.normal_force.reshape(-1, 4)[local],
-        "velocity_deviation_analytic": state.velocity_deviation.reshape(-1)[local],
-        "valid_analytic": state.valid.reshape(-1)[local],
+        # the study's fast model where it was valid (re-solved balls: NaN, not valid)
+        "velocity_deviation_analytic": np.where(
+            fast, state.velocity_deviation.reshape(-1)[local], np.nan),
+        "valid_analytic": fast,
     }
 
 
@@ -152,9 +156,11 @@ def run_chunk(config, block_indices, spot_indices, drawn=None):
         for index in block_indices:
             size = block_size_of(config, index)
             sl = slice(offset, offset + size)
-            sub = BallState(*(getattr(state, f)[sl] for f in BallState.__dataclass_fields__))
+            sub = state.rows(sl)
             acc = Accumulator.for_config(config)
             acc.add(sub, t[sl], pair[sl])
+            if offset == 0:  # the chunk's re-solves, counted once
+                acc.resolve_seconds = state.resolve_seconds
             start = index * config.study.block_size
             out.append((index, acc, _spot_rows(sub, start * balls, spot_indices)))
             offset += size
@@ -165,9 +171,10 @@ def run_chunk(config, block_indices, spot_indices, drawn=None):
             # loads at the carriage positions, as during the integration
             nx, ny = loads_at(config, b.initial_position)
             state = evaluate_balls(config, values, nx, ny)
-            t, pair, ok = first_contact_along_track(config, b, state)
+            t, pair, ok, seconds = first_contact_along_track(config, b, state)
             acc = Accumulator.for_config(config)
             acc.add(state, t, pair, ok)
+            acc.resolve_seconds += seconds
             out.append((b.index, acc, _spot_rows(state, b.start * balls, spot_indices)))
     return out
 
@@ -233,6 +240,7 @@ def _save_checkpoint(path, fp, next_block, acc, spots):
     tmp = f"{path}.tmp-{os.getpid()}"
     state = acc.state()
     arrays = {f"acc_{k}": v for k, v in state.items()}
+    arrays["resolve_seconds"] = np.float64(acc.resolve_seconds)
     arrays.update({f"spot_{k}": v for k, v in spots.items()})
     with open(tmp, "wb") as fh:
         np.savez(fh, fingerprint=np.array(fp), next_block=np.int64(next_block), **arrays)
@@ -246,6 +254,7 @@ def _load_checkpoint(path, fp):
                 return None
             acc = Accumulator.from_state(
                 {k[4:]: data[k] for k in data.files if k.startswith("acc_")})
+            acc.resolve_seconds = float(data["resolve_seconds"])
             spots = {k[5:]: data[k] for k in data.files if k.startswith("spot_")}
             return int(data["next_block"]), acc, spots
     except (OSError, KeyError, ValueError):

@@ -370,8 +370,8 @@ def _mix(block_a, block_b, factor):
 
 
 def _evaluate_block(config, block):
-    """epsilon per ball (size, balls) (NaN invalid) and contact indicator (size,) (NaN when
-    the train has an invalid ball)."""
+    """epsilon per ball (size, balls) (NaN unresolved) and contact indicator (size,) (NaN
+    when the train has an unresolved ball and no certain contact)."""
     from tolsim.study.evaluate import evaluate_balls, loads_at, loads_per_ball
     from tolsim.study.propagation import first_contact_along_track, first_contact_constant
     from tolsim.study.sampling import error_values
@@ -391,9 +391,12 @@ def _evaluate_block(config, block):
     else:
         nx, ny = loads_at(config, block.initial_position)
         state = evaluate_balls(config, values, nx, ny)
-        t, _, ok = first_contact_along_track(config, block, state)
+        t, _, ok, _ = first_contact_along_track(config, block, state)
         ok = ok & state.valid.all(axis=1)
-    contact = np.where(ok, np.isfinite(t).astype(float), np.nan)
+    # a reported contact is certain even in a train with an unresolved ball; no contact is
+    # known only when every ball was resolved (NaN otherwise)
+    hit = np.isfinite(t)
+    contact = np.where(hit, 1.0, np.where(ok, 0.0, np.nan))
     return state.velocity_deviation, contact
 
 
@@ -453,8 +456,9 @@ def study_sensitivity(config, samples: int = 2048, *, confidence_level=0.95,
 # Result-file variables
 # --------------------------------------------------------------------------------------------
 #: Declarations for :mod:`tolsim.io.schema` of the variables :func:`sensitivity_variables`
-#: returns: name -> (dims, units, long_name). All along the ``factor`` dimension (coordinate:
-#: the tolerance source names). The first two are already declared in the schema.
+#: returns: name -> (dims, units, long_name). All along the ``factor`` dimension (an integer
+#: index coordinate; the tolerance source names are the ``factor_name`` label variable). The
+#: first two are already declared in the schema.
 SENSITIVITY_VARIABLES = {
     f"sensitivity{prefix}_{index}{suffix}": (
         ("factor",), "1",
@@ -472,7 +476,8 @@ def sensitivity_variables(result: SensitivityResult) -> dict:
     Returns
     -------
     dict
-        ``"factor"`` -> ndarray of str (the coordinate) and every name of
+        ``"factor"`` -> ndarray of str (the source names, written as the ``factor_name``
+        label along ``factor``) and every name of
         :data:`SENSITIVITY_VARIABLES` -> ndarray (d,), ready for
         ``xarray.Dataset.assign(**{k: (("factor",), v) ...})``.
     """

@@ -38,7 +38,7 @@ SOURCES = {
 
 SCOPES = ("rail", "carriage", "ball")
 DISTRIBUTIONS = ("fixed", "normal", "uniform", "truncated_normal", "cpk")
-VELOCITY_MODELS = ("eq24", "analytic")
+VELOCITY_MODELS = ("eq24", "analytic", "full")
 STATIC_MODELS = ("paired", "rigid", "solved", "linearised")
 PROPAGATIONS = ("constant", "along_track")
 SAMPLINGS = ("random", "sobol", "lhs")

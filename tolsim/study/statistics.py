@@ -10,21 +10,41 @@ bit-identical however the blocks were grouped into chunks or spread over workers
   default) of the order statistics that bracket the empirical quantile, are clipped to the
   exact [min, max], and are NaN when the quantile falls outside the histogram range (the
   out-of-range counts are stored).
-* contact: exact counts of valid trains and of trains with a contact within the horizon; a
+* contact: exact counts of resolved trains and of trains with a contact within the horizon; a
   fixed-bin histogram of the time to first contact over [0, horizon], its exact min and max,
   and the count per touching pair. Time quantiles (given contact) have an error of at most
   one time bin (horizon / ``time_bins``); the survival curve S(t) = P(no contact by t) is
   exact at the bin edges.
-* validity: counts of balls by cause (static not converged, loss of contact, outside the
-  velocity model's validity) and of trains with an invalid ball, which are excluded.
+* every train counts. A ball outside the fast velocity model's validity is re-solved with the
+  full model (:mod:`tolsim.study.evaluate`); the counts say how many were, how many the full
+  model could not take, and how long the re-solves took. A ball that no model resolves
+  (static not converged, loss of contact, full model failed) leaves its train *unresolved*
+  unless the train has a contact that is certain without it (a pair of resolved balls that
+  touches within the horizon). With k trains with contact, u unresolved trains and N trains
+  in all, P(contact) is reported as
 
-Reference: T. F. Chan, G. H. Golub, R. J. LeVeque, "Updating formulae and a pairwise algorithm
+  - the estimate k / (N - u) over the trains whose outcome is known, with its
+    Clopper-Pearson interval (missing at random);
+  - the partial-identification bounds [k / N, (k + u) / N], which hold whatever the
+    unresolved trains would have done ([Manski2003] Ch. 1), and the interval that covers
+    them: [CP lower end of k of N, CP upper end of k + u of N].
+
+  With u = 0 all three coincide with the plain estimate k / N. Time-to-contact statistics
+  and the survival curve are over the resolved trains.
+
+References: T. F. Chan, G. H. Golub, R. J. LeVeque, "Updating formulae and a pairwise algorithm
 for computing sample variances", Stanford CS report STAN-CS-79-773 (1979).
+[Manski2003] C. F. Manski, Partial Identification of Probability Distributions, Springer, 2003.
 """
 
 import numpy as np
 
-from tolsim.study.quality import clopper_pearson_interval
+from tolsim.study.estimators import (
+    ClusterMoments,
+    assembly_totals,
+    clopper_pearson_interval,
+    histogram_quantiles,
+)
 
 #: Quantile levels stored for epsilon and time to contact [-].
 QUANTILES = (0.001, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99, 0.999)
@@ -63,20 +83,31 @@ class Accumulator:
     horizon : float
         [s]; contact-time histogram range.
     time_bins : int
+    velocity_deviation_limit : float
+        Spec limit L on |epsilon| [-] for the per-assembly out-of-spec counts (0: none).
+
+    Besides the ball-level moments, the accumulator keeps the count, mean and co-moment matrix
+    of the per-assembly totals (valid balls, balls out of spec, sum and sum of squares of
+    epsilon; :class:`tolsim.study.estimators.ClusterMoments`), so that ball-level proportions
+    and Cpk get intervals with the assembly as the sampling unit
+    (:func:`tolsim.study.estimators.cluster_proportion`, ``cluster_capability``).
     """
 
     #: array attributes, in the order they are saved
     FIELDS = (
-        "n_assemblies", "n_assemblies_valid", "n_contact", "n_balls", "n_balls_valid",
-        "n_not_converged", "n_loss_of_contact", "n_outside_validity",
+        "n_assemblies", "n_assemblies_valid", "n_contact", "n_unresolved", "n_balls",
+        "n_balls_valid", "n_not_converged", "n_loss_of_contact", "n_outside_validity",
+        "n_resolved_full", "n_full_failed",
         "eps_mean", "eps_m2", "eps_min", "eps_max", "eps_histogram", "eps_underflow",
         "eps_overflow", "ball_count", "ball_mean", "ball_m2", "time_histogram", "time_min",
         "time_max", "pair_count",
     )
 
     def __init__(self, balls, velocity_deviation_range, velocity_deviation_bins, horizon,
-                 time_bins):
+                 time_bins, velocity_deviation_limit=0.0):
         self.balls = int(balls)
+        self.velocity_deviation_limit = float(velocity_deviation_limit)
+        self.cluster = ClusterMoments.empty()
         self.eps_edges = np.linspace(velocity_deviation_range[0], velocity_deviation_range[1],
                                      velocity_deviation_bins + 1)
         self.time_edges = np.linspace(0.0, horizon, time_bins + 1)
@@ -84,11 +115,17 @@ class Accumulator:
         self.n_assemblies = i8(0)
         self.n_assemblies_valid = i8(0)
         self.n_contact = i8(0)
+        self.n_unresolved = i8(0)
         self.n_balls = i8(0)
         self.n_balls_valid = i8(0)
         self.n_not_converged = i8(0)
         self.n_loss_of_contact = i8(0)
         self.n_outside_validity = i8(0)
+        self.n_resolved_full = i8(0)
+        self.n_full_failed = i8(0)
+        # [s] wall time of the full-model re-solves: a timing, not part of the result (not in
+        # FIELDS or state(); the runner's checkpoint keeps it apart)
+        self.resolve_seconds = 0.0
         self.eps_mean = 0.0
         self.eps_m2 = 0.0
         self.eps_min = np.inf
@@ -108,7 +145,7 @@ class Accumulator:
     def for_config(cls, config):
         st = config.study
         return cls(config.train.balls, st.velocity_deviation_range, st.velocity_deviation_bins,
-                   config.motion.duration, st.time_bins)
+                   config.motion.duration, st.time_bins, st.velocity_deviation_limit)
 
     # ---------------------------------------------------------------------------------------
     def add(self, state, contact_time, contact_pair, train_valid=None):
@@ -117,25 +154,34 @@ class Accumulator:
         Parameters
         ----------
         state : tolsim.study.evaluate.BallState
-            Balls of shape (m, balls); epsilon is NaN for invalid balls.
+            Balls of shape (m, balls); epsilon is NaN for unresolved balls.
         contact_time : ndarray (m,)
-            [s], inf when no contact within the horizon.
+            [s], inf when no contact within the horizon. A finite time must be certain: the
+            propagation only reports contacts of pairs whose balls are resolved.
         contact_pair : ndarray of int (m,)
         train_valid : ndarray of bool (m,), optional
-            Extra validity of the train (along-track propagation).
+            Extra validity of the train (along-track propagation: every ball resolved at
+            every step).
         """
+        from tolsim.study.evaluate import MODEL_FULL
+
         eps, valid = state.velocity_deviation, state.valid
         block = Accumulator(self.balls, (self.eps_edges[0], self.eps_edges[-1]),
                             len(self.eps_histogram), self.time_edges[-1],
-                            len(self.time_histogram))
+                            len(self.time_histogram), self.velocity_deviation_limit)
+        limit = self.velocity_deviation_limit if self.velocity_deviation_limit > 0 else np.inf
+        block.cluster = ClusterMoments.from_totals(assembly_totals(eps, limit))
         m = eps.shape[0]
         block.n_assemblies = np.int64(m)
         block.n_balls = np.int64(eps.size)
         block.n_balls_valid = np.int64(np.count_nonzero(valid))
         block.n_not_converged = np.int64(np.count_nonzero(~state.converged))
         block.n_loss_of_contact = np.int64(np.count_nonzero(state.loss_of_contact))
-        block.n_outside_validity = block.n_balls - block.n_balls_valid - \
+        block.n_resolved_full = np.int64(np.count_nonzero(state.model == MODEL_FULL))
+        block.n_full_failed = block.n_balls - block.n_balls_valid - \
             block.n_not_converged - block.n_loss_of_contact
+        block.n_outside_validity = block.n_resolved_full + block.n_full_failed
+        block.resolve_seconds = float(state.resolve_seconds)
         x = eps[valid]
         if x.size:
             block.eps_mean = float(np.mean(x))
@@ -155,25 +201,26 @@ class Accumulator:
         ok = valid.all(axis=1)
         if train_valid is not None:
             ok &= train_valid
+        hit = np.isfinite(contact_time)
         block.n_assemblies_valid = np.int64(np.count_nonzero(ok))
-        t = contact_time[ok]
-        hit = np.isfinite(t)
         block.n_contact = np.int64(np.count_nonzero(hit))
-        if block.n_contact:
-            th = t[hit]
+        block.n_unresolved = np.int64(np.count_nonzero(~ok & ~hit))
+        timed = ok & hit  # first-contact time and pair known
+        if np.any(timed):
+            th = contact_time[timed]
             block.time_min = float(th.min())
             block.time_max = float(th.max())
             block.time_histogram = _uniform_histogram(th, self.time_edges)
-            pairs = contact_pair[ok][hit]
-            block.pair_count = np.bincount(pairs, minlength=len(self.pair_count)).astype(
-                np.int64)
+            block.pair_count = np.bincount(contact_pair[timed],
+                                           minlength=len(self.pair_count)).astype(np.int64)
         self.merge(block)
 
     def merge(self, other):
         """Merge ``other`` into self (the order of merges is part of the result)."""
-        for name in ("n_assemblies", "n_assemblies_valid", "n_contact", "n_balls",
-                     "n_balls_valid", "n_not_converged", "n_loss_of_contact",
-                     "n_outside_validity", "eps_histogram", "eps_underflow", "eps_overflow",
+        for name in ("n_assemblies", "n_assemblies_valid", "n_contact", "n_unresolved",
+                     "n_balls", "n_balls_valid", "n_not_converged", "n_loss_of_contact",
+                     "n_outside_validity", "n_resolved_full", "n_full_failed",
+                     "resolve_seconds", "eps_histogram", "eps_underflow", "eps_overflow",
                      "time_histogram", "pair_count"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         n_a = self.n_balls_valid - other.n_balls_valid  # already added above
@@ -187,6 +234,7 @@ class Accumulator:
             other.ball_m2)
         self.time_min = min(self.time_min, other.time_min)
         self.time_max = max(self.time_max, other.time_max)
+        self.cluster = self.cluster.merge(other.cluster)
 
     # ---------------------------------------------------------------------------------------
     def state(self) -> dict:
@@ -194,13 +242,20 @@ class Accumulator:
         out = {name: np.asarray(getattr(self, name)) for name in self.FIELDS}
         out["eps_edges"] = self.eps_edges
         out["time_edges"] = self.time_edges
+        out["velocity_deviation_limit"] = np.float64(self.velocity_deviation_limit)
+        out["cluster_count"] = np.int64(self.cluster.count)
+        out["cluster_mean"] = self.cluster.mean
+        out["cluster_comoment"] = self.cluster.comoment
         return out
 
     @classmethod
     def from_state(cls, state: dict):
         eps_edges, time_edges = state["eps_edges"], state["time_edges"]
         acc = cls(len(state["ball_count"]), (eps_edges[0], eps_edges[-1]), len(eps_edges) - 1,
-                  time_edges[-1], len(time_edges) - 1)
+                  time_edges[-1], len(time_edges) - 1, float(state["velocity_deviation_limit"]))
+        acc.cluster = ClusterMoments(int(state["cluster_count"]),
+                                     np.array(state["cluster_mean"], dtype=float),
+                                     np.array(state["cluster_comoment"], dtype=float))
         for name in cls.FIELDS:
             value = np.asarray(state[name])
             setattr(acc, name, value.copy() if value.ndim else value[()])
@@ -229,8 +284,24 @@ class Accumulator:
         return np.clip(q, self.eps_min, self.eps_max) if self.n_balls_valid else q
 
     def contact_probability(self):
-        """P(contact within the horizon) over valid trains and its 95 % Clopper-Pearson CI."""
-        return clopper_pearson(int(self.n_contact), int(self.n_assemblies_valid))
+        """P(contact within the horizon) over the trains whose outcome is known, k / (N - u),
+        and its 95 % Clopper-Pearson interval."""
+        known = int(self.n_assemblies) - int(self.n_unresolved)
+        return clopper_pearson(int(self.n_contact), known)
+
+    def contact_probability_bounds(self, confidence: float = 0.95):
+        """Partial-identification bounds of P(contact) over all N trains, and their interval.
+
+        Returns
+        -------
+        (lower, upper, ci_lower, ci_upper) : floats
+            k / N and (k + u) / N, and the Clopper-Pearson lower end of k of N and upper end
+            of k + u of N (NaN when N = 0).
+        """
+        n, k, u = int(self.n_assemblies), int(self.n_contact), int(self.n_unresolved)
+        low, ci_low, _ = clopper_pearson(k, n, confidence)
+        high, _, ci_high = clopper_pearson(k + u, n, confidence)
+        return low, high, ci_low, ci_high
 
     def time_to_contact_quantiles(self, levels=QUANTILES) -> np.ndarray:
         """Quantiles of the time to first contact given contact [s] (error <= one bin).
@@ -241,45 +312,12 @@ class Accumulator:
         return np.clip(q, self.time_min, self.time_max) if self.n_contact else q
 
     def survival(self) -> np.ndarray:
-        """S(t) = P(no contact by t) at the time bin edges, over valid trains [-]."""
+        """S(t) = P(no contact by t) at the time bin edges, over resolved trains [-]."""
         n = int(self.n_assemblies_valid)
         if n == 0:
             return np.full(len(self.time_edges), np.nan)
         cum = np.concatenate([[0], np.cumsum(self.time_histogram)])
         return 1.0 - cum / n
-
-
-def histogram_quantiles(counts, edges, levels, underflow=0, overflow=0):
-    """Quantiles from a histogram, linear inside a bin; NaN outside the histogram range.
-
-    Parameters
-    ----------
-    counts : ndarray of int (bins,)
-    edges : ndarray (bins + 1,)
-    levels : sequence of float in [0, 1]
-    underflow, overflow : int
-        Samples below / above the range.
-
-    Returns
-    -------
-    ndarray (len(levels),)
-    """
-    counts = np.asarray(counts, dtype=np.int64)
-    total = int(counts.sum()) + int(underflow) + int(overflow)
-    out = np.full(len(levels), np.nan)
-    if total == 0:
-        return out
-    cum = int(underflow) + np.concatenate([[0], np.cumsum(counts)])
-    for i, q in enumerate(levels):
-        target = q * total
-        if target < cum[0] or target > cum[-1]:
-            continue
-        k = int(np.searchsorted(cum, target, side="left"))
-        k = min(max(k, 1), len(counts))
-        c = counts[k - 1]
-        frac = 0.5 if c == 0 else (target - cum[k - 1]) / c
-        out[i] = edges[k - 1] + frac * (edges[k] - edges[k - 1])
-    return out
 
 
 def clopper_pearson(successes: int, trials: int, confidence: float = 0.95):
