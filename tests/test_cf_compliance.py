@@ -117,3 +117,18 @@ def test_negative_control_string_coordinate_and_time(tmp_path):
     errors, failed = check(out, tmp_path)
     assert errors or any("contact" in f for f in failed[3]), failed
     assert any("time" in f for f in failed[3]), failed
+
+
+@pytest.mark.slow
+def test_result_file_with_saved_samples_passes_cf_checker(tmp_path, capsys):
+    # issue 17: the per-assembly export (a ``sample`` dimension beside ``ball``, ``pair`` and
+    # ``contact``, flags on ``sample_model``, missing contact times) and the worst-case / RSS
+    # variables keep the file CF-clean
+    result = run_study(small(CONFIG_FILES[0]), save_samples=SAMPLES["constant"] // 2)
+    out = tmp_path / "samples.nc"
+    ds = write_result(result, out, history="test")
+    assert ds.sizes["sample"] == SAMPLES["constant"] // 2
+    assert "velocity_deviation_rss" in ds and "gap_closure_worst_case" in ds
+    errors, failed = check(out, tmp_path)
+    assert not errors, capsys.readouterr().err
+    assert failed[3] == [] and failed[2] == [], failed

@@ -63,6 +63,14 @@ def test_point_model_reports_sliding_contact(capsys):
         (["--forces-n", "1", "2", "3", "4", "--load-n", "1", "2"], "not allowed"),
         (["--dbeta-deg", "x", "0", "0", "0"], "--dbeta-deg"),
         (["--velocity-mm-s", "-3"], "--velocity-mm-s"),
+        # issue 17: force sets that mean nothing (was "+nan %" and exit 0, or a traceback)
+        (["--forces-n", "0", "0", "0", "0"], "no contact carries a force"),
+        (["--forces-n", "0", "0", "100", "100"], "bottom (BL, BR) groove carries no force"),
+        (["--forces-n", "100", "100", "0", "0"], "top (TR, TL) groove carries no force"),
+        (["--forces-n", "nan", "100", "100", "100"], "--forces-n"),
+        (["--forces-n", "inf", "100", "100", "100"], "--forces-n"),
+        (["--model", "full", "--forces-n", "1e300", "1", "1", "1"], "R_B / 2"),
+        (["--model", "full", "--dbeta-deg", "50", "0", "0", "0"], "--model full"),
     ],
 )
 def test_bad_arguments_one_line_exit_2(args, needle):
@@ -91,3 +99,30 @@ def test_two_point_contact_gives_strict_json_with_warning(capsys):
     assert "NaN" not in text
     out = json.loads(text)
     assert out["valid"] is False and out["warnings"]
+
+
+@pytest.mark.parametrize("model", ["eq24", "analytic", "point", "full"])
+def test_single_zero_force_is_a_named_loss_of_contact(model, capsys):
+    # One flank without force is a loss of contact, a real state: every model either gives
+    # a number with a warning naming the flank, or says epsilon is undefined. Never "nan".
+    args = ["ball", "--model", model, "--forces-n", "100", "0", "100", "100"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "nan" not in text.lower()
+    assert "warning: BR carries no force (loss of contact)" in text or (
+        "warning: epsilon is undefined: BR carries no force (loss of contact)" in text)
+    assert main(args + ["--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["valid"] is False
+    assert any("BR carries no force" in w for w in out["warnings"])
+    if out["velocity_deviation"] is None:
+        assert any(w.startswith("epsilon is undefined") for w in out["warnings"])
+
+
+def test_analytic_undefined_at_loss_of_contact(capsys):
+    # The analytic model solves Eqs. (17), (18), (21) for four loaded contacts: with one
+    # unloaded it has no answer, and says so (text and JSON), pointing at the full model.
+    assert main(["ball", "--forces-n", "100", "0", "100", "100"]) == 0
+    text = capsys.readouterr().out
+    assert "velocity deviation    undefined" in text
+    assert "--model full treats one unloaded contact" in text

@@ -81,6 +81,14 @@ def test_report_every_config(results, name, tmp_path, capsys):
         assert "quality.png" in pngs and "Cpk" in page
     else:
         assert "quality.png" not in pngs
+    # issue 17: the verdict box at the top, the initial gap among the sampled inputs, the
+    # assumptions table, the model check named after the study's model, and the PDF
+    assert page.index("id='verdict'") < page.index("1. What was studied")
+    tolerances = page[page.index("id='tolerances'"):]
+    assert "<td>initial_gap</td>" in tolerances[: tolerances.index("</table>")]
+    assert "id='assumptions'" in page and "VALIDITY_ERROR_BUDGET" in page
+    assert f"7. Model check: {config.study.velocity_model} versus" in page
+    assert (out / "report.pdf").read_bytes()[:5] == b"%PDF-"
 
 
 def test_report_uses_stored_sensitivity(results, tmp_path):
@@ -120,6 +128,14 @@ def test_no_sensitivity_flag(results, tmp_path):
     assert main(["report", str(nc), "-o", str(out), "--no-sensitivity", "--quiet"]) == 0
     assert not (out / "sensitivity.png").exists()
     assert "not requested" in (out / "report.html").read_text(encoding="utf-8")
+
+
+def test_no_pdf_flag(results, tmp_path, capsys):
+    nc, _ = next(iter(results.values()))
+    out = tmp_path / "rep"
+    assert main(["report", str(nc), "-o", str(out), "--no-sensitivity", "--no-pdf"]) == 0
+    assert (out / "report.html").exists() and not (out / "report.pdf").exists()
+    assert "report.pdf" not in capsys.readouterr().out
 
 
 def _error(args, capsys):

@@ -159,6 +159,35 @@ BAD = [
      "motion.stroke_mm", 8),
     ("sensitivity_one_sample", ("seed = 1", "seed = 1\nsensitivity_samples = 1"),
      "study.sensitivity_samples", 24),
+    # issue 17: a bare fraction is ambiguous (0.5 meant as 0.5 % gave "Cpk 134")
+    ("limit_without_unit", ("seed = 1", "seed = 1\nvelocity_deviation_limit = 0.5"),
+     "study.velocity_deviation_limit", 24),
+    ("probability_limit_without_unit", ("seed = 1", "seed = 1\ncontact_probability_limit = 0.01"),
+     "study.contact_probability_limit", 24),
+    ("range_without_unit", ("seed = 1", "seed = 1\nvelocity_deviation_range = [-0.02, 0.02]"),
+     "study.velocity_deviation_range", 24),
+    ("limit_of_100_percent", ("seed = 1", "seed = 1\nvelocity_deviation_limit_percent = 100"),
+     "study.velocity_deviation_limit_percent", 24),
+    ("probability_above_100_percent", ("seed = 1",
+                                       "seed = 1\ncontact_probability_limit_percent = 101"),
+     "study.contact_probability_limit_percent", 24),
+    ("limit_bad_unit", ("seed = 1", "seed = 1\nvelocity_deviation_limit_permille = 5"),
+     "study.velocity_deviation_limit_permille", 24),
+    # issue 17: a unit slip (std_mm for std_um) beyond the static model's range, at load time
+    ("std_mm_for_std_um", ('[tolerances.bottom_rotation]\ndistribution = "normal"\n'
+                           'std_deg = 0.5', '[tolerances.arc_centre_offset_tangential_BL]\n'
+                                            'distribution = "normal"\nstd_mm = 1.0'),
+     "tolerances.arc_centre_offset_tangential_BL.std_mm", 19),
+    ("std_mm_inline", ('[tolerances.bottom_rotation]\ndistribution = "normal"\nstd_deg = 0.5',
+                       '[tolerances]\narc_centre_offset_normal_TL = { distribution = "normal", '
+                       'std_mm = 1.0 }'),
+     "tolerances.arc_centre_offset_normal_TL.std_mm", 18),
+    ("band_in_mm", ('distribution = "normal"\nstd_deg = 0.5',
+                    'distribution = "uniform"\nlow_deg = -1\nhigh_deg = 30'),
+     "tolerances.bottom_rotation.high_deg", 20),
+    ("quoted_key", ("std_deg = 0.5", '"std_deg" = -0.5'), "tolerances.bottom_rotation.std_deg",
+     19),
+    ("syntax_line", ("balls = 2", "balls = = 2"), "invalid TOML", 10),
 ]
 
 
@@ -188,3 +217,82 @@ def test_missing_file_is_config_error(tmp_path):
 
 def test_config_error_is_value_error():
     assert issubclass(ConfigError, ValueError)
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 17: unit-suffixed fractions, plausible tolerances, the effective config
+# ---------------------------------------------------------------------------------------------
+def test_fraction_keys_in_si():
+    text = MINIMAL.replace("seed = 1", "seed = 1\nvelocity_deviation_limit_percent = 0.5\n"
+                                       "contact_probability_limit_ppm = 250\n"
+                                       "velocity_deviation_range_percent = [-3, 1.5]")
+    st = parse_config(text).study
+    # SI inside: fractions [-]; 0.5 % = 0.005, 250 ppm = 2.5e-4 (exact to a rounding)
+    assert st.velocity_deviation_limit == pytest.approx(0.005, rel=1e-15)
+    assert st.contact_probability_limit == pytest.approx(2.5e-4, rel=1e-15)
+    assert st.velocity_deviation_range == pytest.approx((-0.03, 0.015), rel=1e-15)
+
+
+def test_bare_fraction_error_says_the_new_key():
+    text = MINIMAL.replace("seed = 1", "seed = 1\nvelocity_deviation_limit = 0.005")
+    with pytest.raises(ConfigError) as info:
+        parse_config(text, "bad.toml")
+    msg = str(info.value)
+    assert msg.startswith("bad.toml:24: study.velocity_deviation_limit = 0.005 has no unit")
+    assert "velocity_deviation_limit_percent = 0.5 if 0.005 is a fraction" in msg
+
+
+def test_default_config_limits_unchanged_by_the_rename():
+    # default.toml: velocity_deviation_limit_percent = 0.5 (was the fraction 0.005), the
+    # histogram range +/-2 % (was +/-0.02): the same SI values as before the rename
+    st = load_config().study
+    assert st.velocity_deviation_limit == 0.005
+    assert st.velocity_deviation_range == (-0.02, 0.02)
+    assert st.contact_probability_limit == 0.0
+
+
+@pytest.mark.parametrize("std_um, ok", [(12.5, True), (12.6, False)])
+def test_tolerance_range_edge(std_um, ok):
+    # Table 1 bearing: (f - 1/2) D = 0.4 mm, a quarter is 100 um = 8 x 12.5 um
+    text = MINIMAL.replace("[tolerances.bottom_rotation]\ndistribution = \"normal\"\n"
+                           "std_deg = 0.5", "[tolerances.ball_oversize]\n"
+                                            f"distribution = \"normal\"\nstd_um = {std_um}")
+    if ok:
+        parse_config(text)
+    else:
+        with pytest.raises(ConfigError, match=r"^x:19: tolerances.ball_oversize.std_um = 12.6: "
+                                              r"mean \+/- 8 std reaches -100.8 .. 100.8 um"):
+            parse_config(text, "x")
+
+
+def test_with_overrides_writes_the_effective_text():
+    base = parse_config(MINIMAL.replace("seed = 1", "seed = 1      # the seed"), "a.toml")
+    c = base.with_overrides(samples=12345, seed=7)
+    assert (c.study.samples, c.study.seed) == (12345, 7)
+    changed = [(a, b) for a, b in zip(base.text.splitlines(), c.text.splitlines(), strict=True)
+               if a != b]
+    # only the two value lines change; the comment keeps its column
+    assert changed == [("samples = 100", "samples = 12345"),
+                       ("seed = 1      # the seed", "seed = 7      # the seed")]
+    assert parse_config(c.text, "a.toml") == c  # the text is the study that runs
+    assert base.with_overrides().text == base.text
+
+
+@pytest.mark.parametrize("layout", [
+    "[study]\nsamples = 100 # n\nseed = 1\n",
+    "[ \"study\" ]\n\"samples\" = 100\nseed=1\n",
+    "study.samples = 100\nstudy.seed = 1\n",
+    "study = { samples = 100, seed = 1 }\n",
+])
+def test_with_overrides_any_study_layout(layout):
+    body = MINIMAL.split("[study]")[0]
+    text = (layout + body) if layout.startswith("study") else (body + layout)
+    c = parse_config(text).with_overrides(samples=5, seed=99)
+    again = parse_config(c.text)
+    assert (again.study.samples, again.study.seed) == (5, 99)
+    assert again == c
+
+
+def test_with_overrides_default_config_round_trips():
+    c = load_config().with_overrides(samples=3, seed=4)
+    assert parse_config(c.text, "default.toml") == c

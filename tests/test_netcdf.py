@@ -39,7 +39,7 @@ samples = 500
 seed = 8
 block_size = 128
 spot_checks = 3
-velocity_deviation_limit = 0.004
+velocity_deviation_limit_percent = 0.4
 """
 
 

@@ -420,3 +420,98 @@ def test_default_study_headline_regression():
     assert acc.n_assemblies == 100_000 and acc.n_unresolved == 0
     assert acc.n_contact == 65_168
     assert acc.n_resolved_full == acc.n_outside_validity == 60
+
+
+# --- precision target (issue 17) --------------------------------------------------------------
+def spot_study(samples=3000):
+    """``make()`` with 6 spot checks (their choice depends on the number of samples)."""
+    return parse_config(make().text.replace("spot_checks = 0", "spot_checks = 6")
+                        .replace("samples = 3000", f"samples = {samples}"))
+
+
+def assert_same_spot_checks(a, b):
+    for k in ("ball_index", "contact_angle_deviation", "normal_force",
+              "velocity_deviation_analytic", "valid_analytic", "velocity_deviation_full",
+              "valid_full"):
+        assert_array_equal(getattr(a.spot_checks, k), getattr(b.spot_checks, k), err_msg=k)
+
+
+@pytest.mark.parametrize("width", ["0.05", "20%"])
+def test_target_stop_is_bit_identical_to_a_fixed_run_of_that_size(width):
+    # P(contact) is about 0.25 here: the 95 % interval is 0.054 wide after 1024 assemblies
+    # and 0.031 after 3000, so the run stops part-way, at a whole block (128 assemblies).
+    from tolsim.study.runner import PrecisionTarget
+
+    target = PrecisionTarget.parse(width)
+    c = spot_study()
+    stopped = [run_study(c, chunk_blocks=chunk, target=target) for chunk in (1, 5)]
+    n_done = int(stopped[0].statistics.n_assemblies)
+    assert 0 < n_done < 3000 and n_done % 128 == 0
+    fixed = run_study(spot_study(n_done))
+    for r in stopped:
+        assert r.target_reached and r.samples_maximum == 3000
+        assert r.config.study.samples == n_done  # the file's config says what was run
+        assert_identical(r, fixed)
+        assert_same_spot_checks(r, fixed)
+        assert len(r.spot_checks.ball_index) == 6
+        assert f"after {n_done:,} of at most 3,000".replace(",", " ") in r.stopping_rule
+    # it stopped at the first block where the interval was narrow enough
+    assert target.reached(fixed.statistics)
+    assert not target.reached(run_study(c.with_overrides(samples=n_done - 128)).statistics)
+
+
+def test_target_not_reached_runs_to_the_maximum():
+    from tolsim.study.runner import PrecisionTarget
+
+    c = make(samples=1000)
+    r = run_study(c, chunk_blocks=2, target=PrecisionTarget(0.001))
+    assert not r.target_reached and r.config is c
+    assert_identical(r, run_study(c))
+    assert r.stopping_rule.startswith("target not reached")
+
+
+def test_target_run_resumes_to_the_same_stop(tmp_path):
+    # Interrupted before the target, then resumed: the same stop as in one go.
+    from tolsim.study.runner import PrecisionTarget
+
+    c, target = make(), PrecisionTarget(0.05)
+    ckpt = tmp_path / "out.nc.partial"
+    with pytest.raises(StudyInterrupted):
+        run_study(c, chunk_blocks=1, checkpoint_path=str(ckpt), max_blocks=3, target=target)
+    resumed = run_study(c, chunk_blocks=4, checkpoint_path=str(ckpt), target=target)
+    whole = run_study(c, target=target)
+    assert resumed.resumed_blocks == 3 and resumed.config.study.samples < 3000
+    assert resumed.config.study.samples == whole.config.study.samples
+    assert_identical(resumed, whole)
+
+
+@pytest.mark.parametrize("text, width, relative", [
+    ("0.005", 0.005, False), (" 0.02 ", 0.02, False), ("10%", 0.1, True), ("150%", 1.5, True),
+])
+def test_precision_target_syntax(text, width, relative):
+    from tolsim.study.runner import PrecisionTarget
+
+    t = PrecisionTarget.parse(text)
+    assert (t.width, t.relative) == (pytest.approx(width, rel=1e-15), relative)
+    assert PrecisionTarget.parse(str(t)) == t
+
+
+@pytest.mark.parametrize("text", ["0", "1", "-0.01", "nan", "inf", "abc", "0%", "%", "5%%"])
+def test_precision_target_rejects(text):
+    from tolsim.study.runner import PrecisionTarget
+
+    with pytest.raises(ValueError, match="0.005"):
+        PrecisionTarget.parse(text)
+
+
+def test_resume_and_ignored_checkpoint_are_said(tmp_path):
+    c = make(samples=1000)
+    ckpt = tmp_path / "out.nc.partial"
+    with pytest.raises(StudyInterrupted):
+        run_study(c, chunk_blocks=1, checkpoint_path=str(ckpt), max_blocks=3)
+    said = []
+    run_study(c, checkpoint_path=str(ckpt), notify=said.append)
+    assert said == [f"resumed from {ckpt}: 384 of 1 000 assemblies already done"]
+    said.clear()
+    run_study(make(samples=1000, seed=5), checkpoint_path=str(ckpt), notify=said.append)
+    assert len(said) == 1 and said[0].startswith(f"ignoring {ckpt}: it is not a checkpoint")

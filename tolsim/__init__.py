@@ -20,6 +20,16 @@ Nomenclature (paper symbol -> code name), contacts always ordered BL, BR, TR, TL
     v       groove_velocity [m/s]       mu      friction_coefficient [-]
     rho     side_force_ratio N_x/N_y    theta   groove rotation [rad]
 
+Python API (what ``tolsim run`` does, usable in a notebook)::
+
+    import tolsim
+    config = tolsim.load_config()                  # the packaged default study, or a path
+    result = tolsim.run_study(config.with_overrides(samples=20_000))
+    tolsim.write_result(result, "study.nc")        # the CF-netCDF file of ``tolsim run``
+    tolsim.analytic(dbeta, force)                  # epsilon of balls from their contact state
+
+See ``API`` for every name and README.md (``## Python API``) for a worked example.
+
 Reference: B. Lin, C. E. Okwudire, M. Duan, J. S. Wou, "An improved analytical model of
 friction and ball motion in linear ball bearings - with application to ball-to-ball contact
 prediction", IMECE2018-88033 (called "the paper" or [Lin2018] throughout).
@@ -32,4 +42,41 @@ try:
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+#: The Python API: name -> module. Imported on first use (PEP 562), so ``import tolsim`` stays
+#: light (no Numba compilation, no xarray) and the ``tolsim`` command starts fast.
+API = {
+    # studies
+    "load_config": "tolsim.io.config",
+    "parse_config": "tolsim.io.config",
+    "run_study": "tolsim.study.runner",
+    "write_result": "tolsim.io.netcdf",
+    "read_result": "tolsim.io.netcdf",
+    "linear_stackup": "tolsim.study.worst_case",
+    # physics: the velocity models, the static contact, the bearing
+    "eq24": "tolsim.physics.analytic",
+    "analytic": "tolsim.physics.analytic",
+    "point": "tolsim.physics.analytic",
+    "full": "tolsim.physics.friction",
+    "solve_static": "tolsim.physics.static",
+    "GrooveErrors": "tolsim.physics.static",
+    "paired_forces": "tolsim.physics.geometry",
+    "Bearing": "tolsim.physics.geometry",
+    "TABLE1": "tolsim.physics.geometry",
+}
+
+__all__ = ["__version__", *API]
+
+
+def __getattr__(name):
+    module = API.get(name)
+    if module is None:
+        raise AttributeError(f"module 'tolsim' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(API))

@@ -56,7 +56,25 @@ class Parser(argparse.ArgumentParser):
 
 
 class _HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
-    pass
+    """Descriptions as written; an option's default appended only when it says something.
+
+    ``ArgumentDefaultsHelpFormatter`` appends ``(default: X)`` to every option, which gave
+    ``(default: None)`` on options whose default is "not given" (the help text says what
+    happens then), ``(default: False)`` on on/off flags, and a second default where the help
+    text already states one. Here the default is appended only to an option that takes a
+    value, has a real default, and whose help does not mention a default already.
+    """
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if (default is None or default is argparse.SUPPRESS or action.nargs == 0
+                or isinstance(default, bool) or "default" in text.lower()):
+            return text
+        if not action.option_strings and action.nargs not in (argparse.OPTIONAL,
+                                                               argparse.ZERO_OR_MORE):
+            return text
+        return f"{text} (default: %(default)s)"
 
 
 def build_parser(argv=()):

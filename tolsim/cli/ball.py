@@ -229,13 +229,46 @@ def _bearing_and_velocity(args):
     return bearing, velocity
 
 
+def largest_force(bearing) -> float:
+    """Contact force [N] at which the Hertz ellipse's semi-major axis reaches R_B / 2, the
+    edge of every velocity model (:func:`tolsim.physics.friction.full` refuses beyond)."""
+    from tolsim.physics.hertz import hertz_constants
+
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    return (0.5 * bearing.ball_radius / hc.semi_major_coefficient) ** 3
+
+
+def _check_forces(forces, flag, bearing):
+    """Reject force sets that mean nothing for a ball between two grooves.
+
+    Negative or non-finite forces; no force at all (a loose ball: epsilon is undefined); a
+    groove whose two flanks both carry nothing (the ball is not held between the grooves:
+    no equilibrium); a force beyond :func:`largest_force`. A single zero force is a loss of
+    contact at that flank, a real state that each model treats in its own way (see the
+    warnings of :func:`evaluate`).
+    """
+    text = " ".join(f"{f:g}" for f in forces)
+    if not np.all(np.isfinite(forces)) or np.any(forces < 0):
+        raise UsageError(f"{flag} must be four finite forces >= 0 N, got {text}")
+    if not np.any(forces > 0):
+        raise UsageError(f"{flag} {text}: no contact carries a force, so the ball is loose "
+                         "and its velocity is undefined")
+    for groove, pair in (("bottom (BL, BR)", forces[:2]), ("top (TR, TL)", forces[2:])):
+        if not np.any(pair > 0):
+            raise UsageError(f"{flag} {text}: the {groove} groove carries no force, so the "
+                             "ball is not held between the grooves (no equilibrium)")
+    limit = largest_force(bearing)
+    if np.any(forces > limit):
+        raise UsageError(f"{flag} {text}: a force above {limit:.4g} N makes the Hertz "
+                         "contact ellipse wider than R_B / 2, outside every model")
+
+
 def _forces(args, bearing):
     """Four normal forces [N] and a description of where they came from."""
     if args.forces_n is not None:
         forces = np.array(args.forces_n, dtype=float)
-        if not np.all(np.isfinite(forces)) or np.any(forces < 0):
-            raise UsageError(f"--forces-n must be four finite forces >= 0 N, got "
-                             f"{' '.join(f'{f:g}' for f in args.forces_n)}")
+        _check_forces(forces, "--forces-n", bearing)
         return forces, "given"
     nx, ny = args.load_n if args.load_n is not None else DEFAULT_LOAD_N
     if not (math.isfinite(nx) and math.isfinite(ny)):
@@ -244,7 +277,26 @@ def _forces(args, bearing):
     if np.any(forces <= 0):
         raise UsageError(f"--load-n {nx:g} {ny:g}: |N_x| must be < N_y (tan beta_0 N_y) for "
                          "four-point contact; the paired approximation gives a force <= 0")
+    _check_forces(forces, f"--load-n {nx:g} {ny:g} (paired forces)", bearing)
     return forces, "paired"
+
+
+def _loss_of_contact_warning(model, forces, eps):
+    """The warning for unloaded flanks or an undefined epsilon (None if neither)."""
+    unloaded = [c for c, f in zip(CONTACTS, forces, strict=True) if not f > 0]
+    if not unloaded and math.isfinite(eps):
+        return None
+    where = (f"{', '.join(unloaded)} {'carries' if len(unloaded) == 1 else 'carry'} no force "
+             "(loss of contact)") if unloaded else "no value for these angles and forces"
+    if math.isfinite(eps):
+        runs = f"the ball runs on {4 - len(unloaded)} contacts"
+        return (f"{where}: {runs}" if model == "full" else
+                f"{where}: {runs}, the {model} model is derived for four; treat epsilon "
+                "with caution")
+    hint = "; --model full treats one unloaded contact" if (
+        len(unloaded) == 1 and model != "full") else ""
+    needs = "finds no solution" if model == "full" else "needs all four loaded"
+    return f"epsilon is undefined: {where}, and the {model} model {needs}{hint}"
 
 
 def evaluate(args):
@@ -259,9 +311,15 @@ def evaluate(args):
         options = {"groove_velocity": velocity, "surface": args.surface or "planar"}
     elif args.surface is not None:
         raise UsageError("--surface applies to --model full only")
-    result = model(dbeta, forces, bearing, **options)
+    try:
+        result = model(dbeta, forces, bearing, **options)
+    except ValueError as exc:  # inputs outside the model's domain, named by the model
+        raise UsageError(f"--model {args.model}: {' '.join(str(exc).split())}") from None
     eps = float(result.velocity_deviation)
-    if not bool(result.valid):
+    contact_warning = _loss_of_contact_warning(args.model, forces, eps)
+    if contact_warning:
+        warnings.append(contact_warning)
+    if not bool(result.valid) and math.isfinite(eps):
         warnings.append(f"{VALIDITY_NOTES.get(args.model, 'not valid')}: treat epsilon "
                         "with caution")
     gamma = result.zero_velocity_offset
@@ -304,27 +362,33 @@ def evaluate(args):
 
 
 def _text(out):
+    eps = out["velocity_deviation_percent"]
+    defined = math.isfinite(eps)
     lines = [
         f"model                 {out['model']}",
-        f"velocity deviation    {out['velocity_deviation_percent']:+.4f} %",
-        f"ball velocity         {out['ball_velocity_m_s'] * 1e3:.6f} mm/s "
-        f"(v/2 = {out['groove_velocity_m_s'] * 500:.6f} mm/s)",
+        f"velocity deviation    {eps:+.4f} %" if defined else
+        "velocity deviation    undefined (see the warning)",
+        (f"ball velocity         {out['ball_velocity_m_s'] * 1e3:.6f} mm/s " if defined else
+         "ball velocity         undefined ")
+        + f"(v/2 = {out['groove_velocity_m_s'] * 500:.6f} mm/s)",
         "contact               " + "  ".join(f"{c:>9}" for c in CONTACTS),
         "contact angle [deg]   " + "  ".join(f"{b:9.4f}" for b in out["contact_angle_deg"]),
         "normal force [N]      " + "  ".join(f"{f:9.3f}" for f in out["normal_force_n"]),
     ]
     if out["zero_velocity_offset_deg"] is not None:
         lines.append("dgamma [deg]          "
-                     + "  ".join(f"{g:9.4f}" for g in out["zero_velocity_offset_deg"]))
-    if "velocity_deviation_eq22" in out:
+                     + "  ".join(f"{g:9.4f}" if math.isfinite(g) else f"{'undefined':>9}"
+                                 for g in out["zero_velocity_offset_deg"]))
+    if "velocity_deviation_eq22" in out and math.isfinite(out["velocity_deviation_eq22"]):
         lines.append(f"epsilon, Eq. (22)     {100 * out['velocity_deviation_eq22']:+.4f} %")
     if "sliding_contact" in out:
         lines.append(f"sliding contact       {out['sliding_contact']}")
-    if "drag_force_n" in out:
+    if "drag_force_n" in out and math.isfinite(out["drag_force_n"]):
         lines.append(f"drag force            {out['drag_force_n']:.6g} N ({out['surface']} "
                      f"contact, residual {out['residual']:.2g})")
         lines.append("c/a                   "
-                     + "  ".join(f"{c:9.4f}" for c in out["contact_offset_ratio"]))
+                     + "  ".join(f"{c:9.4f}" if math.isfinite(c) else f"{'undefined':>9}"
+                                 for c in out["contact_offset_ratio"]))
     if "static" in out:
         st = out["static"]
         lines.append(f"static contact        {st['mode']}: {st['contact_count']} loaded flanks, "

@@ -1,4 +1,4 @@
-"""``tolsim report``: a self-contained HTML report of a study result file.
+"""``tolsim report``: a self-contained HTML report of a study result file, and its PDF.
 
 A thin layer over :func:`tolsim.reports.study.make_report`.
 """
@@ -11,11 +11,15 @@ import time
 from tolsim.cli import UsageError, integer_at_least
 
 DESCRIPTION = """\
-Write an HTML report (report.html, figures embedded, plus the PNGs) of a result file of
-'tolsim run': what was studied (config and provenance), the epsilon distribution with any spec
-limit, the contact probability with its confidence interval, the survival curve of the time to
-first contact, analytic-versus-full spot checks, the tolerances that drive the risk (Sobol'
-indices) and, with a limit on |epsilon|, the fraction out of spec and Cpk.
+Write an HTML report (report.html, figures embedded, plus the PNGs) and the same report as
+PDF with fields for the reviewers' sign-off (report.pdf) of a result file of 'tolsim run': the
+verdict against the config's spec limits (pass / fail / undecided at 95 % confidence, or "no
+spec limit given"), what was studied with the sampled inputs and an assumptions table (each
+with where it comes from), the epsilon distribution with any spec limit, the contact
+probability with its confidence interval, the survival curve of the time to first contact,
+spot checks of the study's velocity model against the full model (half of them near the spec
+limit), the tolerances that drive the risk (Sobol' indices) and, with a limit on |epsilon|,
+the fraction out of spec and Cpk.
 
 When the file holds no sensitivity indices they are computed from the config stored in the
 file (same seed); --sensitivity-samples sets the cost, --no-sensitivity skips it.
@@ -30,7 +34,7 @@ _sample_count = integer_at_least(2, "an integer >= 2")
 
 
 def add_parser(subparsers, formatter_class=None):
-    p = subparsers.add_parser("report", help="HTML report of a study result file",
+    p = subparsers.add_parser("report", help="HTML and PDF report of a study result file",
                               description=DESCRIPTION, formatter_class=formatter_class)
     p.add_argument("result", metavar="RESULTS.nc", help="result file of 'tolsim run'")
     p.add_argument("-o", "--out", metavar="DIR", default=argparse.SUPPRESS,
@@ -41,6 +45,7 @@ def add_parser(subparsers, formatter_class=None):
                         "64 for along-track propagation)")
     p.add_argument("--no-sensitivity", action="store_true",
                    help="do not compute sensitivity indices missing from the file")
+    p.add_argument("--no-pdf", action="store_true", help="write no report.pdf")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     return p
 
@@ -60,12 +65,12 @@ def run(args) -> int:
     try:
         result = make_report(args.result, out, sensitivity=not args.no_sensitivity,
                              sensitivity_samples=getattr(args, "sensitivity_samples", None),
-                             progress=say)
+                             progress=say, pdf=not args.no_pdf)
     except NotAResult as exc:
         raise UsageError(str(exc)) from None
     except OSError as exc:
         raise UsageError(f"cannot write to {out}: {exc}") from None
     if not args.quiet:
-        print(f"wrote {result.html} and {len(result.figures)} figures "
-              f"({time.perf_counter() - started:.1f} s)")
+        print(f"wrote {result.html}{f', {result.pdf}' if result.pdf else ''} and "
+              f"{len(result.figures)} figures ({time.perf_counter() - started:.1f} s)")
     return 0

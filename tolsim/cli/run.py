@@ -4,9 +4,11 @@ A thin layer over :func:`tolsim.io.config.load_config`, :func:`tolsim.study.runn
 and :func:`tolsim.io.netcdf.write_result`.
 """
 
+import argparse
 import os
 import shlex
 import sys
+import tempfile
 from pathlib import Path
 
 from tolsim.cli import UsageError, integer_at_least
@@ -17,18 +19,52 @@ contact state and velocity deviation epsilon, propagate the balls of each track 
 ball-to-ball contact. Writes a netCDF file (CF-1.10) with the statistics, the config and the
 seed, and prints a short summary.
 
-Without CONFIG the packaged default study runs. Progress is checkpointed next to the output
-(OUT.partial); rerunning the same command resumes from it with a bit-identical result.
+Without CONFIG the packaged default study runs. The output's folder is checked before any
+work starts. The first run on a machine (or after an update of tolsim) compiles the kernels
+for a few tens of seconds, and says so; later runs load them from Numba's cache.
+
+Stopping and resuming: progress is saved next to the output in OUT.partial, every 30 s
+(--checkpoint-interval) and when you press Ctrl-C. Rerunning the same command resumes from
+it (and says from where), with a result bit-identical to an uninterrupted run.
+
+Precision target: with --target-ci-width the run stops at the first block of assemblies at
+which the 95 % interval of P(contact) is that narrow, and --samples (or study.samples) is
+the maximum. The file records the number of assemblies actually run: a fixed run of that
+many gives the same result.
 
 examples:
   tolsim run                                   # the packaged default study
   tolsim run configs/paper_case_study.toml -o case.nc
   tolsim run study.toml --samples 1000000 --seed 7 -o seed7.nc
+  tolsim run study.toml --samples 10000000 --target-ci-width 0.002   # P(contact) +- 0.001
+  tolsim run study.toml --samples 10000000 --target-ci-width 10%     # width 10 % of P
 """
 
 
 _positive_int = integer_at_least(1, "a positive integer")
 _seed = integer_at_least(0, "a non-negative integer")
+
+
+def _seconds(text):
+    """An argparse ``type``: a number of seconds >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (0 <= value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
+    return value
+
+
+def _target(text):
+    """An argparse ``type``: a :class:`tolsim.study.runner.PrecisionTarget` (``0.005`` or
+    ``10%``); imported only when the flag is given."""
+    from tolsim.study.runner import PrecisionTarget
+
+    try:
+        return PrecisionTarget.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_parser(subparsers, formatter_class=None):
@@ -41,7 +77,8 @@ def add_parser(subparsers, formatter_class=None):
                    help="result file (default: CONFIG's name with .nc, or tolsim-result.nc for the "
                         "default study, in the current folder)")
     p.add_argument("--samples", type=_positive_int, metavar="N",
-                   help="number of assemblies (overrides study.samples)")
+                   help="number of assemblies (overrides study.samples); the maximum with "
+                        "--target-ci-width")
     p.add_argument("--seed", type=_seed, metavar="S", help="random seed (overrides study.seed)")
     p.add_argument("--workers", type=_positive_int, default=1, metavar="N",
                    help="worker processes, sharing the cores (the result does not depend on "
@@ -50,12 +87,26 @@ def add_parser(subparsers, formatter_class=None):
                         "costs 1-2 s to start and pays off only for long runs on many cores")
     p.add_argument("--chunk-blocks", type=_positive_int, metavar="N",
                    help="random blocks evaluated together (default: ~260k balls per chunk)")
+    p.add_argument("--target-ci-width", type=_target, metavar="W",
+                   help="stop once the 95 %% interval of P(contact) (the one that covers its "
+                        "bounds when some trains are unresolved) is at most W wide: a width "
+                        "such as 0.005, or a share of the estimate such as 10%%. Checked after "
+                        "each block of study.block_size assemblies, in order; --samples is "
+                        "then the maximum. Zero contacts never meet a relative target")
+    p.add_argument("--checkpoint-interval", type=_seconds, default=30.0, metavar="SECONDS",
+                   help="save the progress to OUT.partial at most every SECONDS seconds (0: "
+                        "after every chunk); Ctrl-C saves it too. Default: 30")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--resume", action="store_true",
                        help="require a matching checkpoint OUT.partial and continue from it")
     group.add_argument("--fresh", action="store_true",
                        help="ignore and delete a checkpoint OUT.partial")
-    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    p.add_argument("--save-samples", type=_seed, default=0, metavar="N",
+                   help="also store the first N assemblies' inputs and outputs (tolerance "
+                        "values, gaps, contact angles and forces, epsilon per ball, first "
+                        "contact) along a 'sample' dimension of the result file")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar, messages or summary (errors are still shown)")
     return p
 
 
@@ -101,6 +152,8 @@ def summary(ds, output, elapsed) -> str:
             f"{float(ds.contact_probability_bound_upper):.4f}], 95 % interval "
             f"[{float(ds.contact_probability_bounds_ci_lower):.4f}, "
             f"{float(ds.contact_probability_bounds_ci_upper):.4f}]")
+    if a.get("stopping_rule"):  # --target-ci-width
+        lines.append(a["stopping_rule"])
     lines.append(f"propagation: {a['propagation_assumption']}")
     if a.get("propagation_caveat"):
         lines.append(f"  note: {a['propagation_caveat']}")
@@ -122,11 +175,17 @@ def summary(ds, output, elapsed) -> str:
         lines.append(
             f"warning: {n_unres} of {n_asm} trains ({100 * n_unres / n_asm:.2g} %) are "
             "unresolved; P(contact) is known only within the bounds above")
+    if n_balls and n_unresolved_balls / n_balls > UNRESOLVED_WARNING:
+        lines.append(
+            f"warning: {n_unresolved_balls} of {n_balls} balls "
+            f"({100 * n_unresolved_balls / n_balls:.2g} %) have no epsilon from any model; "
+            "the epsilon statistics, ppm and Cpk below are over the resolved balls only")
     n_sc = ds.sizes["spot_check"]
     if n_sc and int(ds.spot_check_n_valid):
         lines.append(
             f"spot checks: {int(ds.spot_check_n_valid)} of {n_sc} valid in both models, "
-            f"analytic - full: RMS {100 * float(ds.spot_check_rms_difference):.4f} %, "
+            f"{a['velocity_model']} - full: RMS "
+            f"{100 * float(ds.spot_check_rms_difference):.4f} %, "
             f"max {100 * float(ds.spot_check_max_abs_difference):.4f} % (of v/2)")
     else:
         lines.append(f"spot checks: {a['spot_check_status']}")
@@ -140,6 +199,15 @@ def summary(ds, output, elapsed) -> str:
         if "velocity_deviation_cpk" in ds:
             line += f", Cpk {float(ds.velocity_deviation_cpk):.3f}"
         lines.append(line)
+    if "critical_ball" in ds:
+        b, pr = int(ds.critical_ball), int(ds.critical_pair)
+        lines.append(
+            f"linear stack-up: epsilon of ball {b} RSS "
+            f"{100 * float(ds.velocity_deviation_rss[b]):.3f} % (Monte Carlo std "
+            f"{100 * float(ds.velocity_deviation_std_by_ball[b]):.3f} %), "
+            f"worst case +-{100 * float(ds.velocity_deviation_worst_case[b]):.3f} %; gap "
+            f"closure of pair {pr} RSS {1e6 * float(ds.gap_closure_rss[pr]):.3g} um, worst case "
+            f"+-{1e6 * float(ds.gap_closure_worst_case[pr]):.3g} um")
     if "sensitivity_total" in ds.variables and ds.sizes.get("factor", 0):
         for var, what in (("sensitivity_total", "epsilon"),
                           ("sensitivity_contact_total", "contact")):
@@ -157,12 +225,49 @@ def summary(ds, output, elapsed) -> str:
 def _command_line(args, output) -> str:
     """The command that reproduces this run (for the history attribute)."""
     parts = ["tolsim", "run"] + ([args.config] if args.config else []) + ["-o", str(output)]
-    for flag, value in (("--samples", args.samples), ("--seed", args.seed)):
+    for flag, value in (("--samples", args.samples), ("--seed", args.seed),
+                        ("--save-samples", args.save_samples or None)):
         if value is not None:
             parts += [flag, str(value)]
     if args.workers != 1:
         parts += ["--workers", str(args.workers)]
+    if args.target_ci_width is not None:
+        parts += ["--target-ci-width", str(args.target_ci_width)]
     return shlex.join(parts)
+
+
+def _check_output(output: Path, checkpoint: Path):
+    """Fail before any work if the result or its checkpoint cannot be written there.
+
+    The folder is tried by creating and removing a file in it (permissions alone do not
+    tell: root, ACLs, read-only file systems). An existing result is replaced by a rename,
+    which a write-protected file, or another user's file in a sticky folder such as /tmp,
+    would not allow or should not get.
+    """
+    folder = output.parent
+    if output.is_dir():
+        raise UsageError(f"output {output} is a folder")
+    if not folder.exists():
+        raise UsageError(f"output folder {folder} does not exist")
+    if not folder.is_dir():
+        raise UsageError(f"output folder {folder} is not a folder")
+    if checkpoint.is_dir():
+        raise UsageError(f"checkpoint {checkpoint} is a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".check", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise UsageError(f"cannot write to output folder {folder}: {exc.strerror}") from None
+    if output.exists():
+        if not os.access(output, os.W_OK):
+            raise UsageError(f"output {output} exists and is write-protected; delete it or "
+                             "choose another -o")
+        sticky = folder.stat()
+        if (sticky.st_mode & 0o1000 and hasattr(os, "geteuid")
+                and os.geteuid() not in (0, sticky.st_uid, output.stat().st_uid)):
+            raise UsageError(f"output {output} belongs to another user in a sticky folder "
+                             "and cannot be replaced; choose another -o")
 
 
 def run(args) -> int:
@@ -178,11 +283,8 @@ def run(args) -> int:
         output = Path(Path(args.config).stem + ".nc")
     else:
         output = Path("tolsim-result.nc")
-    if output.is_dir():
-        raise UsageError(f"output {output} is a folder")
-    if not output.parent.resolve().is_dir():
-        raise UsageError(f"output folder {output.parent} does not exist")
     checkpoint = Path(f"{output}.partial")
+    _check_output(output, checkpoint)
 
     import tqdm
 
@@ -204,11 +306,26 @@ def run(args) -> int:
 
     bar = tqdm.tqdm(total=config.study.samples, unit="asm", unit_scale=True, file=sys.stderr,
                     desc="tolsim run", disable=True if args.quiet else None, smoothing=0.1)
+
+    def notify(message):  # resumed checkpoint, compiling kernels: on stderr, past the bar
+        if not args.quiet:
+            tqdm.tqdm.write(f"tolsim run: {message}", file=sys.stderr)
+
     try:
         result = run_study(config, workers=args.workers, chunk_blocks=args.chunk_blocks,
-                           progress=bar.update, checkpoint_path=str(checkpoint))
+                           progress=bar.update, checkpoint_path=str(checkpoint),
+                           checkpoint_interval=args.checkpoint_interval,
+                           target=args.target_ci_width, notify=notify,
+                           save_samples=args.save_samples)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    except KeyboardInterrupt:
+        if not checkpoint.exists():
+            raise
+        bar.close()
+        print(f"tolsim run: interrupted; the progress is in {checkpoint}, run the same "
+              "command again to resume", file=sys.stderr)
+        return 130
     finally:
         bar.close()
     ds = write_result(result, output, history=_command_line(args, output))

@@ -11,6 +11,9 @@ The sections and their keys are documented in ``tolsim/data/default.toml`` (the 
 default study) and in ``configs/*.toml``.
 """
 
+import csv
+import hashlib
+import io
 import math
 import re
 import tomllib
@@ -22,12 +25,14 @@ import numpy as np
 from tolsim.physics.geometry import Bearing
 from tolsim.study.spec import (
     DISTRIBUTIONS,
+    PLAUSIBLE_NORMAL_RANGE,
     PROPAGATIONS,
     SAMPLINGS,
     SCOPES,
     SOURCES,
     STATIC_MODELS,
     VELOCITY_MODELS,
+    Correlation,
     Distribution,
     Loads,
     Motion,
@@ -35,6 +40,7 @@ from tolsim.study.spec import (
     StudySettings,
     Tolerance,
     Train,
+    correlation_matrix_problem,
 )
 
 __all__ = ["ConfigError", "StudyConfig", "default_config_text", "load_config", "parse_config"]
@@ -48,9 +54,12 @@ UNITS = {
     "pressure": {"Pa": 1.0, "MPa": 1e6, "GPa": 1e9},
     "velocity": {"m_per_s": 1.0, "mm_per_s": 1e-3},
     "time": {"s": 1.0, "min": 60.0},
+    "fraction": {"percent": 1e-2, "ppm": 1e-6},
     "dimensionless": {"": 1.0},
 }
 
+#: Fewest measured values an ``empirical`` distribution accepts.
+MIN_EMPIRICAL_VALUES = 10
 
 
 class ConfigError(ValueError):
@@ -68,18 +77,25 @@ class _Source:
         self.lines = text.splitlines()
 
     def line_of(self, table, key=None):
-        """Line number (1-based) of ``key`` in ``[table]`` (or of the header), else None."""
-        header = re.compile(r"^\s*\[\s*([A-Za-z0-9_.\s\"]+?)\s*\]\s*(#.*)?$")
-        current, found_header = "", None
+        """Line number (1-based) of ``key`` in ``[table]`` (or of the header), else None.
+
+        The k-th ``[[name]]`` of an array of tables is the table ``name[k]`` (k from 1).
+        """
+        header = re.compile(r"""^\s*\[(\[?)\s*([A-Za-z0-9_.\s"']+?)\s*\]\]?\s*(#.*)?$""")
+        current, found_header, counts = "", None, {}
         for number, line in enumerate(self.lines, 1):
             m = header.match(line)
             if m:
-                current = ".".join(p.strip().strip('"') for p in m.group(1).split("."))
+                current = ".".join(p.strip().strip("\"'") for p in m.group(2).split("."))
+                if m.group(1):
+                    counts[current] = counts.get(current, 0) + 1
+                    current = f"{current}[{counts[current]}]"
                 if current == table and found_header is None:
                     found_header = number
                 continue
             if key is not None:
-                if current == table and re.match(rf"^\s*{re.escape(key)}\s*=", line):
+                quoted = rf"""(?:{re.escape(key)}|"{re.escape(key)}"|'{re.escape(key)}')"""
+                if current == table and re.match(rf"^\s*{quoted}\s*=", line):
                     return number
                 # dotted parent tables (a.b.key = ...)
                 rel = (table + "." + key)[len(current) + 1 :] if current else table + "." + key
@@ -127,25 +143,10 @@ class _Table:
     def quantity(self, name, kind, *, default=None, required=True, allow_list=False,
                  minimum=None, positive=False):
         """Read ``name_<unit>`` and return it in SI (a float, or a tuple with allow_list)."""
-        units = UNITS[kind]
-        keys = [f"{name}_{u}" if u else name for u in units]
-        present = [k for k in keys if k in self.data]
-        if len(present) > 1:
-            raise self.error(present[1], f"given together with {present[0]}: use one")
-        if not present:
-            if name in self.data and kind != "dimensionless":
-                raise self.error(name, f"needs a unit suffix: one of {', '.join(keys)}")
-            for k in self.data:
-                if k.startswith(f"{name}_") and k[len(name) + 1 :] not in UNITS:
-                    raise self.error(k, f"has an unknown unit suffix (use one of "
-                                        f"{', '.join(keys)})")
-            if required and default is None:
-                raise self.error(keys[0] if kind == "dimensionless" else f"{name}_<unit>",
-                                 f"is missing (one of {', '.join(keys)})")
+        found = self.unit_key(name, kind, required=required and default is None)
+        if found is None:
             return default
-        key = present[0]
-        self.used.add(key)
-        factor = units[key[len(name) + 1 :] if key != name else ""]
+        key, factor = found
         raw = self.data[key]
         values = raw if (allow_list and isinstance(raw, list)) else [raw]
         if allow_list and isinstance(raw, list) and not raw:
@@ -159,6 +160,43 @@ class _Table:
                 raise self.error(key, f"= {v!r} must be >= {minimum}")
             out.append(float(v) * factor)
         return tuple(out) if (allow_list and isinstance(raw, list)) else out[0]
+
+    def unit_key(self, name, kind, *, required=True):
+        """(key, factor to SI) of the one ``name_<unit>`` key given, or None if absent.
+
+        Raises for two units, no unit, an unknown unit suffix, or a missing required key.
+        """
+        units = UNITS[kind]
+        keys = [f"{name}_{u}" if u else name for u in units]
+        present = [k for k in keys if k in self.data]
+        if len(present) > 1:
+            raise self.error(present[1], f"given together with {present[0]}: use one")
+        if not present:
+            if name in self.data and kind != "dimensionless":
+                raise self.error(name, f"needs a unit suffix: one of {', '.join(keys)}")
+            for k in self.data:
+                if k.startswith(f"{name}_") and k[len(name) + 1 :] not in units:
+                    raise self.error(k, f"has an unknown unit suffix (use one of "
+                                        f"{', '.join(keys)})")
+            if required:
+                raise self.error(keys[0] if kind == "dimensionless" else f"{name}_<unit>",
+                                 f"is missing (one of {', '.join(keys)})")
+            return None
+        key = present[0]
+        self.used.add(key)
+        return key, units[key[len(name) + 1 :] if key != name else ""]
+
+    def text(self, key, *, default=None):
+        """A free string (a file name, a column name); missing -> ``default`` or an error."""
+        if key not in self.data:
+            if default is None:
+                raise self.error(key, "is missing")
+            return default
+        self.used.add(key)
+        v = self.data[key]
+        if not isinstance(v, str) or not v.strip():
+            raise self.error(key, f"= {v!r} must be a non-empty string")
+        return v
 
     def key_for(self, name, kind):
         """The key actually used for quantity ``name`` (``name_<unit>`` if absent)."""
@@ -237,7 +275,7 @@ def _distribution(table: _Table, kind: str) -> Distribution:
             raise table.error(table.key_for("high", kind),
                               f"= {high!r} must be greater than low ({low!r}) [SI]")
         d = Distribution("truncated_normal", mean=mean, std=std, low=low, high=high)
-    else:  # cpk
+    elif name == "cpk":
         low, high = q("low"), q("high")
         if not high > low:
             raise table.error(table.key_for("high", kind),
@@ -249,7 +287,106 @@ def _distribution(table: _Table, kind: str) -> Distribution:
         std = min(high - mean, mean - low) / (3.0 * cpk)
         d = Distribution("cpk", mean=mean, std=std, low=low, high=high, cpk=cpk,
                          truncate=table.boolean("truncate"))
+    else:  # empirical
+        d = _empirical(table, kind)
     return d
+
+
+def _empirical(table: _Table, kind: str) -> Distribution:
+    """Measured values from a CSV column: ``file``, ``column_<unit>``, optional ``sha256``."""
+    file = table.text("file")
+    column_key, factor = table.unit_key("column", kind)
+    column = table.text(column_key)
+    path = Path(file)
+    if not path.is_absolute():  # relative to the config file (a string config: to the cwd)
+        path = Path(table.source.path).parent / path
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise table.error("file", f"= {file!r}: cannot read {path}: "
+                                  f"{exc.strerror or exc.__class__.__name__}") from None
+    sha256 = hashlib.sha256(raw).hexdigest()
+    if table.has("sha256"):
+        pinned = table.text("sha256").strip().lower()
+        if pinned != sha256:
+            raise table.error("sha256", f"= {pinned!r} but {file} has SHA-256 {sha256}: the "
+                                        "measured data changed")
+
+    def bad(message):
+        return table.error(column_key, f"= {column!r}: {file}{message}")
+
+    try:
+        reader = csv.reader(io.StringIO(raw.decode("utf-8-sig")))
+        header, values = None, []
+        for row in reader:
+            cells = [c.strip() for c in row]
+            if not any(cells) or cells[0].startswith("#"):  # blank and comment lines
+                continue
+            if header is None:
+                header = cells
+                if column not in header:
+                    raise bad(f":{reader.line_num}: no column {column!r} in the header "
+                              f"({', '.join(repr(h) for h in header)})")
+                j = header.index(column)
+                continue
+            cell = cells[j] if j < len(cells) else ""
+            if not cell:  # a shorter column of a file with several
+                continue
+            try:
+                v = float(cell)
+            except ValueError:
+                raise bad(f":{reader.line_num}: {cell!r} is not a number") from None
+            if not math.isfinite(v):
+                raise bad(f":{reader.line_num}: {cell!r} is not a finite number")
+            values.append(v * factor)
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise bad(f": not a readable CSV file ({' '.join(str(exc).split())})") from None
+    if header is None:
+        raise bad(": the file is empty (expected a header line, then one value per line)")
+    if len(values) < MIN_EMPIRICAL_VALUES:
+        raise bad(f": {len(values)} values; at least {MIN_EMPIRICAL_VALUES} are needed")
+    return Distribution("empirical", data=tuple(sorted(values)), data_file=file,
+                        data_sha256=sha256)
+
+
+def _check_range(table: _Table, source: str, kind: str, dist: Distribution, bearing):
+    """Raise if ``dist`` reaches beyond the errors the static model accepts.
+
+    Lengths: a quarter of the ball-groove centre distance (f - 1/2) D, angles pi/8, as
+    :func:`tolsim.physics.static.solve_static` demands of every ball. A normal reaches
+    :data:`tolsim.study.spec.PLAUSIBLE_NORMAL_RANGE` standard deviations. Catches unit slips
+    (``std_mm`` for ``std_um``) at load time, with the key and its line.
+    """
+    limit = math.pi / 8 if kind == "angle" else 0.25 * (bearing.groove_radius
+                                                          - bearing.ball_radius)
+    low, high = dist.support
+    if max(abs(low), abs(high)) <= limit:
+        return
+    edge = "low" if abs(low) >= abs(high) else "high"
+    if dist.kind == "fixed":
+        name = "value"
+    elif dist.kind == "empirical":
+        name = "column"
+    elif dist.kind == "normal":
+        name = "mean" if abs(dist.mean) > limit else "std"
+    elif dist.kind == "cpk" and not dist.truncate:  # the band, or the spread beyond it
+        name = edge if max(abs(dist.low), abs(dist.high)) > limit else "cpk"
+    else:
+        name = edge
+    key = name if name == "cpk" else table.key_for(name, kind)
+    # the unit the user wrote (of this key, or of the table's other keys of this kind)
+    suffixes = [k.rpartition("_")[2] for k in (key, *table.data) if "_" in k]
+    unit = next((u for u in suffixes if u in UNITS[kind]), next(iter(UNITS[kind])))
+    factor = UNITS[kind][unit]
+    reach = {"column": "the data reach", "value": "the value is",
+             "std": f"mean +/- {PLAUSIBLE_NORMAL_RANGE:g} std reaches",
+             "cpk": f"mean +/- {PLAUSIBLE_NORMAL_RANGE:g} std reaches"}.get(name,
+                                                                          "the values reach")
+    span = f"{low / factor:.4g}" if low == high else f"{low / factor:.4g} .. {high / factor:.4g}"
+    what = "pi/8" if kind == "angle" else "a quarter of the ball-groove centre distance"
+    raise table.error(key, f"= {table.data.get(key)!r}: {reach} {span} {unit}, beyond the "
+                           f"+/-{limit / factor:.4g} {unit} ({what}) that the static model "
+                           f"accepts for {source}: is the unit right?")
 
 
 def _bearing(t: _Table) -> Bearing:
@@ -301,6 +438,9 @@ def _train(t: _Table, bearing: Bearing) -> Train:
     if gap.kind in ("uniform", "truncated_normal") and gap.low < 0:
         raise gap_table.error(gap_table.key_for("low", "length"),
                               f"= {gap.low!r} m must be >= 0 (gaps cannot overlap)")
+    if gap.kind == "empirical" and gap.data[0] < 0:
+        raise gap_table.error(gap_table.key_for("column", "length"),
+                              f"holds {gap.data[0]!r} m: gaps must be >= 0 (cannot overlap)")
     pitch = 2.0 * bearing.ball_radius + max(gap.expected, 0.0)
     length = t.quantity("loaded_zone_length", "length", default=balls * pitch, positive=True)
     t.finish()
@@ -340,7 +480,7 @@ def _loads(t: _Table, train: Train, bearing: Bearing) -> Loads:
                  yaw_moment=float(yaw))
 
 
-def _tolerances(t: _Table | None) -> tuple:
+def _tolerances(t: _Table | None, bearing: Bearing) -> tuple:
     if t is None:
         return ()
     out = []
@@ -350,6 +490,7 @@ def _tolerances(t: _Table | None) -> tuple:
         sub = t.table(source)
         kind, side = SOURCES[source]
         dist = _distribution(sub, kind)
+        _check_range(sub, source, kind, dist, bearing)
         scope = sub.string("scope", SCOPES, default=side)
         if side != "ball" and scope == "rail" and side == "carriage":
             raise sub.error("scope", "= 'rail' but this is a carriage-side error source")
@@ -365,11 +506,32 @@ def _tolerances(t: _Table | None) -> tuple:
     return tuple(out)
 
 
+#: Keys that were plain fractions and now carry a unit (``_percent`` or ``_ppm``).
+FRACTION_KEYS = ("velocity_deviation_range", "velocity_deviation_limit",
+                 "contact_probability_limit")
+
+
 def _study(t: _Table) -> StudySettings:
-    lo_hi = t.quantity("velocity_deviation_range", "dimensionless", allow_list=True,
+    for name in FRACTION_KEYS:
+        if t.has(name):  # a bare 0.5 was read as 50 % where 0.5 % was meant
+            v = t.data[name]
+
+            def percent(x):
+                number = isinstance(x, int | float) and not isinstance(x, bool)
+                return f"{100 * x:.10g}" if number else repr(x)
+
+            pct = ("[" + ", ".join(map(percent, v)) + "]") if isinstance(v, list) else percent(v)
+            raise t.error(name, f"= {v!r} has no unit: write {name}_percent = {pct} if "
+                                f"{v!r} is a fraction, {name}_percent = {v!r} if it is in "
+                                "percent (or use _ppm)")
+    lo_hi = t.quantity("velocity_deviation_range", "fraction", allow_list=True,
                        default=(-0.02, 0.02))
+    range_key = t.key_for("velocity_deviation_range", "fraction")
     if not (isinstance(lo_hi, tuple) and len(lo_hi) == 2 and lo_hi[1] > lo_hi[0]):
-        raise t.error("velocity_deviation_range", f"= {lo_hi!r} must be [low, high], low < high")
+        raise t.error(range_key, f"= {t.data.get(range_key)!r} must be [low, high], low < high")
+    if not (-1.0 <= lo_hi[0] and lo_hi[1] <= 1.0):
+        raise t.error(range_key, f"= {t.data.get(range_key)!r} must lie within "
+                                 "[-100 %, 100 %] (|epsilon| > 1 stops or reverses a ball)")
     s = StudySettings(
         samples=t.integer("samples", minimum=1),
         seed=t.integer("seed", minimum=0),
@@ -383,18 +545,97 @@ def _study(t: _Table) -> StudySettings:
         velocity_deviation_range=tuple(lo_hi),
         velocity_deviation_bins=t.integer("velocity_deviation_bins", default=400, minimum=1),
         time_bins=t.integer("time_bins", default=200, minimum=1),
-        velocity_deviation_limit=t.quantity("velocity_deviation_limit", "dimensionless",
+        velocity_deviation_limit=t.quantity("velocity_deviation_limit", "fraction",
                                             default=0.0, minimum=0.0),
-        contact_probability_limit=t.quantity("contact_probability_limit", "dimensionless",
+        contact_probability_limit=t.quantity("contact_probability_limit", "fraction",
                                              default=0.0, minimum=0.0),
         sensitivity_samples=t.integer("sensitivity_samples", default=0, minimum=0),
     )
     if s.sensitivity_samples == 1:
         raise t.error("sensitivity_samples", "must be 0 (off) or >= 2")
+    if s.velocity_deviation_limit >= 1:
+        key = t.key_for("velocity_deviation_limit", "fraction")
+        raise t.error(key, f"= {t.data[key]!r} must be < 100 % (|epsilon| >= 1 stops or "
+                           "reverses a ball)")
     if s.contact_probability_limit > 1:
-        raise t.error("contact_probability_limit", "must be <= 1")
+        key = t.key_for("contact_probability_limit", "fraction")
+        raise t.error(key, f"= {t.data[key]!r} must be <= 100 %")
     t.finish()
     return s
+
+
+def _draw_scope(tolerance) -> str:
+    """How a source is drawn: per assembly (rail or carriage), per ball, or a rail field."""
+    if tolerance.scope == "rail" and tolerance.correlation_length > 0:
+        return f"a rail random field of correlation_length {tolerance.correlation_length:g} m"
+    return {"rail": "one value per rail", "carriage": "one value per carriage",
+            "ball": "one value per ball"}[tolerance.scope]
+
+
+def _correlations(root: _Table, tolerances: tuple) -> tuple:
+    """The ``[[correlation]]`` groups: validated Gaussian-copula correlation matrices.
+
+    A group correlates sources drawn alike (one scope; rail random fields of one correlation
+    length): a value per carriage correlated with a value per rail, or with a field along
+    the rail, has no one matrix that describes it.
+    """
+    if not root.has("correlation"):
+        return ()
+    root.used.add("correlation")
+    raw = root.data["correlation"]
+    if not (isinstance(raw, list) and all(isinstance(item, dict) for item in raw)):
+        raise root.source.error("correlation", None, "must be an array of tables: start "
+                                                     "each group with [[correlation]]")
+    given = {t.source: t for t in tolerances}
+    owner, out = {}, []
+    for number, item in enumerate(raw, 1):
+        t = _Table(item, f"correlation[{number}]", root.source)
+        sources = t.data.get("sources")
+        t.used.add("sources")
+        if not (isinstance(sources, list) and len(sources) >= 2
+                and all(isinstance(x, str) for x in sources)):
+            raise t.error("sources", f"= {sources!r} must be a list of at least two source "
+                                     "names")
+        for name in sources:
+            if name not in SOURCES:
+                raise t.error("sources", f"has {name!r}, not a known error source")
+            if name not in given:
+                raise t.error("sources", f"has {name!r}, which has no [tolerances.{name}]")
+            if not given[name].distribution.is_random:
+                raise t.error("sources", f"has {name!r}, whose distribution is not random: "
+                                         "nothing to correlate")
+            if name in owner:
+                raise t.error("sources", f"has {name!r} again (already in correlation"
+                                         f"[{owner[name]}]): put sources correlated with "
+                                         "each other in one matrix")
+            owner[name] = number
+        scopes = {_draw_scope(given[name]) for name in sources}
+        if len(scopes) > 1:
+            raise t.error("sources", "mixes sources drawn as " + " and ".join(sorted(scopes))
+                          + ": a group's sources must be drawn alike (one scope; rail fields "
+                          "of one correlation_length)")
+        n = len(sources)
+        if t.has("coefficient") == t.has("matrix"):
+            raise t.error("coefficient", "or matrix: give exactly one (a coefficient for "
+                                         "every pair, or the full matrix)")
+        if t.has("coefficient"):
+            rho = t.quantity("coefficient", "dimensionless")
+            matrix = [[1.0 if i == j else rho for j in range(n)] for i in range(n)]
+            key = "coefficient"
+        else:
+            key = "matrix"
+            matrix = t.data["matrix"]
+            t.used.add(key)
+            if not (isinstance(matrix, list) and len(matrix) == n and all(
+                    isinstance(row, list) and len(row) == n for row in matrix)):
+                raise t.error(key, f"must be {n} x {n} (one row per source), got {matrix!r}")
+            matrix = [[float(t._number(key, v)) for v in row] for row in matrix]
+        problem = correlation_matrix_problem(matrix)
+        if problem:
+            raise t.error(key, problem)
+        t.finish()
+        out.append(Correlation(tuple(sources), tuple(tuple(row) for row in matrix)))
+    return tuple(out)
 
 
 def parse_config(text: str, path: str = "<string>") -> StudyConfig:
@@ -420,19 +661,26 @@ def parse_config(text: str, path: str = "<string>") -> StudyConfig:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML: {' '.join(str(exc).split())}") from None
+        message = " ".join(str(exc).split())
+        at = re.search(r" \(at line (\d+), column (\d+)\)$", message)
+        if at:  # "path:line: ..." like every other config error
+            message = f"{message[: at.start()]} (column {at.group(2)})"
+            path = f"{path}:{at.group(1)}"
+        raise ConfigError(f"{path}: invalid TOML: {message}") from None
     root = _Table(data, "", source)
     bearing = _bearing(root.table("bearing"))
     motion = _motion(root.table("motion"))
     train = _train(root.table("train"), bearing)
     loads = _loads(root.table("loads"), train, bearing)
-    tolerances = _tolerances(root.table("tolerances", required=False))
+    tolerances = _tolerances(root.table("tolerances", required=False), bearing)
+    correlations = _correlations(root, tolerances)
     study = _study(root.table("study"))
     for key in data:
         if key not in root.used:
             raise source.error(key, None, "is not a known section (bearing, motion, train, "
-                                          "loads, tolerances, study)")
-    return StudyConfig(bearing, motion, train, loads, tolerances, study, text, path)
+                                          "loads, tolerances, correlation, study)")
+    return StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
+                       correlations)
 
 
 def default_config_text() -> str:

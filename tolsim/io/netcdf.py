@@ -18,14 +18,35 @@ import xarray as xr
 from tolsim import __version__
 from tolsim.io import schema
 from tolsim.physics.geometry import CONTACTS
+from tolsim.study import saved_samples
 from tolsim.study.propagation import propagation_assumption, propagation_caveat
 from tolsim.study.quality import dataset_quality
+from tolsim.study.sampling import SPOT_CHECK_STRATA
 from tolsim.study.sensitivity import sensitivity_variables
 from tolsim.study.statistics import QUANTILES
+from tolsim.study.worst_case import stackup_variables
 
 
 def _nan_if_zero(value):
     return float(value) if value else float("nan")
+
+
+def provenance_attributes(config) -> dict:
+    """Global attributes that pin down how to rerun: package versions (``*_version``) and,
+    for measured data, ``data_files`` (lines ``<sha256>  <path>`` as ``sha256sum`` writes
+    them, paths relative to the config file: ``sha256sum -c`` there checks them)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"tolsim_version": __version__, "python_version": sys.version.split()[0]}
+    for package in ("numpy", "scipy", "numba"):
+        try:
+            out[f"{package}_version"] = version(package)
+        except PackageNotFoundError:
+            out[f"{package}_version"] = "not installed"
+    files = config.data_files
+    if files:
+        out["data_files"] = "\n".join(f"{sha}  {path}" for path, sha in files.items())
+    return out
 
 
 def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
@@ -111,6 +132,10 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "spot_check_valid_analytic": (("spot_check",), sc.valid_analytic.astype(np.int8)),
         "spot_check_valid_full": (("spot_check",), sc.valid_full.astype(np.int8)),
         "spot_check_n_valid": np.int64(both.sum()),
+        "spot_check_stratum": (("spot_check",), np.asarray(sc.stratum, dtype=np.int8)),
+        "spot_check_band_lower": float(sc.band[0]),
+        "spot_check_band_upper": float(sc.band[1]),
+        "spot_check_band_balls": np.int64(sc.band_balls),
         "spot_check_rms_difference": float(np.sqrt(np.mean(diff**2))) if diff.size else np.nan,
         "spot_check_max_abs_difference": float(np.max(np.abs(diff))) if diff.size else np.nan,
     }
@@ -163,6 +188,10 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "elapsed_seconds": float(result.elapsed),
         "workers": int(result.workers),
     }
+    ds.attrs.update(provenance_attributes(cfg))
+    if getattr(result, "target", None) is not None:  # tolsim run --target-ci-width
+        ds.attrs.update(stopping_rule=result.stopping_rule, target_ci_width=str(result.target),
+                        samples_maximum=int(result.samples_maximum))
     if result.sensitivity is not None:
         variables = sensitivity_variables(result.sensitivity)
         names = variables.pop("factor")
@@ -170,9 +199,19 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
                               factor_name=("factor", names))
         ds = ds.assign({name: (("factor",), values) for name, values in variables.items()})
         ds.attrs["sensitivity_samples"] = int(st.sensitivity_samples)
+    if getattr(result, "stackup", None) is not None:  # worst case and RSS
+        ds = ds.assign(stackup_variables(result.stackup))
+    if getattr(result, "samples", None):  # the saved assemblies, along ``sample``
+        rows = saved_samples.dataset_variables(cfg, result.samples)
+        ds = ds.assign_coords(sample=rows.pop("sample")).assign(rows)
     quality = {k: v for k, v in dataset_quality(ds).items() if not k.startswith("_")}
     ds = ds.assign({name: float(value) for name, value in quality.items()})
     schema.apply_attributes(ds)
+    if "sample_model" in ds:
+        ds["sample_model"].attrs.update(saved_samples.flag_attributes())  # CF 3.5 flags
+    ds["spot_check_stratum"].attrs.update(  # CF 3.5 flags
+        flag_values=np.arange(len(SPOT_CHECK_STRATA), dtype=np.int8),
+        flag_meanings=" ".join(SPOT_CHECK_STRATA))
     return schema.validate(ds)
 
 

@@ -11,7 +11,7 @@ Dimensions: ``quantile`` (levels), ``velocity_deviation_bin`` (histogram bins of
 ``elapsed_time`` (survival-curve times since the start of the stroke = the edges of the time
 bins), ``time_bin``, ``ball`` (position in the train, 0 = trailing), ``pair`` (adjacent pairs,
 named by their trailing ball), ``spot_check``, ``contact`` (4), ``bounds`` (2), ``factor``
-(tolerance sources, optional).
+(tolerance sources, optional), ``sample`` (the saved assemblies, optional).
 
 The file passes the CF checker (``compliance-checker --test=cf:1.10``, see
 ``tests/test_cf_compliance.py``): coordinate variables are numeric, strictly monotonic and
@@ -26,7 +26,9 @@ not ``time``: it is a duration in ``s``, not a CF time coordinate (``units`` "..
 from dataclasses import dataclass
 
 from tolsim.study.quality import QUALITY_VARIABLES
+from tolsim.study.saved_samples import SAMPLE_VARIABLES
 from tolsim.study.sensitivity import SENSITIVITY_VARIABLES
+from tolsim.study.worst_case import STACKUP_VARIABLES
 
 #: Value of the ``Conventions`` global attribute.
 CONVENTIONS = "CF-1.10"
@@ -35,6 +37,19 @@ SCHEMA_VERSION = "2"  # 2: elapsed_time, contact_name, factor_name
 #: Required global attributes (all strings except ``seed``).
 GLOBAL_ATTRIBUTES = ("Conventions", "title", "source", "history", "seed", "config",
                      "tolsim_schema")
+#: Provenance global attributes written since issue 17 (optional: older files lack them).
+#: ``config`` is the effective config (overrides included: ``tolsim run`` on it reproduces
+#: every data variable); these pin the software and the measured data.
+PROVENANCE_ATTRIBUTES = {
+    "tolsim_version": "version of tolsim that wrote the file",
+    "python_version": "Python version",
+    "numpy_version": "NumPy version (random streams: PCG64 and SeedSequence)",
+    "scipy_version": "SciPy version (special functions, quasi-random designs)",
+    "numba_version": "Numba version (compiled kernels)",
+    "data_files": "measured-data files of empirical distributions, one line each: "
+                  "'<sha256>  <path relative to the config file>' (sha256sum format); "
+                  "only when the config uses some",
+}
 
 
 class SchemaError(ValueError):
@@ -163,6 +178,15 @@ DATA_VARIABLES = {
                                    "i"),
     "spot_check_valid_full": V(_SC, "1", "1 if the full model converged and is valid", "i"),
     "spot_check_n_valid": V((), "1", "spot checks valid in both models", "i"),
+    # stratified spot checks (tolsim.study.sampling.SpotCheckPlan); optional: older files
+    "spot_check_stratum": V(_SC, "1", "stratum of the spot check (flag_meanings)", "i",
+                            required=False),
+    "spot_check_band_lower": V((), "1", "lower end of the |epsilon| band of the near-limit "
+                                        "spot checks", required=False),
+    "spot_check_band_upper": V((), "1", "upper end of the |epsilon| band of the near-limit "
+                                        "spot checks", required=False),
+    "spot_check_band_balls": V((), "1", "balls of the fast model with |epsilon| in the "
+                                        "near-limit band", "i", required=False),
     "spot_check_rms_difference": V((), "1", "RMS of epsilon analytic - full over valid checks"),
     "spot_check_max_abs_difference": V((), "1", "largest |epsilon analytic - full|"),
     # sensitivity and quality-engineering figures (issue 6): declared in the study modules
@@ -171,6 +195,12 @@ DATA_VARIABLES = {
        for name, (dims, units, long_name) in SENSITIVITY_VARIABLES.items()},
     **{name: V((), units, long_name, required=False)
        for name, (units, long_name) in QUALITY_VARIABLES.items()},
+    # worst case and RSS of the linearised stack-up, and the per-assembly export along
+    # ``sample`` (issue 17): declared in the study modules, optional here
+    **{name: V(dims, units, long_name, kind, required=False)
+       for name, (dims, units, long_name, kind) in STACKUP_VARIABLES.items()},
+    **{name: V(dims, units, long_name, kind, required=False)
+       for name, (dims, units, long_name, kind) in SAMPLE_VARIABLES.items()},
 }
 
 VARIABLES = {**COORDINATES, **DATA_VARIABLES}

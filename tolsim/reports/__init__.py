@@ -2,7 +2,10 @@
 
 * :mod:`tolsim.reports.paper`: the source paper's Fig. 4, 7 and 9 and Table 2 reproduced
   from the models (``tolsim paper``).
-* :mod:`tolsim.reports.study`: the HTML report of a study result file (``tolsim report``).
+* :mod:`tolsim.reports.study`: the HTML report of a study result file (``tolsim report``),
+  with the verdict against the spec limits (:mod:`tolsim.reports.verdict`), the sampled
+  inputs and the assumptions with their sources (:mod:`tolsim.reports.assumptions`), and the
+  same report as PDF with a sign-off block (:mod:`tolsim.reports.pdf`).
 
 Figures are built on :class:`matplotlib.figure.Figure` objects directly, never through
 ``pyplot``: no global state, no GUI backend, nothing to close, and the caller's backend is

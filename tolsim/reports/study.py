@@ -1,18 +1,25 @@
-"""The report of a study result file (``tolsim report``): one self-contained HTML page + PNGs.
+"""The report of a study result file (``tolsim report``): a self-contained HTML page, the
+same report as PDF with the reviewers' sign-off block, and PNGs.
 
 :func:`make_report` reads a result written by ``tolsim run`` (:mod:`tolsim.io.netcdf`) and
 writes, into a folder:
 
-* ``velocity_deviation.png``: the epsilon distribution (histogram) with the spec limit, and
-  epsilon along the train (mean and standard deviation per ball position);
+* ``velocity_deviation.png``: the epsilon distribution (histogram) with the spec limit,
+  epsilon along the train (mean and standard deviation per ball position) and, in a panel of
+  its own, the side force ratio rho per position;
 * ``contact.png``: the survival curve P(no contact by t) with a pointwise 95 % band, the
   contact probability with its interval against a spec limit, and which pair touches first;
-* ``spot_checks.png``: analytic-versus-full identity plot with validity counts;
+* ``spot_checks.png``: the study's velocity model against the full model on the spot-checked
+  balls (circles drawn uniformly, diamonds near the spec limit), with the counts beside it;
 * ``sensitivity.png``: the tolerance sources ranked by their Sobol' total-effect index on
   epsilon and on the contact indicator (:mod:`tolsim.study.sensitivity`);
 * ``quality.png`` (with a limit on |epsilon|): the tails of epsilon on a log scale against
   the limit, the fraction out of spec and Cpk (:mod:`tolsim.study.quality`);
-* ``report.html`` with all of them embedded as data URIs, the study's config and provenance.
+* ``report.html`` with all of them embedded as data URIs: at the top the verdict against the
+  config's spec limits (:mod:`tolsim.reports.verdict`), then what was studied with the
+  sampled inputs (the initial gap included) and the assumptions table
+  (:mod:`tolsim.reports.assumptions`), the config and provenance, and a sign-off table;
+* ``report.pdf``: the same for review and sign-off (:mod:`tolsim.reports.pdf`).
 
 Sensitivity indices are taken from the file when ``tolsim run`` stored them (``factor``
 dimension, ``sensitivity_first_order`` / ``sensitivity_total``); otherwise they are computed
@@ -27,15 +34,18 @@ from datetime import UTC, datetime
 import numpy as np
 
 from tolsim import __version__
+from tolsim.reports.assumptions import assumption_table, config_of, tolerance_table
 from tolsim.reports.style import (
     LIMIT_COLOUR,
     MODEL_COLOURS,
     SERIES_COLOURS,
     data_uri,
+    new_canvas,
     new_figure,
     render_png,
     styled,
 )
+from tolsim.reports.verdict import FAIL, PASS, STATUS_LABELS, UNDECIDED, study_verdict
 from tolsim.study import quality
 from tolsim.study.estimators import wilson_interval
 from tolsim.study.quality import format_fraction
@@ -62,6 +72,8 @@ class ReportOutputs:
     sensitivity: object = None
     sensitivity_source: str = ""
     quality: dict = field(default_factory=dict)
+    verdict: object = None  # tolsim.reports.verdict.Verdict
+    pdf: str = ""
 
 
 # --------------------------------------------------------------------------------------------
@@ -169,13 +181,15 @@ def sensitivity_from_file(ds):
                             np.array(first_ci), np.array(total_ci))
 
 
-def config_of(ds):
-    """The :class:`~tolsim.study.spec.StudyConfig` embedded in a result (seed of the file)."""
-    from tolsim.io.config import parse_config
+def _config_error(ds) -> str:
+    """Why the embedded config cannot be parsed, or '' when it can."""
+    from tolsim.io.config import ConfigError
 
-    name = ds.attrs.get("title", "result").split(": ", 1)[-1]
-    config = parse_config(str(ds.attrs["config"]), name)
-    return config.with_overrides(seed=int(ds.attrs["seed"]))
+    try:
+        config_of(ds)
+    except (ConfigError, KeyError, ValueError) as exc:
+        return " ".join(str(exc).split())
+    return ""
 
 
 def compute_sensitivity(ds, samples=None):
@@ -193,8 +207,15 @@ def compute_sensitivity(ds, samples=None):
 # --------------------------------------------------------------------------------------------
 @styled
 def plot_velocity_deviation(ds):
-    """epsilon histogram with the spec limit; mean +- std of epsilon per ball position."""
-    fig, (ax, ax2) = new_figure(11.0, 4.3, ncols=2, width_ratios=[1.6, 1.0])
+    """epsilon histogram with the spec limit; epsilon (mean +- std) and the side force ratio
+    rho per ball position, in two panels with their own, separately labelled scales (on
+    twin axes, a rho of 0.4 drawn level with a 0.5 % limit line read as "rho reaches the
+    limit")."""
+    fig = new_canvas(11.0, 5.2)
+    grid = fig.add_gridspec(2, 2, width_ratios=[1.6, 1.0], height_ratios=[1.45, 1.0])
+    ax = fig.add_subplot(grid[:, 0])
+    ax2 = fig.add_subplot(grid[0, 1])
+    ax3 = fig.add_subplot(grid[1, 1], sharex=ax2)
     counts = np.asarray(ds["velocity_deviation_histogram"], dtype=float)
     edges = 100.0 * _edges(ds, "velocity_deviation_bin_bounds")
     limit = _f(ds, "velocity_deviation_limit")
@@ -239,24 +260,29 @@ def plot_velocity_deviation(ds):
     balls = np.asarray(ds["ball"])
     m = 100 * np.asarray(ds["velocity_deviation_mean_by_ball"], dtype=float)
     sd = 100 * np.asarray(ds["velocity_deviation_std_by_ball"], dtype=float)
-    ax2.errorbar(balls + 1, m, yerr=np.nan_to_num(sd), fmt="o-", color=SERIES_COLOURS[1],
-                 capsize=3, lw=1.2, ms=4)
+    ax2.errorbar(balls + 1, m, yerr=np.nan_to_num(sd), fmt="o-", color=SERIES_COLOURS[2],
+                 capsize=3, lw=1.2, ms=4, label="mean ± 1 std")
     ax2.axhline(0, color="0.5", lw=0.6)
     if np.isfinite(limit) and limit > 0:
         for s in (-1, 1):
-            ax2.axhline(100 * s * limit, color=LIMIT_COLOUR, lw=1.5, ls="--")
-    ax2.set_xlabel("ball position in the train [-] (1 = trailing)")
-    ax2.set_ylabel("ε [%], mean ± 1 std per position")
-    ax2.set_title("(b) ε along the train")
-    ax2.set_xticks(balls + 1 if len(balls) <= 20 else np.linspace(1, len(balls), 6).round())
+            ax2.axhline(100 * s * limit, color=LIMIT_COLOUR, lw=1.5, ls="--",
+                        label="spec limit on |ε|" if s > 0 else None)
+        ax2.legend(loc="lower right", fontsize=7.5, ncols=2, framealpha=0.9)
+        top = max(120 * limit, np.nanmax(np.abs(m) + np.nan_to_num(sd), initial=0) * 1.1)
+        ax2.set_ylim(-1.45 * top if top else -1, top if top else 1)  # room for the legend
+    ax2.set_ylabel("ε [%]")
+    ax2.set_title("(b) ε along the train: mean ± 1 std per position", fontsize=10)
+    ax2.tick_params(labelbottom=False)
+    ticks = balls + 1 if len(balls) <= 20 else np.linspace(1, len(balls), 6).round()
     rho = np.asarray(ds["side_force_ratio"], dtype=float)
-    if np.ptp(rho) > 0:
-        ax3 = ax2.twinx()
-        ax3.plot(balls + 1, rho, color="0.5", ls=":", lw=1.2)
-        ax3.set_ylabel("side force ratio ρ [-] (dotted)", color="0.4")
-        ax3.tick_params(axis="y", colors="0.4")
-        ax3.spines["right"].set_visible(True)
-        ax3.grid(False)
+    ax3.plot(balls + 1, rho, "s-", color=SERIES_COLOURS[3], lw=1.2, ms=4)
+    ax3.axhline(0, color="0.5", lw=0.6)
+    reach = float(np.nanmax(np.abs(rho), initial=0.0))
+    ax3.set_ylim(-1.25 * reach if reach > 0 else -0.1, 1.25 * reach if reach > 0 else 0.1)
+    ax3.set_xticks(ticks)
+    ax3.set_xlabel("ball position in the train [-] (1 = trailing)")
+    ax3.set_ylabel("ρ = N_x / N_y [-]")
+    ax3.set_title("(c) side force ratio ρ per position (the load, not ε)", fontsize=10)
     return fig
 
 
@@ -300,7 +326,7 @@ def plot_contact(ds):
     if np.isfinite(limit) and limit > 0:
         ax_p.axhline(limit, color=LIMIT_COLOUR, ls="--", lw=2,
                      label=f"limit {format_fraction(limit)}")
-        ax_p.legend(loc="lower center", fontsize=8)
+        ax_p.legend(loc="upper center", fontsize=8)  # above the bar: ylim leaves room
     ax_p.set_xlim(-0.8, 0.8)
     ax_p.set_xlabel("contact within the horizon")
     ax_p.set_ylabel("P(contact within the horizon) per train [-]")
@@ -318,53 +344,119 @@ def plot_contact(ds):
     return fig
 
 
+#: Markers of the spot-check strata (``spot_check_stratum``).
+STRATUM_MARKERS = {0: ("o", "drawn uniformly"), 1: ("D", "near the spec limit")}
+
+
 @styled
 def plot_spot_checks(ds):
-    """Identity plot epsilon analytic vs full, and the difference, with validity counts."""
-    fig, (ax, ax2) = new_figure(10.5, 4.5, ncols=2)
+    """The study's model against the full friction model on the spot-checked balls: identity
+    plot, difference, and the counts beside them (nothing drawn over the points).
+
+    Circles are balls drawn uniformly, diamonds balls drawn near the spec limit on |epsilon|
+    (``spot_check_stratum``); crosses are balls flagged invalid by one model.
+    """
+    from matplotlib.ticker import MaxNLocator
+
+    from tolsim.physics.analytic import VALIDITY_ERROR_BUDGET
+
+    fig = new_canvas(11.5, 4.9)
+    ax, ax2, ax_text = fig.subplots(1, 3, width_ratios=[1.0, 1.0, 0.62])
     ea = 100 * np.asarray(ds["spot_check_velocity_deviation_analytic"], dtype=float)
     ef = 100 * np.asarray(ds["spot_check_velocity_deviation_full"], dtype=float)
     k = ea.size
     va = np.asarray(ds["spot_check_valid_analytic"], dtype=bool) if k else np.zeros(0, bool)
     vf = np.asarray(ds["spot_check_valid_full"], dtype=bool) if k else np.zeros(0, bool)
+    stratum = (np.asarray(ds["spot_check_stratum"], dtype=int) if "spot_check_stratum" in ds
+               else np.zeros(k, int))
     both = va & vf
     model = ds.attrs.get("velocity_model", "analytic")
+    limit = 100 * _f(ds, "velocity_deviation_limit")
+    budget = 100 * VALIDITY_ERROR_BUDGET
+    diff = ea - ef
+    finite = np.isfinite(ea) & np.isfinite(ef)
     if k:
-        ax.plot(ef[both], ea[both], "o", ms=4, color=MODEL_COLOURS["analytic"],
-                label=f"valid in both ({both.sum()})")
-        other = ~both & np.isfinite(ea) & np.isfinite(ef)
+        for code, (marker, name) in STRATUM_MARKERS.items():
+            sel = both & (stratum == code)
+            if sel.any():
+                kw = dict(ms=5, color=MODEL_COLOURS["analytic"], ls="none", marker=marker,
+                          mfc=MODEL_COLOURS["analytic"] if code == 0 else "white", mew=1.3)
+                ax.plot(ef[sel], ea[sel], label=f"{name}, valid in both ({sel.sum()})", **kw)
+                ax2.plot(ef[sel], diff[sel], **kw)
+        other = ~both & finite
         if other.any():
             ax.plot(ef[other], ea[other], "x", ms=6, color=LIMIT_COLOUR,
                     label=f"invalid in one model ({other.sum()})")
-        finite = np.concatenate([ea[np.isfinite(ea)], ef[np.isfinite(ef)]])
-        if finite.size:
-            lo, hi = finite.min(), finite.max()
+            ax2.plot(ef[other], diff[other], "x", ms=6, color=LIMIT_COLOUR)
+        values = np.concatenate([ea[np.isfinite(ea)], ef[np.isfinite(ef)]])
+        if values.size:
+            lo, hi = values.min(), values.max()
             pad = 0.08 * max(hi - lo, 1e-3)
             line = np.array([lo - pad, hi + pad])
             ax.plot(line, line, color="k", lw=0.8, label="identity")
             ax.set_xlim(*line)
             ax.set_ylim(*line)
-        ax2.plot(ef[both], ea[both] - ef[both], "o", ms=4, color=MODEL_COLOURS["analytic"])
+            ax2.set_xlim(*line)
+            if np.isfinite(limit) and limit > 0:
+                shown = [x for x in (-limit, limit) if line[0] <= x <= line[1]]
+                for j, x in enumerate(shown):
+                    for a in (ax, ax2):
+                        a.axvline(x, color=LIMIT_COLOUR, lw=1.2, ls="--",
+                                  label="spec limit on |ε|" if a is ax and j == 0 else None)
         ax2.axhline(0, color="k", lw=0.8)
+        if finite.any() and np.nanmax(np.abs(diff[finite])) > 0.25 * budget:
+            for y in (-budget, budget):
+                ax2.axhline(y, color="0.45", lw=1.0, ls=":")
+            ax.plot([], [], color="0.45", lw=1.0, ls=":",
+                    label=f"validity budget ±{budget:.2g} pp (in b)")
+    for a in (ax, ax2):
+        a.xaxis.set_major_locator(MaxNLocator(nbins=5))
+        a.yaxis.set_major_locator(MaxNLocator(nbins=6))
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("ε, full friction model [%]")
     ax.set_ylabel(f"ε, study model '{model}' [%]")
-    ax.set_title(f"(a) spot checks: {k} balls re-solved")
-    ax.legend(loc="upper left", fontsize=8)
-    counts = (f"spot checks: {k}\nvalid in both: {int(both.sum())}\n"
-              f"'{model}' invalid: {int((~va).sum())}\n"
-              f"full invalid or not converged: {int((~vf).sum())}\n"
-              f"RMS difference: {100 * _f(ds, 'spot_check_rms_difference'):.4f} pp\n"
-              f"max |difference|: {100 * _f(ds, 'spot_check_max_abs_difference'):.4f} pp")
-    ax2.text(0.98, 0.03, counts, transform=ax2.transAxes, ha="right", va="bottom", fontsize=8,
-             bbox=dict(boxstyle="round", fc="white", ec="0.7", alpha=0.9))
+    ax.set_title(f"(a) spot checks: {k} balls re-solved", fontsize=10.5)
     ax2.set_xlabel("ε, full friction model [%]")
     ax2.set_ylabel(f"ε '{model}' − ε full [percentage points]")
-    ax2.set_title("(b) difference")
-    if not k:
-        ax2.text(0.5, 0.5, ds.attrs.get("spot_check_status", "no spot checks"),
-                 transform=ax2.transAxes, ha="center", va="center")
+    ax2.set_title("(b) difference", fontsize=10.5)
+    if ax.get_legend_handles_labels()[0]:
+        fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=3,
+                   fontsize=8, frameon=False)
+    ax_text.set_axis_off()
+    ax_text.set_title("(c) counts", fontsize=10.5)
+    ax_text.text(0.0, 1.0, _spot_check_counts(ds, model, stratum, va, vf, diff, budget),
+                 transform=ax_text.transAxes, ha="left", va="top", fontsize=8.5,
+                 linespacing=1.45, wrap=True)
     return fig
+
+
+def _spot_check_counts(ds, model, stratum, va, vf, diff, budget):
+    """The text beside the spot-check plots."""
+    k = stratum.size
+    if not k:
+        return str(ds.attrs.get("spot_check_status", "no spot checks"))
+    both = va & vf
+    near = stratum == 1
+    lines = [f"spot checks: {k}"]
+    if near.any():
+        lines.append(f"  drawn uniformly: {int((~near).sum())}")
+        band = (100 * _f(ds, "spot_check_band_lower"), 100 * _f(ds, "spot_check_band_upper"))
+        lines.append(f"  near the limit: {int(near.sum())}")
+        lines.append(f"    ({band[0]:.3g} % ≤ |ε| ≤ {band[1]:.3g} %,")
+        lines.append(f"    {_i(ds, 'spot_check_band_balls'):,} balls in that band)")
+    lines += [f"valid in both models: {int(both.sum())}",
+              f"'{model}' invalid (re-solved): {int((~va).sum())}",
+              f"full invalid / not converged: {int((~vf).sum())}",
+              "",
+              f"'{model}' − full [pp]:"]
+    for name, sel in (("uniform", both & ~near), ("near limit", both & near)):
+        if sel.any():
+            d = diff[sel]
+            lines.append(f"  {name}: RMS {np.sqrt(np.mean(d * d)):.4f},")
+            lines.append(f"    max |·| {np.max(np.abs(d)):.4f}")
+    inside = int(np.sum(np.abs(diff[both]) <= budget))
+    lines.append(f"inside the ±{budget:.2g} pp budget: {inside} of {int(both.sum())}")
+    return "\n".join(lines)
 
 
 OUTPUT_TITLES = {"velocity_deviation": "share of the variance of ε",
@@ -473,7 +565,36 @@ th { background: #f3f3f3; } td.num { text-align: right; font-variant-numeric: ta
 img { max-width: 100%; border: 1px solid #eee; } .muted { color: #666; font-size: 0.9em; }
 pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
 .verdict { font-weight: bold; } .bad { color: #b00; } .good { color: #070; }
+.verdict-box { border: 3px solid #888; border-radius: 6px; padding: 0.6em 1.1em;
+               margin: 1.2em 0; background: #fafafa; }
+.verdict-box.pass { border-color: #070; background: #f3fbf3; }
+.verdict-box.fail { border-color: #b00; background: #fdf3f3; }
+.verdict-box.undecided { border-color: #c80; background: #fffaf0; }
+.verdict-label { font-size: 1.45em; font-weight: bold; margin: 0.2em 0 0.4em 0; }
+.status-pass { color: #070; font-weight: bold; } .status-fail { color: #b00; font-weight: bold; }
+.status-undecided { color: #a60; font-weight: bold; } .status-none { color: #555; }
+table.signoff td { height: 2.6em; min-width: 11em; }
 """
+
+#: Captions of the figures (HTML and PDF).
+CAPTIONS = {
+    "velocity_deviation": "(a) ε distribution over all valid balls; (b) ε per position along "
+                          "the train, mean ± 1 std; (c) the side force ratio ρ of the load "
+                          "at each position, on its own scale (a load, not a deviation: it "
+                          "has nothing to do with the spec limit on ε).",
+    "contact": "Survival curve of the time to first contact (travel on the top axis), "
+               "contact probability with its 95 % interval, and the pair that touches first.",
+    "quality": "Tails of ε on a log scale against the spec limit.",
+    "sensitivity": "Sobol' indices: first order (the factor alone) and total effect (with "
+                   "interactions).",
+    "spot_checks": "Balls re-solved with the full friction model: circles drawn uniformly "
+                   "over all balls, diamonds drawn among the balls near the spec limit on "
+                   "|ε|, where the ppm and Cpk claims are made.",
+}
+#: Fields of the sign-off block (HTML and PDF).
+SIGN_OFF_ROLES = ("Prepared by", "Reviewed by", "Approved by")
+SIGN_OFF_FIELDS = ("name", "function", "date", "signature")
+SIGN_OFF_DECISIONS = ("accepted", "accepted with conditions", "rejected")
 
 
 def _row(label, value, num=True):
@@ -489,34 +610,100 @@ def _pct(x, digits=3):
 
 
 def _tolerance_rows(ds):
-    """HTML rows describing the tolerances of the embedded config (empty if unreadable)."""
+    """Tolerance table rows (:func:`tolsim.reports.assumptions.tolerance_table`), the initial
+    gap included; the config's keys as written when it cannot be parsed."""
     try:
         config = config_of(ds)
     except Exception:  # noqa: BLE001 - the report must not fail on an old config
-        return []
-    from tolsim.study.spec import SOURCES
-
-    scale = {"angle": (180 / np.pi, "deg"), "length": (1e6, "µm")}
-    rows = []
-    for t in config.tolerances:
-        factor, unit = scale.get(SOURCES.get(t.source, ("length",))[0], (1.0, ""))
-        dist = t.distribution
-        fields = {"fixed": ("value",), "normal": ("mean", "std"), "uniform": ("low", "high"),
-                  "truncated_normal": ("mean", "std", "low", "high"),
-                  "cpk": ("low", "high", "mean", "cpk")}.get(dist.kind, ())
-        params = ", ".join(
-            f"{f} {getattr(dist, f):.3g}" if f == "cpk" else
-            f"{f} {factor * getattr(dist, f):.3g} {unit}" for f in fields)
-        if t.correlation_length > 0:
-            params += f"; correlation length {1e3 * t.correlation_length:.3g} mm"
-        rows.append(f"<tr><td>{html.escape(t.source)}</td><td>{html.escape(t.scope)}</td>"
-                    f"<td>{html.escape(dist.kind)}</td><td>{html.escape(params)}</td></tr>")
-    return rows
+        config = None
+    return tolerance_table(config, ds)
 
 
-def _html(ds, figures, sens, sens_source, q, path):
+def section_titles(ds) -> dict:
+    """Figure name -> heading of its section; the model check names the study's velocity
+    model (``velocity_model`` attribute)."""
+    model = ds.attrs.get("velocity_model", "?")
+    return {"velocity_deviation": "3. Ball velocity deviation ε",
+            "contact": "4. Ball-to-ball contact",
+            "quality": "5. Quality engineering",
+            "sensitivity": "6. What drives the risk",
+            "spot_checks": f"7. Model check: {model} versus the full friction model"}
+
+
+def study_facts(ds) -> list:
+    """(label, value, numeric) rows of "what was studied" (HTML and PDF)."""
+    a = ds.attrs
+    return [
+        ("assemblies (trains) sampled", f"{_i(ds, 'n_assemblies'):,}", True),
+        ("balls per train", ds.sizes.get("ball", "?"), True),
+        ("balls evaluated", f"{_i(ds, 'n_balls'):,}", True),
+        ("stroke duration (horizon)", f"{_f(ds, 'horizon'):.4g} s", True),
+        ("carriage speed v", f"{1e3 * _f(ds, 'groove_velocity'):.4g} mm/s", True),
+        ("carriage travel", f"{1e3 * _f(ds, 'horizon') * _f(ds, 'groove_velocity'):.4g} mm",
+         True),
+        ("velocity model", a.get("velocity_model", "?"), False),
+        ("static contact model", a.get("static_model", "?"), False),
+        ("propagation", a.get("propagation", "?"), False),
+        ("sampling", a.get("sampling", "?"), False),
+        ("seed", a.get("seed", "?"), True),
+        ("source", a.get("source", "?"), False),
+        ("history", a.get("history", "?"), False),
+    ]
+
+
+def headline(ds, sens=None) -> list:
+    """The key sentences of a report (the top of the HTML page and of the PDF)."""
+    n_asm = _i(ds, "n_assemblies")
+    n_unres = _i(ds, "n_assemblies_unresolved")
+    p, lo, hi = (_f(ds, x) for x in ("contact_probability", "contact_probability_ci_lower",
+                                      "contact_probability_ci_upper"))
+    travel = 1e3 * _f(ds, "horizon") * _f(ds, "groove_velocity")
+    out = [f"P(ball-to-ball contact within the {travel:.4g} mm stroke) = "
+           f"{format_fraction(p, lo, hi)} per train ({_i(ds, 'n_contact'):,} of "
+           f"{n_asm - n_unres:,} trains whose outcome is known)."]
+    if sens is not None and "contact" in getattr(sens, "outputs", ()):
+        k = list(sens.outputs).index("contact")
+        total = np.asarray(sens.total[k], dtype=float)
+        if np.any(np.isfinite(total)):
+            top = int(np.nanargmax(total))
+            name = sens.factors[top]
+            text = (f"It rests most on {name} (total Sobol' index {total[top]:.2f} for "
+                    "contact)")
+            if name == "initial_gap":
+                text += (": the assumed initial gap between the balls ([train] initial_gap), "
+                         "not a measured tolerance; see the tolerance and assumptions tables")
+            out.append(text + ".")
+    return out
+
+
+def _verdict_html(verdict, lines):
+    cls = {PASS: "pass", FAIL: "fail", UNDECIDED: "undecided"}.get(verdict.status, "none")
+    parts = [f"<div class='verdict-box {cls}' id='verdict'>",
+             f"<p class='verdict-label'>Verdict: {html.escape(verdict.label)}</p>",
+             *(f"<p>{html.escape(s)}</p>" for s in lines),
+             "<table><tr><th>quantity</th><th>requirement</th><th>estimate</th>"
+             "<th>verdict</th><th>why</th></tr>"]
+    for c in verdict.checks:
+        scls = {PASS: "status-pass", FAIL: "status-fail",
+                UNDECIDED: "status-undecided"}.get(c.status, "status-none")
+        parts.append(f"<tr><td>{html.escape(c.quantity)}</td>"
+                     f"<td>{html.escape(c.requirement)}</td><td>{html.escape(c.estimate)}</td>"
+                     f"<td class='{scls}'>{html.escape(STATUS_LABELS.get(c.status, c.status))}"
+                     "</td>"
+                     f"<td>{html.escape(c.reason)}</td></tr>")
+    parts.append("</table><p class='muted'>Pass: the whole 95 % interval meets the limit; "
+                 "fail: the whole interval violates it; undecided: the interval straddles "
+                 "it. The spec limits come from the config ([study] section); a quantity "
+                 "without one gets no verdict.</p></div>")
+    return parts
+
+
+def _html(ds, figures, sens, sens_source, q, path, verdict=None):
     a = ds.attrs
     n_asm = _i(ds, "n_assemblies")
+    model = str(a.get("velocity_model", "?"))
+    verdict = verdict if verdict is not None else study_verdict(ds, q)
+    tolerances = _tolerance_rows(ds)
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
         f"<title>{html.escape(a.get('title', 'tolsim report'))}</title>",
@@ -524,25 +711,31 @@ def _html(ds, figures, sens, sens_source, q, path):
         f"<h1>{html.escape(a.get('title', 'tolsim study'))}</h1>",
         f"<p class='muted'>Report of <code>{html.escape(os.path.basename(path))}</code>, "
         f"made by tolsim {__version__} on "
-        f"{datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}.</p>",
+        f"{datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}. The same report as PDF, with "
+        "the sign-off fields: <code>report.pdf</code>.</p>",
+        *_verdict_html(verdict, headline(ds, sens)),
         "<h2>1. What was studied</h2><table>",
-        _row("assemblies (trains) sampled", f"{n_asm:,}"),
-        _row("balls per train", ds.sizes.get("ball", "?")),
-        _row("balls evaluated", f"{_i(ds, 'n_balls'):,}"),
-        _row("stroke duration (horizon)", f"{_f(ds, 'horizon'):.4g} s"),
-        _row("carriage speed v", f"{1e3 * _f(ds, 'groove_velocity'):.4g} mm/s"),
-        _row("carriage travel", f"{1e3 * _f(ds, 'horizon') * _f(ds, 'groove_velocity'):.4g} mm"),
-        _row("velocity model", a.get("velocity_model", "?"), False),
-        _row("static contact model", a.get("static_model", "?"), False),
-        _row("propagation", a.get("propagation", "?"), False),
-        _row("sampling", a.get("sampling", "?"), False),
-        _row("seed", a.get("seed", "?")),
-        _row("source", a.get("source", "?"), False),
-        _row("history", a.get("history", "?"), False),
+        *(_row(label, value, num) for label, value, num in study_facts(ds)),
         "</table>",
-        *(["<h3>Tolerances</h3><table><tr><th>source</th><th>scope</th>"
-            "<th>distribution</th><th>parameters</th></tr>", *_tolerance_rows(ds), "</table>"]
-          if _tolerance_rows(ds) else []),
+    ]
+    if tolerances:
+        parts += ["<h3 id='tolerances'>Sampled inputs (tolerances and the initial gap)</h3>",
+                  "<table><tr><th>input</th><th>scope</th><th>distribution</th>"
+                  "<th>parameters</th><th>config</th></tr>"]
+        parts += [f"<tr><td>{html.escape(r.source)}</td><td>{html.escape(r.scope)}</td>"
+                  f"<td>{html.escape(r.distribution)}</td><td>{html.escape(r.parameters)}</td>"
+                  f"<td><code>{html.escape(r.key)}</code></td></tr>" for r in tolerances]
+        parts.append("</table><p class='muted'>Scope: rail and carriage errors are drawn once "
+                     "per assembly (or as a random field along the rail with a correlation "
+                     "length), ball errors per ball, the gap per adjacent pair.</p>")
+    parts += ["<h3 id='assumptions'>Assumptions and where they come from</h3>",
+              "<table><tr><th>topic</th><th>assumption</th><th>value</th>"
+              "<th>source</th></tr>"]
+    parts += [f"<tr><td>{html.escape(r.topic)}</td><td>{html.escape(r.item)}</td>"
+              f"<td>{html.escape(r.value)}</td><td>{html.escape(r.source)}</td></tr>"
+              for r in assumption_table(ds)]
+    parts += [
+        "</table>",
         "<details><summary>The study's config (TOML, as stored in the file: rerun it with "
         "<code>tolsim run</code>)</summary>",
         f"<pre>{html.escape(str(a.get('config', '')))}</pre></details>",
@@ -553,10 +746,6 @@ def _html(ds, figures, sens, sens_source, q, path):
     tq = np.asarray(ds["time_to_contact_quantile"], dtype=float)
     lev = np.asarray(ds["quantile"])
     med = tq[int(np.argmin(np.abs(lev - 0.5)))]
-    plimit = _f(ds, "contact_probability_limit")
-    verdict = quality.contact_probability_verdict(p, hi, plimit)
-    cls = "good" if verdict.startswith("meets") else "bad" if verdict.startswith(
-        "fails") else ""
     n_unres = _i(ds, "n_assemblies_unresolved")
     bounds = [_f(ds, f"contact_probability_{x}") for x in (
         "bound_lower", "bound_upper", "bounds_ci_lower", "bounds_ci_upper")]
@@ -579,8 +768,7 @@ def _html(ds, figures, sens, sens_source, q, path):
                              f"{100 * _f(ds, 'velocity_deviation_std'):.3f} %"),
         _row("ε range", f"{_pct(_f(ds, 'velocity_deviation_min'))} to "
                         f"{_pct(_f(ds, 'velocity_deviation_max'))}"),
-        _row(f"balls outside the {a.get('velocity_model', '?')} model's validity, "
-             "re-solved with the full model",
+        _row(f"balls outside the {model} model's validity, re-solved with the full model",
              f"{_i(ds, 'n_balls_resolved_full'):,} of {_i(ds, 'n_balls_outside_validity'):,} "
              f"in {float(a.get('full_model_resolve_seconds', 0.0)):.2f} s"),
         _row("unresolved balls (static not converged / loss of contact / full model failed)",
@@ -590,22 +778,21 @@ def _html(ds, figures, sens, sens_source, q, path):
         "</table>",
         *([f"<p class='verdict'>{html.escape(a['propagation_caveat'])}</p>"]
           if a.get("propagation_caveat") else []),
-        f"<p class='verdict {cls}'>Contact-probability spec: {html.escape(verdict)}.</p>",
     ]
 
-    def fig(name, caption):
+    def fig(name, caption=None):
+        caption = caption or CAPTIONS.get(name, name)
         if name in figures:
             parts.append(f"<figure><img alt='{html.escape(caption)}' "
                          f"src='{data_uri(figures[name])}'><figcaption class='muted'>"
                          f"{html.escape(caption)}</figcaption></figure>")
 
-    parts.append("<h2>3. Ball velocity deviation ε</h2>")
-    fig("velocity_deviation", "ε distribution over all valid balls, and along the train.")
-    parts.append("<h2>4. Ball-to-ball contact</h2>")
-    fig("contact", "Survival curve of the time to first contact (travel on the top axis), "
-                   "contact probability with its 95 % interval, and the pair that touches "
-                   "first.")
-    parts.append("<h2>5. Quality engineering</h2>")
+    titles = section_titles(ds)
+    parts.append(f"<h2>{html.escape(titles['velocity_deviation'])}</h2>")
+    fig("velocity_deviation")
+    parts.append(f"<h2>{html.escape(titles['contact'])}</h2>")
+    fig("contact")
+    parts.append(f"<h2>{html.escape(titles['quality'])}</h2>")
     if q:
         prop, cap = q["_proportion"], q["_capability"]
         limit = 100 * _f(ds, "velocity_deviation_limit")
@@ -631,11 +818,12 @@ def _html(ds, figures, sens, sens_source, q, path):
                      "limit in units of 3σ; 1.33 means 4σ. Where the two Cpk differ, ε is "
                      "not normal and the percentile index is the one to use. "
                      "Fractions below 0.1 % are shown in ppm.</p>")
-        fig("quality", "Tails of ε on a log scale against the spec limit.")
+        fig("quality")
     else:
-        parts.append("<p>No limit on |ε| in the config (<code>study.velocity_deviation_limit"
-                     "</code>): no fraction out of spec or capability index.</p>")
-    parts.append("<h2>6. What drives the risk</h2>")
+        parts.append("<p>No limit on |ε| in the config (<code>[study] "
+                     "velocity_deviation_limit_percent</code> or <code>_ppm</code>): no "
+                     "fraction out of spec or capability index.</p>")
+    parts.append(f"<h2>{html.escape(titles['sensitivity'])}</h2>")
     if sens is None:
         parts.append(f"<p>{html.escape(sens_source)}</p>")
     elif len(sens.factors) == 0:
@@ -643,8 +831,7 @@ def _html(ds, figures, sens, sens_source, q, path):
                      "nothing to rank.</p>")
     else:
         parts.append(f"<p class='muted'>{html.escape(sens_source)}</p>")
-        fig("sensitivity", "Sobol' indices: first order (the factor alone) and total effect "
-                           "(with interactions).")
+        fig("sensitivity")
         for k, output in enumerate(sens.outputs):
             if np.all(np.isnan(sens.total[k])):
                 parts.append(f"<p>{html.escape(OUTPUT_TITLES.get(output, output))}: the "
@@ -666,9 +853,15 @@ def _html(ds, figures, sens, sens_source, q, path):
                              f"</td><td class='num'>{t:.3f} [{tl:.3f}, {th:.3f}]</td>"
                              f"<td class='num'>{sens.first_order[k, i]:.3f}</td></tr>")
             parts.append("</table>")
-    parts.append("<h2>7. Model check: analytic versus full friction model</h2>")
-    fig("spot_checks", "Randomly chosen balls re-solved with the full friction model.")
+    parts.append(f"<h2>{html.escape(titles['spot_checks'])}</h2>")
+    fig("spot_checks")
     parts.append(f"<p class='muted'>{html.escape(str(a.get('spot_check_status', '')))}</p>")
+    parts.append("<h2 id='sign-off'>8. Review and sign-off</h2><table class='signoff'><tr>"
+                 "<th></th>" + "".join(f"<th>{f}</th>" for f in SIGN_OFF_FIELDS) + "</tr>")
+    for role in SIGN_OFF_ROLES:
+        parts.append(f"<tr><th>{role}</th>" + "<td></td>" * len(SIGN_OFF_FIELDS) + "</tr>")
+    parts.append("</table><p>Decision: " + " &nbsp; ".join(
+        f"&#9744; {d}" for d in SIGN_OFF_DECISIONS) + "</p>")
     parts.append("<h2>Provenance</h2><table>")
     for key in ("Conventions", "source", "history", "seed", "references",
                 "contact_probability_interval", "velocity_deviation_quantile_resolution",
@@ -683,8 +876,9 @@ def _html(ds, figures, sens, sens_source, q, path):
 # Driver
 # --------------------------------------------------------------------------------------------
 def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
-                progress=None) -> ReportOutputs:
-    """Write ``report.html`` and the PNGs of a result file into ``folder``.
+                progress=None, pdf=True, out_of_spec_limit=None,
+                cpk_minimum=None) -> ReportOutputs:
+    """Write ``report.html``, ``report.pdf`` and the PNGs of a result file into ``folder``.
 
     Parameters
     ----------
@@ -698,6 +892,11 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
         Base-sample size for that (default :data:`SENSITIVITY_SAMPLES`).
     progress : callable, optional
         Called with a short message before each step.
+    pdf : bool
+        Also write ``report.pdf`` with the sign-off block (:mod:`tolsim.reports.pdf`).
+    out_of_spec_limit, cpk_minimum : float, optional
+        Allowed fraction of balls out of spec and required Cpk for the verdict
+        (:func:`tolsim.reports.verdict.study_verdict`); the config has no keys for them.
 
     Returns
     -------
@@ -715,6 +914,9 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     sens = sensitivity_from_file(ds)
     if sens is not None:
         source = "Sobol' indices stored in the result file by tolsim run."
+    elif sensitivity and (config_error := _config_error(ds)):
+        source = ("Sensitivity indices not computed: the config stored in the file cannot "
+                  f"be parsed by this tolsim version ({config_error}).")
     elif sensitivity:
         say("sensitivity (Sobol' indices from the embedded config)")
         sens = compute_sensitivity(ds, sensitivity_samples)
@@ -729,6 +931,8 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     out.sensitivity, out.sensitivity_source = sens, source
     q = quality.dataset_quality(ds)
     out.quality = q
+    out.verdict = study_verdict(ds, q, out_of_spec_limit=out_of_spec_limit,
+                                cpk_minimum=cpk_minimum)
 
     say("figures")
     figs = {"velocity_deviation": plot_velocity_deviation(ds), "contact": plot_contact(ds),
@@ -747,5 +951,36 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     say("report.html")
     out.html = os.path.join(folder, "report.html")
     with open(out.html, "w", encoding="utf-8") as fh:
-        fh.write(_html(ds, pngs, sens, source, q, os.fspath(path)))
+        fh.write(_html(ds, pngs, sens, source, q, os.fspath(path), out.verdict))
+    if pdf:
+        say("report.pdf")
+        out.pdf = write_report_pdf(ds, figs, sens, out.verdict, path,
+                                   os.path.join(folder, "report.pdf"))
     return out
+
+
+def write_report_pdf(ds, figs, sens, verdict, path, pdf_path) -> str:
+    """The PDF of a report (:func:`tolsim.reports.pdf.write_pdf`): ``figs`` are the report's
+    Figures by name, rendered again at :data:`tolsim.reports.pdf.FIGURE_DPI`."""
+    from tolsim.reports import pdf
+
+    return pdf.write_pdf(pdf_path, **pdf_content(ds, figs, sens, verdict, path))
+
+
+def pdf_content(ds, figs, sens, verdict, path) -> dict:
+    """The arguments of :func:`tolsim.reports.pdf.report_pages` for a result file."""
+    from tolsim.reports import pdf
+
+    order = ("velocity_deviation", "contact", "quality", "sensitivity", "spot_checks")
+    pngs = {name: render_png(figs[name], dpi=pdf.FIGURE_DPI) for name in order if name in figs}
+    a = ds.attrs
+    subtitle = (f"Result file {os.path.basename(os.fspath(path))}, report by tolsim "
+                f"{__version__} on {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}; "
+                f"study run by {a.get('source', '?')}: {a.get('history', '?')}")
+    return dict(
+        title=str(a.get("title", "tolsim study")), subtitle=subtitle,
+        verdict=verdict, headline=headline(ds, sens),
+        facts=[(label, str(value)) for label, value, _ in study_facts(ds)],
+        tolerances=_tolerance_rows(ds), assumptions=assumption_table(ds), figures=pngs,
+        captions=CAPTIONS, sections=section_titles(ds), result_path=os.fspath(path),
+        sign_off=(SIGN_OFF_ROLES, SIGN_OFF_FIELDS, SIGN_OFF_DECISIONS))

@@ -59,6 +59,14 @@ def styled(func):
     return wrapper
 
 
+def new_canvas(width=6.4, height=4.2):
+    """A Figure without axes on an Agg canvas (constrained layout), for grid layouts and
+    text pages. Call it from a function decorated with :func:`styled`."""
+    fig = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
 def new_figure(width=6.4, height=4.2, **subplots):
     """A Figure on an Agg canvas and its axes (``Figure.subplots(**subplots)``).
 
@@ -68,16 +76,15 @@ def new_figure(width=6.4, height=4.2, **subplots):
     -------
     fig, axes
     """
-    fig = Figure(figsize=(width, height), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_canvas(width, height)
     return fig, fig.subplots(**subplots)
 
 
-def render_png(fig) -> bytes:
-    """The figure as PNG bytes (Agg)."""
+def render_png(fig, dpi=DPI) -> bytes:
+    """The figure as PNG bytes (Agg) at ``dpi`` [dots per inch]."""
     buf = io.BytesIO()
     with matplotlib.rc_context(RC):
-        fig.savefig(buf, format="png", dpi=DPI)
+        fig.savefig(buf, format="png", dpi=dpi)
     return buf.getvalue()
 
 

@@ -3,9 +3,11 @@
 All randomness comes from one :class:`numpy.random.SeedSequence` with the study's ``seed``:
 block k of ``block_size`` assemblies draws from ``SeedSequence(seed, spawn_key=(0, k))`` (the
 k-th child of the "assemblies" stream), the spot-check selection from
-``SeedSequence(seed, spawn_key=(1,))``. A block is always drawn whole, in a fixed order, and
-then cut to the assemblies it holds, so the draws of an assembly depend only on (seed,
-block_size, its index): not on the number of samples, the chunking or the number of workers.
+``SeedSequence(seed, spawn_key=(1,))`` (its near-limit stratum from the hash key of
+``spawn_key=(1, 1)``, :class:`SpotCheckPlan`). A block is always drawn whole, in a fixed
+order, and then cut to the assemblies it holds, so the draws of an assembly depend only on
+(seed, block_size, its index): not on the number of samples, the chunking or the number of
+workers.
 
 Within a block the draws are, in this order:
 
@@ -25,7 +27,19 @@ Within a block the draws are, in this order:
 
 Every distribution maps the standard normal z to its value
 (:meth:`tolsim.study.spec.Distribution.from_normal`), so QMC, fields and plain draws share
-the transformation.
+the transformation; an ``empirical`` distribution (measured values) maps z through u = Phi(z)
+and its interpolated empirical quantile function.
+
+Correlated sources (:class:`tolsim.study.spec.Correlation`, a Gaussian copula): the block
+holds independent standard normals xi; :func:`error_values` turns those of a correlated group
+into z = L xi, L the lower Cholesky factor of the group's correlation matrix, element by
+element (no BLAS: the sums run in a fixed order, so the values are bit-identical however the
+blocks are chunked). The group shares a scope, so the xi of its sources have one shape; rail
+fields of one correlation length share their grid and AR(1) coefficients, and the linear map
+commutes with the recursion and the interpolation: the fields are then cross-correlated as
+rho_ij exp(-|ds| / l). The sensitivity analysis swaps the independent xi, so the index of a
+later source of a group is that of its part independent of the earlier ones (Cholesky
+order).
 """
 
 import warnings
@@ -92,7 +106,8 @@ class Block:
     index, start, size : int
         Block number, index of its first assembly, number of assemblies.
     normals : dict
-        source -> standard normal variates: shape (size, 1) for per-assembly sources,
+        source -> independent standard normal variates (correlated groups are combined by
+        :func:`error_values`): shape (size, 1) for per-assembly sources,
         (size, balls) for ``ball`` sources and for rail fields at the ball centres
         (``constant`` propagation).
     fields : dict
@@ -292,21 +307,176 @@ def error_values(config, block: Block, rail_position=None):
     """
     pos = block.initial_position if rail_position is None else rail_position
     shape = pos.shape
-    out = {}
+    z = {}
     for t in config.tolerances:
         if t.source in block.fields:
-            z = block.fields[t.source].at(pos)
+            z[t.source] = block.fields[t.source].at(pos)
         else:
-            z = np.broadcast_to(block.normals[t.source], shape)
-        out[t.source] = t.distribution.from_normal(z)
-    return out
+            z[t.source] = np.broadcast_to(block.normals[t.source], shape)
+    for group in config.correlations:
+        _correlate(group, z)
+    return {t.source: t.distribution.from_normal(z[t.source]) for t in config.tolerances}
+
+
+def _correlate(group, z):
+    """Replace the independent normals xi of ``group``'s sources in ``z`` by L xi."""
+    chol = group.cholesky
+    xi = [z[source] for source in group.sources]
+    for i, source in enumerate(group.sources):
+        total = chol[i, 0] * xi[0]  # elementwise, k = 0, 1, ..., i: a fixed order
+        for k in range(1, i + 1):
+            total = total + chol[i, k] * xi[k]
+        z[source] = total
 
 
 def choose_spot_checks(config) -> np.ndarray:
-    """Sorted global ball indices (assembly * balls + ball) re-solved with the full model."""
+    """Sorted global ball indices (assembly * balls + ball): the candidates of the uniform
+    stratum of the spot checks (all ``spot_checks`` of them; see :class:`SpotCheckPlan`)."""
     total = config.study.samples * config.train.balls
     k = min(config.study.spot_checks, total)
     if k == 0:
         return np.empty(0, dtype=np.int64)
     rng = spot_check_generator(config.study.seed)
     return np.sort(rng.choice(total, size=k, replace=False)).astype(np.int64)
+
+
+# --------------------------------------------------------------------------------------------
+# Spot checks stratified towards the spec limit
+# --------------------------------------------------------------------------------------------
+#: Band of |epsilon| around the spec limit L, as multiples of L, from which the near-limit
+#: stratum of the spot checks is drawn.
+NEAR_LIMIT_BAND = (0.8, 1.2)
+#: Names of the spot-check strata, by their code in ``spot_check_stratum``.
+SPOT_CHECK_STRATA = ("uniform", "near_limit")
+#: Identity of the selection scheme (part of a run's fingerprint for resuming).
+SPOT_CHECK_SCHEME = "spot checks: uniform + near-limit band, splitmix64 priorities, v1"
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1, _MIX2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+
+
+def spot_check_priority(key: int, ball_index) -> np.ndarray:
+    """Seeded pseudo-random priority of global ball indices (uint64).
+
+    SplitMix64's output function (Steele, Lea & Flood, "Fast splittable pseudorandom number
+    generators", OOPSLA 2014) at state ``key + (index + 1) * golden``: a fixed function of
+    (key, index), so a ball's priority does not depend on which block or chunk it is in.
+    """
+    x = np.asarray(ball_index, dtype=np.uint64)
+    with np.errstate(over="ignore"):  # arithmetic modulo 2^64, as intended
+        z = np.uint64(key) + (x + np.uint64(1)) * _GOLDEN
+        z = (z ^ (z >> np.uint64(30))) * _MIX1
+        z = (z ^ (z >> np.uint64(27))) * _MIX2
+    return z ^ (z >> np.uint64(31))
+
+
+def _smallest(priority, ball_index, k):
+    """Positions of the k smallest (priority, ball index) pairs, in that order."""
+    order = np.lexsort((ball_index, priority))
+    return order[:k]
+
+
+@dataclass(frozen=True)
+class SpotCheckPlan:
+    """Which balls a study re-solves with the full model (fixed before the run).
+
+    Two strata. ``uniform``: balls drawn uniformly over all balls before the run
+    (:func:`choose_spot_checks`). ``near_limit``: with a spec limit L on |epsilon|, up to
+    ``near_limit`` = ``count`` // 2 balls whose study epsilon came from the fast model and
+    lies in ``band`` = [0.8 L, 1.2 L] (:data:`NEAR_LIMIT_BAND`), where the ppm and Cpk
+    claims are made; a uniform sample of the band: the balls with the smallest
+    :func:`spot_check_priority`. Each block keeps its ``near_limit`` smallest, and the k
+    smallest of a union are the k smallest of the parts' k smallest, so the choice is the
+    same whatever the chunking, workers or resuming (bit-identical). When the band holds
+    fewer balls the uniform stratum fills up to ``count`` (its candidates with the smallest
+    priorities); without a limit every spot check is uniform, as before.
+
+    Attributes
+    ----------
+    uniform : ndarray of int64
+        Sorted global ball indices, the ``count`` candidates of the uniform stratum.
+    count : int
+        Spot checks in all.
+    near_limit : int
+        Most spot checks from the band.
+    band : tuple of float
+        (low, high) of |epsilon| [-]; NaN without a limit.
+    key : int
+        Hash key of the priorities (``SeedSequence(seed, spawn_key=(1, 1))``).
+    """
+
+    uniform: np.ndarray
+    count: int
+    near_limit: int
+    band: tuple
+    key: int
+
+
+def spot_check_plan(config) -> SpotCheckPlan:
+    """The :class:`SpotCheckPlan` of a study."""
+    uniform = choose_spot_checks(config)
+    limit = config.study.velocity_deviation_limit
+    has_limit = bool(limit) and limit > 0
+    band = (NEAR_LIMIT_BAND[0] * limit, NEAR_LIMIT_BAND[1] * limit) if has_limit else (
+        float("nan"), float("nan"))
+    key = int(np.random.SeedSequence(config.study.seed, spawn_key=(1, 1)).generate_state(
+        1, np.uint64)[0])
+    return SpotCheckPlan(uniform, len(uniform), len(uniform) // 2 if has_limit else 0,
+                         band, key)
+
+
+def near_limit_candidates(plan: SpotCheckPlan, velocity_deviation, fast, start_ball: int,
+                          exclude=()):
+    """The near-limit candidates among consecutive balls.
+
+    Parameters
+    ----------
+    plan : SpotCheckPlan
+    velocity_deviation : ndarray, shape (n,)
+        The study's epsilon of balls ``start_ball`` .. ``start_ball + n - 1`` [-].
+    fast : ndarray of bool, shape (n,)
+        True where epsilon came from the study's fast model.
+    start_ball : int
+        Global index of the first ball.
+    exclude : array_like of int
+        Local positions already spot-checked (the uniform candidates).
+
+    Returns
+    -------
+    local : ndarray of int64
+        Local positions of at most ``plan.near_limit`` balls in the band (smallest
+        priorities), sorted.
+    in_band : int
+        Balls of the fast model in the band (the stratum's population here).
+    """
+    if plan.near_limit == 0:
+        return np.empty(0, np.int64), 0
+    a = np.abs(velocity_deviation)
+    with np.errstate(invalid="ignore"):
+        mask = fast & (a >= plan.band[0]) & (a <= plan.band[1])
+    in_band = int(np.count_nonzero(mask))
+    mask[np.asarray(exclude, dtype=np.int64)] = False
+    local = np.flatnonzero(mask)
+    glob = local + start_ball
+    keep = _smallest(spot_check_priority(plan.key, glob), glob, plan.near_limit)
+    return np.sort(local[keep]).astype(np.int64), in_band
+
+
+def select_spot_checks(plan: SpotCheckPlan, ball_index, stratum) -> np.ndarray:
+    """Rows of the recorded candidates that are spot-checked, sorted by ball index.
+
+    ``ball_index``, ``stratum``: of every recorded candidate (all ``count`` uniform ones and
+    each block's near-limit ones). Keeps the ``near_limit`` near-limit candidates with the
+    smallest priorities and fills up to ``count`` with the uniform candidates of smallest
+    priority.
+    """
+    ball_index = np.asarray(ball_index, dtype=np.int64)
+    stratum = np.asarray(stratum)
+    priority = spot_check_priority(plan.key, ball_index)
+    near = np.flatnonzero(stratum == 1)
+    near = near[_smallest(priority[near], ball_index[near], plan.near_limit)]
+    uniform = np.flatnonzero(stratum == 0)
+    uniform = uniform[_smallest(priority[uniform], ball_index[uniform],
+                                plan.count - len(near))]
+    rows = np.concatenate([uniform, near])
+    return rows[np.argsort(ball_index[rows], kind="stable")]

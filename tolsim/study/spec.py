@@ -4,6 +4,7 @@ Built by :func:`tolsim.io.config.load_config` from TOML (where the unit suffixes
 converted), or directly in Python. Nothing here knows about files or units.
 """
 
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -37,11 +38,15 @@ SOURCES = {
 }
 
 SCOPES = ("rail", "carriage", "ball")
-DISTRIBUTIONS = ("fixed", "normal", "uniform", "truncated_normal", "cpk")
+DISTRIBUTIONS = ("fixed", "normal", "uniform", "truncated_normal", "cpk", "empirical")
 VELOCITY_MODELS = ("eq24", "analytic", "full")
 STATIC_MODELS = ("paired", "rigid", "solved", "linearised")
 PROPAGATIONS = ("constant", "along_track")
 SAMPLINGS = ("random", "sobol", "lhs")
+#: Standard deviations either side of the mean taken as the reach of an unbounded normal
+#: (``normal``, untruncated ``cpk``) when its values are checked against the static model's
+#: range: P(|z| > 8) = 1.2e-15, so even 10^9 balls never draw beyond it.
+PLAUSIBLE_NORMAL_RANGE = 8.0
 
 
 # --------------------------------------------------------------------------------------------
@@ -62,7 +67,14 @@ class Distribution:
         tolerance band [``low``, ``high``] made by a normal process with capability index
         ``cpk`` around ``mean`` (default the band centre),
         std = min(high - mean, mean - low) / (3 cpk); ``truncate`` = true models 100 %
-        inspection (parts outside the band are rejected).
+        inspection (parts outside the band are rejected); ``empirical``: measured values
+        (``data``), sampled through their interpolated empirical quantile function
+        (:meth:`from_normal`).
+    data : tuple of float
+        ``empirical`` only: the measured values, sorted ascending [SI].
+    data_file, data_sha256 : str
+        ``empirical`` only: where the values came from (the path as written in the config)
+        and the SHA-256 of that file's bytes, for the result file's audit trail.
     """
 
     kind: str = "fixed"
@@ -73,16 +85,40 @@ class Distribution:
     high: float = 0.0
     cpk: float = 0.0
     truncate: bool = False
+    data: tuple = ()
+    data_file: str = ""
+    data_sha256: str = ""
 
     @property
     def is_random(self) -> bool:
+        if self.kind == "empirical":
+            return len(self.data) > 1 and self.data[0] != self.data[-1]
         return self.kind != "fixed" and not (self.kind == "normal" and self.std == 0.0)
+
+    @property
+    def support(self) -> tuple:
+        """(lowest, highest) value the distribution can give [SI]; for an unbounded normal
+        the values at -/+ :data:`PLAUSIBLE_NORMAL_RANGE` standard deviations."""
+        if self.kind == "fixed":
+            return self.value, self.value
+        if self.kind == "empirical":
+            return self.data[0], self.data[-1]
+        if self.kind == "uniform" or self.kind == "truncated_normal" or (
+                self.kind == "cpk" and self.truncate):
+            return self.low, self.high
+        reach = PLAUSIBLE_NORMAL_RANGE * self.std
+        return self.mean - reach, self.mean + reach
 
     @property
     def expected(self) -> float:
         """Mean of the distribution (used for nominal ball positions) [SI]."""
         if self.kind == "fixed":
             return self.value
+        if self.kind == "empirical":
+            # mean of the piecewise-linear quantile function: the trapezoidal rule over
+            # the n - 1 equal steps in u between the order statistics
+            x = np.asarray(self.data)
+            return float((x.sum() - 0.5 * (x[0] + x[-1])) / (x.size - 1))
         if self.kind == "uniform":
             return 0.5 * (self.low + self.high)
         if self.kind == "normal" or (self.kind == "cpk" and not self.truncate):
@@ -97,6 +133,13 @@ class Distribution:
         z = np.asarray(z, dtype=np.float64)
         if self.kind == "fixed":
             return np.full(z.shape, self.value)
+        if self.kind == "empirical":
+            # u = Phi(z), then the sample quantile of definition 7 of Hyndman and Fan (1996),
+            # numpy's default method="linear": Q(u) = x_(k) + (h - k)(x_(k+1) - x_(k)) with
+            # h = (n - 1) u and the order statistics x_(0) <= ... <= x_(n-1). Values stay
+            # within the measured range.
+            x = np.asarray(self.data)
+            return np.interp((x.size - 1) * ndtr(z), np.arange(x.size, dtype=np.float64), x)
         if self.kind == "normal" or (self.kind == "cpk" and not self.truncate):
             return self.mean + self.std * z
         if self.kind == "uniform":
@@ -130,6 +173,73 @@ class Tolerance:
     distribution: Distribution
     scope: str
     correlation_length: float = 0.0
+
+
+def correlation_matrix_problem(matrix) -> str | None:
+    """Why ``matrix`` is not a valid correlation matrix (one line), or None if it is.
+
+    Valid: square, finite, symmetric (exactly, as typed), unit diagonal and positive
+    definite (its Cholesky factorisation exists; a coefficient of +/-1 is only positive
+    semi-definite: use one source instead of two perfectly correlated ones).
+    """
+    m = np.asarray(matrix, dtype=np.float64)
+    n = m.shape[0] if m.ndim == 2 else 0
+    if m.ndim != 2 or m.shape != (n, n) or n < 2:
+        return f"must be a square matrix of at least 2 x 2, got shape {m.shape}"
+    if not np.all(np.isfinite(m)):
+        return "must hold finite numbers"
+    if not np.all(np.diag(m) == 1.0):
+        return f"must have a unit diagonal, got {np.diag(m).tolist()}"
+    i, j = np.nonzero(m != m.T)
+    if i.size:
+        return f"must be symmetric: [{i[0]}][{j[0]}] = {m[i[0], j[0]]!r} but " \
+               f"[{j[0]}][{i[0]}] = {m[j[0], i[0]]!r}"
+    if np.any(np.abs(m) > 1.0):
+        return "must have coefficients within [-1, 1]"
+    try:
+        np.linalg.cholesky(m)
+    except np.linalg.LinAlgError:
+        return ("is not positive definite (no Cholesky factor): the coefficients contradict "
+                "each other, or one is +/-1 (then use one source)")
+    return None
+
+
+@dataclass(frozen=True)
+class Correlation:
+    """Correlated tolerance sources: a Gaussian copula of their standard normal variates.
+
+    Each source keeps its own distribution (its marginal); the standard normals z that
+    :meth:`Distribution.from_normal` maps are correlated with ``matrix``:
+    z = L xi with L the lower Cholesky factor of ``matrix`` and xi independent standard
+    normals (:func:`tolsim.study.sampling.error_values`). For normal marginals the values
+    then have Pearson correlation ``matrix``; for others the Spearman rank correlation is
+    (6 / pi) asin(rho / 2) (Kruskal 1958), which a monotone marginal does not change.
+
+    Attributes
+    ----------
+    sources : tuple of str
+        Keys of :data:`SOURCES`, all with the same scope (and, for rail random fields, the
+        same correlation length), in the order of ``matrix``.
+    matrix : tuple of tuple of float
+        Correlation matrix of the standard normals [-], positive definite.
+    """
+
+    sources: tuple
+    matrix: tuple
+
+    def __post_init__(self):
+        if len(set(self.sources)) != len(self.sources):
+            raise ValueError(f"correlation sources {self.sources!r} repeat a source")
+        problem = correlation_matrix_problem(self.matrix)
+        if problem is None and len(self.matrix) != len(self.sources):
+            problem = f"is {len(self.matrix)} x {len(self.matrix)} for {len(self.sources)} sources"
+        if problem:
+            raise ValueError(f"correlation matrix {problem}")
+
+    @property
+    def cholesky(self) -> np.ndarray:
+        """Lower Cholesky factor L of ``matrix`` (L L^T = matrix)."""
+        return np.linalg.cholesky(np.asarray(self.matrix, dtype=np.float64))
 
 
 @dataclass(frozen=True)
@@ -215,13 +325,16 @@ class StudySettings:
     time_steps : int
         Integration steps over the horizon for ``along_track`` propagation.
     velocity_deviation_range : tuple of float
-        Histogram range of epsilon [-].
+        Histogram range of epsilon [-] (a fraction; config key
+        ``velocity_deviation_range_percent``).
     velocity_deviation_bins, time_bins : int
         Histogram bins of epsilon and of time to first contact.
     velocity_deviation_limit : float
-        Spec limit on |epsilon| [-] (0: none); stored for reports.
+        Spec limit on |epsilon| [-] (0: none), a fraction: 0.005 is 0.5 % (config key
+        ``velocity_deviation_limit_percent`` or ``_ppm``); stored for reports.
     contact_probability_limit : float
-        Spec limit on P(contact) [-] (0: none); stored for reports.
+        Spec limit on P(contact) [-] (0: none), a fraction (config key
+        ``contact_probability_limit_percent`` or ``_ppm``); stored for reports.
     sensitivity_samples : int
         Base sample size of the variance-based sensitivity analysis run after the study
         (0: none); it costs sensitivity_samples (d + 2) extra assemblies for d random
@@ -247,7 +360,12 @@ class StudySettings:
 
 @dataclass(frozen=True)
 class StudyConfig:
-    """A validated study: everything in SI units. ``text`` is the TOML source."""
+    """A validated study: everything in SI units.
+
+    ``text`` is the TOML source of exactly this study (the effective config: run-level
+    overrides are written into it by :meth:`with_overrides`), so ``tolsim run`` on it
+    reproduces the run. ``correlations`` holds the :class:`Correlation` groups of sources.
+    """
 
     bearing: Bearing
     motion: Motion
@@ -257,9 +375,24 @@ class StudyConfig:
     study: StudySettings
     text: str = field(default="", repr=False)
     path: str = "<string>"
+    correlations: tuple = ()
+
+    @property
+    def data_files(self) -> dict:
+        """Measured-data files of ``empirical`` distributions: path (as in the config) ->
+        SHA-256 of its bytes, in config order."""
+        dists = [self.train.initial_gap] + [t.distribution for t in self.tolerances]
+        return {d.data_file: d.data_sha256 for d in dists if d.kind == "empirical"
+                and d.data_file}
 
     def with_overrides(self, *, samples=None, seed=None):
-        """A copy with run-level settings replaced (the CLI flags)."""
+        """A copy with run-level settings replaced (the CLI flags, or the samples actually
+        run when a run stops early).
+
+        The new values are also written into ``text`` (the value on the ``samples`` /
+        ``seed`` line of ``[study]`` is replaced; layout and comments are kept), so the text
+        stays the TOML of the study that runs. A config without text keeps an empty text.
+        """
         changes = {}
         if samples is not None:
             if not (isinstance(samples, int) and samples > 0):
@@ -269,6 +402,77 @@ class StudyConfig:
             if not (isinstance(seed, int) and seed >= 0):
                 raise ValueError(f"seed = {seed!r} must be a non-negative integer")
             changes["seed"] = seed
-        return replace(self, study=replace(self.study, **changes))
+        text = self.text
+        for key, value in changes.items():
+            if text:
+                text = set_study_value(text, key, value)
+        return replace(self, study=replace(self.study, **changes), text=text)
+
+
+# --------------------------------------------------------------------------------------------
+# Effective config text
+# --------------------------------------------------------------------------------------------
+#: A table header ``[a.b]`` or ``[[a]]`` (not an array value: no commas).
+_HEADER = re.compile(r"""^\s*\[(\[?)\s*([A-Za-z0-9_\-."'\s]+?)\s*\]\]?\s*(#.*)?$""")
+
+
+def _key(name):
+    """Regex of a TOML key name, bare or quoted."""
+    return rf"""(?:{name}|"{name}"|'{name}')"""
+
+
+def set_study_value(text: str, key: str, value: int) -> str:
+    """``text`` with the value of ``[study]`` key ``key`` replaced by ``value``.
+
+    The key is found as a line of the ``[study]`` table (``samples = 100  # note``), as a
+    dotted key before the first table (``study.samples = 100``) or in an inline table
+    (``study = { samples = 100, ... }``); only the value changes, so comments and layout stay
+    (the comment keeps its column where the value's width allows). Plain text processing:
+    no TOML parser below the I/O layer.
+
+    Raises
+    ------
+    ValueError
+        If the key is not found exactly once.
+    """
+    lines = text.splitlines(keepends=True)
+    table, in_string, hits = "", None, []
+    value_re = r"([^\s,}#]+)"
+    in_table = re.compile(rf"^(\s*{_key(key)}\s*=\s*){value_re}([ \t]*)(#.*)?(\r?\n)?$")
+    dotted = re.compile(rf"^(\s*{_key('study')}\s*\.\s*{_key(key)}\s*=\s*){value_re}"
+                        r"([ \t]*)(#.*)?(\r?\n)?$")
+    inline = re.compile(rf"^\s*{_key('study')}\s*=\s*{{")
+    inline_value = re.compile(rf"([{{,]\s*{_key(key)}\s*=\s*){value_re}")
+    for number, line in enumerate(lines):
+        if in_string is not None:  # inside a multi-line string: not TOML structure
+            if line.count(in_string) % 2:
+                in_string = None
+            continue
+        for quote in ('"""', "'''"):
+            if line.count(quote) % 2:
+                in_string = quote
+        m = _HEADER.match(line)
+        if m and in_string is None:
+            table = ".".join(p.strip().strip("\"'") for p in m.group(2).split("."))
+            table = "[]" if m.group(1) else table  # an array of tables: never [study]
+            continue
+        pattern = in_table if table == "study" else dotted if table == "" else None
+        if pattern is not None and (m := pattern.match(line)):
+            hits.append((number, m))
+        elif table == "" and inline.match(line) and inline_value.search(line):
+            hits.append((number, None))
+    if len(hits) != 1:
+        raise ValueError(f"cannot record study.{key} = {value} in the config text: the key "
+                         f"is found {len(hits)} times")
+    number, m = hits[0]
+    new = str(value)
+    if m is None:
+        lines[number] = inline_value.sub(lambda x: x.group(1) + new, lines[number], count=1)
+    else:
+        head, old, gap, comment, end = m.groups()
+        if comment:
+            gap = " " * max(1, len(gap) + len(old) - len(new))
+        lines[number] = head + new + (gap or "") + (comment or "") + (end or "")
+    return "".join(lines)
 
 

@@ -37,6 +37,8 @@ for computing sample variances", Stanford CS report STAN-CS-79-773 (1979).
 [Manski2003] C. F. Manski, Partial Identification of Probability Distributions, Springer, 2003.
 """
 
+import copy
+
 import numpy as np
 
 from tolsim.study.estimators import (
@@ -235,6 +237,16 @@ class Accumulator:
         self.time_min = min(self.time_min, other.time_min)
         self.time_max = max(self.time_max, other.time_max)
         self.cluster = self.cluster.merge(other.cluster)
+
+    def merged(self, other) -> "Accumulator":
+        """A new accumulator: self followed by ``other`` (:meth:`merge` on a deep copy).
+
+        Self is left unchanged, so a runner can replace its state by the successor in one
+        assignment: a KeyboardInterrupt never leaves a half-merged state behind.
+        """
+        out = copy.deepcopy(self)
+        out.merge(other)
+        return out
 
     # ---------------------------------------------------------------------------------------
     def state(self) -> dict:

@@ -1,0 +1,218 @@
+"""The verdict of a study against its spec limits: pass, fail or undecided at the stated
+confidence, or "no spec limit given".
+
+Each check compares a 95 % interval with a limit (two-sided intervals, so each one-sided
+statement below holds with at least 97.5 % confidence):
+
+* **P(contact) per train <= P_max** (``study.contact_probability_limit``). The interval is
+  the one that covers the partial-identification bounds over all trains (unresolved trains
+  counted as no contact / as contact: ``contact_probability_bounds_ci_lower`` /
+  ``_ci_upper``), so an unresolved train can never turn a fail into a pass; files without
+  the bounds use the Clopper-Pearson interval over the resolved trains. Pass when its upper
+  end is at most P_max, fail when its lower end is above P_max, undecided otherwise.
+* **fraction of balls with |epsilon| > L <= p_max**: the fraction out of spec and its
+  interval with the assembly as the sampling unit (:func:`tolsim.study.quality.
+  dataset_quality`) against an allowed fraction p_max. The config has a limit L on |epsilon|
+  but no allowed fraction; :func:`study_verdict` takes one (``out_of_spec_limit``).
+* **Cpk >= Cpk_min**: Cpk with its interval (delta method over assemblies) against a
+  required minimum (``cpk_minimum``; none in the config either). Pass when the lower end is
+  at least Cpk_min, fail when the upper end is below it.
+
+The overall verdict is *fail* if any check fails, else *undecided* if any is undecided, else
+*pass* if any passes, else "no spec limit given".
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tolsim.study.estimators import format_fraction
+
+PASS, FAIL, UNDECIDED, NO_LIMIT = "pass", "fail", "undecided", "no spec limit given"
+#: How a status is shown in the table of checks.
+STATUS_LABELS = {PASS: "PASS", FAIL: "FAIL", UNDECIDED: "UNDECIDED", NO_LIMIT: "no verdict"}
+#: Confidence level of the intervals behind the verdict.
+CONFIDENCE = 0.95
+
+
+@dataclass(frozen=True)
+class SpecCheck:
+    """One spec limit against the study's estimate.
+
+    Attributes
+    ----------
+    quantity : str
+        What is judged.
+    requirement : str
+        The limit, or "no spec limit given".
+    estimate : str
+        The estimate with its interval.
+    status : str
+        :data:`PASS`, :data:`FAIL`, :data:`UNDECIDED` or :data:`NO_LIMIT`.
+    reason : str
+        One sentence: why this status.
+    """
+
+    quantity: str
+    requirement: str
+    estimate: str
+    status: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """All checks and the overall status."""
+
+    status: str
+    checks: tuple
+    confidence: float = CONFIDENCE
+
+    @property
+    def label(self) -> str:
+        """Upper-case label for the box: PASS, FAIL, UNDECIDED or NO SPEC LIMIT GIVEN."""
+        return self.status.upper()
+
+
+def judge_upper_limit(lower, upper, limit) -> str:
+    """Status of "quantity <= limit" from an interval [lower, upper] of the quantity."""
+    if not (limit is not None and np.isfinite(limit)):
+        return NO_LIMIT
+    if np.isfinite(upper) and upper <= limit:
+        return PASS
+    if np.isfinite(lower) and lower > limit:
+        return FAIL
+    return UNDECIDED
+
+
+def judge_lower_limit(lower, upper, limit) -> str:
+    """Status of "quantity >= limit" from an interval [lower, upper] of the quantity."""
+    if not (limit is not None and np.isfinite(limit)):
+        return NO_LIMIT
+    if np.isfinite(lower) and lower >= limit:
+        return PASS
+    if np.isfinite(upper) and upper < limit:
+        return FAIL
+    return UNDECIDED
+
+
+def _f(ds, name):
+    return float(np.asarray(ds[name])) if name in ds.variables else float("nan")
+
+
+def _limit(value):
+    """A configured limit, or None (0 and NaN mean none)."""
+    return float(value) if value is not None and np.isfinite(value) and value > 0 else None
+
+
+def _sentence(status, what, lower, upper, limit_text, side):
+    level = f"{100 * CONFIDENCE:.0f} %"
+    if status == PASS:
+        end = "upper" if side == "max" else "lower"
+        return f"the whole {level} interval ({lower} to {upper}) meets {limit_text}: its " \
+               f"{end} end is inside the limit"
+    if status == FAIL:
+        return f"the whole {level} interval ({lower} to {upper}) violates {limit_text}"
+    if status == UNDECIDED:
+        return (f"the {level} interval ({lower} to {upper}) straddles {limit_text}: more "
+                "samples are needed to decide")
+    return f"no limit on {what} in the config: the estimate is shown without a verdict"
+
+
+def contact_check(ds) -> SpecCheck:
+    """P(contact) per train against ``contact_probability_limit``."""
+    p = _f(ds, "contact_probability")
+    lo, hi = _f(ds, "contact_probability_bounds_ci_lower"), _f(
+        ds, "contact_probability_bounds_ci_upper")
+    covering = np.isfinite(lo) and np.isfinite(hi)
+    if not covering:
+        lo, hi = _f(ds, "contact_probability_ci_lower"), _f(ds, "contact_probability_ci_upper")
+    limit = _limit(_f(ds, "contact_probability_limit"))
+    status = judge_upper_limit(lo, hi, limit)
+    kind = ("interval covering the bounds over all trains" if covering and _f(
+        ds, "n_assemblies_unresolved") > 0 else "Clopper-Pearson interval")
+    estimate = (f"{format_fraction(p)} ({100 * CONFIDENCE:.0f} % {kind}: "
+                f"{format_fraction(lo)} to {format_fraction(hi)})")
+    req = f"P(contact) ≤ {format_fraction(limit)}" if limit else NO_LIMIT
+    reason = _sentence(status, "P(contact)", format_fraction(lo), format_fraction(hi), req,
+                       "max")
+    unresolved = _f(ds, "n_assemblies_unresolved")
+    if status == UNDECIDED and covering and unresolved > 0 and judge_upper_limit(
+            _f(ds, "contact_probability_ci_lower"), _f(ds, "contact_probability_ci_upper"),
+            limit) != UNDECIDED:
+        reason = reason.replace("more samples are needed to decide",
+                                f"the {int(unresolved):,} unresolved trains leave it open")
+    if not np.isfinite(p) and status != NO_LIMIT:
+        reason = "no train has a known outcome: " + reason
+    return SpecCheck("P(ball-to-ball contact within the stroke) per train", req, estimate,
+                     status, reason)
+
+
+def out_of_spec_check(ds, q, out_of_spec_limit=None) -> SpecCheck:
+    """Fraction of balls with |epsilon| above the limit L against an allowed fraction."""
+    eps_limit = _limit(_f(ds, "velocity_deviation_limit"))
+    quantity = "fraction of balls out of spec"
+    if eps_limit is None or not q:
+        return SpecCheck(quantity + " (|ε| > L)", NO_LIMIT, "no limit L on |ε|: not computed",
+                         NO_LIMIT, "no limit on |ε| in the config")
+    quantity = f"fraction of balls with |ε| > {100 * eps_limit:.3g} %"
+    prop = q["_proportion"]
+    limit = _limit(out_of_spec_limit)
+    status = judge_upper_limit(prop.lower, prop.upper, limit)
+    req = f"≤ {format_fraction(limit)}" if limit else NO_LIMIT
+    reason = _sentence(status, "the allowed fraction out of spec", format_fraction(prop.lower),
+                       format_fraction(prop.upper), f"the allowed fraction {req}", "max")
+    return SpecCheck(quantity, req, prop.text(), status, reason)
+
+
+def cpk_check(ds, q, cpk_minimum=None) -> SpecCheck:
+    """Cpk of epsilon against a required minimum."""
+    cap = q.get("_capability") if q else None
+    if cap is None:
+        return SpecCheck("process capability Cpk of ε", NO_LIMIT,
+                         "no limit L on |ε|: not computed", NO_LIMIT,
+                         "no limit on |ε| in the config")
+    limit = _limit(cpk_minimum)
+    status = judge_lower_limit(cap.cpk_lower, cap.cpk_upper, limit)
+    req = f"Cpk ≥ {limit:.3g}" if limit else NO_LIMIT
+    estimate = (f"{cap.cpk:.3f} ({100 * CONFIDENCE:.0f} % interval {cap.cpk_lower:.3f} to "
+                f"{cap.cpk_upper:.3f}); percentile Cpk {cap.cpk_percentile:.3f}")
+    reason = _sentence(status, "Cpk", f"{cap.cpk_lower:.3f}", f"{cap.cpk_upper:.3f}", req,
+                       "min")
+    return SpecCheck("process capability Cpk of ε", req, estimate, status, reason)
+
+
+def overall(statuses) -> str:
+    """Fail over undecided over pass over no limit."""
+    statuses = list(statuses)
+    for s in (FAIL, UNDECIDED, PASS):
+        if s in statuses:
+            return s
+    return NO_LIMIT
+
+
+def study_verdict(ds, q=None, *, out_of_spec_limit=None, cpk_minimum=None) -> Verdict:
+    """The verdict of a result file against its spec limits.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A result file of ``tolsim run``.
+    q : dict, optional
+        :func:`tolsim.study.quality.dataset_quality` of ``ds`` (computed when not given).
+    out_of_spec_limit : float, optional
+        Allowed fraction of balls with |epsilon| above the limit [-] (none in the config).
+    cpk_minimum : float, optional
+        Required Cpk of epsilon [-] (none in the config).
+
+    Returns
+    -------
+    Verdict
+    """
+    if q is None:
+        from tolsim.study.quality import dataset_quality
+
+        q = dataset_quality(ds)
+    checks = (contact_check(ds), out_of_spec_check(ds, q, out_of_spec_limit),
+              cpk_check(ds, q, cpk_minimum))
+    return Verdict(overall(c.status for c in checks), checks)

@@ -1,0 +1,149 @@
+"""Per-assembly export: the inputs and outputs of the first N assemblies of a study.
+
+``run_study(config, save_samples=N)`` (``tolsim run --save-samples N``) keeps, for the first
+N assemblies in block order, every tolerance source's value at each ball, the initial gaps,
+each ball's loaded contact angles and forces, its epsilon and which model gave it, and the
+train's first contact (time and pair), so the user can do their own analysis of exactly the
+assemblies behind the statistics. The rows are cut from the blocks as the runner merges them
+(:func:`sample_rows`), so they are bit-identical whatever the chunking or workers; blocks
+whose rows a resumed run does not have are evaluated again (:func:`take`). The result file
+holds them along a ``sample`` dimension (:data:`SAMPLE_VARIABLES`).
+
+With ``along_track`` propagation the source values, contact state and epsilon are those at
+the start of the stroke (the balls' initial rail positions); the contact time follows the
+whole stroke.
+"""
+
+import numpy as np
+
+from tolsim.study.spec import SOURCES
+
+#: Prefix of the sample rows in a block's records (beside its spot-check rows) and of their
+#: variables.
+PREFIX = "sample_"
+#: Codes of ``sample_model`` (:data:`tolsim.study.evaluate.MODEL_UNRESOLVED`, ``MODEL_FAST``,
+#: ``MODEL_FULL``) and their CF flag meanings.
+MODEL_FLAGS = {-1: "unresolved", 0: "fast_model", 1: "full_model"}
+_UNITS = {"length": "m", "angle": "rad"}
+
+#: Declarations for :mod:`tolsim.io.schema`: name -> (dims, units, long_name, dtype kind).
+SAMPLE_VARIABLES = {
+    "sample": (("sample",), "1", "assembly index (the first assemblies of the study, in "
+               "block order)", "i"),
+    **{f"{PREFIX}error_{source}": (("sample", "ball"), _UNITS[kind],
+                                   f"value of the tolerance source {source} at the ball",
+                                   "f")
+       for source, (kind, _) in SOURCES.items()},
+    f"{PREFIX}initial_gap": (("sample", "pair"), "m", "gap between adjacent balls at the "
+                             "start of the stroke", "f"),
+    f"{PREFIX}contact_angle_deviation": (("sample", "ball", "contact"), "rad",
+                                         "loaded contact angle deviation of the ball", "f"),
+    f"{PREFIX}normal_force": (("sample", "ball", "contact"), "N",
+                              "contact force of the ball", "f"),
+    f"{PREFIX}velocity_deviation": (("sample", "ball"), "1", "velocity deviation epsilon of "
+                                    "the ball (missing: unresolved)", "f"),
+    f"{PREFIX}model": (("sample", "ball"), "1", "model that gave epsilon (flag_meanings)",
+                       "i"),
+    f"{PREFIX}contact_time": (("sample",), "s", "time of the first ball-to-ball contact of "
+                              "the train (missing: none within the horizon)", "f"),
+    f"{PREFIX}contact_pair": (("sample",), "1", "adjacent pair of the first contact, named "
+                              "by its trailing ball (-1: none within the horizon)", "i"),
+}
+
+
+def sample_rows(config, save_samples, start, values, initial_gap, state, contact_time,
+                contact_pair, rows=slice(None)) -> dict:
+    """The saved rows of one block: the part of its assemblies among the first N.
+
+    Parameters
+    ----------
+    config : StudyConfig
+    save_samples : int
+        N, assemblies to keep (0: none).
+    start : int
+        Global index of the block's first assembly.
+    values : dict
+        source -> ndarray (m, balls), the source values of the evaluated assemblies [SI].
+    initial_gap : ndarray (m, balls - 1)
+    state : tolsim.study.evaluate.BallState
+        Of shape (m, balls).
+    contact_time, contact_pair : ndarray (m,)
+        First contact (inf / -1: none).
+    rows : slice
+        The block's assemblies among the m.
+
+    Returns
+    -------
+    dict
+        ``sample_*`` name -> ndarray with the block's first min(size, N - start) rows; empty
+        when the block starts at or after N.
+    """
+    m = len(contact_time)
+    first = np.arange(m)[rows][: max(save_samples - start, 0)]
+    keep = len(first)
+    if keep == 0:
+        return {}
+    balls = config.train.balls
+    out = {f"{PREFIX}index": np.arange(start, start + keep, dtype=np.int64)}
+    for t in config.tolerances:
+        v = np.broadcast_to(values[t.source], (m, balls))
+        out[f"{PREFIX}error_{t.source}"] = np.array(v[first], dtype=np.float64)
+    out[f"{PREFIX}initial_gap"] = np.array(initial_gap[first], dtype=np.float64).reshape(
+        keep, max(balls - 1, 0))
+    out[f"{PREFIX}contact_angle_deviation"] = np.array(state.contact_angle_deviation[first])
+    out[f"{PREFIX}normal_force"] = np.array(state.normal_force[first])
+    out[f"{PREFIX}velocity_deviation"] = np.array(state.velocity_deviation[first])
+    out[f"{PREFIX}model"] = np.array(state.model[first], dtype=np.int8)
+    out[f"{PREFIX}contact_time"] = np.array(contact_time[first], dtype=np.float64)
+    out[f"{PREFIX}contact_pair"] = np.array(contact_pair[first], dtype=np.int64)
+    return out
+
+
+def concatenate(parts) -> dict:
+    """The ``sample_*`` rows of block records, concatenated in order."""
+    names = [k for p in parts for k in p if k.startswith(PREFIX)]
+    names = list(dict.fromkeys(names))
+    return {k: np.concatenate([p[k] for p in parts if k in p]) for k in names}
+
+
+def take(config, parts, save_samples: int, spot_plan) -> dict | None:
+    """The first ``save_samples`` assemblies' rows from the merged blocks' records ``parts``
+    (None when not asked for).
+
+    A block whose records lack them (a run resumed from a checkpoint, which keeps the
+    spot-check rows only, or blocks evaluated again for a shorter run) is evaluated again
+    through the same pipeline: same draws, same result.
+    """
+    if not save_samples:
+        return None
+    wanted = min(save_samples, config.study.samples)
+    rows = concatenate(parts)
+    index = rows.get(f"{PREFIX}index", np.empty(0, np.int64))
+    if not np.array_equal(index[:wanted], np.arange(wanted)):
+        from tolsim.study.runner import run_chunk
+        from tolsim.study.sampling import n_blocks
+
+        blocks = list(range(n_blocks(wanted, config.study.block_size)))
+        rows = concatenate([spots for _, _, spots in run_chunk(
+            config, blocks, spot_plan, save_samples=wanted)])
+    return {k: v[:wanted] for k, v in rows.items()}
+
+
+def dataset_variables(config, samples: dict) -> dict:
+    """name -> (dims, values) of the ``sample`` variables of a result file."""
+    out = {}
+    for name, values in samples.items():
+        if name == f"{PREFIX}index":
+            out["sample"] = (("sample",), values)
+            continue
+        values = np.array(values)
+        if name == f"{PREFIX}contact_time":
+            values[~np.isfinite(values)] = np.nan  # no contact: missing
+        out[name] = (SAMPLE_VARIABLES[name][0], values)
+    return out
+
+
+def flag_attributes() -> dict:
+    """CF 3.5 flag attributes of ``sample_model``."""
+    return {"flag_values": np.array(list(MODEL_FLAGS), dtype=np.int8),
+            "flag_meanings": " ".join(MODEL_FLAGS.values())}
