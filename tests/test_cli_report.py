@@ -89,6 +89,8 @@ def test_report_every_config(results, name, tmp_path, capsys):
     assert "id='assumptions'" in page and "VALIDITY_ERROR_BUDGET" in page
     assert f"7. Model check: {config.study.velocity_model} versus" in page
     assert (out / "report.pdf").read_bytes()[:5] == b"%PDF-"
+    # issue 17: worst case and RSS beside the Monte Carlo, from the file's stack-up
+    assert "Linear stack-up beside the Monte Carlo" in page
 
 
 def test_report_uses_stored_sensitivity(results, tmp_path):

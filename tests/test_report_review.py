@@ -216,6 +216,33 @@ def test_verdict_of_the_default_study(default_result, default_report):
     assert out.verdict.status == V.NO_LIMIT
 
 
+def test_verdict_takes_every_limit_from_the_config(tmp_path):
+    # The spec limits of the config, all of them: P(contact) <= 90 % passes (the default
+    # study's P is about 0.65 with an interval of +-0.05 at 400 assemblies), at most 5 % of
+    # balls beyond |epsilon| <= 0.5 % passes (about 1e-4), Cpk >= 3 fails (about 1.3).
+    from tolsim.io.config import default_config_text, parse_config
+
+    text = default_config_text().replace(
+        "contact_probability_limit_percent = 0.0",
+        "contact_probability_limit_percent = 90\nout_of_spec_limit_percent = 5\n"
+        "cpk_minimum = 3")
+    config = parse_config(text).with_overrides(samples=400)
+    config = replace(config, study=replace(config.study, spot_checks=0, sensitivity_samples=0))
+    assert config.study.out_of_spec_limit == 0.05 and config.study.cpk_minimum == 3.0
+    path = tmp_path / "limits.nc"
+    write_result(run_study(config), path, history="test")
+    with xr.open_dataset(path) as ds:
+        ds = ds.load()
+    verdict = V.study_verdict(ds, study_report.quality.dataset_quality(ds))
+    assert [c.status for c in verdict.checks] == [V.PASS, V.PASS, V.FAIL]
+    assert verdict.status == V.FAIL
+    rows = {r.item: (r.value, r.source) for r in A.assumption_table(ds)
+            if r.topic == "spec limits"}
+    assert rows["allowed fraction of balls beyond the limit on |ε|"] == (
+        "5 %", "[study] out_of_spec_limit_percent = 5")
+    assert rows["required minimum Cpk of ε"] == ("3", "[study] cpk_minimum = 3")
+
+
 # --------------------------------------------------------------------------------------------
 # PDF
 # --------------------------------------------------------------------------------------------

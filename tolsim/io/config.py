@@ -508,7 +508,7 @@ def _tolerances(t: _Table | None, bearing: Bearing) -> tuple:
 
 #: Keys that were plain fractions and now carry a unit (``_percent`` or ``_ppm``).
 FRACTION_KEYS = ("velocity_deviation_range", "velocity_deviation_limit",
-                 "contact_probability_limit")
+                 "contact_probability_limit", "out_of_spec_limit")
 
 
 def _study(t: _Table) -> StudySettings:
@@ -549,6 +549,9 @@ def _study(t: _Table) -> StudySettings:
                                             default=0.0, minimum=0.0),
         contact_probability_limit=t.quantity("contact_probability_limit", "fraction",
                                              default=0.0, minimum=0.0),
+        out_of_spec_limit=t.quantity("out_of_spec_limit", "fraction", default=0.0,
+                                     minimum=0.0),
+        cpk_minimum=t.quantity("cpk_minimum", "dimensionless", default=0.0, minimum=0.0),
         sensitivity_samples=t.integer("sensitivity_samples", default=0, minimum=0),
     )
     if s.sensitivity_samples == 1:
@@ -557,9 +560,17 @@ def _study(t: _Table) -> StudySettings:
         key = t.key_for("velocity_deviation_limit", "fraction")
         raise t.error(key, f"= {t.data[key]!r} must be < 100 % (|epsilon| >= 1 stops or "
                            "reverses a ball)")
-    if s.contact_probability_limit > 1:
-        key = t.key_for("contact_probability_limit", "fraction")
-        raise t.error(key, f"= {t.data[key]!r} must be <= 100 %")
+    for name in ("contact_probability_limit", "out_of_spec_limit"):
+        if getattr(s, name) > 1:
+            key = t.key_for(name, "fraction")
+            raise t.error(key, f"= {t.data[key]!r} must be <= 100 %")
+    if s.out_of_spec_limit > 0 and s.velocity_deviation_limit == 0:
+        key = t.key_for("out_of_spec_limit", "fraction")
+        raise t.error(key, "needs a limit on |epsilon| (velocity_deviation_limit_percent) "
+                           "to say which balls are out of spec")
+    if s.cpk_minimum > 0 and s.velocity_deviation_limit == 0:
+        raise t.error("cpk_minimum", "needs a limit on |epsilon| "
+                                     "(velocity_deviation_limit_percent) to define Cpk")
     t.finish()
     return s
 

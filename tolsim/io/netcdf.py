@@ -122,6 +122,8 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
                                     acc.cluster.comoment),
         "velocity_deviation_limit": _nan_if_zero(st.velocity_deviation_limit),
         "contact_probability_limit": _nan_if_zero(st.contact_probability_limit),
+        "velocity_deviation_out_of_spec_limit": _nan_if_zero(st.out_of_spec_limit),
+        "velocity_deviation_cpk_minimum": _nan_if_zero(st.cpk_minimum),
         "spot_check_ball_index": (("spot_check",), sc.ball_index.astype(np.int64)),
         "spot_check_contact_angle_deviation": (("spot_check", "contact"),
                                                sc.contact_angle_deviation.reshape(-1, 4)),

@@ -166,6 +166,10 @@ DATA_VARIABLES = {
     # spec limits (NaN: none)
     "velocity_deviation_limit": V((), "1", "specification limit on |epsilon|"),
     "contact_probability_limit": V((), "1", "specification limit on the contact probability"),
+    "velocity_deviation_out_of_spec_limit": V((), "1", "allowed fraction of balls with "
+                                              "|epsilon| above its limit", required=False),
+    "velocity_deviation_cpk_minimum": V((), "1", "required minimum Cpk of epsilon",
+                                        required=False),
     # spot checks
     "spot_check_ball_index": V(_SC, "1", "global index of the spot-checked ball "
                                          "(assembly * balls + ball)", "i"),

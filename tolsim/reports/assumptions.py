@@ -402,4 +402,12 @@ def assumption_table(ds, config=None) -> list:
     add("spec limits", "limit on P(contact) per train",
         format_fraction(p_limit) if np.isfinite(p_limit) else "no spec limit given",
         _source(data, "study", "contact_probability_limit", "not set"))
+    oos, cpk_min = (_f(ds, "velocity_deviation_out_of_spec_limit"),
+                    _f(ds, "velocity_deviation_cpk_minimum"))
+    add("spec limits", "allowed fraction of balls beyond the limit on |ε|",
+        format_fraction(oos) if np.isfinite(oos) else "no spec limit given",
+        _source(data, "study", "out_of_spec_limit", "not set"))
+    add("spec limits", "required minimum Cpk of ε",
+        f"{cpk_min:.3g}" if np.isfinite(cpk_min) else "no spec limit given",
+        _source(data, "study", "cpk_minimum", "not set"))
     return rows

@@ -12,11 +12,13 @@ statement below holds with at least 97.5 % confidence):
   end is at most P_max, fail when its lower end is above P_max, undecided otherwise.
 * **fraction of balls with |epsilon| > L <= p_max**: the fraction out of spec and its
   interval with the assembly as the sampling unit (:func:`tolsim.study.quality.
-  dataset_quality`) against an allowed fraction p_max. The config has a limit L on |epsilon|
-  but no allowed fraction; :func:`study_verdict` takes one (``out_of_spec_limit``).
+  dataset_quality`) against an allowed fraction p_max (``study.out_of_spec_limit_percent``
+  or ``_ppm``, stored as ``velocity_deviation_out_of_spec_limit``; or the
+  ``out_of_spec_limit`` argument of :func:`study_verdict`).
 * **Cpk >= Cpk_min**: Cpk with its interval (delta method over assemblies) against a
-  required minimum (``cpk_minimum``; none in the config either). Pass when the lower end is
-  at least Cpk_min, fail when the upper end is below it.
+  required minimum (``study.cpk_minimum``, stored as ``velocity_deviation_cpk_minimum``; or
+  the ``cpk_minimum`` argument). Pass when the lower end is at least Cpk_min, fail when the
+  upper end is below it.
 
 The overall verdict is *fail* if any check fails, else *undecided* if any is undecided, else
 *pass* if any passes, else "no spec limit given".
@@ -157,7 +159,8 @@ def out_of_spec_check(ds, q, out_of_spec_limit=None) -> SpecCheck:
                          NO_LIMIT, "no limit on |ε| in the config")
     quantity = f"fraction of balls with |ε| > {100 * eps_limit:.3g} %"
     prop = q["_proportion"]
-    limit = _limit(out_of_spec_limit)
+    limit = _limit(_f(ds, "velocity_deviation_out_of_spec_limit")
+                   if out_of_spec_limit is None else out_of_spec_limit)
     status = judge_upper_limit(prop.lower, prop.upper, limit)
     req = f"≤ {format_fraction(limit)}" if limit else NO_LIMIT
     reason = _sentence(status, "the allowed fraction out of spec", format_fraction(prop.lower),
@@ -172,7 +175,8 @@ def cpk_check(ds, q, cpk_minimum=None) -> SpecCheck:
         return SpecCheck("process capability Cpk of ε", NO_LIMIT,
                          "no limit L on |ε|: not computed", NO_LIMIT,
                          "no limit on |ε| in the config")
-    limit = _limit(cpk_minimum)
+    limit = _limit(_f(ds, "velocity_deviation_cpk_minimum")
+                   if cpk_minimum is None else cpk_minimum)
     status = judge_lower_limit(cap.cpk_lower, cap.cpk_upper, limit)
     req = f"Cpk ≥ {limit:.3g}" if limit else NO_LIMIT
     estimate = (f"{cap.cpk:.3f} ({100 * CONFIDENCE:.0f} % interval {cap.cpk_lower:.3f} to "

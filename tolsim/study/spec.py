@@ -335,6 +335,11 @@ class StudySettings:
     contact_probability_limit : float
         Spec limit on P(contact) [-] (0: none), a fraction (config key
         ``contact_probability_limit_percent`` or ``_ppm``); stored for reports.
+    out_of_spec_limit : float
+        Allowed fraction of balls with |epsilon| above ``velocity_deviation_limit`` [-] (0:
+        none; config key ``out_of_spec_limit_percent`` or ``_ppm``); for the verdict.
+    cpk_minimum : float
+        Required minimum Cpk of epsilon [-] (0: none); for the verdict.
     sensitivity_samples : int
         Base sample size of the variance-based sensitivity analysis run after the study
         (0: none); it costs sensitivity_samples (d + 2) extra assemblies for d random
@@ -355,6 +360,8 @@ class StudySettings:
     time_bins: int = 200
     velocity_deviation_limit: float = 0.0
     contact_probability_limit: float = 0.0
+    out_of_spec_limit: float = 0.0
+    cpk_minimum: float = 0.0
     sensitivity_samples: int = 0
 
 
