@@ -333,3 +333,14 @@ def test_summary_warns_when_balls_are_unresolved(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "warning: 2048 of 6144 balls (33 %) have no epsilon from any model" in out
     assert "are unresolved; P(contact) is known only within the bounds" in out
+
+
+def test_summary_splits_the_spot_checks_by_stratum(tmp_path, capsys):
+    # The spot checks are stratified (half near the spec limit on |epsilon|); the summary
+    # gives the agreement with the full model per stratum, not only mixed.
+    import re
+
+    assert main(["run", "-o", str(tmp_path / "d.nc"), "--samples", "2048"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("spot checks"))
+    m = re.search(r"uniform (\d+): RMS [\d.]+ %, max [\d.]+ %; near the limit (\d+): RMS", line)
+    assert m and int(m.group(1)) + int(m.group(2)) == 20, line

@@ -114,6 +114,26 @@ def add_parser(subparsers, formatter_class=None):
 UNRESOLVED_WARNING = 1e-3
 
 
+def _strata_text(ds) -> str:
+    """'; near the limit: RMS .., max ..' when some spot checks were drawn near the limit."""
+    if "spot_check_stratum" not in ds:
+        return ""
+    import numpy as np
+
+    near = np.asarray(ds.spot_check_stratum) == 1
+    both = (np.asarray(ds.spot_check_valid_analytic, dtype=bool)
+            & np.asarray(ds.spot_check_valid_full, dtype=bool))
+    diff = (np.asarray(ds.spot_check_velocity_deviation_analytic)
+            - np.asarray(ds.spot_check_velocity_deviation_full))
+    parts = []
+    for name, sel in (("uniform", ~near & both), ("near the limit", near & both)):
+        if sel.any() and near.any():
+            d = diff[sel]
+            parts.append(f"{name} {sel.sum()}: RMS {100 * np.sqrt(np.mean(d * d)):.4f} %, "
+                         f"max {100 * np.max(np.abs(d)):.4f} %")
+    return ("; " + "; ".join(parts)) if parts else ""
+
+
 def _pct(x):
     return f"{100 * x:+.3f} %"
 
@@ -186,7 +206,8 @@ def summary(ds, output, elapsed) -> str:
             f"spot checks: {int(ds.spot_check_n_valid)} of {n_sc} valid in both models, "
             f"{a['velocity_model']} - full: RMS "
             f"{100 * float(ds.spot_check_rms_difference):.4f} %, "
-            f"max {100 * float(ds.spot_check_max_abs_difference):.4f} % (of v/2)")
+            f"max {100 * float(ds.spot_check_max_abs_difference):.4f} % (of v/2)"
+            + _strata_text(ds))
     else:
         lines.append(f"spot checks: {a['spot_check_status']}")
     if "velocity_deviation_out_of_spec_fraction" in ds:
