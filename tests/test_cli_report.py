@@ -10,7 +10,11 @@ import pytest
 
 from tolsim.cli import main
 
-CONFIGS = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "configs", "*.toml")))
+#: configs with a [carriage] are left out: studies with a carriage are not implemented yet
+#: (issue 12); tests/test_configs.py runs them through `tolsim carriage`
+CONFIGS = sorted(p for p in glob.glob(os.path.join(os.path.dirname(__file__), "..", "configs",
+                                                   "*.toml"))
+                 if "\n[carriage]" not in open(p, encoding="utf-8").read())
 #: small sample counts keep the test fast (along-track propagation is ~100x dearer)
 SAMPLES = {"constant": 64, "along_track": 8}
 

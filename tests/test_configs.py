@@ -20,6 +20,9 @@ SAMPLES = {
     "whatif_along_track.toml": 200,
     "known_answer.toml": 4096,  # the closed-form checks are in tests/test_known_answer.py
 }
+#: Configs with a [carriage] (issue 12): `tolsim run` refuses them until studies with a
+#: carriage exist, so they are run through `tolsim carriage` here instead.
+CARRIAGE_CONFIGS = ("carriage_preload.toml",)
 
 
 def run(name, samples="default"):
@@ -29,7 +32,10 @@ def run(name, samples="default"):
 
 
 def test_every_config_is_covered():
-    assert sorted(p.name for p in CONFIGS.glob("*.toml")) == sorted(SAMPLES)
+    assert sorted(p.name for p in CONFIGS.glob("*.toml")) == sorted([*SAMPLES,
+                                                                      *CARRIAGE_CONFIGS])
+    for name in CARRIAGE_CONFIGS:
+        assert load_config(CONFIGS / name).carriage is not None
 
 
 def test_paper_case_study_contact_time():
@@ -126,3 +132,44 @@ def test_configs_are_reproducible(name):
     a, b = run(name, n), run(name, n)
     for k, v in a.statistics.state().items():
         np.testing.assert_array_equal(v, b.statistics.state()[k])
+
+
+@pytest.mark.parametrize("name", CARRIAGE_CONFIGS)
+def test_carriage_configs_run_through_tolsim_carriage(name, capsys):
+    # `tolsim carriage` solves the nominal assembly: converged, nothing locked, every ball
+    # loaded; the vertical load moves the carriage down. (Balance and the JSON interface:
+    # tests/test_cli_carriage.py.)
+    import json
+
+    from tolsim.cli import main
+
+    assert main(["carriage", str(CONFIGS / name), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["converged"] is True and out["locked"] == []
+    assert all(max(b["normal_force_n"]) > 0 for b in out["balls"])
+    assert out["displacement"]["u_y_um"] < 0
+
+
+def test_carriage_preload_classes():
+    # The comment table of configs/carriage_preload.toml: preload per contact K (o/2)^1.5
+    # for o = 0, 2, 4 um (0, 23, 66 N) and the vertical stiffness under the file's load
+    # (243, 408, 597 N/um, to the table's 3 digits); light and medium keep four-point
+    # contact, none closes one diagonal of each ball.
+    from dataclasses import replace
+
+    from tolsim.physics.carriage import solve_carriage
+    from tolsim.physics.hertz import hertz_constants
+
+    c = load_config(CONFIGS / "carriage_preload.toml")
+    assert c.carriage.preload_oversize == pytest.approx(2e-6, rel=1e-12)  # "light"
+    b = c.bearing
+    k = hertz_constants(b.ball_radius, b.conformity, b.youngs_modulus,
+                        b.poisson_ratio).load_deflection_constant
+    for o, preload, stiffness, contacts in ((0.0, 0.0, 243, 2), (2e-6, 23, 408, 4),
+                                            (4e-6, 66, 597, 4)):
+        assert round(k * (o / 2) ** 1.5) == preload
+        carriage = replace(c.carriage, preload_oversize=o)
+        sol = solve_carriage(carriage.layout, carriage.load, b, oversize=carriage.oversize)
+        assert sol.converged
+        assert round(sol.stiffness[1, 1] * 1e-6) == stiffness
+        assert sol.contact_count.min() == contacts

@@ -15,6 +15,7 @@ SUBCOMMANDS = {
     "run": "tolsim.cli.run",
     "paper": "tolsim.cli.paper",
     "report": "tolsim.cli.report",
+    "carriage": "tolsim.cli.carriage",
 }
 
 SUMMARIES = {
@@ -22,6 +23,7 @@ SUMMARIES = {
     "run": "Monte Carlo tolerance study from a TOML config to a netCDF result",
     "paper": "reproduce the source paper's figures and Table 2",
     "report": "HTML report of a study result file",
+    "carriage": "load distribution of one carriage on its ball tracks, with preload",
 }
 
 

@@ -298,6 +298,10 @@ def run(args) -> int:
         config = load_config(args.config).with_overrides(samples=args.samples, seed=args.seed)
     except (ConfigError, ValueError) as exc:
         raise UsageError(str(exc)) from None
+    if config.carriage is not None:
+        raise UsageError(f"{config.path}: studies with a [carriage] are not implemented yet "
+                         f"(issue 12); 'tolsim carriage {config.path}' solves its load "
+                         "distribution")
     if args.output:
         output = Path(args.output)
     elif args.config:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tolsim.physics.carriage import CarriageLayout, CarriageLoad
 from tolsim.physics.geometry import Bearing
 from tolsim.study.spec import (
     DISTRIBUTIONS,
@@ -32,6 +33,7 @@ from tolsim.study.spec import (
     SOURCES,
     STATIC_MODELS,
     VELOCITY_MODELS,
+    Carriage,
     Correlation,
     Distribution,
     Loads,
@@ -480,6 +482,93 @@ def _loads(t: _Table, train: Train, bearing: Bearing) -> Loads:
                  yaw_moment=float(yaw))
 
 
+def _carriage(t: _Table, bearing: Bearing) -> Carriage:
+    """``[carriage]``, ``[carriage.load]`` and ``[[carriage.track]]`` (tolsim issue 12)."""
+    n = t.integer("balls_per_track", minimum=1)
+    pitch = t.quantity("ball_pitch", "length")
+    pitch_key = t.key_for("ball_pitch", "length")
+    if pitch < 0:
+        raise t.error(pitch_key, f"= {t.data[pitch_key]!r} must be >= 0")
+    diameter = 2.0 * bearing.ball_radius
+    if n > 1 and pitch < diameter * (1.0 - 1e-12):
+        raise t.error(pitch_key, f"= {t.data[pitch_key]!r} is less than the ball diameter "
+                                 f"({diameter * 1e3:g} mm): neighbouring balls would overlap")
+    preload = t.quantity("preload_oversize", "length", default=0.0)
+    limit = 0.25 * (bearing.groove_radius - bearing.ball_radius)
+    if abs(preload) > limit:
+        key = t.key_for("preload_oversize", "length")
+        raise t.error(key, f"= {t.data[key]!r} is beyond +/- {limit * 1e6:g} um, a quarter of "
+                           "the ball-groove centre distance (a unit slip?)")
+
+    load_table = t.table("load", required=False)
+    if load_table is None:
+        load = CarriageLoad()
+    else:
+        force = lambda name: load_table.quantity(name, "force", default=0.0)  # noqa: E731
+        moment = lambda name: load_table.quantity(name, "moment", default=0.0)  # noqa: E731
+        load = CarriageLoad(lateral_force=force("lateral"), vertical_force=force("vertical"),
+                            pitch_moment=moment("pitch_moment"), yaw_moment=moment("yaw_moment"),
+                            roll_moment=moment("roll_moment"))
+        load_table.finish()
+
+    raw = t.data.get("track")
+    if raw is None or raw == []:
+        raise t.error("track", "is missing: give one [[carriage.track]] per row of balls "
+                               "(x_mm, y_mm, orientation_deg)")
+    t.used.add("track")
+    if not (isinstance(raw, list) and all(isinstance(item, dict) for item in raw)):
+        raise t.error("track", "must be an array of tables: start each track with "
+                               "[[carriage.track]]")
+    xs, ys, phis, per_track = [], [], [], []
+    for number, item in enumerate(raw, 1):
+        tr = _Table(item, f"{t.name}.track[{number}]", t.source)
+        xs.append(tr.quantity("x", "length"))
+        ys.append(tr.quantity("y", "length", default=0.0))
+        phis.append(tr.quantity("orientation", "angle"))
+        dev = tr.quantity("ball_oversize_deviation", "length", allow_list=True, required=False)
+        if dev is not None:
+            key = tr.key_for("ball_oversize_deviation", "length")
+            if not isinstance(dev, tuple) or len(dev) != n:
+                count = len(dev) if isinstance(dev, tuple) else 1
+                raise tr.error(key, f"has {count} values but balls_per_track = {n} (one "
+                                    "per ball, ball 0 trailing)")
+            per_track.append((number, key, dev))
+        tr.finish()
+    deviation = ()
+    flat = t.quantity("ball_oversize_deviation", "length", allow_list=True, required=False)
+    if flat is not None:
+        key = t.key_for("ball_oversize_deviation", "length")
+        if per_track:
+            raise t.error(key, f"given together with carriage.track[{per_track[0][0]}]."
+                               f"{per_track[0][1]}: give one list over all balls here, or a "
+                               "list in every track")
+        total = n * len(raw)
+        if not isinstance(flat, tuple) or len(flat) != total:
+            count = len(flat) if isinstance(flat, tuple) else 1
+            raise t.error(key, f"has {count} values but the carriage has {total} balls "
+                               f"({len(raw)} tracks x {n}, track by track)")
+        deviation = flat
+    elif per_track:
+        if len(per_track) != len(raw):
+            missing = next(k for k in range(1, len(raw) + 1)
+                           if k not in {p[0] for p in per_track})
+            raise t.source.error(f"{t.name}.track[{missing}]", "ball_oversize_deviation_um",
+                                 "is missing: give it in every track or in none")
+        deviation = tuple(v for _, _, dev in per_track for v in dev)
+    for value in deviation:
+        if abs(preload + value) > limit:
+            key = t.key_for("ball_oversize_deviation", "length")
+            raise t.error(key, f"gives a ball oversize of {(preload + value) * 1e6:g} um, "
+                               f"beyond +/- {limit * 1e6:g} um")
+    t.finish()
+    try:
+        layout = CarriageLayout(np.array(xs), np.array(ys), np.array(phis), n, pitch)
+    except ValueError as exc:
+        raise t.error(None, " ".join(str(exc).split())) from None
+    return Carriage(layout=layout, load=load, preload_oversize=preload,
+                    ball_oversize_deviation=tuple(map(float, deviation)))
+
+
 def _tolerances(t: _Table | None, bearing: Bearing) -> tuple:
     if t is None:
         return ()
@@ -681,17 +770,29 @@ def parse_config(text: str, path: str = "<string>") -> StudyConfig:
     root = _Table(data, "", source)
     bearing = _bearing(root.table("bearing"))
     motion = _motion(root.table("motion"))
-    train = _train(root.table("train"), bearing)
-    loads = _loads(root.table("loads"), train, bearing)
+    carriage = None
+    if root.has("carriage"):  # loads from [carriage.load]; [train] optional
+        if root.has("loads"):
+            raise source.error("loads", None, "section beside [carriage]: a carriage takes "
+                                              "its loads from [carriage.load]; remove [loads]")
+        carriage = _carriage(root.table("carriage"), bearing)
+        train = _train(root.table("train"), bearing) if root.has("train") else None
+        if train is not None and train.balls != carriage.layout.balls_per_track:
+            raise source.error("train", "balls", f"= {train.balls} but "
+                               f"carriage.balls_per_track = {carriage.layout.balls_per_track}")
+        loads = None
+    else:
+        train = _train(root.table("train"), bearing)
+        loads = _loads(root.table("loads"), train, bearing)
     tolerances = _tolerances(root.table("tolerances", required=False), bearing)
     correlations = _correlations(root, tolerances)
     study = _study(root.table("study"))
     for key in data:
         if key not in root.used:
             raise source.error(key, None, "is not a known section (bearing, motion, train, "
-                                          "loads, tolerances, correlation, study)")
+                                          "loads, carriage, tolerances, correlation, study)")
     return StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
-                       correlations)
+                       correlations, carriage)
 
 
 def default_config_text() -> str:

@@ -71,6 +71,57 @@ A contact that opens is reported (``contact_count``), not an error. A carriage t
 entirely (no carriage flank loaded, or the motion leaves the gothic arch) is a ValueError
 naming the load.
 
+How carriage loads map to the balls' side-force ratio
+-----------------------------------------------------
+Small-displacement rigid-body kinematics, linearised at the ball; each step is tested in
+``tests/test_carriage.py`` (numbers for the [Lin2018] Table 1 ball, K = 2.345e10 N/m^1.5,
+d = R_G - R_B = 0.4 mm).
+
+1. *Which DOF a load excites.* By d(p) = B(p) q a yaw theta_y moves the grooves sideways by
+   d_x = theta_y z, a pitch theta_x moves them vertically by d_y = -theta_x z (both odd in z,
+   zero at the reference point), a vertical load moves them all by u_y, a lateral one by u_x.
+   The external moment is balanced by the ball forces' moments: yaw by sum z f_x, pitch by
+   -sum z f_y (f the ball's force on the carriage, carriage frame).
+2. *Into the module frame.* g = E_t^T d: g_1 = cos(phi) d_x + sin(phi) d_y (side), g_2 =
+   -sin(phi) d_x + cos(phi) d_y (normal). phi = 0: yaw -> g_1 = theta_y z, pitch and vertical
+   -> g_2. Wrapped guide (phi = +/-90 deg): g_1 = +/-d_y (vertical and pitch become side
+   displacements), g_2 = -/+d_x (lateral and yaw become normal displacements).
+3. *Linearised ball.* With f = (-N_x, N_y) and S = -df/dg: dN_x = S_11 g_1 + S_12 g_2, dN_y =
+   -S_12 g_1 - S_22 g_2. In the (BL, TR) and (BR, TL) diagonal directions a, b (at 45 deg) the
+   flank stiffnesses are diagonal and the rail and carriage flanks of a pair act in series:
+   S ~ (k_1 a a^T + k_2 b b^T) / 2 with k ~ F^(1/3), F_1 ~ 1 - rho, F_2 ~ 1 + rho ([Lin2018]
+   Sec. 3.1), so S_12 / S_22 = +/-(k_1 - k_2)/(k_1 + k_2): zero without a side load (mirror
+   symmetry). Preloaded, unloaded and at beta_0 = 45 deg, exactly K_t = K_b = (k_n + F0/d) I,
+   S = (k_n + F0/d)/2 I with F0 = K (o/2)^1.5, k_n = 1.5 K (o/2)^0.5 (F0/d is 0.25 % of k_n
+   at o = 3 um, where F0 = 43.1 N, N0 = 2 F0 cos(beta_0) = 60.9 N, k_n = 43.1 N/um, S =
+   21.6 N/um).
+4. *Wrapped guide, yaw moment M.* g_2 = -/+theta_y z, g_1 = 0, so it changes N_y along z and
+   leaves N_x alone: N_y,j = N0 +/- M z_j / (2 sum z^2) (left/right track), theta_y = M / (2 S
+   sum z^2) (K_yaw = 2 S sum z^2 = 0.118 N m/urad for six balls at 12.5 mm, o = 3 um), and
+   N_x = 0 exactly for any M (module mirror symmetry). The Hertz correction to N_y is second
+   order in M (1.6 % of the linear change at 1 N m). Once the balls already carry side load
+   (a vertical load), S_12 != 0 drags N_x along: dN_x/dN_y = -(k_1 - k_2)/(k_1 + k_2) =
+   -0.140 at rho0 = -0.40 (measured -0.138); each track still carries V/2.
+5. *Wrapped guide, pitch moment P.* g_1 = -/+theta_x z: N_x,j = -/+P z_j / (2 sum z^2), N_y =
+   N0 + O(P^2), so rho_j = N_x,j / N_y,j is nearly linear in z. Measured (o = 3 um, six balls
+   at 12.5 mm): P = 5 N m, |rho| <= 0.45: R^2 = 0.99985 and the largest deviation from the
+   least-squares line 0.54 % of the rho range (the end balls' N_y rises 3.5 %); P = 10 N m:
+   R^2 = 0.9975, 2.2 %; P = 20 N m: the end balls go to two-point contact, R^2 = 0.947, 11.6 %.
+6. *phi = 0 track, vertical load V and yaw M ([Lin2018] Fig. 8; the old per-ball rule).* g_1
+   = theta_y z, g_2 = u_y for every ball and S_12 = 0 at rho = 0, so to first order N_x,j =
+   S_11 theta_y z_j and, from sum z N_x = M, N_x,j = M z_j / sum z^2 at N_y = V/n: the old rule
+   (``tolsim/io/config.py`` ``_loads``) is exactly the linearised carriage. Beyond it: N_y of
+   a ball is even and convex in g_1 (the pair approaches are delta_v +/- c g_1 and F ~
+   delta^1.5), so at the common u_y the end balls take more N_y and the middle ones less
+   (sum N_y = V); rho is odd in M, so rho - rho_old = O(M^3). Default study (10 balls at
+   10.05 mm, V = 10 x 200 N, M = 15 N m, no preload): theta_y = 57.3 urad, u_y = -9.21 um,
+   max |rho - rho_old| = 0.0071 at the end balls (z = -/+45.2 mm: -/+0.4000 against
+   -/+0.4071; 0.87 % of the rho range), 95 % of it from N_y = 203.4 N there (197.8 N in the
+   middle); N_x is within 0.067 N of the old rule. With two balls (Fig. 8) the track is
+   statically determinate: V = 400 N and M = 0.6 x 200 N x 10.5 mm = 1.26 N m give rho =
+   (-0.6, +0.6) exactly, reading ball 0 (trailing) as the paper's Ball 1 (the faster ball
+   behind, which runs into Ball 2).
+
 References
 ----------
 .. [Lin2018] B. Lin, C. E. Okwudire, M. Duan, J. S. Wou, IMECE2018-88033 (Sec. 2.1, Fig. 6).

@@ -526,6 +526,10 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     -------
     StudyResult
     """
+    if getattr(config, "carriage", None) is not None:
+        raise ValueError(f"{config.path}: studies with a [carriage] are not implemented yet "
+                         "(issue 12); tolsim.study.carriage.solve_config_carriage solves its "
+                         "load distribution")
     if not (isinstance(workers, int) and workers >= 1):
         raise ValueError(f"workers = {workers!r} must be a positive integer")
     if not (isinstance(save_samples, int) and save_samples >= 0):

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.special import ndtr, ndtri
 
+from tolsim.physics.carriage import CarriageLayout, CarriageLoad
 from tolsim.physics.geometry import Bearing
 
 # --------------------------------------------------------------------------------------------
@@ -305,6 +306,45 @@ class Loads:
 
 
 @dataclass(frozen=True)
+class Carriage:
+    """A rigid carriage on its ball tracks, with preload, under the loads a user knows
+    (tolsim issue 12; conventions in :mod:`tolsim.physics.carriage`).
+
+    Attributes
+    ----------
+    layout : tolsim.physics.carriage.CarriageLayout
+        Tracks (x, y [m], orientation [rad]), balls per track, ball pitch [m].
+    load : tolsim.physics.carriage.CarriageLoad
+        External load at the reference point [N, N m].
+    preload_oversize : float
+        Nominal diametral ball oversize o of every ball [m] (the preload class).
+    ball_oversize_deviation : tuple of float
+        Per-ball deviation from ``preload_oversize`` [m], track by track (n_tracks x
+        balls_per_track values), or () for none.
+    """
+
+    layout: CarriageLayout
+    load: CarriageLoad
+    preload_oversize: float = 0.0
+    ball_oversize_deviation: tuple = ()
+
+    def __post_init__(self):
+        n = self.layout.n_tracks * self.layout.balls_per_track
+        if self.ball_oversize_deviation and len(self.ball_oversize_deviation) != n:
+            raise ValueError(f"ball_oversize_deviation has {len(self.ball_oversize_deviation)} "
+                             f"values, the carriage has {n} balls")
+
+    @property
+    def oversize(self) -> np.ndarray:
+        """Diametral oversize of every ball [m], (n_tracks, balls_per_track)."""
+        shape = (self.layout.n_tracks, self.layout.balls_per_track)
+        out = np.full(shape, float(self.preload_oversize))
+        if self.ball_oversize_deviation:
+            out += np.asarray(self.ball_oversize_deviation, dtype=float).reshape(shape)
+        return out
+
+
+@dataclass(frozen=True)
 class StudySettings:
     """How the study runs.
 
@@ -372,23 +412,29 @@ class StudyConfig:
     ``text`` is the TOML source of exactly this study (the effective config: run-level
     overrides are written into it by :meth:`with_overrides`), so ``tolsim run`` on it
     reproduces the run. ``correlations`` holds the :class:`Correlation` groups of sources.
+    ``carriage`` is the :class:`Carriage` of a config with ``[carriage]`` (issue 12); such a
+    config has no per-ball ``loads`` (None) and ``train`` only if it gives ``[train]``.
+    Studies with a carriage are not implemented yet: :func:`tolsim.study.runner.run_study`
+    refuses them.
     """
 
     bearing: Bearing
     motion: Motion
-    train: Train
-    loads: Loads
+    train: Train | None
+    loads: Loads | None
     tolerances: tuple
     study: StudySettings
     text: str = field(default="", repr=False)
     path: str = "<string>"
     correlations: tuple = ()
+    carriage: Carriage | None = None
 
     @property
     def data_files(self) -> dict:
         """Measured-data files of ``empirical`` distributions: path (as in the config) ->
         SHA-256 of its bytes, in config order."""
-        dists = [self.train.initial_gap] + [t.distribution for t in self.tolerances]
+        dists = ([] if self.train is None else [self.train.initial_gap]) + [
+            t.distribution for t in self.tolerances]
         return {d.data_file: d.data_sha256 for d in dists if d.kind == "empirical"
                 and d.data_file}
 

@@ -1,0 +1,202 @@
+"""``tolsim carriage``: the load distribution of one carriage on its ball tracks (issue 12)."""
+
+import json
+import math
+
+import numpy as np
+
+from tolsim.cli import UsageError
+from tolsim.physics.carriage import DOFS
+from tolsim.physics.geometry import CONTACTS
+
+DESCRIPTION = """\
+Load distribution of one rigid carriage on its preloaded ball tracks (tolsim issue 12), for
+a study config with a [carriage] section: the nominal assembly (the config's preload class
+and per-ball oversize deviations; no sampled tolerances).
+
+Per ball (track t, ball j, ball 0 trailing, at z along the rail): the four contact forces
+F_BL F_BR F_TR F_TL and contact-angle deviations dbeta in the ball's module frame, the
+side-force ratio rho = N_x / N_y and the velocity deviation epsilon (the analytical model;
+the full friction model where the analytical one is outside its validity). For the carriage:
+its displacement (u_x, u_y [um]; pitch, yaw, roll [urad]) and tangent stiffness in the
+catalogue's units (N/um for forces against translations, N m/urad for moments against
+rotations), the DOFs the layout cannot resist (locked), and convergence.
+
+Frame: z along the rail, x lateral, y up; loads at the reference point midway between the
+tracks. A load the tracks cannot carry, or one that lifts the carriage off, is an error.
+
+Examples:
+  tolsim carriage configs/carriage_preload.toml
+  tolsim carriage configs/carriage_preload.toml --json
+  tolsim carriage configs/carriage_preload.toml --plot load_distribution.png
+"""
+
+#: JSON names of the displacement, in DOFS order, and the factor from SI.
+DISPLACEMENT_KEYS = ("u_x_um", "u_y_um", "pitch_urad", "yaw_urad", "roll_urad")
+DOF_UNITS = ("um", "um", "urad", "urad", "urad")
+LOAD_UNITS = ("N", "N", "N m", "N m", "N m")
+
+
+def add_parser(subparsers, formatter_class=None):
+    p = subparsers.add_parser(
+        "carriage",
+        help="load distribution of one carriage on its ball tracks, with preload",
+        description=DESCRIPTION,
+        formatter_class=formatter_class,
+    )
+    p.add_argument("config", metavar="CONFIG", help="study config (TOML) with [carriage]")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="also write the load distribution (ball force against position, per "
+                        "track) to this PNG file")
+    return p
+
+
+def _finite(value):
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def evaluate(config) -> dict:
+    """The JSON-ready result of the nominal carriage of ``config`` (issue 12's interface).
+
+    Raises
+    ------
+    UsageError
+        A load the layout cannot carry, or lift-off.
+    """
+    from tolsim.study.carriage import solve_config_carriage
+
+    try:
+        result = solve_config_carriage(config)
+    except ValueError as exc:
+        raise UsageError(f"{config.path}: {exc}") from None
+    sol = result.solution
+    beta0 = math.degrees(config.bearing.nominal_contact_angle)
+    balls = []
+    t_count, n = sol.normal_force.shape[:2]
+    for t in range(t_count):
+        for j in range(n):
+            dbeta = np.rad2deg(sol.contact_angle_deviation[t, j])
+            balls.append({
+                "track": t,
+                "ball": j,
+                "z_mm": float(sol.ball_z[j] * 1e3),
+                "normal_force_n": [float(f) for f in sol.normal_force[t, j]],
+                "contact_angle_deg": [float(beta0 + d) for d in dbeta],
+                "contact_angle_deviation_deg": [float(d) for d in dbeta],
+                "contact_count": int(sol.contact_count[t, j]),
+                "side_load_n": float(sol.side_load[t, j]),
+                "normal_load_n": float(sol.normal_load[t, j]),
+                "side_force_ratio": _finite(sol.side_force_ratio[t, j]),
+                "velocity_deviation": _finite(result.velocity_deviation[t, j]),
+                "velocity_model": str(result.velocity_model[t, j]) or None,
+            })
+    carriage = config.carriage
+    return {
+        "config": config.path,
+        "preload_oversize_um": carriage.preload_oversize * 1e6,
+        "load": {"lateral_n": carriage.load.lateral_force,
+                 "vertical_n": carriage.load.vertical_force,
+                 "pitch_moment_n_m": carriage.load.pitch_moment,
+                 "yaw_moment_n_m": carriage.load.yaw_moment,
+                 "roll_moment_n_m": carriage.load.roll_moment},
+        "contacts": list(CONTACTS),
+        "balls": balls,
+        "displacement": {k: float(v * 1e6)
+                         for k, v in zip(DISPLACEMENT_KEYS, sol.displacement, strict=True)},
+        "stiffness": {
+            "dofs": list(DOFS),
+            # dQ_i/dq_j: rows the load (N or N m), columns the motion (um or urad)
+            "matrix": [[float(v * 1e-6) for v in row] for row in sol.stiffness],
+            "units": [[f"{lu}/{du}" for du in DOF_UNITS] for lu in LOAD_UNITS],
+        },
+        "locked": list(sol.locked),
+        "converged": bool(sol.converged),
+        "iterations": int(sol.iterations),
+    }
+
+
+def _number(value, fmt):
+    return format(value, fmt) if value is not None else f"{'-':>{len(format(0.0, fmt))}}"
+
+
+def _text(out) -> str:
+    load = out["load"]
+    lines = [
+        f"carriage of {out['config']}: {len({b['track'] for b in out['balls']})} tracks, "
+        f"preload oversize {out['preload_oversize_um']:g} um",
+        f"load: lateral {load['lateral_n']:g} N, vertical {load['vertical_n']:g} N, pitch "
+        f"{load['pitch_moment_n_m']:g} N m, yaw {load['yaw_moment_n_m']:g} N m, roll "
+        f"{load['roll_moment_n_m']:g} N m",
+        "",
+        "track ball   z [mm]     F_BL     F_BR     F_TR     F_TL [N]  "
+        "dbeta_BL  dbeta_BR  dbeta_TR  dbeta_TL [deg]      rho  epsilon [%]",
+    ]
+    for b in out["balls"]:
+        eps = b["velocity_deviation"]
+        lines.append(
+            f"{b['track']:>5} {b['ball']:>4} {b['z_mm']:8.2f} "
+            + " ".join(f"{f:8.2f}" for f in b["normal_force_n"]) + "     "
+            + " ".join(f"{d:+9.4f}" for d in b["contact_angle_deviation_deg"]) + "       "
+            + _number(b["side_force_ratio"], "+8.4f") + "  "
+            + (_number(None, "+9.5f") if eps is None else f"{round(100 * eps, 5) + 0.0:+9.5f}")
+            + ("" if b["velocity_model"] in ("analytic", None) else f" ({b['velocity_model']})"))
+    opened = sum(b["contact_count"] < 4 for b in out["balls"])
+    undefined = sum(b["velocity_deviation"] is None for b in out["balls"])
+    by_full = sum(b["velocity_model"] == "full" for b in out["balls"])
+    if by_full:
+        lines.append(f"(full): epsilon of {by_full} balls from the full friction model, the "
+                     "analytical one being outside its validity there")
+    if opened:
+        lines.append(f"{opened} of {len(out['balls'])} balls have opened contacts (F = 0); "
+                     f"epsilon is undefined (-) for {undefined}: no velocity model takes a ball "
+                     "without four loaded contacts")
+    d = out["displacement"]
+    lines += [
+        "",
+        f"displacement: u_x {d['u_x_um']:+.4f} um, u_y {d['u_y_um']:+.4f} um, pitch "
+        f"{d['pitch_urad']:+.3f} urad, yaw {d['yaw_urad']:+.3f} urad, roll "
+        f"{d['roll_urad']:+.3f} urad",
+        "stiffness (rows: load, columns: motion):",
+        "          " + "".join(f"{name:>12}" for name in out["stiffness"]["dofs"]),
+    ]
+    for name, row, units in zip(out["stiffness"]["dofs"], out["stiffness"]["matrix"],
+                                out["stiffness"]["units"], strict=True):
+        lines.append(f"  {name:<8}" + "".join(f"{v:12.4g}" for v in row) + f"   [{units[0]} .. "
+                     f"{units[-1]}]")
+    k = out["stiffness"]["matrix"]
+    lines.append(f"catalogue: vertical {k[1][1]:.4g} N/um, lateral {k[0][0]:.4g} N/um, pitch "
+                 f"{k[2][2]:.4g}, yaw {k[3][3]:.4g}, roll {k[4][4]:.4g} N m/urad")
+    lines.append(f"locked: {', '.join(out['locked']) if out['locked'] else 'none'}")
+    lines.append(f"converged: {'yes' if out['converged'] else 'NO'} "
+                 f"({out['iterations']} Newton steps)")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    from tolsim.io.config import ConfigError, load_config
+
+    try:
+        config = load_config(args.config)
+    except ConfigError as exc:
+        raise UsageError(str(exc)) from None
+    if config.carriage is None:
+        raise UsageError(f"{args.config}: has no [carriage] section (tolsim carriage needs "
+                         "one; see configs/carriage_preload.toml)")
+    out = evaluate(config)
+    if args.plot:
+        from tolsim.reports.carriage import plot_load_distribution
+
+        try:
+            plot_load_distribution(out, args.plot)
+        except OSError as exc:
+            raise UsageError(f"--plot: cannot write {args.plot}: "
+                             f"{exc.strerror or exc}") from None
+    if args.json:
+        print(json.dumps(out, indent=2, allow_nan=False))
+    else:
+        print(_text(out))
+        if args.plot:
+            print(f"wrote {args.plot}")
+    return 0
