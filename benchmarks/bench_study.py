@@ -26,8 +26,14 @@ The cost of re-solving balls outside the fast model's validity with the full fri
 ``configs/known_answer.toml`` at sigma = 2 deg: balls/s, how many balls were re-solved and the
 share of the run time their re-solves took.
 
+With ``--friction`` it times instead the study after contact (issue 13):
+``configs/friction_yaw.toml``, the same study with ``[contact]`` (every train followed over the
+stroke, each ball's creep coefficients, the carriage friction and its statistics), against the
+same study without ``[contact]`` in the same run, at each size (target: >= 1.5 M balls/s on 2
+cores, peak memory flat from 1e6 to 1e7 balls).
+
 Run: ``python benchmarks/bench_study.py [--sizes 1e6 1e7] [--workers 1 2]
-[--static solved paired]``
+[--static solved paired] [--friction]``
 """
 
 import argparse
@@ -44,14 +50,15 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs" / "yaw_moment_tolerances.toml"
+FRICTION_CONFIG = ROOT / "configs" / "friction_yaw.toml"
 RESOLVE_STUDIES = {"default": ROOT / "tolsim" / "data" / "default.toml",
                    "known_answer": ROOT / "configs" / "known_answer.toml"}
 
 
-def study(balls_total, static_model="solved"):
+def study(balls_total, static_model="solved", config=CONFIG):
     from tolsim.io.config import load_config
 
-    c = load_config(CONFIG)
+    c = load_config(config)
     c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0,
                                  static_model=static_model))
     return c.with_overrides(samples=max(1, int(balls_total) // c.train.balls))
@@ -107,10 +114,10 @@ def numpy_pipeline(config):
     return total
 
 
-def child(balls_total, workers, baseline, static_model):
+def child(balls_total, workers, baseline, static_model, config=CONFIG):
     from tolsim.study.runner import run_study
 
-    c = study(balls_total, static_model)
+    c = study(balls_total, static_model, config)
     run_study(c.with_overrides(samples=2048), workers=workers)  # load / compile kernels
     start = time.perf_counter()
     if baseline:
@@ -145,12 +152,15 @@ def resolve_child(name, balls_total):
                       "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 
 
-def measure(balls, workers=1, baseline=False, static_model="solved", resolve=None):
+def measure(balls, workers=1, baseline=False, static_model="solved", resolve=None,
+            config=None):
     cmd = [sys.executable, __file__, "--child", str(balls), str(workers), static_model]
     if baseline:
         cmd.append("--baseline")
     if resolve:
         cmd += ["--resolve", resolve]
+    if config is not None:
+        cmd += ["--config", str(config)]
     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -167,12 +177,20 @@ def main():
     p.add_argument("--resolve", help=argparse.SUPPRESS)
     p.add_argument("--resolve-size", type=float, default=1e6,
                    help="balls of the re-solve cost runs (default and known-answer studies)")
+    p.add_argument("--friction", action="store_true",
+                   help="time the study after contact (configs/friction_yaw.toml) against "
+                        "the same study without [contact], at --sizes with one worker")
+    p.add_argument("--config", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
         if args.resolve:
             resolve_child(args.resolve, float(args.child[0]))
         else:
-            child(float(args.child[0]), int(args.child[1]), args.baseline, args.child[2])
+            child(float(args.child[0]), int(args.child[1]), args.baseline, args.child[2],
+                  Path(args.config) if args.config else CONFIG)
+        return
+    if args.friction:
+        friction(args.sizes)
         return
     print(f"tolsim study pipeline: {CONFIG.name} (solved static, analytic epsilon, "
           f"propagation a), {os.cpu_count()} cores")
@@ -200,6 +218,23 @@ def main():
               f"{r['outside']} outside validity ({r['resolved'] / r['balls']:.2%} of balls) in "
               f"{r['resolve_seconds']:.2f} s ({r['resolve_seconds'] / r['seconds']:.0%} of the "
               f"run); unresolved trains {r['unresolved_trains']}; peak {r['peak_mib']:.0f} MiB")
+
+
+def friction(sizes):
+    """Print the study with [contact] against the same study without it, size by size."""
+    print(f"tolsim study after contact: {FRICTION_CONFIG.name} against "
+          f"{CONFIG.name} (the same study without [contact]); solved static, analytic "
+          f"epsilon, one worker, {os.cpu_count()} cores")
+    for size in sizes:
+        base = measure(size, config=CONFIG)
+        with_contact = measure(size, config=FRICTION_CONFIG)
+        for label, r in (("without [contact]", base), ("with [contact]   ", with_contact)):
+            print(f"  {r['balls']:.2e} balls {label}: {r['seconds']:7.2f} s  "
+                  f"{r['balls'] / r['seconds'] / 1e6:.3f} M balls/s  peak RSS "
+                  f"{max(r['peak_mib'], r['child_peak_mib']):.0f} MiB")
+        ratio = base["seconds"] / with_contact["seconds"]
+        print(f"  throughput with [contact]: {ratio:.2f}x the study without it "
+              "(target: >= 1.5 M balls/s)")
 
 
 if __name__ == "__main__":

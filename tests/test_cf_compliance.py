@@ -26,11 +26,9 @@ from tolsim.io.netcdf import result_to_dataset, write_result  # noqa: E402
 from tolsim.study.runner import run_study  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
-#: (configs with a [carriage] are left out: studies with a carriage are not implemented yet,
-#: issue 12; tests/test_configs.py runs them through `tolsim carriage`)
+#: (configs with a [carriage] included: their files add the ``track`` and carriage variables)
 CONFIG_FILES = [ROOT / "tolsim" / "data" / "default.toml",
-                *sorted(p for p in (ROOT / "configs").glob("*.toml")
-                        if "\n[carriage]" not in p.read_text(encoding="utf-8"))]
+                *sorted((ROOT / "configs").glob("*.toml"))]
 CHECKER = "cf:1.10"
 #: small runs: assemblies per propagation model (along-track is ~100x dearer per assembly),
 #: Sobol' base samples (each costs d + 2 assemblies) and spot checks

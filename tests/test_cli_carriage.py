@@ -92,7 +92,11 @@ def one_line_error(capsys, argv):
 # --------------------------------------------------------------------------------------------
 def test_carriage_config_to_si_dataclasses():
     c = parse_config(HEAD + CARRIAGE)
-    assert c.loads is None and c.train is None
+    assert c.loads is None
+    # no [train]: one track's balls at the nominal pitch, gap = pitch - D (11 mm - 10 mm)
+    assert c.train.balls == 4 and c.train.initial_gap.kind == "fixed"
+    assert c.train.initial_gap.value == pytest.approx(1e-3, rel=1e-12)
+    assert (c.n_tracks, c.balls) == (2, 8)
     layout, load = c.carriage.layout, c.carriage.load
     assert isinstance(layout, CarriageLayout) and isinstance(load, CarriageLoad)
     assert_allclose(layout.track_x, [-0.02, 0.02], rtol=1e-15)  # mm -> m
@@ -171,11 +175,16 @@ def test_every_existing_config_still_has_no_carriage():
         assert (c.carriage is not None) == (path == CONFIG)
 
 
-def test_run_refuses_a_carriage_config(capsys, tmp_path):
-    # studies with a carriage are not implemented yet: one line, exit 2, nothing written
-    err = one_line_error(capsys, ["run", str(CONFIG), "-o", str(tmp_path / "x.nc")])
-    assert "not implemented yet" in err and "tolsim carriage" in err
-    assert not list(tmp_path.iterdir())
+def test_run_refuses_an_along_track_carriage_with_one_ball(capsys, tmp_path):
+    # one line naming the key, exit 2, nothing written
+    text = CONFIG.read_text().replace("[study]\n", '[study]\npropagation = "along_track"\n')
+    text = text.replace("balls_per_track = 12", "balls_per_track = 1").replace(
+        "balls = 12", "balls = 1")
+    path = tmp_path / "along.toml"
+    path.write_text(text)
+    err = one_line_error(capsys, ["run", str(path), "-o", str(tmp_path / "x.nc")])
+    assert "carriage.balls_per_track" in err and "along_track" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["along.toml"]
 
 
 def test_carriage_refuses_a_config_without_carriage(capsys):
@@ -201,7 +210,8 @@ def test_json_interface_names_and_shapes(capsys):
         assert isinstance(b["side_force_ratio"], float)
         assert isinstance(b["velocity_deviation"], float)
     z = [b["z_mm"] for b in out["balls"][:n]]
-    assert_allclose(z, (np.arange(n) - (n - 1) / 2) * 10.5, rtol=1e-12)  # ball 0 trailing
+    pitch_mm = 1e3 * load_config(CONFIG).carriage.layout.ball_pitch
+    assert_allclose(z, (np.arange(n) - (n - 1) / 2) * pitch_mm, rtol=1e-12)  # ball 0 trailing
     assert set(out["displacement"]) == {"u_x_um", "u_y_um", "pitch_urad", "yaw_urad",
                                         "roll_urad"}
     k = np.array(out["stiffness"]["matrix"])

@@ -10,11 +10,8 @@ import pytest
 
 from tolsim.cli import main
 
-#: configs with a [carriage] are left out: studies with a carriage are not implemented yet
-#: (issue 12); tests/test_configs.py runs them through `tolsim carriage`
-CONFIGS = sorted(p for p in glob.glob(os.path.join(os.path.dirname(__file__), "..", "configs",
-                                                   "*.toml"))
-                 if "\n[carriage]" not in open(p, encoding="utf-8").read())
+#: every config, those with a [carriage] (issue 12) included
+CONFIGS = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "configs", "*.toml")))
 #: small sample counts keep the test fast (along-track propagation is ~100x dearer)
 SAMPLES = {"constant": 64, "along_track": 8}
 
@@ -91,10 +88,19 @@ def test_report_every_config(results, name, tmp_path, capsys):
     tolerances = page[page.index("id='tolerances'"):]
     assert "<td>initial_gap</td>" in tolerances[: tolerances.index("</table>")]
     assert "id='assumptions'" in page and "VALIDITY_ERROR_BUDGET" in page
-    assert f"7. Model check: {config.study.velocity_model} versus" in page
+    carriage = config.carriage is not None  # its section 3 moves the later ones down
+    assert f"{8 if carriage else 7}. Model check: {config.study.velocity_model} versus" in page
     assert (out / "report.pdf").read_bytes()[:5] == b"%PDF-"
-    # issue 17: worst case and RSS beside the Monte Carlo, from the file's stack-up
+    # issue 17: worst case and RSS beside the Monte Carlo, from the file's stack-up (none for
+    # a carriage, whose balls are coupled: the page says so)
     assert "Linear stack-up beside the Monte Carlo" in page
+    assert ("Not computed for a carriage" in page) == carriage
+    # issue 12: a carriage study has its section with the load distribution, per assembly
+    if carriage:
+        assert "3. Carriage: load case, preload, load distribution and stiffness" in page
+        assert "carriage.png" in pngs and "per assembly" in page
+    else:
+        assert "carriage.png" not in pngs and "id='carriage'" not in page
 
 
 def test_report_uses_stored_sensitivity(results, tmp_path):

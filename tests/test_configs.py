@@ -19,6 +19,7 @@ SAMPLES = {
     "whatif_no_yaw_moment.toml": 1024,
     "whatif_along_track.toml": 200,
     "known_answer.toml": 4096,  # the closed-form checks are in tests/test_known_answer.py
+    "friction_yaw.toml": 1024,  # its checks are in tests/test_friction_study.py
 }
 #: Configs with a [carriage] (issue 12): `tolsim run` refuses them until studies with a
 #: carriage exist, so they are run through `tolsim carriage` here instead.
@@ -153,8 +154,9 @@ def test_carriage_configs_run_through_tolsim_carriage(name, capsys):
 def test_carriage_preload_classes():
     # The comment table of configs/carriage_preload.toml: preload per contact K (o/2)^1.5
     # for o = 0, 2, 4 um (0, 23, 66 N) and the vertical stiffness under the file's load
-    # (243, 408, 597 N/um, to the table's 3 digits); light and medium keep four-point
-    # contact, none closes one diagonal of each ball.
+    # (192, 419, 598 N/um, to the table's 3 digits) and the largest |rho| (1.00, 0.47, 0.17);
+    # light and medium keep four-point contact, none closes one diagonal of each ball. The
+    # P(contact) column is the study's (tests/test_carriage_study.py checks its direction).
     from dataclasses import replace
 
     from tolsim.physics.carriage import solve_carriage
@@ -165,11 +167,13 @@ def test_carriage_preload_classes():
     b = c.bearing
     k = hertz_constants(b.ball_radius, b.conformity, b.youngs_modulus,
                         b.poisson_ratio).load_deflection_constant
-    for o, preload, stiffness, contacts in ((0.0, 0.0, 243, 2), (2e-6, 23, 408, 4),
-                                            (4e-6, 66, 597, 4)):
+    for o, preload, stiffness, contacts, rho in ((0.0, 0.0, 192, 2, 1.00),
+                                                 (2e-6, 23, 419, 4, 0.47),
+                                                 (4e-6, 66, 598, 4, 0.17)):
         assert round(k * (o / 2) ** 1.5) == preload
         carriage = replace(c.carriage, preload_oversize=o)
         sol = solve_carriage(carriage.layout, carriage.load, b, oversize=carriage.oversize)
         assert sol.converged
         assert round(sol.stiffness[1, 1] * 1e-6) == stiffness
         assert sol.contact_count.min() == contacts
+        assert round(float(np.nanmax(np.abs(sol.side_force_ratio))), 2) == rho

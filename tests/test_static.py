@@ -427,8 +427,8 @@ def _lane_tile(nx, ny, e, bearing=TABLE1, tol=1e-12):
     fields = to_groove_errors(e)
     m = len(nx)
     assert m <= st_._TILE
-    items = [("side_load", nx, 0), ("normal_load", ny, 0)] + st_._error_items(fields, bearing)
-    (lx, ly, e_n, e_t, rb, rt, ob, ot, dd), _ = st_._prepare(items, bearing)
+    items = [("side_load", nx, 0), ("normal_load", ny, 0)] + st_.error_items(fields, bearing)
+    (lx, ly, e_n, e_t, rb, rt, ob, ot, dd), _ = st_.prepare_inputs(items, bearing)
     d = bearing.groove_radius - bearing.ball_radius
     s0, c0 = np.sin(bearing.nominal_contact_angle), np.cos(bearing.nominal_contact_angle)
     w = np.empty((st_._ROWS, st_._TILE))

@@ -52,6 +52,12 @@ API = {
     "write_result": "tolsim.io.netcdf",
     "read_result": "tolsim.io.netcdf",
     "linear_stackup": "tolsim.study.worst_case",
+    "compare_runs": "tolsim.reports.compare",
+    "solve_config_carriage": "tolsim.study.carriage",
+    "solve_carriage": "tolsim.physics.carriage",
+    "solve_carriage_batch": "tolsim.physics.carriage",
+    "CarriageLayout": "tolsim.physics.carriage",
+    "CarriageLoad": "tolsim.physics.carriage",
     # physics: the velocity models, the static contact, the bearing
     "eq24": "tolsim.physics.analytic",
     "analytic": "tolsim.physics.analytic",

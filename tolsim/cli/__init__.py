@@ -16,6 +16,7 @@ SUBCOMMANDS = {
     "paper": "tolsim.cli.paper",
     "report": "tolsim.cli.report",
     "carriage": "tolsim.cli.carriage",
+    "compare": "tolsim.cli.compare",
 }
 
 SUMMARIES = {
@@ -24,6 +25,7 @@ SUMMARIES = {
     "paper": "reproduce the source paper's figures and Table 2",
     "report": "HTML report of a study result file",
     "carriage": "load distribution of one carriage on its ball tracks, with preload",
+    "compare": "studies side by side: statistics, differences with intervals, config changes",
 }
 
 

@@ -11,6 +11,7 @@ import sys
 import numpy as np
 
 from tolsim.cli import UsageError
+from tolsim.physics.ball_loads import DEFAULT_BALL_FRICTION
 from tolsim.physics.geometry import (
     CONTACTS,
     TABLE1,
@@ -53,6 +54,15 @@ geometric (rigid) contact angles of those errors are used. With 'solved' and no 
 errors, --dbeta-deg is read as rigid contact-angle deviations, realised by turning each
 flank about the ball centre.
 
+Neighbours (--model analytic or full): --push-n P pushes the ball along the rail through its
+centre (P > 0 from behind, the direction the top groove moves); --neighbour-forces-n Q_BACK
+Q_FRONT gives the normal forces of the balls behind and in front (P = Q_BACK - Q_FRONT), whose
+ball-to-ball friction (--ball-friction, mu_bb, default 0.1) brakes the ball's rolling. The
+output then adds the carriage friction force of the ball (the friction between the ball and
+the moving top groove along the rail, positive when it opposes the carriage motion), its
+free-rolling value, the creep stiffness K = dP/d(epsilon), the traction capacity beyond which
+the ball slides, and with --model full the power dissipated in the contacts.
+
 Defaults are the paper's Table 1 (R_B = 5 mm, f = 0.54, beta_0 = 45 deg, E = 210 GPa,
 nu = 0.28, mu = 0.1, v = 10 mm/s); --config FILE takes the [bearing] and [motion] sections of
 a study config instead.
@@ -63,7 +73,12 @@ Examples:
   tolsim ball --model analytic --dbeta-deg -1 1 0.5 0 --forces-n 150 60 140 55
   tolsim ball --static solved                     # case (a), ball 1, loaded angles
   tolsim ball --static solved --bottom-rotation-deg 2 --load-n 120 200 --json
+  tolsim ball --push-n 2 --json                   # case (a) ball 1 pushed from behind
+  tolsim ball --model full --neighbour-forces-n 5 1 --ball-friction 0.1
 """
+
+#: Models that take external loads (push, neighbour forces): they have friction forces.
+LOADED_MODELS = ("analytic", "full")
 
 #: The paper's case study (Table 2, case (a), ball 1): theta = 2 deg, rho = -0.6, N_y = 200 N.
 DEFAULT_DBETA_DEG = (-2.0, 2.0, 0.0, 0.0)
@@ -99,7 +114,52 @@ def add_parser(subparsers, formatter_class=None):
                    help="study config (TOML) whose [bearing] and [motion] sections to use")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_static_arguments(p)
+    _add_load_arguments(p)
     return p
+
+
+def _add_load_arguments(p):
+    """Options of the external loads on the ball (issue 13, part 1)."""
+    g = p.add_argument_group("neighbours: push and ball-to-ball contact "
+                             "(--model analytic or full)")
+    loads = g.add_mutually_exclusive_group()
+    loads.add_argument("--push-n", type=float, metavar="P",
+                       help="net push on the ball along the rail through its centre [N], "
+                            "+ from behind (along the top groove's motion)")
+    loads.add_argument("--neighbour-forces-n", nargs=2, type=float,
+                       metavar=("Q_BACK", "Q_FRONT"),
+                       help="normal contact forces of the balls behind and in front [N] "
+                            "(>= 0; push = Q_BACK - Q_FRONT, and their friction brakes the "
+                            "ball's rolling)")
+    g.add_argument("--ball-friction", type=float, metavar="MU",
+                   help="Coulomb coefficient of the ball-to-ball contacts, with "
+                        "--neighbour-forces-n (default 0.1)")
+
+
+def _external_loads(args):
+    """Keyword arguments of the external loads for the model, or {} without them."""
+    if args.ball_friction is not None and args.neighbour_forces_n is None:
+        raise UsageError("--ball-friction applies to the ball-to-ball contacts: give "
+                         "--neighbour-forces-n Q_BACK Q_FRONT")
+    flag = ("--push-n" if args.push_n is not None else
+            "--neighbour-forces-n" if args.neighbour_forces_n is not None else None)
+    if flag is None:
+        return {}
+    if args.model not in LOADED_MODELS:
+        raise UsageError(f"{flag} needs --model {' or '.join(LOADED_MODELS)} (the {args.model} "
+                         "model has no friction forces to carry a load)")
+    if args.push_n is not None:
+        if not math.isfinite(args.push_n):
+            raise UsageError(f"--push-n must be a finite force in N, got {args.push_n:g}")
+        return {"push": args.push_n}
+    q_back, q_front = args.neighbour_forces_n
+    if not (math.isfinite(q_back) and math.isfinite(q_front) and q_back >= 0 and q_front >= 0):
+        raise UsageError("--neighbour-forces-n must be two finite forces >= 0 N (Q_BACK "
+                         f"Q_FRONT), got {q_back:g} {q_front:g}")
+    mu_bb = DEFAULT_BALL_FRICTION if args.ball_friction is None else args.ball_friction
+    if not (math.isfinite(mu_bb) and mu_bb >= 0):
+        raise UsageError(f"--ball-friction must be a finite coefficient >= 0, got {mu_bb:g}")
+    return {"neighbour_force": [q_back, q_front], "ball_friction": mu_bb}
 
 
 #: Geometric-error options (argparse dest) -> (flag, unit, largest magnitude accepted)
@@ -302,6 +362,7 @@ def _loss_of_contact_warning(model, forces, eps):
 def evaluate(args):
     """Run the model for the parsed arguments; returns the JSON-ready dict."""
     bearing, velocity = _bearing_and_velocity(args)
+    loads = _external_loads(args)
     dbeta_deg, forces, force_source, static_out, warnings = _angles_and_forces(args, bearing)
     dbeta = np.deg2rad(dbeta_deg)
     model = MODELS[args.model]
@@ -312,14 +373,17 @@ def evaluate(args):
     elif args.surface is not None:
         raise UsageError("--surface applies to --model full only")
     try:
-        result = model(dbeta, forces, bearing, **options)
+        result = model(dbeta, forces, bearing, **options, **loads)
     except ValueError as exc:  # inputs outside the model's domain, named by the model
         raise UsageError(f"--model {args.model}: {' '.join(str(exc).split())}") from None
     eps = float(result.velocity_deviation)
-    contact_warning = _loss_of_contact_warning(args.model, forces, eps)
+    sliding = bool(loads) and bool(result.sliding)
+    contact_warning = None if sliding else _loss_of_contact_warning(args.model, forces, eps)
     if contact_warning:
         warnings.append(contact_warning)
-    if not bool(result.valid) and math.isfinite(eps):
+    if sliding:
+        warnings.append(_sliding_warning(result))
+    elif not bool(result.valid) and math.isfinite(eps):
         warnings.append(f"{VALIDITY_NOTES.get(args.model, 'not valid')}: treat epsilon "
                         "with caution")
     gamma = result.zero_velocity_offset
@@ -358,6 +422,44 @@ def evaluate(args):
         if not out["converged"]:
             warnings.append(f"full model did not converge: residual {out['residual']:.3g} "
                             f"after {out['iterations']} iterations")
+    if loads:
+        out.update(_load_output(args.model, loads, result))
+    return out
+
+
+def _sliding_warning(result):
+    """The warning for a ball whose loads exceed what the raceway traction can carry."""
+    push, capacity = float(result.push), float(result.traction_capacity)
+    if abs(push) >= capacity:
+        return (f"gross sliding: |push| {abs(push):.4g} N >= traction capacity {capacity:.4g} "
+                "N, the raceways cannot hold the ball at a rolling speed (it is carried along "
+                "by its neighbours)")
+    return (f"gross sliding: Q_BACK + Q_FRONT = {float(result.neighbour_force_sum):.4g} N >= "
+            f"braking capacity {float(result.braking_capacity):.4g} N, the ball-to-ball "
+            "friction stalls the ball's rolling")
+
+
+def _load_output(model, loads, result):
+    """JSON fields of a loaded ball (tolsim.physics.ball_loads)."""
+    out = {"push_n": float(result.push)}
+    if "neighbour_force" in loads:
+        out["neighbour_forces_n"] = [float(q) for q in loads["neighbour_force"]]
+        out["ball_friction"] = float(loads["ball_friction"])
+    out.update({
+        "carriage_force_n": float(result.carriage_force),
+        "free_rolling_carriage_force_n": float(result.free_rolling_carriage_force),
+        "free_rolling_velocity_deviation": float(result.free_rolling_velocity_deviation),
+        "creep_stiffness_n": float(result.creep_stiffness),
+        "traction_capacity_n": float(result.traction_capacity),
+        "braking_capacity_n": float(result.braking_capacity),
+        "sliding": bool(result.sliding),
+    })
+    if model == "full":
+        out.update({
+            "dissipated_power_w": float(result.dissipated_power),
+            "contact_dissipated_power_w": [float(p) for p in result.contact_dissipated_power],
+            "ball_contact_dissipated_power_w": float(result.ball_contact_dissipated_power),
+        })
     return out
 
 
@@ -389,6 +491,8 @@ def _text(out):
         lines.append("c/a                   "
                      + "  ".join(f"{c:9.4f}" if math.isfinite(c) else f"{'undefined':>9}"
                                  for c in out["contact_offset_ratio"]))
+    if "carriage_force_n" in out:
+        lines += _load_text(out)
     if "static" in out:
         st = out["static"]
         lines.append(f"static contact        {st['mode']}: {st['contact_count']} loaded flanks, "
@@ -396,6 +500,29 @@ def _text(out):
                      + " ".join(f"{a:.3f}" for a in st["approach_um"]))
     lines += [f"warning: {w}" for w in out["warnings"]]
     return "\n".join(lines)
+
+
+def _load_text(out):
+    """Text lines of a loaded ball."""
+    def number(value, fmt):
+        return format(value, fmt) if math.isfinite(value) else "undefined"
+
+    push = (f"push                  {out['push_n']:+.6g} N" if "neighbour_forces_n" not in out
+            else "neighbour forces      back {:.6g} N, front {:.6g} N (push {:+.6g} N, "
+                 "mu_bb {:g})".format(*out["neighbour_forces_n"], out["push_n"],
+                                      out["ball_friction"]))
+    lines = [
+        push,
+        f"carriage force        {number(out['carriage_force_n'], '.6g')} N (free rolling "
+        f"{number(out['free_rolling_carriage_force_n'], '.6g')} N; + opposes the carriage)",
+        f"creep stiffness       {number(out['creep_stiffness_n'], '.6g')} N per unit epsilon",
+        f"traction capacity     {number(out['traction_capacity_n'], '.6g')} N"
+        + ("  (sliding)" if out["sliding"] else ""),
+    ]
+    if "dissipated_power_w" in out:
+        lines.append(f"dissipated power      {number(out['dissipated_power_w'], '.6g')} W "
+                     "(raceways and ball contacts)")
+    return lines
 
 
 def _strict_json(value):

@@ -21,12 +21,23 @@ spot checks of the study's velocity model against the full model (half of them n
 limit), the tolerances that drive the risk (Sobol' indices) and, with a limit on |epsilon|,
 the fraction out of spec and Cpk.
 
+For a study with a [carriage] (an assembly is a carriage with one train per track) the
+report adds a section on the carriage: the load case in catalogue terms (radial and lateral
+load, pitching, yawing and rolling moments), the preload (ball oversize and force per
+contact), the tracks with the nominal load distribution (ball normal load N_y and side force
+ratio rho along the rail, per track: carriage.png), the carriage displacement and stiffness
+(N/um, N m/urad) of the nominal assembly with their mean, std, min and max over the sampled
+carriages, and the carriages not solved. Per-ball and per-pair figures then draw one series
+per track, and P(contact) is per assembly: contact in any of its trains.
+
 When the file holds no sensitivity indices they are computed from the config stored in the
 file (same seed); --sensitivity-samples sets the cost, --no-sensitivity skips it.
 
 examples:
   tolsim run configs/yaw_moment_tolerances.toml -o yaw.nc
   tolsim report yaw.nc -o yaw-report
+  tolsim run configs/carriage_preload.toml -o carriage.nc
+  tolsim report carriage.nc
 """
 
 

@@ -32,12 +32,19 @@ which the 95 % interval of P(contact) is that narrow, and --samples (or study.sa
 the maximum. The file records the number of assemblies actually run: a fixed run of that
 many gives the same result.
 
+On a cluster: --scheduler runs the chunks of random blocks as tasks on dask.distributed
+(pip install "tolsim[dask]", on the workers too): a running scheduler (tcp://HOST:8786 or
+its scheduler file), or local:N for N worker processes on this machine. The result is
+bit-identical to the run in this process; a worker lost mid-run costs only the tasks dask
+reruns, and stopping and resuming work as above. The dashboard's address is printed.
+
 examples:
   tolsim run                                   # the packaged default study
   tolsim run configs/paper_case_study.toml -o case.nc
   tolsim run study.toml --samples 1000000 --seed 7 -o seed7.nc
   tolsim run study.toml --samples 10000000 --target-ci-width 0.002   # P(contact) +- 0.001
   tolsim run study.toml --samples 10000000 --target-ci-width 10%     # width 10 % of P
+  tolsim run study.toml --samples 100000000 --scheduler tcp://head-node:8786
 """
 
 
@@ -84,7 +91,16 @@ def add_parser(subparsers, formatter_class=None):
                    help="worker processes, sharing the cores (the result does not depend on "
                         "it). 1 is fastest on a few cores: the compiled kernels already run on "
                         "every core and the next chunk is drawn meanwhile; each extra process "
-                        "costs 1-2 s to start and pays off only for long runs on many cores")
+                        "costs 1-2 s to start and pays off only for long runs on many cores. "
+                        "Not with --scheduler, whose workers do the work")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the tasks on dask.distributed (needs pip install "
+                        "\"tolsim[dask]\"): tcp://HOST:8786 for a running scheduler ('dask "
+                        "scheduler' on the head node, 'dask worker tcp://HOST:8786' on each "
+                        "machine), the path of a scheduler file (dask scheduler "
+                        "--scheduler-file FILE), or local:N to start a LocalCluster of N "
+                        "worker processes here (local: one per core). Same result as without "
+                        "it; for small studies the process alone is faster")
     p.add_argument("--chunk-blocks", type=_positive_int, metavar="N",
                    help="random blocks evaluated together (default: ~260k balls per chunk)")
     p.add_argument("--target-ci-width", type=_target, metavar="W",
@@ -134,8 +150,61 @@ def _strata_text(ds) -> str:
     return ("; " + "; ".join(parts)) if parts else ""
 
 
+def _carriage_text(ds) -> str:
+    """One line on the carriage of a study with one: preload, displacement, stiffness."""
+    t = ds.carriage_translation_nominal.values
+    k = ds.carriage_translational_stiffness_nominal.values
+    k_mean = ds.carriage_translational_stiffness_mean.values
+    line = (f"carriage: preload {1e6 * float(ds.preload_oversize):.3g} um oversize "
+            f"({float(ds.preload_contact_force):.3g} N per contact); nominal u_x "
+            f"{1e6 * t[0]:+.3f} um, u_y {1e6 * t[1]:+.3f} um; stiffness k_xx "
+            f"{1e-6 * k[0]:.4g}, k_yy {1e-6 * k[1]:.4g} N/um (nominal), "
+            f"{1e-6 * k_mean[0]:.4g}, {1e-6 * k_mean[1]:.4g} N/um (mean over assemblies)")
+    failed = int(ds.n_assemblies_carriage_failed)
+    if failed:
+        line += f"; {failed} carriages not solved (their trains are unresolved)"
+    return line
+
+
 def _pct(x):
     return f"{100 * x:+.3f} %"
+
+
+def _friction_text(ds) -> list:
+    """Lines on the friction of a study with [contact]: increase and P(increase > limit)."""
+    inc = ds["friction_increase_quantile"]
+    resolved = int(ds.n_assemblies_friction_resolved)
+    unresolved = int(ds.n_assemblies_friction_unresolved)
+    n_asm = int(ds.n_assemblies)
+
+    def at(level):
+        return float(inc.sel(quantile=level, method="nearest"))
+
+    lines = [
+        f"friction (worst track of each assembly, mu_bb {float(ds.ball_friction_coefficient):g}): "
+        f"baseline {float(ds.friction_force_baseline):.4g} N; increase median {at(0.5):.3g} N, "
+        f"99 % {at(0.99):.3g} N, largest {float(ds.friction_increase_max):.3g} N; contact "
+        f"during {100 * float(ds.contact_fraction_mean):.3g} % of the stroke on average "
+        f"({resolved} of {n_asm} assemblies resolved)"]
+    limit = float(ds.friction_increase_limit)
+    if limit == limit:  # a limit is set (NaN otherwise)
+        k = int(ds.n_friction_exceedance)
+        lines.append(
+            f"P(friction increase > {limit:.4g} N) = "
+            f"{float(ds.friction_exceedance_probability):.4f}  95 % CI "
+            f"[{float(ds.friction_exceedance_probability_ci_lower):.4f}, "
+            f"{float(ds.friction_exceedance_probability_ci_upper):.4f}]  ({k} of "
+            f"{n_asm - unresolved} assemblies whose outcome is known)")
+        if unresolved:
+            lines.append(
+                f"  bounds over all {n_asm} assemblies, the {unresolved} unresolved counted as "
+                f"below / above: [{float(ds.friction_exceedance_probability_bound_lower):.4f}, "
+                f"{float(ds.friction_exceedance_probability_bound_upper):.4f}]")
+    sliding = int(ds.n_assemblies_sliding)
+    if sliding:
+        lines.append(f"  {sliding} assemblies with a sliding ball (push beyond its traction "
+                     "capacity): unresolved from the onset of sliding")
+    return lines
 
 
 def summary(ds, output, elapsed) -> str:
@@ -149,8 +218,11 @@ def summary(ds, output, elapsed) -> str:
 
     n_asm, n_unres = int(ds.n_assemblies), int(ds.n_assemblies_unresolved)
     balls = ds.sizes["ball"]
+    tracks = ds.sizes.get("track", 0)
+    trains = "assemblies" if tracks else "trains"  # a carriage: any of its trains touches
+    shape = f"{tracks} tracks x {balls} balls" if tracks else f"{balls} balls"
     lines = [
-        f"study: {a['title'].split(': ', 1)[-1]}  {n_asm} assemblies x {balls} balls  "
+        f"study: {a['title'].split(': ', 1)[-1]}  {n_asm} assemblies x {shape}  "
         f"({a['velocity_model']}, {a['static_model']} static, {a['propagation']} "
         f"propagation, {a['sampling']} sampling, seed {a['seed']})",
         f"epsilon: mean {_pct(float(ds.velocity_deviation_mean))}, "
@@ -163,8 +235,10 @@ def summary(ds, output, elapsed) -> str:
         f"{float(ds.contact_probability):.4f}  95 % CI "
         f"[{float(ds.contact_probability_ci_lower):.4f}, "
         f"{float(ds.contact_probability_ci_upper):.4f}]  "
-        f"({int(ds.n_contact)} of {n_asm - n_unres} trains whose outcome is known)",
+        f"({int(ds.n_contact)} of {n_asm - n_unres} {trains} whose outcome is known)",
     ]
+    if tracks:
+        lines.append(_carriage_text(ds))
     if n_unres:
         lines.append(
             f"  bounds over all {n_asm} trains, with the {n_unres} unresolved ones counted "
@@ -177,6 +251,8 @@ def summary(ds, output, elapsed) -> str:
     lines.append(f"propagation: {a['propagation_assumption']}")
     if a.get("propagation_caveat"):
         lines.append(f"  note: {a['propagation_caveat']}")
+    if "friction_increase_quantile" in ds:  # [contact]: after the first contact
+        lines.extend(_friction_text(ds))
     if int(ds.n_contact):
         lines.append(
             f"time to first contact: earliest {float(ds.time_to_contact_min):.4g} s, "
@@ -231,7 +307,8 @@ def summary(ds, output, elapsed) -> str:
             f"+-{1e6 * float(ds.gap_closure_worst_case[pr]):.3g} um")
     if "sensitivity_total" in ds.variables and ds.sizes.get("factor", 0):
         for var, what in (("sensitivity_total", "epsilon"),
-                          ("sensitivity_contact_total", "contact")):
+                          ("sensitivity_contact_total", "contact"),
+                          ("sensitivity_friction_total", "the friction increase")):
             if var in ds:
                 # indexed by the source names (the factor_name label), not the factor index
                 by_name = ds[var].swap_dims(factor="factor_name").to_series()
@@ -252,6 +329,8 @@ def _command_line(args, output) -> str:
             parts += [flag, str(value)]
     if args.workers != 1:
         parts += ["--workers", str(args.workers)]
+    if args.scheduler:
+        parts += ["--scheduler", args.scheduler]
     if args.target_ci_width is not None:
         parts += ["--target-ci-width", str(args.target_ci_width)]
     return shlex.join(parts)
@@ -298,10 +377,6 @@ def run(args) -> int:
         config = load_config(args.config).with_overrides(samples=args.samples, seed=args.seed)
     except (ConfigError, ValueError) as exc:
         raise UsageError(str(exc)) from None
-    if config.carriage is not None:
-        raise UsageError(f"{config.path}: studies with a [carriage] are not implemented yet "
-                         f"(issue 12); 'tolsim carriage {config.path}' solves its load "
-                         "distribution")
     if args.output:
         output = Path(args.output)
     elif args.config:
@@ -310,6 +385,17 @@ def run(args) -> int:
         output = Path("tolsim-result.nc")
     checkpoint = Path(f"{output}.partial")
     _check_output(output, checkpoint)
+    if args.scheduler is not None:  # before any work: the extra, the value, the flags
+        from tolsim.study import distributed
+
+        if args.workers != 1:
+            raise UsageError("--workers and --scheduler: the scheduler's workers do the work; "
+                             "for N worker processes on this machine use --scheduler local:N")
+        try:
+            distributed.require_distributed()
+            distributed.parse_scheduler(args.scheduler)
+        except (distributed.MissingExtraError, ValueError) as exc:
+            raise UsageError(str(exc)) from None
 
     import tqdm
 
@@ -341,8 +427,9 @@ def run(args) -> int:
                            progress=bar.update, checkpoint_path=str(checkpoint),
                            checkpoint_interval=args.checkpoint_interval,
                            target=args.target_ci_width, notify=notify,
-                           save_samples=args.save_samples)
-    except ValueError as exc:
+                           save_samples=args.save_samples, scheduler=args.scheduler)
+    except ValueError as exc:  # also a scheduler that cannot be reached
+
         raise UsageError(str(exc)) from None
     except KeyboardInterrupt:
         if not checkpoint.exists():

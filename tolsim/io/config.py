@@ -17,6 +17,7 @@ import io
 import math
 import re
 import tomllib
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
@@ -25,6 +26,7 @@ import numpy as np
 from tolsim.physics.carriage import CarriageLayout, CarriageLoad
 from tolsim.physics.geometry import Bearing
 from tolsim.study.spec import (
+    CREEP_MODELS,
     DISTRIBUTIONS,
     PLAUSIBLE_NORMAL_RANGE,
     PROPAGATIONS,
@@ -34,6 +36,7 @@ from tolsim.study.spec import (
     STATIC_MODELS,
     VELOCITY_MODELS,
     Carriage,
+    ContactSettings,
     Correlation,
     Distribution,
     Loads,
@@ -499,6 +502,20 @@ def _carriage(t: _Table, bearing: Bearing) -> Carriage:
         key = t.key_for("preload_oversize", "length")
         raise t.error(key, f"= {t.data[key]!r} is beyond +/- {limit * 1e6:g} um, a quarter of "
                            "the ball-groove centre distance (a unit slip?)")
+    # end relief (crowning) of the carriage grooves; the length is checked against the
+    # loaded zone in parse_config, once [train] is read
+    relief_depth = t.quantity("end_relief_depth", "length", default=0.0, minimum=0.0)
+    relief_length = t.quantity("end_relief_length", "length", default=0.0, minimum=0.0)
+    depth_key = t.key_for("end_relief_depth", "length")
+    length_key = t.key_for("end_relief_length", "length")
+    if relief_depth > limit:
+        raise t.error(depth_key, f"= {t.data[depth_key]!r} is beyond {limit * 1e6:g} um, a "
+                                 "quarter of the ball-groove centre distance (a unit slip?)")
+    if relief_depth > 0 and not relief_length > 0:
+        raise t.error(depth_key, "needs end_relief_length_<unit> > 0 (the relieved length at "
+                                 "each end of the loaded zone)")
+    if relief_length > 0 and not relief_depth > 0:
+        raise t.error(length_key, "has no effect without end_relief_depth_<unit> > 0")
 
     load_table = t.table("load", required=False)
     if load_table is None:
@@ -566,7 +583,36 @@ def _carriage(t: _Table, bearing: Bearing) -> Carriage:
     except ValueError as exc:
         raise t.error(None, " ".join(str(exc).split())) from None
     return Carriage(layout=layout, load=load, preload_oversize=preload,
-                    ball_oversize_deviation=tuple(map(float, deviation)))
+                    ball_oversize_deviation=tuple(map(float, deviation)),
+                    end_relief_depth=relief_depth, end_relief_length=relief_length)
+
+
+def _carriage_propagation(t: _Table, carriage: Carriage, train: Train, study_table: _Table,
+                          study: StudySettings):
+    """Raise for what a [carriage] study cannot combine with its propagation: end relief
+    without along_track or longer than half the loaded zone; one ball per track, fixed
+    per-ball oversizes with along_track."""
+    if carriage.end_relief_depth > 0:
+        half = 0.5 * train.loaded_zone_length
+        key = t.key_for("end_relief_length", "length")
+        if carriage.end_relief_length > half:
+            raise t.error(key, f"= {t.data[key]!r} is longer than half the loaded zone "
+                               f"({half * 1e3:g} mm, train.loaded_zone_length / 2)")
+        if study.propagation != "along_track":
+            raise t.error(t.key_for("end_relief_depth", "length"),
+                          "acts on balls rolling through the carriage: it needs "
+                          "study.propagation = 'along_track'")
+    if study.propagation != "along_track":
+        return
+    if carriage.layout.balls_per_track < 2:
+        raise t.error("balls_per_track", "= 1: with propagation = 'along_track' a track needs "
+                                         "at least 2 balls (one ball cannot hold the "
+                                         "carriage's pitch and yaw as it rolls)")
+    if carriage.ball_oversize_deviation:
+        raise t.error(t.key_for("ball_oversize_deviation", "length"),
+                      "fixes the size of the balls at their slots, but with propagation = "
+                      "'along_track' the balls roll through the carriage: give the size "
+                      "scatter as [tolerances.ball_oversize] instead")
 
 
 def _tolerances(t: _Table | None, bearing: Bearing) -> tuple:
@@ -598,6 +644,21 @@ def _tolerances(t: _Table | None, bearing: Bearing) -> tuple:
 #: Keys that were plain fractions and now carry a unit (``_percent`` or ``_ppm``).
 FRACTION_KEYS = ("velocity_deviation_range", "velocity_deviation_limit",
                  "contact_probability_limit", "out_of_spec_limit")
+
+
+def _contact(t: _Table) -> ContactSettings:
+    """``[contact]``: after balls touch (issue 13; :class:`ContactSettings`)."""
+    s = ContactSettings(
+        ball_friction_coefficient=t.quantity("ball_friction_coefficient", "dimensionless",
+                                             default=0.1, minimum=0.0),
+        friction_increase_limit=t.quantity("friction_increase_limit", "force", default=0.0,
+                                           positive=True),
+        creep_model=t.string("creep_model", CREEP_MODELS, default="analytic"),
+        examples=t.integer("examples", default=4, minimum=0),
+        travel_points=t.integer("travel_points", default=201, minimum=2),
+    )
+    t.finish()
+    return s
 
 
 def _study(t: _Table) -> StudySettings:
@@ -776,23 +837,52 @@ def parse_config(text: str, path: str = "<string>") -> StudyConfig:
             raise source.error("loads", None, "section beside [carriage]: a carriage takes "
                                               "its loads from [carriage.load]; remove [loads]")
         carriage = _carriage(root.table("carriage"), bearing)
-        train = _train(root.table("train"), bearing) if root.has("train") else None
-        if train is not None and train.balls != carriage.layout.balls_per_track:
-            raise source.error("train", "balls", f"= {train.balls} but "
-                               f"carriage.balls_per_track = {carriage.layout.balls_per_track}")
+        layout = carriage.layout
+        if root.has("train"):
+            train = _train(root.table("train"), bearing)
+            if train.balls != layout.balls_per_track:
+                raise source.error("train", "balls", f"= {train.balls} but "
+                                   f"carriage.balls_per_track = {layout.balls_per_track}")
+        else:  # the balls of one track at the nominal pitch
+            gap = max(layout.ball_pitch - 2.0 * bearing.ball_radius, 0.0)
+            train = Train(balls=layout.balls_per_track,
+                          initial_gap=Distribution(kind="fixed", value=gap),
+                          loaded_zone_length=max(layout.balls_per_track * layout.ball_pitch,
+                                                 2.0 * bearing.ball_radius))
         loads = None
     else:
         train = _train(root.table("train"), bearing)
         loads = _loads(root.table("loads"), train, bearing)
     tolerances = _tolerances(root.table("tolerances", required=False), bearing)
     correlations = _correlations(root, tolerances)
-    study = _study(root.table("study"))
+    study_table = root.table("study")
+    study = _study(study_table)
+    if carriage is not None:  # the carriage solve is the static model of its balls
+        given = study_table.data.get("static_model")
+        if given not in (None, "solved"):
+            raise study_table.error("static_model", f"= {given!r}: a study with a [carriage] "
+                                    "solves every ball with the carriage (elastic, "
+                                    "displacement-controlled); remove the key or set 'solved'")
+        study = replace(study, static_model="solved")
+        _carriage_propagation(_Table(data["carriage"], "carriage", source), carriage, train,
+                              study_table, study)
+    contact = None
+    if root.has("contact"):  # after contact: trains and friction (issue 13)
+        contact = _contact(root.table("contact"))
+        if study.propagation != "constant":
+            raise study_table.error("propagation", f"= {study.propagation!r}: a study with "
+                                    "[contact] supports 'constant' propagation only "
+                                    "(along_track is not supported yet)")
+        if not bearing.friction_coefficient > 0:
+            raise source.error("bearing", "friction_coefficient", "= 0: a study with [contact] "
+                               "needs raceway friction (> 0) to carry the balls' pushes")
     for key in data:
         if key not in root.used:
             raise source.error(key, None, "is not a known section (bearing, motion, train, "
-                                          "loads, carriage, tolerances, correlation, study)")
+                                          "loads, carriage, tolerances, correlation, study, "
+                                          "contact)")
     return StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
-                       correlations, carriage)
+                       correlations, carriage, contact)
 
 
 def default_config_text() -> str:

@@ -19,6 +19,8 @@ from tolsim import __version__
 from tolsim.io import schema
 from tolsim.physics.geometry import CONTACTS
 from tolsim.study import saved_samples
+from tolsim.study.carriage import carriage_variables
+from tolsim.study.friction import friction_variables
 from tolsim.study.propagation import propagation_assumption, propagation_caveat
 from tolsim.study.quality import dataset_quality
 from tolsim.study.sampling import SPOT_CHECK_STRATA
@@ -74,7 +76,26 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
     sc = result.spot_checks
     both = sc.valid_analytic & sc.valid_full
     diff = sc.velocity_deviation_analytic[both] - sc.velocity_deviation_full[both]
-    balls = cfg.train.balls
+    balls = cfg.train.balls  # per track
+    tracks = cfg.n_tracks
+    carriage = cfg.carriage is not None
+    ball_dims = ("track", "ball") if carriage else ("ball",)
+    pair_dims = ("track", "pair") if carriage else ("pair",)
+
+    def by_ball(values):
+        return (ball_dims, np.asarray(values).reshape((tracks, balls) if carriage else -1))
+
+    pairs = acc.pair_count[: tracks * max(balls - 1, 0)]
+    if carriage:
+        nominal = getattr(result, "carriage_nominal", None)
+        if nominal is not None:
+            sol = nominal.solution
+            loads = (sol.normal_load, sol.side_load, sol.side_force_ratio)
+        else:
+            loads = (np.full((tracks, balls), np.nan),) * 3
+    else:
+        loads = (np.asarray(cfg.loads.normal_load), np.asarray(cfg.loads.side_load),
+                 cfg.loads.side_force_ratio)
     data = {
         "velocity_deviation_mean": acc.velocity_deviation_mean,
         "velocity_deviation_std": acc.velocity_deviation_std,
@@ -84,11 +105,11 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "velocity_deviation_histogram": (("velocity_deviation_bin",), acc.eps_histogram),
         "velocity_deviation_underflow": acc.eps_underflow,
         "velocity_deviation_overflow": acc.eps_overflow,
-        "velocity_deviation_mean_by_ball": (("ball",), ball_mean),
-        "velocity_deviation_std_by_ball": (("ball",), ball_std),
-        "normal_load": (("ball",), np.asarray(cfg.loads.normal_load)),
-        "side_load": (("ball",), np.asarray(cfg.loads.side_load)),
-        "side_force_ratio": (("ball",), cfg.loads.side_force_ratio),
+        "velocity_deviation_mean_by_ball": by_ball(ball_mean),
+        "velocity_deviation_std_by_ball": by_ball(ball_std),
+        "normal_load": by_ball(loads[0]),
+        "side_load": by_ball(loads[1]),
+        "side_force_ratio": by_ball(loads[2]),
         "contact_probability": p,
         "contact_probability_ci_lower": lo,
         "contact_probability_ci_upper": hi,
@@ -102,7 +123,8 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "time_to_contact_max": acc.time_max if acc.n_contact else np.nan,
         "time_to_contact_histogram": (("time_bin",), acc.time_histogram),
         "survival_probability": (("elapsed_time",), acc.survival()),
-        "contact_pair_count": (("pair",), acc.pair_count[: max(balls - 1, 0)]),
+        "contact_pair_count": (pair_dims, pairs.reshape(
+            (tracks, max(balls - 1, 0)) if carriage else -1)),
         "horizon": cfg.motion.duration,
         "groove_velocity": cfg.motion.groove_velocity,
         "n_assemblies": acc.n_assemblies,
@@ -158,6 +180,16 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "contact": (("contact",), np.arange(len(CONTACTS), dtype=np.int64)),
         "contact_name": (("contact",), np.array(CONTACTS)),
     }
+    if carriage:
+        more_coords, more_data = carriage_variables(cfg, acc, getattr(result, "carriage_nominal",
+                                                                      None))
+        coords.update(more_coords)
+        data.update(more_data)
+    friction_attrs = {}
+    if getattr(acc, "friction", None) is not None:  # [contact]: trains and friction (issue 13)
+        more_coords, more_data, friction_attrs = friction_variables(result)
+        coords.update(more_coords)
+        data.update(more_data)
     ds = xr.Dataset(data, coords=coords)
     if history is None:
         history = " ".join(shlex.quote(a) for a in [os.path.basename(sys.argv[0])] + sys.argv[1:])
@@ -191,6 +223,7 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         "workers": int(result.workers),
     }
     ds.attrs.update(provenance_attributes(cfg))
+    ds.attrs.update(friction_attrs)
     if getattr(result, "target", None) is not None:  # tolsim run --target-ci-width
         ds.attrs.update(stopping_rule=result.stopping_rule, target_ci_width=str(result.target),
                         samples_maximum=int(result.samples_maximum))

@@ -11,7 +11,12 @@ Dimensions: ``quantile`` (levels), ``velocity_deviation_bin`` (histogram bins of
 ``elapsed_time`` (survival-curve times since the start of the stroke = the edges of the time
 bins), ``time_bin``, ``ball`` (position in the train, 0 = trailing), ``pair`` (adjacent pairs,
 named by their trailing ball), ``spot_check``, ``contact`` (4), ``bounds`` (2), ``factor``
-(tolerance sources, optional), ``sample`` (the saved assemblies, optional).
+(tolerance sources, optional), ``sample`` (the saved assemblies, optional); a study with a
+carriage adds ``track`` (its rows of balls; the per-ball and per-pair variables gain it as their
+first dim), ``carriage_translation`` (u_x, u_y), ``carriage_rotation`` (pitch, yaw, roll),
+``carriage_force_component`` and ``carriage_moment_component``; a study with ``[contact]``
+adds ``force_bin`` (force histogram bins) and, with examples, ``example`` and ``travel``
+(carriage travel of the example trajectories).
 
 The file passes the CF checker (``compliance-checker --test=cf:1.10``, see
 ``tests/test_cf_compliance.py``): coordinate variables are numeric, strictly monotonic and
@@ -25,6 +30,8 @@ not ``time``: it is a duration in ``s``, not a CF time coordinate (``units`` "..
 
 from dataclasses import dataclass
 
+from tolsim.study.carriage import CARRIAGE_COORDINATES, CARRIAGE_VARIABLES
+from tolsim.study.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
 from tolsim.study.quality import QUALITY_VARIABLES
 from tolsim.study.saved_samples import SAMPLE_VARIABLES
 from tolsim.study.sensitivity import SENSITIVITY_VARIABLES
@@ -65,6 +72,15 @@ class Variable:
     long_name: str
     kind: str = "f"  # numpy dtype kind: f float, i integer, U/O/S string
     required: bool = True
+    track_axis: int | None = None  # where a study with a carriage inserts its ``track`` dim
+
+    def dims_in(self, ds) -> tuple:
+        """The dims expected in ``ds``: with a ``track_axis`` and a ``track`` dimension in
+        the Dataset (a study with a carriage), ``track`` inserted there."""
+        if self.track_axis is not None and "track" in ds.dims:
+            k = self.track_axis
+            return self.dims[:k] + ("track",) + self.dims[k:]
+        return self.dims
 
 
 V = Variable
@@ -88,6 +104,12 @@ COORDINATES = {
     "factor": V(("factor",), "1", "tolerance source index (names in factor_name)", "i",
                 required=False),
     "factor_name": V(("factor",), "1", "tolerance source", "U", required=False),
+    # a study with a carriage (issue 12): declared in tolsim.study.carriage, optional here
+    **{name: V(dims, units, long_name, kind, required=False)
+       for name, (dims, units, long_name, kind) in CARRIAGE_COORDINATES.items()},
+    # a study with [contact] (issue 13): declared in tolsim.study.friction, optional here
+    **{name: V(dims, units, long_name, kind, required=False)
+       for name, (dims, units, long_name, kind) in FRICTION_COORDINATES.items()},
 }
 
 DATA_VARIABLES = {
@@ -101,13 +123,18 @@ DATA_VARIABLES = {
                                       "number of valid balls per epsilon bin", "i"),
     "velocity_deviation_underflow": V((), "1", "valid balls below the histogram range", "i"),
     "velocity_deviation_overflow": V((), "1", "valid balls above the histogram range", "i"),
-    "velocity_deviation_mean_by_ball": V(("ball",), "1", "mean epsilon per train position"),
+    "velocity_deviation_mean_by_ball": V(("ball",), "1", "mean epsilon per train position",
+                                         track_axis=0),
     "velocity_deviation_std_by_ball": V(("ball",), "1",
-                                        "standard deviation of epsilon per train position"),
-    # loads
-    "normal_load": V(("ball",), "N", "load N_y pressing the top groove down, per ball"),
-    "side_load": V(("ball",), "N", "lateral load N_x on the top groove, per ball"),
-    "side_force_ratio": V(("ball",), "1", "side force ratio rho = N_x / N_y per ball"),
+                                        "standard deviation of epsilon per train position",
+                                        track_axis=0),
+    # loads (a study with a carriage: of its nominal assembly, per track)
+    "normal_load": V(("ball",), "N", "load N_y pressing the top groove down, per ball",
+                     track_axis=0),
+    "side_load": V(("ball",), "N", "lateral load N_x on the top groove, per ball",
+                   track_axis=0),
+    "side_force_ratio": V(("ball",), "1", "side force ratio rho = N_x / N_y per ball",
+                          track_axis=0),
     # contact
     "contact_probability": V((), "1",
                              "probability of ball-to-ball contact within the horizon per "
@@ -135,7 +162,8 @@ DATA_VARIABLES = {
     "time_to_contact_histogram": V(("time_bin",), "1",
                                    "number of trains per time-to-first-contact bin", "i"),
     "survival_probability": V(("elapsed_time",), "1", "probability of no contact by time t"),
-    "contact_pair_count": V(("pair",), "1", "first contacts per adjacent pair", "i"),
+    "contact_pair_count": V(("pair",), "1", "first contacts per adjacent pair", "i",
+                            track_axis=0),
     "horizon": V((), "s", "duration of the stroke considered"),
     "groove_velocity": V((), "m s-1", "velocity v of the top groove (carriage)"),
     # counts
@@ -203,8 +231,13 @@ DATA_VARIABLES = {
     # ``sample`` (issue 17): declared in the study modules, optional here
     **{name: V(dims, units, long_name, kind, required=False)
        for name, (dims, units, long_name, kind) in STACKUP_VARIABLES.items()},
-    **{name: V(dims, units, long_name, kind, required=False)
+    **{name: V(dims, units, long_name, kind, required=False,
+               track_axis=1 if {"ball", "pair"} & set(dims) else None)
        for name, (dims, units, long_name, kind) in SAMPLE_VARIABLES.items()},
+    **{name: V(dims, units, long_name, kind, required=False)
+       for name, (dims, units, long_name, kind) in CARRIAGE_VARIABLES.items()},
+    **{name: V(dims, units, long_name, kind, required=False)
+       for name, (dims, units, long_name, kind) in FRICTION_VARIABLES.items()},
 }
 
 VARIABLES = {**COORDINATES, **DATA_VARIABLES}
@@ -231,9 +264,9 @@ def validate(ds):
                 raise SchemaError(f"variable {name!r} is missing")
             continue
         var = ds.variables[name]
-        if tuple(var.dims) != decl.dims:
+        if tuple(var.dims) != decl.dims_in(ds):
             raise SchemaError(f"variable {name!r} has dims {tuple(var.dims)}, "
-                              f"expected {decl.dims}")
+                              f"expected {decl.dims_in(ds)}")
         kind = var.dtype.kind
         ok = kind in ("U", "O", "S") if decl.kind == "U" else kind == decl.kind or (
             decl.kind == "i" and kind == "u")

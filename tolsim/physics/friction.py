@@ -23,6 +23,13 @@ linearised:
 * **Equilibrium** (Eq. 18 in full nonlinear form): sum of z forces, x and y moments (and the
   z moment when omega_z is free) vanish. Normal forces pass through the ball centre.
 
+External loads (issue 13; :mod:`tolsim.physics.ball_loads`): the neighbours' push P adds to
+the z force and their ball-to-ball braking -mu_bb (Q_back + Q_front) R_B Omega_perp /
+|Omega_perp| to the moments; the equations stay the gradient of a convex potential (D plus
+the braking term minus P v_B), which the solver minimises as before
+(:func:`full_loaded_kernel`). The ball's traction capacity is the same minimisation with both
+grooves at rest and v_B fixed; beyond it the ball slides.
+
 Quadrature (the direction field is singular at the zero-velocity point). The integrals are
 taken in polar coordinates *centred on the zero-velocity point*, in the coordinates
 (x/a, z/b) where the ellipse is the unit disc. For planar contact the slip direction is
@@ -72,6 +79,16 @@ from numba import prange
 
 from tolsim._jit import jit, pjit
 from tolsim.physics.analytic import VelocityResult, _as_ball_arrays
+from tolsim.physics.ball_loads import (
+    DEFAULT_BALL_FRICTION,
+    SIDE_SIGN_X_T,
+    SIDE_SIGN_Y_T,
+    BallLoadFields,
+    as_ball_loads,
+    point_traction_capacity,
+    rolling_axis,
+    stall_moment,
+)
 from tolsim.physics.geometry import (
     SIDE_SIGN_X,
     SIDE_SIGN_Y,
@@ -292,8 +309,10 @@ def _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_sca
 
     state = (v_B, omega_x, omega_y, omega_z). Writes loads = (F_z, M_x, M_y, M_z, D), D the
     dissipated power (the equilibrium is the minimum of D, a convex function), and per
-    contact ``contact[i] = (c_i/a_i, d_i/b_i, F_z,i, omega_i, roll_i)``.
+    contact ``contact[i] = (c_i/a_i, d_i/b_i, F_z,i, omega_i, roll_i)``; when ``contact`` has
+    a sixth column, ``contact[i, 5]`` = D_i, the power dissipated in contact i.
     """
+    with_power = contact.shape[1] > 5
     vb = state[0]
     wx = state[1]
     wy = state[2]
@@ -317,10 +336,13 @@ def _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_sca
         u0 = vb - vgroove[i] - wr_
         contact[i, 3] = om
         contact[i, 4] = wr_
+        power_before = power
         if f <= 0.0:
             contact[i, 0] = np.nan
             contact[i, 1] = np.nan
             contact[i, 2] = 0.0
+            if with_power:
+                contact[i, 5] = 0.0
             continue
         if not curved:
             # pole (c, d) of the rotation field; pure sliding if it is (nearly) at infinity
@@ -352,6 +374,8 @@ def _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_sca
             contact[i, 0] = pt
             contact[i, 1] = ps
             contact[i, 2] = fz
+            if with_power:
+                contact[i, 5] = power - power_before
         else:
             pt, ps, ok = _curved_pole(vb - vgroove[i], wr_, om, wz, a, b, rd, hoff[i])
             pp = pt * pt + ps * ps
@@ -429,6 +453,8 @@ def _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_sca
             contact[i, 0] = pt if ok else np.nan
             contact[i, 1] = ps if ok else np.nan
             contact[i, 2] = ffz
+            if with_power:
+                contact[i, 5] = power - power_before
     loads[0] = fz_tot
     loads[1] = mx
     loads[2] = my
@@ -471,15 +497,32 @@ def _solve_small(jac, rhs, n, out):
 
 
 @jit
-def _residual(state, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale, curved,
-              rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res):
-    """Normalised equilibrium residual (F_z, M_x, M_y[, M_z]) / sum F; returns max |res|."""
+def _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major, semi_minor,
+              sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res):
+    """Normalised equilibrium residual (F_z, M_x, M_y[, M_z]) / sum F; returns max |res|.
+
+    Rows ``first`` .. ``first + nunk - 1`` of the loads (``first`` = 1 when v_B is fixed).
+    External loads (tolsim.physics.ball_loads, R = 1, v = 1, mu = 1 units): the push
+    ``push`` = P / mu adds to F_z, the braking ``braking`` = (mu_bb / mu)(Q_back + Q_front)
+    adds -braking Omega_perp / |Omega_perp| to (M_x, M_y). loads[4] becomes the potential
+    Phi = D + braking |Omega_perp| - push v_B, whose gradient is -loads[:4] (the solver's
+    merit); both are skipped when zero, so the unloaded residual is unchanged bit for bit.
+    """
     _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_scale, curved, rd,
                 hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact)
+    if push != 0.0:
+        loads[0] += push
+        loads[4] -= push * state[0]
+    if braking > 0.0:
+        spin_perp = np.hypot(state[1], state[2])
+        if spin_perp > 0.0:
+            loads[1] -= braking * state[1] / spin_perp
+            loads[2] -= braking * state[2] / spin_perp
+        loads[4] += braking * spin_perp
     total = force[0] + force[1] + force[2] + force[3]
     worst = 0.0
     for k in range(nunk):
-        res[k] = loads[k] / total
+        res[k] = loads[first + k] / total
         worst = max(worst, abs(res[k]))
     if not np.isfinite(worst):
         worst = np.inf
@@ -488,42 +531,50 @@ def _residual(state, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma
 
 @jit
 def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff, free_spin,
-               tol, max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info):
+               tol, max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
+               first=0, push=0.0, braking=0.0, groove_speed=1.0, given_start=False):
     """Damped Newton solve of the equilibrium of one ball (R = 1, v = 1, mu = 1).
 
     Writes the solution into ``state`` (v_B, omega_x, omega_y, omega_z), the per-contact
     quantities into ``contact`` and (residual, iterations, converged) into ``info``.
+
+    Options for external loads (:func:`_residual`): ``push`` = P / mu and ``braking`` =
+    (mu_bb / mu)(Q_back + Q_front). ``first`` = 1 fixes v_B = state[0] and solves the moment
+    rows for Omega only; ``groove_speed`` is the top groove's velocity (0: both grooves at
+    rest, the sliding state of the traction capacity); ``given_start`` starts from ``state``
+    instead of pure rolling. The defaults are the unloaded problem.
     """
     px = np.empty(4)
     py = np.empty(4)
-    vgroove = np.array([0.0, 0.0, 1.0, 1.0])
+    vgroove = np.array([0.0, 0.0, groove_speed, groove_speed])
     sxs = (-1.0, 1.0, 1.0, -1.0)
     sys_ = (-1.0, -1.0, 1.0, 1.0)
     for i in range(4):
         px[i] = sxs[i] * np.sin(beta[i])
         py[i] = sys_[i] * np.cos(beta[i])
-    nunk = 4 if free_spin else 3
+    nunk = (4 if free_spin else 3) - first
     total = force[0] + force[1] + force[2] + force[3]
-    # Start: pure rolling at the contact centres, v_B + w_x p_y - w_y p_x = V_i (least
-    # squares over the contacts that carry load).
-    ata = np.zeros((3, 3))
-    atb = np.zeros(3)
-    for i in range(4):
-        if force[i] > 0.0:
-            row = (1.0, py[i], -px[i])
-            for r in range(3):
-                atb[r] += row[r] * vgroove[i]
-                for c in range(3):
-                    ata[r, c] += row[r] * row[c]
-    x0 = np.zeros(3)
-    state[:] = 0.0
-    if _solve_small(ata, atb, 3, x0):
-        state[0] = x0[0]
-        state[1] = x0[1]
-        state[2] = x0[2]
-    else:
-        state[0] = 0.5
-        state[1] = 0.5 / np.cos(beta[0])
+    if not given_start:
+        # Start: pure rolling at the contact centres, v_B + w_x p_y - w_y p_x = V_i (least
+        # squares over the contacts that carry load).
+        ata = np.zeros((3, 3))
+        atb = np.zeros(3)
+        for i in range(4):
+            if force[i] > 0.0:
+                row = (1.0, py[i], -px[i])
+                for r in range(3):
+                    atb[r] += row[r] * vgroove[i]
+                    for c in range(3):
+                        ata[r, c] += row[r] * row[c]
+        x0 = np.zeros(3)
+        state[:] = 0.0
+        if _solve_small(ata, atb, 3, x0):
+            state[0] = x0[0]
+            state[1] = x0[1]
+            state[2] = x0[2]
+        else:
+            state[0] = 0.5
+            state[1] = 0.5 / np.cos(beta[0])
     loads = np.empty(5)
     res = np.empty(4)
     res_new = np.empty(4)
@@ -533,8 +584,9 @@ def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hof
     rp = np.empty(4)
     rm = np.empty(4)
     work = np.empty((4, 5))
-    worst = _residual(state, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
-                      curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res)
+    worst = _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major,
+                      semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
+                      loads, contact, res)
     dis = loads[4]
     it = 0
     converged = worst <= tol
@@ -542,14 +594,17 @@ def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hof
         it += 1
         # central-difference Jacobian
         for c in range(nunk):
-            hstep = _FD_STEP * max(1.0, abs(state[c]))
+            k = first + c
+            hstep = _FD_STEP * max(1.0, abs(state[k]))
             trial[:] = state
-            trial[c] = state[c] + hstep
-            _residual(trial, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
-                      curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rp)
-            trial[c] = state[c] - hstep
-            _residual(trial, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
-                      curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rm)
+            trial[k] = state[k] + hstep
+            _residual(trial, nunk, first, push, braking, px, py, vgroove, force, semi_major,
+                      semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
+                      loads, work, rp)
+            trial[k] = state[k] - hstep
+            _residual(trial, nunk, first, push, braking, px, py, vgroove, force, semi_major,
+                      semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
+                      loads, work, rm)
             for r in range(nunk):
                 jac[r, c] = (rp[r] - rm[r]) / (2.0 * hstep)
         neg = np.empty(nunk)
@@ -560,17 +615,19 @@ def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hof
             merit += res[r] * res[r]
         accepted = False
         new = worst
+        if first > 0:
+            trial[0] = state[0]
         # 1) Newton step with backtracking on the sum of squares
         if _solve_small(jac, neg, nunk, step):
             t = 1.0
             for _ls in range(8):
                 for c in range(nunk):
-                    trial[c] = state[c] + t * step[c]
-                if nunk == 3:
+                    trial[first + c] = state[first + c] + t * step[c]
+                if first + nunk < 4:
                     trial[3] = 0.0
-                new = _residual(trial, nunk, px, py, vgroove, force, semi_major, semi_minor,
-                                sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
-                                loads, work, res_new)
+                new = _residual(trial, nunk, first, push, braking, px, py, vgroove, force,
+                                semi_major, semi_minor, sigma_scale, curved, rd, hoff, cin,
+                                sin_, win, xo, wo, tr, wr, loads, work, res_new)
                 msum = 0.0
                 slope = 0.0  # directional derivative of D: gradient = -loads
                 for r in range(nunk):
@@ -606,12 +663,12 @@ def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hof
                     damped[c, c] += lam * (jtj[c, c] + 1e-12 * big)
                 if _solve_small(damped, jtr, nunk, step):
                     for c in range(nunk):
-                        trial[c] = state[c] + step[c]
-                    if nunk == 3:
+                        trial[first + c] = state[first + c] + step[c]
+                    if first + nunk < 4:
                         trial[3] = 0.0
-                    new = _residual(trial, nunk, px, py, vgroove, force, semi_major,
-                                    semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win,
-                                    xo, wo, tr, wr, loads, work, res_new)
+                    new = _residual(trial, nunk, first, push, braking, px, py, vgroove, force,
+                                    semi_major, semi_minor, sigma_scale, curved, rd, hoff, cin,
+                                    sin_, win, xo, wo, tr, wr, loads, work, res_new)
                     msum = 0.0
                     slope = 0.0
                     for r in range(nunk):
@@ -630,8 +687,9 @@ def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hof
         dis = loads[4]
         converged = worst <= tol
     # final per-contact quantities at the accepted state
-    worst = _residual(state, nunk, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
-                      curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res)
+    worst = _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major,
+                      semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
+                      loads, contact, res)
     info[0] = worst
     info[1] = it
     info[2] = 1.0 if worst <= tol else 0.0
@@ -686,6 +744,184 @@ def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_
         out_info[n, 2] = info[2]
 
 
+@jit
+def _load_sensitivities(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff,
+                        free_spin, push, braking, cin, sin_, win, xo, wo, tr, wr, state):
+    """d(epsilon)/d(push) and d(epsilon)/d(braking) at an equilibrium ``state`` (internal units).
+
+    The equilibrium res(x; push, braking) = 0 (res = loads / sum F, x = (v_B, Omega)) moves
+    by dx = -J^-1 (d res / d load) d load, J the central-difference Jacobian of the solver;
+    d res / d push = e_z / sum F and d res / d braking = -(0, e_x, e_y[, 0]) / sum F with e =
+    Omega_perp / |Omega_perp|. epsilon = 2 v_B - 1 (v = 1). NaN if J is singular.
+    """
+    px = np.empty(4)
+    py = np.empty(4)
+    vgroove = np.array([0.0, 0.0, 1.0, 1.0])
+    sxs = (-1.0, 1.0, 1.0, -1.0)
+    sys_ = (-1.0, -1.0, 1.0, 1.0)
+    for i in range(4):
+        px[i] = sxs[i] * np.sin(beta[i])
+        py[i] = sys_[i] * np.cos(beta[i])
+    nunk = 4 if free_spin else 3
+    total = force[0] + force[1] + force[2] + force[3]
+    loads = np.empty(5)
+    work = np.empty((4, 5))
+    rp = np.empty(4)
+    rm = np.empty(4)
+    trial = np.empty(4)
+    jac = np.empty((nunk, nunk))
+    for c in range(nunk):
+        hstep = _FD_STEP * max(1.0, abs(state[c]))
+        trial[:] = state
+        trial[c] = state[c] + hstep
+        _residual(trial, nunk, 0, push, braking, px, py, vgroove, force, semi_major, semi_minor,
+                  sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rp)
+        trial[c] = state[c] - hstep
+        _residual(trial, nunk, 0, push, braking, px, py, vgroove, force, semi_major, semi_minor,
+                  sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rm)
+        for r in range(nunk):
+            jac[r, c] = (rp[r] - rm[r]) / (2.0 * hstep)
+    unit = np.zeros(nunk)
+    sol = np.zeros(4)
+    unit[0] = 1.0 / total
+    deps_dpush = np.nan
+    if _solve_small(jac, unit, nunk, sol):
+        deps_dpush = -2.0 * sol[0]
+    deps_dbraking = np.nan
+    spin_perp = np.hypot(state[1], state[2])
+    if spin_perp > 0.0:
+        unit[0] = 0.0
+        unit[1] = -state[1] / spin_perp / total
+        unit[2] = -state[2] / spin_perp / total
+        if _solve_small(jac, unit, nunk, sol):
+            deps_dbraking = -2.0 * sol[0]
+    return deps_dpush, deps_dbraking
+
+
+#: Columns of ``out_load`` of :func:`full_loaded_kernel` (internal units, over mu).
+FULL_LOAD_COLUMNS = ("traction_capacity", "saturated_carriage_force", "capacity_residual",
+                     "velocity_deviation_per_push", "velocity_deviation_per_braking",
+                     "sliding", "stall_moment")
+
+
+@pjit
+def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_coefficient,
+                       semi_minor_coefficient, curved, rd, free_spin, tol, max_iter, cin, sin_,
+                       win, xo, wo, tr, wr, out_state, out_contact, out_info, out_load):
+    """The full model under external loads, n balls in parallel (R = 1, v = 1, mu = 1 units).
+
+    ``push`` (n,) = P / mu [N] and ``braking`` (n,) = (mu_bb / mu)(Q_back + Q_front) [N]
+    (:mod:`tolsim.physics.ball_loads`). Per ball:
+
+    1. the traction capacity P_cap / mu = min over Omega of Phi_0, the ball sliding at
+       v_B = 1 between grooves at rest (Newton on the moment rows from the point-contact
+       minimiser, :func:`~tolsim.physics.ball_loads.point_traction_capacity`; exactly
+       sum F_i with Omega = 0 when the pure-sliding moment sum F_i x_i is within the braking,
+       the kink of |Omega_perp|); P_cap is D + braking |Omega_perp| there, the saturated
+       carriage force F_c / mu = f_TR + f_TL of that state;
+    2. if |push| < P_cap, the loaded equilibrium (F_z + push = 0, moments with the braking)
+       from pure rolling, and d(epsilon)/d(push), d(epsilon)/d(braking) from its Jacobian
+       (:func:`_load_sensitivities`); otherwise the ball slides (no state: NaN). Likewise
+       when ``braking`` >= :func:`~tolsim.physics.ball_loads.stall_moment` (the braking stalls
+       the rotation; sliding = 2.0).
+
+    ``out_contact`` (n, 4, 6): as :func:`full_kernel` plus the contact power D_i. ``out_load``
+    (n, 7): the columns ``FULL_LOAD_COLUMNS`` (capacity residual 0 when exact; sliding 0.0,
+    1.0 for |push| >= capacity, 2.0 for a stall; stall moment over mu). ``out_info`` of a
+    sliding ball is that of the capacity solve.
+    """
+    sigma_scale = 1.5 / np.pi
+    for n in prange(dbeta.shape[0]):
+        beta = np.empty(4)
+        a = np.empty(4)
+        b = np.empty(4)
+        hoff = np.empty(4)
+        for i in range(4):
+            beta[i] = nominal_angle + dbeta[n, i]
+            f13 = np.cbrt(force[n, i])
+            a[i] = semi_major_coefficient * f13
+            b[i] = semi_minor_coefficient * f13
+            hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
+                                                                          - a[i] * a[i]))
+        for k in range(4):
+            out_state[n, k] = np.nan
+            for m in range(6):
+                out_contact[n, k, m] = np.nan
+        for m in range(7):
+            out_load[n, m] = np.nan
+        out_info[n, 0] = np.inf
+        out_info[n, 1] = 0.0
+        out_info[n, 2] = 0.0
+        npos = 0
+        for i in range(4):
+            if force[n, i] > 0.0:
+                npos += 1
+        if npos < 3:
+            continue
+        # 1) traction capacity
+        state = np.zeros(4)
+        contact = np.empty((4, 6))
+        info = np.zeros(3)
+        total = force[n, 0] + force[n, 1] + force[n, 2] + force[n, 3]
+        mx0 = 0.0
+        my0 = 0.0
+        for i in range(4):
+            # moment of pure forward sliding, F_i x_i, x_i = (-p_y, p_x)
+            mx0 -= force[n, i] * SIDE_SIGN_Y_T[i] * np.cos(beta[i])
+            my0 += force[n, i] * SIDE_SIGN_X_T[i] * np.sin(beta[i])
+        brake = braking[n]
+        if np.hypot(mx0, my0) <= brake:
+            capacity = total
+            saturated = -(force[n, 2] + force[n, 3])
+            cap_residual = 0.0
+            cap_ok = True
+        else:
+            ex, ey = rolling_axis(beta, force[n])
+            _, wx0, wy0 = point_traction_capacity(beta, force[n], brake, ex, ey)
+            state[0] = 1.0
+            state[1] = wx0
+            state[2] = wy0
+            state[3] = 0.0
+            _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
+                       max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
+                       1, 0.0, brake, 0.0, True)
+            capacity = brake * np.hypot(state[1], state[2])
+            for i in range(4):
+                capacity += contact[i, 5]
+            saturated = contact[2, 2] + contact[3, 2]
+            cap_residual = info[0]
+            cap_ok = info[2] > 0.5
+        out_load[n, 0] = capacity
+        out_load[n, 1] = saturated
+        out_load[n, 2] = cap_residual
+        load_p = push[n]
+        stall = stall_moment(beta, force[n])
+        out_load[n, 6] = stall
+        if (cap_ok and abs(load_p) >= capacity) or brake >= stall:
+            out_load[n, 5] = 1.0 if cap_ok and abs(load_p) >= capacity else 2.0
+            out_info[n, 0] = cap_residual
+            out_info[n, 2] = 1.0 if cap_ok else 0.0
+            continue
+        out_load[n, 5] = 0.0
+        # 2) the loaded equilibrium
+        state[:] = 0.0
+        _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
+                   max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
+                   0, load_p, brake, 1.0, False)
+        for k in range(4):
+            out_state[n, k] = state[k]
+            for m in range(6):
+                out_contact[n, k, m] = contact[k, m]
+        out_info[n, 0] = info[0]
+        out_info[n, 1] = info[1]
+        out_info[n, 2] = info[2]
+        dp, db = _load_sensitivities(beta, force[n], a, b, sigma_scale, curved, rd, hoff,
+                                     free_spin, load_p, brake, cin, sin_, win, xo, wo, tr, wr,
+                                     state)
+        out_load[n, 3] = dp
+        out_load[n, 4] = db
+
+
 # --------------------------------------------------------------------------------------------
 # Public API
 # --------------------------------------------------------------------------------------------
@@ -727,6 +963,37 @@ class FullResult(VelocityResult):
     residual: np.ndarray
     converged: np.ndarray
     iterations: np.ndarray
+
+
+@dataclass(frozen=True, kw_only=True)
+class LoadedFullResult(FullResult, BallLoadFields):
+    """Result of :func:`full` for n balls under external loads (push, neighbours).
+
+    The fields of :class:`FullResult` at the loaded state (``drag_force`` is
+    ``carriage_force``), those of :class:`tolsim.physics.ball_loads.BallLoadFields`, and the
+    dissipated powers. ``creep_stiffness`` and ``braking_sensitivity`` are the tangents at the
+    loaded state (from the solver's Jacobian, :func:`_load_sensitivities`). A sliding ball
+    has no rolling quasi-static state and ``valid`` False, ``creep_stiffness`` 0 (saturated),
+    Omega and the powers NaN; ``converged``, ``residual`` and ``iterations`` are those of the
+    capacity solve. Pushed beyond ``traction_capacity`` it runs away: epsilon and v_B are
+    +-inf (the sign of P) and ``carriage_force`` is the saturated value of its sliding
+    state. Braked beyond ``braking_capacity`` its rotation stalls: epsilon and
+    ``carriage_force`` are NaN (its speed is not set by rolling).
+
+    Attributes
+    ----------
+    contact_dissipated_power : ndarray, shape (n, 4)
+        D_i = int mu sigma |slip| dA in each raceway contact [W], BL, BR, TR, TL.
+    ball_contact_dissipated_power : ndarray, shape (n,)
+        The ball's share of the ball-contact dissipation, mu_bb (Q_back + Q_front) R_B
+        |Omega_perp| [W] (each contact dissipates the sum of its two balls' shares).
+    dissipated_power : ndarray, shape (n,)
+        sum D_i + the ball's share [W]; equals v F_c + P v_B (power balance).
+    """
+
+    contact_dissipated_power: np.ndarray
+    ball_contact_dissipated_power: np.ndarray
+    dissipated_power: np.ndarray
 
 
 def _parse_grid(grid):
@@ -864,13 +1131,20 @@ def deformed_surface_radius(bearing: Bearing = TABLE1):
 
 def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
          groove_velocity=0.01, surface="planar", free_spin=False, grid=None,
-         tol=DEFAULT_TOLERANCE, max_iter=DEFAULT_MAX_ITER) -> FullResult:
+         tol=DEFAULT_TOLERANCE, max_iter=DEFAULT_MAX_ITER, push=None, neighbour_force=None,
+         ball_friction=DEFAULT_BALL_FRICTION) -> FullResult:
     """Velocity and friction of balls from the comprehensive friction model.
 
     Solves the quasi-static equilibrium of each ball (z force, x and y moments, and the z
     moment when ``free_spin``) under Coulomb friction integrated over the four Hertz
     ellipses ([Lin2018] Eqs. 1-13 and 18, nothing linearised; see the module docstring).
     Balls are solved in parallel over all cores.
+
+    External loads (:mod:`tolsim.physics.ball_loads`): the push P adds to the z force, the
+    ball-ball braking -mu_bb (Q_back + Q_front) R_B Omega_perp / |Omega_perp| to the moments.
+    The ball is then solved three times (:func:`full_loaded_kernel`): free rolling (the
+    baseline, the unloaded solve), the traction capacity (sliding between grooves at rest)
+    and, unless |P| reaches the capacity (gross sliding), the loaded equilibrium.
 
     Parameters
     ----------
@@ -894,11 +1168,21 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
         Convergence tolerance on the normalised residual max|load| / (mu sum F) [-].
     max_iter : int
         Maximum Newton iterations.
+    push : None or array_like, broadcast to the balls
+        P = Q_back - Q_front [N], the neighbours' net push along +z. None: no push.
+    neighbour_force : None or array_like, shape (..., 2)
+        (Q_back, Q_front) >= 0 [N]; sets P and the ball-ball braking. Not with ``push``.
+    ball_friction : float
+        mu_bb [-] of the ball-ball contacts.
 
     Returns
     -------
-    FullResult
-        ``valid`` is ``converged`` and all four forces positive. Non-convergence never raises.
+    FullResult or LoadedFullResult
+        ``valid`` is ``converged`` and all four forces positive (and, with loads, the free
+        solve converged and the ball not sliding). Non-convergence never raises. Without
+        ``push`` and ``neighbour_force``: :class:`FullResult`, exactly as before; with either:
+        :class:`LoadedFullResult`, whose epsilon is the unloaded one bit for bit when the loads
+        are zero.
     """
     if surface not in SURFACES:
         raise ValueError(f"surface = {surface!r}; choose one of {SURFACES}")
@@ -910,6 +1194,12 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
         raise ValueError(f"max_iter = {max_iter!r} must be a positive integer")
     n_ang, n_rad = _parse_grid(grid)
     dbeta, force, shape = _as_ball_arrays(contact_angle_deviation, normal_force)
+    loaded = push is not None or neighbour_force is not None
+    if loaded:
+        load_p, load_q = as_ball_loads(push, neighbour_force, ball_friction, shape)
+        if not bearing.friction_coefficient > 0:
+            raise ValueError(f"friction_coefficient = {bearing.friction_coefficient!r}: a push "
+                             "needs raceway friction (mu > 0) to be carried")
     beta = bearing.nominal_contact_angle + dbeta
     if np.any((beta <= 0) | (beta >= np.pi / 2)):
         raise ValueError("contact_angle_deviation puts a contact angle outside (0, 90) deg")
@@ -918,17 +1208,38 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     radius = bearing.ball_radius
     if np.any(hc.semi_major_coefficient * np.cbrt(force) >= 0.5 * radius):
         raise ValueError("normal_force too large: the contact ellipse exceeds R_B / 2")
-    cin, sin_, win, xo, wo, tr, wr = quadrature_grid(n_ang, n_rad, hc.ellipticity)
+    grid_arrays = quadrature_grid(n_ang, n_rad, hc.ellipticity)
     n = len(dbeta)
     state = np.empty((n, 4))
     contact = np.empty((n, 4, 5))
     info = np.empty((n, 3))
+    options = (surface == "curved", deformed_surface_radius(bearing) / radius, bool(free_spin),
+               float(tol), int(max_iter))
     with np.errstate(divide="ignore", invalid="ignore"):
         full_kernel(dbeta, force, bearing.nominal_contact_angle,
                     hc.semi_major_coefficient / radius, hc.semi_minor_coefficient / radius,
-                    surface == "curved", deformed_surface_radius(bearing) / radius,
-                    bool(free_spin), float(tol), int(max_iter), cin, sin_, win, xo, wo, tr, wr,
-                    state, contact, info)
+                    *options, *grid_arrays, state, contact, info)
+    free = _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocity)
+    if not loaded:
+        return FullResult(**free)
+    mu = bearing.friction_coefficient
+    braking = float(ball_friction) / mu * load_q
+    state = np.empty((n, 4))
+    contact = np.empty((n, 4, 6))
+    info = np.empty((n, 3))
+    load = np.empty((n, len(FULL_LOAD_COLUMNS)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        full_loaded_kernel(dbeta, force, load_p / mu, braking, bearing.nominal_contact_angle,
+                           hc.semi_major_coefficient / radius,
+                           hc.semi_minor_coefficient / radius, *options, *grid_arrays, state,
+                           contact, info, load)
+    return _loaded_full_result(state, contact, info, load, force, shape, bearing, hc,
+                               groove_velocity, load_p, load_q, float(ball_friction), free)
+
+
+def _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocity):
+    """The fields of :class:`FullResult` from the kernel's internal-unit outputs."""
+    radius = bearing.ball_radius
     v = float(groove_velocity)
     mu = bearing.friction_coefficient
     converged = info[:, 2] > 0.5
@@ -947,7 +1258,7 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     def shaped(arr, *tail):
         return arr.reshape(shape + tail)
 
-    return FullResult(
+    return dict(
         velocity_deviation=shaped(eps),
         valid=shaped(valid),
         zero_velocity_offset=shaped(gamma, 4),
@@ -960,4 +1271,54 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
         residual=shaped(info[:, 0]),
         converged=shaped(converged),
         iterations=shaped(info[:, 1].astype(np.int64)),
+    )
+
+
+def _loaded_full_result(state, contact, info, load, force, shape, bearing, hc,
+                        groove_velocity, load_p, load_q, ball_friction, free):
+    """:class:`LoadedFullResult` from :func:`full_loaded_kernel`'s outputs (SI units)."""
+    mu = bearing.friction_coefficient
+    v = float(groove_velocity)
+    sliding = load[:, 5] > 0.5
+    runaway = (load[:, 5] > 0.5) & (load[:, 5] < 1.5)
+    direction = np.where(load_p < 0, -1.0, 1.0)
+    # a ball pushed beyond its capacity runs away: v_B -> +-inf, the friction saturates at
+    # its sliding state; a stalled ball (braking) keeps NaN: its speed is not set by rolling
+    state = state.copy()
+    state[runaway, 0] = direction[runaway] * np.inf
+    fields = _full_fields(state, contact[:, :, :5], info, force, shape, bearing, hc, v)
+    carriage = fields["drag_force"].reshape(-1).copy()
+    carriage[runaway] = mu * direction[runaway] * load[runaway, 1]
+    with np.errstate(divide="ignore"):
+        braking_capacity = (mu * load[:, 6] / ball_friction if ball_friction > 0
+                            else np.full(len(load), np.inf))
+    spin_perp = np.hypot(state[:, 1], state[:, 2])  # units of v / R_B
+    ball_power = v * ball_friction * load_q * spin_perp
+    contact_power = mu * v * contact[:, :, 5]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        stiffness = np.where(sliding, 0.0, mu / load[:, 3])
+    braking_sensitivity = ball_friction / mu * load[:, 4]
+    braking_sensitivity[sliding] = np.nan
+    free_valid = np.asarray(free["valid"]).reshape(-1)
+    valid = fields["valid"].reshape(-1) & free_valid & ~sliding
+
+    def shaped(arr, *tail):
+        return np.asarray(arr).reshape(shape + tail)
+
+    fields.update(valid=shaped(valid), drag_force=shaped(carriage))
+    return LoadedFullResult(
+        **fields,
+        push=shaped(load_p),
+        neighbour_force_sum=shaped(load_q),
+        free_rolling_velocity_deviation=free["velocity_deviation"],
+        carriage_force=shaped(carriage),
+        free_rolling_carriage_force=free["drag_force"],
+        creep_stiffness=shaped(stiffness),
+        braking_sensitivity=shaped(braking_sensitivity),
+        traction_capacity=shaped(mu * load[:, 0]),
+        braking_capacity=shaped(braking_capacity),
+        sliding=shaped(sliding),
+        contact_dissipated_power=shaped(contact_power, 4),
+        ball_contact_dissipated_power=shaped(ball_power),
+        dissipated_power=shaped(contact_power.sum(axis=1) + ball_power),
     )

@@ -143,11 +143,11 @@ DEFAULT_TOLERANCE = 1e-12
 #: Default cap on Newton steps per groove.
 DEFAULT_MAX_ITER = 50
 #: Newton ends with an unverified full step once the relative residual is below
-#: _PREDICT sqrt(tol) (see ``_newton``).
+#: _PREDICT sqrt(tol) (see ``flank_newton``).
 _PREDICT = 0.1
 #: Length scale [m] that sets the absolute force floor K * (1 nm)^1.5 of the tolerance (so a
 #: ball that loses all contact still converges).
-_FLOOR_LENGTH = 1e-9
+FLOOR_LENGTH = 1e-9
 
 
 # --------------------------------------------------------------------------------------------
@@ -161,7 +161,7 @@ def _idx(arr, n):
 
 
 @jit
-def _arc_centres(n, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, cen):
+def arc_centres(n, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, cen):
     """Arc centres of the four flanks of ball n (top groove at g = 0) into cen (4, 6).
 
     Row i holds the arc centre C_i (x, y), its offset from the nominal centre C_i + d n_i
@@ -203,7 +203,7 @@ def _arc_centres(n, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, cen):
 
 
 @jit(inline="always")
-def _flank(px, py, cen, i, d, h, k):
+def flank(px, py, cen, i, d, h, k):
     """Contact direction, 1/distance, approach, force and force slope of flank i.
 
     delta = |P - C_i| - (d - h) is evaluated as (|v|^2 + 2 d n.v + h (2 d - h)) / (|P - C_i|
@@ -237,7 +237,7 @@ def _residual(cen, i0, i1, d, h, k, tx, ty, px, py):
     j22 = 0.0
     fmax = 0.0
     for i in range(i0, i1):
-        ux, uy, inv, delta, f, df = _flank(px, py, cen, i, d, h, k)
+        ux, uy, inv, delta, f, df = flank(px, py, cen, i, d, h, k)
         if f > 0.0:
             rx += f * ux
             ry += f * uy
@@ -251,7 +251,7 @@ def _residual(cen, i0, i1, d, h, k, tx, ty, px, py):
 
 
 @jit
-def _newton(cen, i0, i1, d, h, k, tx, ty, px, py, tol, max_iter, floor, reg, predict):
+def flank_newton(cen, i0, i1, d, h, k, tx, ty, px, py, tol, max_iter, floor, reg, predict):
     """Newton with backtracking on |r| for sum_i F_i u_i = T; returns px, py, iters, ok, |r|.
 
     With ``predict``, a full step taken from a residual below ``_PREDICT sqrt(tol)`` of the
@@ -363,13 +363,13 @@ def _groove(cen, i0, d, h, refx, refy, tx, ty, k, rigid, tol, max_iter, floor, p
         py += d0 * ty / tnorm
     # contact stiffness dF/ddelta = 1.5 K^(2/3) F^(1/3) at F = |T|: the fallback regularisation
     reg = 1.5 * k * np.cbrt(max(tnorm, floor) / k)
-    px, py, it, ok, _ = _newton(cen, i0, i0 + 2, d, h, k, tx, ty, px, py, tol, max_iter,
-                                floor, reg, predict)
+    px, py, it, ok, _ = flank_newton(cen, i0, i0 + 2, d, h, k, tx, ty, px, py, tol,
+                                     max_iter, floor, reg, predict)
     return px, py, it, 0 if ok else 1
 
 
 @jit
-def _outputs(n, cen, px, py, d, h, k, out_dbeta, out_force, out_approach, unit):
+def ball_outputs(n, cen, px, py, d, h, k, out_dbeta, out_force, out_approach, unit):
     """Contact-angle deviations, forces, approaches (and u_i into unit) of ball n at P.
 
     dbeta_i = atan2(t_i . u_i, n_i . u_i), since u_i = cos(dbeta_i) n_i + sin(dbeta_i) t_i;
@@ -377,7 +377,7 @@ def _outputs(n, cen, px, py, d, h, k, out_dbeta, out_force, out_approach, unit):
     """
     count = 0
     for i in range(4):
-        ux, uy, _, delta, f, _ = _flank(px, py, cen, i, d, h, k)
+        ux, uy, _, delta, f, _ = flank(px, py, cen, i, d, h, k)
         unit[i, 0] = ux
         unit[i, 1] = uy
         nx, ny = cen[i, 4], cen[i, 5]
@@ -409,7 +409,7 @@ def _imbalance(n, unit, out_force, lx, ly):
 
 
 @jit(inline="always")
-def _move_top(cen, gx, gy):
+def move_top_groove(cen, gx, gy):
     """Translate the top groove's arc centres (rows 2, 3) by g."""
     for i in range(2, 4):
         cen[i, 0] += gx
@@ -424,7 +424,7 @@ def _load_one(n, side_load, normal_load, e_n, e_t, rot_b, rot_t, off_b, off_t, o
               out_dbeta, out_force, out_approach, out_ball, out_groove, out_converged,
               out_iter, out_count, out_residual):
     """Load-controlled solution of ball n (cen, unit: work arrays)."""
-    _arc_centres(n, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, cen)
+    arc_centres(n, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, cen)
     h = 0.5 * oversize[_idx(oversize, n)]
     lx = side_load[_idx(side_load, n)]
     ly = -normal_load[_idx(normal_load, n)]
@@ -434,27 +434,27 @@ def _load_one(n, side_load, normal_load, e_n, e_t, rot_b, rot_t, off_b, off_t, o
     qx, qy, nt, st = _groove(cen, 2, dist, h, off_t[it_, 0], off_t[it_, 1], -lx, -ly, k,
                              rigid, tol, max_iter, floor, True)
     gx, gy = px - qx, py - qy
-    _move_top(cen, gx, gy)
-    count = _outputs(n, cen, px, py, dist, h, k, out_dbeta, out_force, out_approach, unit)
+    move_top_groove(cen, gx, gy)
+    count = ball_outputs(n, cen, px, py, dist, h, k, out_dbeta, out_force, out_approach, unit)
     if not rigid and sb == 0 and st == 0:
         # verify the predicted last Newton steps on the final state; polish if needed
         fmax = max(max(out_force[n, 0], out_force[n, 1]), max(out_force[n, 2], out_force[n, 3]))
         scale = max(max(abs(lx), abs(ly)), max(fmax, floor))
         if _imbalance(n, unit, out_force, lx, ly) > 2.0 * tol * scale:
-            _move_top(cen, -gx, -gy)
+            move_top_groove(cen, -gx, -gy)
             reg = 1.5 * k * np.cbrt(max(np.sqrt(lx * lx + ly * ly), floor) / k)
-            px, py, mb, okb, _ = _newton(cen, 0, 2, dist, h, k, lx, ly, px, py, tol, max_iter,
-                                         floor, reg, False)
-            qx, qy, mt, okt, _ = _newton(cen, 2, 4, dist, h, k, -lx, -ly, qx, qy, tol,
-                                         max_iter, floor, reg, False)
+            px, py, mb, okb, _ = flank_newton(cen, 0, 2, dist, h, k, lx, ly, px, py, tol,
+                                              max_iter, floor, reg, False)
+            qx, qy, mt, okt, _ = flank_newton(cen, 2, 4, dist, h, k, -lx, -ly, qx, qy, tol,
+                                              max_iter, floor, reg, False)
             nb += mb
             nt += mt
             sb = 0 if okb else 1
             st = 0 if okt else 1
             gx, gy = px - qx, py - qy
-            _move_top(cen, gx, gy)
-            count = _outputs(n, cen, px, py, dist, h, k, out_dbeta, out_force, out_approach,
-                             unit)
+            move_top_groove(cen, gx, gy)
+            count = ball_outputs(n, cen, px, py, dist, h, k, out_dbeta, out_force,
+                                 out_approach, unit)
     if rigid:  # forces from statics at zero approach
         count = 0
         for i0 in (0, 2):
@@ -555,7 +555,7 @@ def _lane_gather(lo, m, side_load, normal_load, e_n, e_t, rot_b, rot_t, off_b, o
 def _lane_start(m, groove, s0, c0, d, k, w):
     """Arc centres and elastic start of one groove (0 bottom, 1 top) for lanes 0..m-1.
 
-    As ``_arc_centres`` and ``_groove`` (two-flank branch) without the branches; a lane with
+    As ``arc_centres`` and ``_groove`` (two-flank branch) without the branches; a lane with
     a one-flank rigid solution or a rotation beyond the series range gets P = NaN.
     """
     ia = 2 * groove
@@ -625,7 +625,7 @@ def _lane_start(m, groove, s0, c0, d, k, w):
 
 @jit(inline="always")
 def _lane_flank(px, py, dcx, dcy, nx, ny, d, h, k):
-    """``_flank`` without the branch (delta <= 0 gives NaN): u, 1/|P - C|, delta, F, dF."""
+    """``flank`` without the branch (delta <= 0 gives NaN): u, 1/|P - C|, delta, F, dF."""
     vx = px - dcx
     vy = py - dcy
     wx = vx + d * nx
@@ -640,7 +640,7 @@ def _lane_flank(px, py, dcx, dcy, nx, ny, d, h, k):
 
 @jit
 def _lane_newton(m, groove, s0, c0, d, k, w):
-    """_LANE_STEPS full Newton steps (as ``_newton``) on one groove for lanes 0..m-1."""
+    """_LANE_STEPS full Newton steps (as ``flank_newton``) on one groove for lanes 0..m-1."""
     ia = 2 * groove
     sgn = 1.0 if groove == 0 else -1.0
     nax, nay, _, _ = _nominal(ia, s0, c0)
@@ -672,7 +672,7 @@ def _lane_newton(m, groove, s0, c0, d, k, w):
 
 @jit
 def _lane_outputs(m, s0, c0, d, k, w):
-    """u_i, delta_i, F_i and dbeta_i of the four flanks for lanes 0..m-1 (as ``_outputs``)."""
+    """u_i, delta_i, F_i and dbeta_i of the four flanks for lanes 0..m-1 (as ``ball_outputs``)."""
     for i in range(4):
         nx, ny, sx, sy = _nominal(i, s0, c0)
         sxy = sx * sy
@@ -741,7 +741,7 @@ def static_load_kernel(side_load, normal_load, e_n, e_t, rot_b, rot_t, off_b, of
     ``vectorised``, elastic solutions take the vectorised fast path where it verifies, the
     scalar solver elsewhere.
     """
-    floor = k * _FLOOR_LENGTH**1.5
+    floor = k * FLOOR_LENGTH**1.5
     s0, c0 = np.sin(beta0), np.cos(beta0)
     nball = out_dbeta.shape[0]
     lanes = vectorised and not rigid and max_iter >= _LANE_STEPS
@@ -770,14 +770,14 @@ def static_load_kernel(side_load, normal_load, e_n, e_t, rot_b, rot_t, off_b, of
 
 
 @jit
-def _displacement_one(n, groove_disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize, s0, c0,
-                      dist, k, tol, max_iter, floor, cen, unit, out_dbeta, out_force,
-                      out_approach, out_ball, out_load, out_converged, out_iter, out_count,
-                      out_residual):
-    """Displacement-controlled solution of ball n."""
-    _arc_centres(n, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, cen)
+def displacement_one(n, groove_disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize, s0, c0,
+                     dist, k, tol, max_iter, floor, cen, unit, out_dbeta, out_force,
+                     out_approach, out_ball, out_load, out_converged, out_iter, out_count,
+                     out_residual):
+    """Displacement-controlled solution of ball n (cen, unit: work arrays)."""
+    arc_centres(n, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, cen)
     ig = _idx(groove_disp, n)
-    _move_top(cen, groove_disp[ig, 0], groove_disp[ig, 1])
+    move_top_groove(cen, groove_disp[ig, 0], groove_disp[ig, 1])
     h = 0.5 * oversize[_idx(oversize, n)]
     # start: mean of the four "touching along the nominal direction" positions,
     # C_i + (d - h) n_i = (C_i + d n_i) - h n_i
@@ -788,10 +788,10 @@ def _displacement_one(n, groove_disp, e_n, e_t, rot_b, rot_t, off_b, off_t, over
         py += 0.25 * (cen[i, 3] - h * cen[i, 5])
     # contact stiffness dF/ddelta at a 1 um approach as the fallback regularisation
     reg = 1.5 * k * 1e-3
-    px, py, it, ok, _ = _newton(cen, 0, 4, dist, h, k, 0.0, 0.0, px, py, tol, max_iter,
-                                floor, reg, False)
-    out_count[n] = _outputs(n, cen, px, py, dist, h, k, out_dbeta, out_force, out_approach,
-                            unit)
+    px, py, it, ok, _ = flank_newton(cen, 0, 4, dist, h, k, 0.0, 0.0, px, py, tol, max_iter,
+                                     floor, reg, False)
+    out_count[n] = ball_outputs(n, cen, px, py, dist, h, k, out_dbeta, out_force,
+                                out_approach, unit)
     # load on the top groove that holds it: (N_x, -N_y) = -sum_top F_i u_i
     lx = -(out_force[n, 2] * unit[2, 0] + out_force[n, 3] * unit[3, 0])
     ly = -(out_force[n, 2] * unit[2, 1] + out_force[n, 3] * unit[3, 1])
@@ -810,17 +810,17 @@ def static_displacement_kernel(groove_disp, e_n, e_t, rot_b, rot_t, off_b, off_t
                                out_dbeta, out_force, out_approach, out_ball, out_load,
                                out_converged, out_iter, out_count, out_residual):
     """Displacement-controlled solution: top groove held at its offset + groove_disp."""
-    floor = k * _FLOOR_LENGTH**1.5
+    floor = k * FLOOR_LENGTH**1.5
     s0, c0 = np.sin(beta0), np.cos(beta0)
     nball = out_dbeta.shape[0]
     for tile in prange((nball + _TILE - 1) // _TILE):
         cen = np.empty((4, 6))
         unit = np.empty((4, 2))
         for n in range(tile * _TILE, min(nball, (tile + 1) * _TILE)):
-            _displacement_one(n, groove_disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize,
-                              s0, c0, dist, k, tol, max_iter, floor, cen, unit, out_dbeta,
-                              out_force, out_approach, out_ball, out_load, out_converged,
-                              out_iter, out_count, out_residual)
+            displacement_one(n, groove_disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize,
+                             s0, c0, dist, k, tol, max_iter, floor, cen, unit, out_dbeta,
+                             out_force, out_approach, out_ball, out_load, out_converged,
+                             out_iter, out_count, out_residual)
 
 
 # --------------------------------------------------------------------------------------------
@@ -939,7 +939,7 @@ def _as_float(name, value):
     return arr, float(max(-lo, hi))
 
 
-def _prepare(items, bearing):
+def prepare_inputs(items, bearing):
     """Validate inputs and bring each to a 2-D C array with first axis 1 or n.
 
     ``items`` is a list of (name, value, trailing) with trailing 0 (per ball), 2 or 4.
@@ -979,7 +979,11 @@ def _prepare(items, bearing):
     return out, ball_shape
 
 
-def _error_items(errors, bearing):
+def error_items(errors, bearing):
+    """``prepare_inputs`` items of a GrooveErrors, each field checked finite and in range.
+
+    Rotations must stay within +/-pi/8 rad and lengths within +/-(R_G - R_B)/4.
+    """
     errors = GrooveErrors() if errors is None else errors
     if not isinstance(errors, GrooveErrors):
         raise ValueError(f"errors must be a GrooveErrors, got {type(errors).__name__}")
@@ -1007,14 +1011,16 @@ def _kernel_outputs(n):
             np.empty(n, dtype=np.int64), np.empty(n))
 
 
-def _check_solver_options(tol, max_iter):
+def check_solver_options(tol, max_iter):
+    """Raise ValueError unless 0 < tol < 1 and max_iter is a positive integer."""
     if not (np.isfinite(tol) and 0 < tol < 1):
         raise ValueError(f"tol = {tol!r} must be in (0, 1)")
     if int(max_iter) != max_iter or max_iter < 1:
         raise ValueError(f"max_iter = {max_iter!r} must be a positive integer")
 
 
-def _hertz_k(bearing):
+def hertz_k(bearing):
+    """Hertz load-deflection constant K [N/m^1.5] of the ball in a flank (F = K delta^1.5)."""
     return hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                            bearing.poisson_ratio).load_deflection_constant
 
@@ -1057,17 +1063,17 @@ def solve_static(side_load, normal_load, errors: GrooveErrors | None = None,
     StaticSolution
         Arrays over the broadcast ball shape of the loads and the errors.
     """
-    _check_solver_options(tol, max_iter)
+    check_solver_options(tol, max_iter)
     items = [("side_load", side_load, 0), ("normal_load", normal_load, 0)]
-    items += _error_items(errors, bearing)
-    arrays, shape = _prepare(items, bearing)
+    items += error_items(errors, bearing)
+    arrays, shape = prepare_inputs(items, bearing)
     nx, ny, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize = arrays
     nx, ny, rot_b, rot_t, oversize = (a[:, 0] for a in (nx, ny, rot_b, rot_t, oversize))
     n = int(np.prod(shape))
     dbeta, force, approach, ball, groove, conv, iters, count, resid = _kernel_outputs(n)
     dist = bearing.groove_radius - bearing.ball_radius
     static_load_kernel(nx, ny, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize,
-                       bearing.nominal_contact_angle, dist, _hertz_k(bearing), bool(rigid),
+                       bearing.nominal_contact_angle, dist, hertz_k(bearing), bool(rigid),
                        float(tol), int(max_iter), bool(vectorised), dbeta, force, approach,
                        ball, groove, conv, iters, count, resid)
     load = np.empty((n, 2))
@@ -1103,9 +1109,9 @@ def solve_static_displacement(groove_displacement, errors: GrooveErrors | None =
     StaticSolution
         ``groove_displacement`` echoes the input; ``groove_load`` holds (N_x, N_y).
     """
-    _check_solver_options(tol, max_iter)
-    items = [("groove_displacement", groove_displacement, 2)] + _error_items(errors, bearing)
-    arrays, shape = _prepare(items, bearing)
+    check_solver_options(tol, max_iter)
+    items = [("groove_displacement", groove_displacement, 2)] + error_items(errors, bearing)
+    arrays, shape = prepare_inputs(items, bearing)
     disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize = arrays
     dist = bearing.groove_radius - bearing.ball_radius
     if np.any(np.abs(disp) > 0.25 * dist):
@@ -1114,7 +1120,7 @@ def solve_static_displacement(groove_displacement, errors: GrooveErrors | None =
     n = int(np.prod(shape))
     dbeta, force, approach, ball, load, conv, iters, count, resid = _kernel_outputs(n)
     static_displacement_kernel(disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize,
-                               bearing.nominal_contact_angle, dist, _hertz_k(bearing),
+                               bearing.nominal_contact_angle, dist, hertz_k(bearing),
                                float(tol), int(max_iter), dbeta, force, approach, ball, load,
                                conv, iters, count, resid)
     groove = np.ascontiguousarray(np.broadcast_to(disp, (n, 2)))
@@ -1334,7 +1340,7 @@ def linearised_static(sensitivity: StaticSensitivity, side_load=None, normal_loa
     items = [("side_load", nx, 0), ("normal_load", ny, 0)]
     items += [(f"errors.{f.name}", getattr(errors, f.name), GrooveErrors.TRAILING[f.name])
               for f in fields(GrooveErrors)]
-    arrays, shape = _prepare(items, TABLE1)
+    arrays, shape = prepare_inputs(items, TABLE1)
     values = dict(zip(["side_load", "normal_load"] + [f.name for f in fields(GrooveErrors)],
                       arrays, strict=True))
     base = _single(nominal, "sensitivity.errors")

@@ -6,6 +6,8 @@
   with the verdict against the spec limits (:mod:`tolsim.reports.verdict`), the sampled
   inputs and the assumptions with their sources (:mod:`tolsim.reports.assumptions`), and the
   same report as PDF with a sign-off block (:mod:`tolsim.reports.pdf`).
+* :mod:`tolsim.reports.compare`: studies side by side with the differences and their
+  intervals (``tolsim compare``).
 
 Figures are built on :class:`matplotlib.figure.Figure` objects directly, never through
 ``pyplot``: no global state, no GUI backend, nothing to close, and the caller's backend is

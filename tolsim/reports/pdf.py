@@ -6,7 +6,9 @@ and writes them with :class:`matplotlib.backends.backend_pdf.PdfPages`:
 1. the headline and the verdict box with its checks, and what was studied;
 2. the sampled inputs (tolerances and the initial gap) and the assumptions table, with where
    each comes from;
-3. the figures of the HTML report, with their captions;
+3. in a study with a ``[carriage]``, the carriage section (load case, preload, tracks with
+   the nominal load distribution and its figure, displacement and stiffness, solved
+   carriages), then the figures of the HTML report, with their captions;
 4. the review and sign-off block: prepared by / reviewed by / approved by, each with name,
    function, date and a signature line, the decision, comments, and the SHA-256 of the
    result file that the signatures refer to.
@@ -291,6 +293,23 @@ def _sign_off(doc, sha, roles, fields, decisions):
     page.y += height + 0.1
 
 
+def _carriage_section(doc, carriage, png, caption):
+    """The carriage section of a carriage study on new pages: its paragraphs, its tables
+    and the load-distribution figure after table ``figure_after``."""
+    doc.new_page()
+    doc.heading(carriage["heading"])
+    for text in carriage.get("paragraphs", ()):
+        doc.paragraph(text, size=8.5)
+    for k, table in enumerate(carriage.get("tables", ())):
+        doc.heading(table.heading, size=10.5)
+        doc.table(list(table.header), [[str(c) for c in row] for row in table.rows],
+                  list(table.widths))
+        if table.note:
+            doc.paragraph(table.note, size=7.5, colour="0.4")
+        if k == carriage.get("figure_after") and png is not None:
+            doc.image(png, caption)
+
+
 def write_pdf(path, **report) -> str:
     """Write the PDF report (the pages of :func:`report_pages`).
 
@@ -318,7 +337,7 @@ def write_pdf(path, **report) -> str:
 
 
 def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assumptions,
-                 figures, captions, sections, result_path, sign_off) -> list:
+                 figures, captions, sections, result_path, sign_off, carriage=None) -> list:
     """The pages of the PDF report, A4 portrait Figures in order.
 
     Parameters
@@ -341,6 +360,11 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
     result_path : str
         The result file (its SHA-256 goes into the sign-off block).
     sign_off : (roles, fields, decisions)
+    carriage : dict, optional
+        The section of a carriage study (:func:`tolsim.reports.study.carriage_content`):
+        ``heading``, ``paragraphs``, ``tables`` (objects with ``heading``, ``header``,
+        ``rows``, ``widths`` and ``note``, :class:`tolsim.reports.study.ReportTable`) and
+        ``figure_after``, the table that ``figures["carriage"]`` follows.
 
     Returns
     -------
@@ -381,8 +405,12 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
     doc.table(["topic", "assumption", "value", "source"],
               [[r.topic, r.item, r.value, r.source] for r in assumptions],
               [0.11, 0.2, 0.38, 0.31])
+    if carriage is not None:
+        _carriage_section(doc, carriage, figures.get("carriage"), captions.get("carriage", ""))
     doc.new_page()
     for name, png in figures.items():
+        if name == "carriage" and carriage is not None:
+            continue  # drawn in its section
         doc.image(png, captions.get(name, ""), heading=sections.get(name, name))
     doc.new_page()
     _sign_off(doc, sha, *sign_off)

@@ -19,16 +19,31 @@ statement below holds with at least 97.5 % confidence):
   required minimum (``study.cpk_minimum``, stored as ``velocity_deviation_cpk_minimum``; or
   the ``cpk_minimum`` argument). Pass when the lower end is at least Cpk_min, fail when the
   upper end is below it.
+* **P(friction increase > L) <= p_max**, in a study with ``[contact]`` and a limit L on the
+  increase of the carriage friction force (``contact.friction_increase_limit_N``, stored as
+  ``friction_increase_limit``; :mod:`tolsim.study.friction`): the row is there whenever L is
+  set. The estimate is P(increase > L) per assembly (its worst track) with its
+  Clopper-Pearson interval; with unresolved assemblies the interval that covers the
+  partial-identification bounds (Clopper-Pearson lower end of k of N, upper end of k + u of
+  N), as for P(contact). The config has no key for the allowed fraction p_max, so, as for
+  the fraction of balls out of spec without an allowed fraction, the row shows the estimate
+  without a verdict unless p_max is given (the ``friction_exceedance_limit`` argument of
+  :func:`study_verdict`).
 
 The overall verdict is *fail* if any check fails, else *undecided* if any is undecided, else
 *pass* if any passes, else "no spec limit given".
+
+In a study with a ``[carriage]`` (a ``track`` dimension in the file) an assembly is a carriage
+with one train per track, and P(contact), its bounds and the unresolved count are per
+assembly (contact in any of its trains): the wording says "assemblies" there
+(:func:`contact_unit`).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from tolsim.study.estimators import format_fraction
+from tolsim.study.estimators import clopper_pearson_interval, format_fraction
 
 PASS, FAIL, UNDECIDED, NO_LIMIT = "pass", "fail", "undecided", "no spec limit given"
 #: How a status is shown in the table of checks.
@@ -102,6 +117,39 @@ def _f(ds, name):
     return float(np.asarray(ds[name])) if name in ds.variables else float("nan")
 
 
+def tracks_of(ds) -> int:
+    """Trains per assembly of a carriage study (the size of its ``track`` dimension), or 0
+    for a study of single trains."""
+    sizes = getattr(ds, "sizes", {})
+    return int(sizes.get("track", 0))
+
+
+def counted(n, noun) -> str:
+    """'1 train', '2 trains': a count with its noun (plural in -s)."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def any_train(n, owner="its") -> str:
+    """'any of its 2 trains', or 'its train' for one."""
+    return f"{owner} train" if n == 1 else f"any of {owner} {n} trains"
+
+
+def contact_unit(ds) -> tuple:
+    """(singular, plural) of what P(contact) is counted over: ``("train", "trains")``, or
+    ``("assembly", "assemblies")`` in a carriage study (an assembly is a carriage with one
+    train per track; it has contact when any of its trains has)."""
+    return ("assembly", "assemblies") if tracks_of(ds) else ("train", "trains")
+
+
+def contact_quantity(ds) -> str:
+    """"P(ball-to-ball contact within the stroke) per train", or per assembly (carriage)."""
+    tracks = tracks_of(ds)
+    if not tracks:
+        return "P(ball-to-ball contact within the stroke) per train"
+    return (f"P(ball-to-ball contact within the stroke) per assembly (a carriage with "
+            f"{counted(tracks, 'train')}" + (": contact in any of them)" if tracks > 1 else ")"))
+
+
 def _limit(value):
     """A configured limit, or None (0 and NaN mean none)."""
     return float(value) if value is not None and np.isfinite(value) and value > 0 else None
@@ -122,7 +170,8 @@ def _sentence(status, what, lower, upper, limit_text, side):
 
 
 def contact_check(ds) -> SpecCheck:
-    """P(contact) per train against ``contact_probability_limit``."""
+    """P(contact) per train (per assembly in a carriage study) against
+    ``contact_probability_limit``."""
     p = _f(ds, "contact_probability")
     lo, hi = _f(ds, "contact_probability_bounds_ci_lower"), _f(
         ds, "contact_probability_bounds_ci_upper")
@@ -131,7 +180,8 @@ def contact_check(ds) -> SpecCheck:
         lo, hi = _f(ds, "contact_probability_ci_lower"), _f(ds, "contact_probability_ci_upper")
     limit = _limit(_f(ds, "contact_probability_limit"))
     status = judge_upper_limit(lo, hi, limit)
-    kind = ("interval covering the bounds over all trains" if covering and _f(
+    one, many = contact_unit(ds)
+    kind = (f"interval covering the bounds over all {many}" if covering and _f(
         ds, "n_assemblies_unresolved") > 0 else "Clopper-Pearson interval")
     estimate = (f"{format_fraction(p)} ({100 * CONFIDENCE:.0f} % {kind}: "
                 f"{format_fraction(lo)} to {format_fraction(hi)})")
@@ -143,11 +193,10 @@ def contact_check(ds) -> SpecCheck:
             _f(ds, "contact_probability_ci_lower"), _f(ds, "contact_probability_ci_upper"),
             limit) != UNDECIDED:
         reason = reason.replace("more samples are needed to decide",
-                                f"the {int(unresolved):,} unresolved trains leave it open")
+                                f"the {int(unresolved):,} unresolved {many} leave it open")
     if not np.isfinite(p) and status != NO_LIMIT:
-        reason = "no train has a known outcome: " + reason
-    return SpecCheck("P(ball-to-ball contact within the stroke) per train", req, estimate,
-                     status, reason)
+        reason = f"no {one} has a known outcome: " + reason
+    return SpecCheck(contact_quantity(ds), req, estimate, status, reason)
 
 
 def out_of_spec_check(ds, q, out_of_spec_limit=None) -> SpecCheck:
@@ -186,6 +235,62 @@ def cpk_check(ds, q, cpk_minimum=None) -> SpecCheck:
     return SpecCheck("process capability Cpk of ε", req, estimate, status, reason)
 
 
+def has_friction(ds) -> bool:
+    """The file holds the friction figures of a study with ``[contact]`` (issue 13)."""
+    return "friction_increase_histogram" in getattr(ds, "variables", {})
+
+
+def friction_check(ds, friction_exceedance_limit=None):
+    """P(friction increase > L) per assembly against an allowed fraction, or None when the
+    file has no friction figures or no limit L on the increase.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A result file of a study with ``[contact]``.
+    friction_exceedance_limit : float, optional
+        Allowed fraction p_max of assemblies whose increase exceeds L [-] (none in the
+        config: without it the estimate is shown with no verdict).
+    """
+    limit_n = _limit(_f(ds, "friction_increase_limit"))
+    if not has_friction(ds) or limit_n is None:
+        return None
+    p = _f(ds, "friction_exceedance_probability")
+    k, u = _f(ds, "n_friction_exceedance"), _f(ds, "n_assemblies_friction_unresolved")
+    n = _f(ds, "n_assemblies")
+    covering = u > 0 and np.isfinite(k) and np.isfinite(n) and n > 0
+    if covering:  # the interval covering the bounds over all assemblies
+        lo = clopper_pearson_interval(int(k), int(n), CONFIDENCE)[0]
+        hi = clopper_pearson_interval(int(k + u), int(n), CONFIDENCE)[1]
+    else:
+        lo, hi = (_f(ds, "friction_exceedance_probability_ci_lower"),
+                  _f(ds, "friction_exceedance_probability_ci_upper"))
+    allowed = _limit(friction_exceedance_limit)
+    status = judge_upper_limit(lo, hi, allowed)
+    one, many = contact_unit(ds)
+    worst = " (its worst track)" if tracks_of(ds) else ""
+    quantity = (f"P(friction increase > {limit_n:.4g} N) per {one}{worst}: the rise of the "
+                "carriage friction force over its free-rolling baseline")
+    kind = (f"interval covering the bounds over all {many}" if covering
+            else "Clopper-Pearson interval")
+    estimate = (f"{format_fraction(p)} ({100 * CONFIDENCE:.0f} % {kind}: "
+                f"{format_fraction(lo)} to {format_fraction(hi)})")
+    if allowed:
+        req = f"P(increase > {limit_n:.4g} N) ≤ {format_fraction(allowed)}"
+        reason = _sentence(status, "the friction exceedance", format_fraction(lo),
+                           format_fraction(hi), req, "max")
+    else:
+        req = f"increase ≤ {limit_n:.4g} N; no allowed fraction given"
+        known = int(n - u) if np.isfinite(n) and np.isfinite(u) else 0
+        reason = (f"{int(k) if np.isfinite(k) else 0:,} of {known:,} {many} whose outcome is "
+                  f"known exceed {limit_n:.4g} N; the config sets no allowed fraction of "
+                  f"{many} beyond the limit ([contact] has no key for it), so the estimate "
+                  "is shown without a verdict")
+    if not np.isfinite(p) and status != NO_LIMIT:
+        reason = f"no {one} has a known friction outcome: " + reason
+    return SpecCheck(quantity, req, estimate, status, reason)
+
+
 def overall(statuses) -> str:
     """Fail over undecided over pass over no limit."""
     statuses = list(statuses)
@@ -195,7 +300,8 @@ def overall(statuses) -> str:
     return NO_LIMIT
 
 
-def study_verdict(ds, q=None, *, out_of_spec_limit=None, cpk_minimum=None) -> Verdict:
+def study_verdict(ds, q=None, *, out_of_spec_limit=None, cpk_minimum=None,
+                  friction_exceedance_limit=None) -> Verdict:
     """The verdict of a result file against its spec limits.
 
     Parameters
@@ -208,6 +314,10 @@ def study_verdict(ds, q=None, *, out_of_spec_limit=None, cpk_minimum=None) -> Ve
         Allowed fraction of balls with |epsilon| above the limit [-] (none in the config).
     cpk_minimum : float, optional
         Required Cpk of epsilon [-] (none in the config).
+    friction_exceedance_limit : float, optional
+        Allowed fraction of assemblies whose friction increase exceeds the config's limit
+        [-] (a study with ``[contact]``; none in the config). The friction row is there
+        whenever the config sets the limit (:func:`friction_check`).
 
     Returns
     -------
@@ -219,4 +329,7 @@ def study_verdict(ds, q=None, *, out_of_spec_limit=None, cpk_minimum=None) -> Ve
         q = dataset_quality(ds)
     checks = (contact_check(ds), out_of_spec_check(ds, q, out_of_spec_limit),
               cpk_check(ds, q, cpk_minimum))
+    friction = friction_check(ds, friction_exceedance_limit)
+    if friction is not None:
+        checks += (friction,)
     return Verdict(overall(c.status for c in checks), checks)

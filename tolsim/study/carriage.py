@@ -14,8 +14,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from tolsim.physics.analytic import analytic
-from tolsim.physics.carriage import CarriageSolution, solve_carriage
-from tolsim.study.evaluate import full_velocity
+from tolsim.physics.carriage import (
+    DOFS,
+    CarriageSolution,
+    solve_carriage,
+    solve_carriage_batch,
+)
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.static import GrooveErrors
+from tolsim.study.evaluate import (
+    StaticResult,
+    ball_velocities,
+    full_velocity,
+    groove_error_fields,
+    serial_if_small,
+)
 
 
 @dataclass(frozen=True)
@@ -90,4 +103,227 @@ def solve_config_carriage(config) -> CarriageResult:
     return CarriageResult(solution, eps, model)
 
 
-__all__ = ["CarriageResult", "ball_velocity_deviation", "solve_config_carriage"]
+#: Codes of :attr:`CarriageState.status` (as ``solve_carriage_batch``): solved, Newton not
+#: converged, lifted off / a ball solve failed.
+CARRIAGE_SOLVED, CARRIAGE_NOT_CONVERGED, CARRIAGE_FAILED = 0, 1, 2
+
+
+@dataclass
+class CarriageState:
+    """Per-assembly carriage results of a chunk of a study.
+
+    Attributes
+    ----------
+    displacement : ndarray, (m, 5)
+        q = (u_x, u_y [m], pitch, yaw, roll [rad]) (NaN where not solved).
+    stiffness : ndarray, (m, 5)
+        Diagonal of the tangent carriage stiffness [N/m, N m/rad] (NaN where not solved).
+    status : ndarray of int8, (m,)
+        :data:`CARRIAGE_SOLVED`, :data:`CARRIAGE_NOT_CONVERGED` or :data:`CARRIAGE_FAILED`.
+    """
+
+    displacement: np.ndarray
+    stiffness: np.ndarray
+    status: np.ndarray
+
+    def rows(self, sl):
+        return CarriageState(self.displacement[sl], self.stiffness[sl], self.status[sl])
+
+
+def carriage_groove_errors(config, values: dict, assemblies: int) -> GrooveErrors:
+    """The sampled errors of every ball of a carriage study as :class:`GrooveErrors` fields of
+    shape (m, tracks, balls) (+ trailing axis), ``values`` of shape (m, tracks * balls)."""
+    tracks, balls = config.n_tracks, config.train.balls
+    shape = (assemblies, tracks * balls)
+    flat = groove_error_fields({k: np.broadcast_to(v, shape) for k, v in values.items()}, shape)
+    return GrooveErrors(**{k: v.reshape((assemblies, tracks, balls) + v.shape[1:])
+                           for k, v in flat.items()})
+
+
+def _solve_batch(carriage, bearing, oversize, errors, assemblies):
+    """Solve every assembly (:func:`tolsim.physics.carriage.solve_carriage_batch`); a
+    carriage that does not converge or lifts off is a status, not an error."""
+    batch = solve_carriage_batch(carriage.layout, carriage.load, bearing, oversize=oversize,
+                                 groove_errors=errors)
+    if batch.status.shape != (assemblies,):
+        raise ValueError(f"carriage batch of {batch.status.shape} for {assemblies} assemblies")
+    stiffness = np.diagonal(batch.stiffness, axis1=1, axis2=2)
+    return (batch.contact_angle_deviation, batch.normal_force, batch.ball_converged,
+            batch.displacement, np.ascontiguousarray(stiffness), batch.status.astype(np.int8))
+
+
+def evaluate_carriage(config, values: dict):
+    """Balls of a chunk of carriage assemblies: carriage solve, then the velocity model.
+
+    Every assembly's carriage is solved with its own sampled groove errors and ball
+    oversizes (the nominal preload and the config's per-ball deviations plus the sampled
+    ``ball_oversize``); its balls' loaded contact states go through the study's velocity model
+    and the full-model re-solves as any ball's (:func:`tolsim.study.evaluate.ball_velocities`).
+    An assembly whose carriage does not converge or lifts off is not dropped: its balls count
+    as not converged, so its trains are unresolved (counted and bounded).
+
+    Parameters
+    ----------
+    config : StudyConfig
+        With ``carriage``.
+    values : dict
+        source -> ndarray (m, tracks * balls) [m or rad] (:func:`tolsim.study.sampling.
+        error_values`).
+
+    Returns
+    -------
+    (BallState, CarriageState)
+        Balls of shape (m, tracks * balls), track by track.
+    """
+    carriage = config.carriage
+    m = next(iter(values.values())).shape[0] if values else 0
+    if not values:
+        raise ValueError("evaluate_carriage needs the error values of the chunk")
+    errors = carriage_groove_errors(config, values, m)
+    nball = config.balls
+    with serial_if_small(m * nball):
+        dbeta, force, ball_ok, q, k, status = _solve_batch(
+            carriage, config.bearing, carriage.oversize, errors, m)
+    ok = ball_ok.reshape(-1) & np.repeat(status == CARRIAGE_SOLVED, nball)
+    f = force.reshape(-1, 4)
+    static = StaticResult(np.ascontiguousarray(dbeta.reshape(-1, 4)),
+                          np.ascontiguousarray(np.where(np.isfinite(f), f, 0.0)), ok)
+    state = ball_velocities(config, static, (m, nball))
+    return state, CarriageState(q, k, status)
+
+
+# --------------------------------------------------------------------------------------------
+# Result-file variables of a study with a carriage
+# --------------------------------------------------------------------------------------------
+_TRANSLATION = ("carriage_translation",)
+_ROTATION = ("carriage_rotation",)
+_TRACK = ("track",)
+#: name -> (dims, units, long_name, dtype kind): the carriage variables of a result file
+#: (:mod:`tolsim.io.schema` declares them, optional).
+CARRIAGE_VARIABLES = {
+    "track_x": (_TRACK, "m", "lateral position x of the track's ball centres", "f"),
+    "track_y": (_TRACK, "m", "vertical position y of the track's ball centres", "f"),
+    "track_orientation": (_TRACK, "rad", "orientation phi of the track's module", "f"),
+    "preload_oversize": ((), "m", "nominal diametral ball oversize (preload class)", "f"),
+    "preload_contact_force": ((), "N", "contact force of the nominal preload alone, "
+                                       "K (o / 2)^1.5", "f"),
+    "n_assemblies_carriage_failed": ((), "1", "assemblies whose carriage did not converge or "
+                                              "lifted off (their trains are unresolved)", "i"),
+    "carriage_load_force": (("carriage_force_component",), "N", "force on the carriage at "
+                            "the reference point (names in carriage_force_component_name)",
+                            "f"),
+    "carriage_load_moment": (("carriage_moment_component",), "N m", "moment on the carriage "
+                             "about the reference point (names in "
+                             "carriage_moment_component_name)", "f"),
+}
+for _dims, _what, _units, _stiff_units in (
+        (_TRANSLATION, "translation", "m", "N m-1"), (_ROTATION, "rotation", "rad", "N m rad-1")):
+    CARRIAGE_VARIABLES[f"carriage_{_what}_nominal"] = (
+        _dims, _units, f"carriage {_what} of the nominal assembly", "f")
+    CARRIAGE_VARIABLES[f"carriage_{_what}al_stiffness_nominal"] = (
+        _dims, _stiff_units, f"carriage {_what}al stiffness (diagonal of the tangent "
+                             "stiffness) of the nominal assembly", "f")
+    for _stat, _label in (("mean", "mean"), ("std", "standard deviation"),
+                          ("min", "smallest"), ("max", "largest")):
+        CARRIAGE_VARIABLES[f"carriage_{_what}_{_stat}"] = (
+            _dims, _units, f"{_label} carriage {_what} over the solved assemblies", "f")
+        CARRIAGE_VARIABLES[f"carriage_{_what}al_stiffness_{_stat}"] = (
+            _dims, _stiff_units, f"{_label} carriage {_what}al stiffness over the solved "
+                                 "assemblies", "f")
+#: Coordinates of the carriage dimensions (index and name label, as ``contact``).
+CARRIAGE_COORDINATES = {
+    "track": (_TRACK, "1", "track (row of balls) of the carriage, in config order", "i"),
+    "carriage_translation": (_TRANSLATION, "1", "carriage translation index (names in "
+                                                "carriage_translation_name)", "i"),
+    "carriage_translation_name": (_TRANSLATION, "1", "carriage translation (u_x, u_y)", "U"),
+    "carriage_rotation": (_ROTATION, "1", "carriage rotation index (names in "
+                                          "carriage_rotation_name)", "i"),
+    "carriage_rotation_name": (_ROTATION, "1", "carriage rotation (pitch about x, yaw about "
+                                               "y, roll about z)", "U"),
+    "carriage_force_component": (("carriage_force_component",), "1", "carriage force "
+                                 "component index (names in carriage_force_component_name)",
+                                 "i"),
+    "carriage_force_component_name": (("carriage_force_component",), "1",
+                                      "carriage force component (lateral +x, vertical +y: "
+                                      "minus the downward load)", "U"),
+    "carriage_moment_component": (("carriage_moment_component",), "1", "carriage moment "
+                                  "component index (names in carriage_moment_component_name)",
+                                  "i"),
+    "carriage_moment_component_name": (("carriage_moment_component",), "1",
+                                       "carriage moment component (about +x, +y, +z)", "U"),
+}
+#: Names along ``carriage_force_component`` and ``carriage_moment_component`` (the
+#: generalised load Q, conjugate to the DOFS).
+LOAD_NAMES = ("lateral_force", "vertical_force_upward", "pitch_moment", "yaw_moment",
+              "roll_moment")
+
+
+def carriage_variables(config, statistics, nominal: "CarriageResult | None") -> tuple:
+    """(coordinates, data variables) of a carriage study for its result file.
+
+    ``statistics``: the study's :class:`~tolsim.study.statistics.Accumulator`; ``nominal``:
+    the nominal assembly (:func:`solve_config_carriage`), or None when it could not be
+    solved (its variables are then NaN).
+    """
+    carriage = config.carriage
+    layout = carriage.layout
+    tracks = layout.n_tracks
+    coords = {
+        "track": (_TRACK, np.arange(tracks, dtype=np.int64)),
+        "carriage_translation": (_TRANSLATION, np.arange(2, dtype=np.int64)),
+        "carriage_translation_name": (_TRANSLATION, np.array(DOFS[:2])),
+        "carriage_rotation": (_ROTATION, np.arange(3, dtype=np.int64)),
+        "carriage_rotation_name": (_ROTATION, np.array(DOFS[2:])),
+        "carriage_force_component": (("carriage_force_component",),
+                                     np.arange(2, dtype=np.int64)),
+        "carriage_force_component_name": (("carriage_force_component",),
+                                          np.array(LOAD_NAMES[:2])),
+        "carriage_moment_component": (("carriage_moment_component",),
+                                      np.arange(3, dtype=np.int64)),
+        "carriage_moment_component_name": (("carriage_moment_component",),
+                                           np.array(LOAD_NAMES[2:])),
+    }
+    k = _hertz_constant(config.bearing)
+    o = float(carriage.preload_oversize)
+    data = {
+        "track_x": (_TRACK, np.asarray(layout.track_x, dtype=float)),
+        "track_y": (_TRACK, np.asarray(layout.track_y, dtype=float)),
+        "track_orientation": (_TRACK, np.asarray(layout.track_orientation, dtype=float)),
+        "preload_oversize": o,
+        "preload_contact_force": k * max(0.5 * o, 0.0) ** 1.5,
+        "n_assemblies_carriage_failed": np.int64(statistics.carriage_failed),
+        "carriage_load_force": (("carriage_force_component",),
+                                carriage.load.generalised()[:2]),
+        "carriage_load_moment": (("carriage_moment_component",),
+                                 carriage.load.generalised()[2:]),
+    }
+    acc = statistics
+    solved = int(acc.carriage_count) > 0
+    columns = {"mean": acc.carriage_mean, "std": acc.carriage_std,
+               "min": acc.carriage_min, "max": acc.carriage_max}
+    if nominal is not None:
+        q = nominal.solution.displacement
+        kdiag = np.diag(nominal.solution.stiffness)
+    else:
+        q = kdiag = np.full(5, np.nan)
+    for what, sl, dims in (("translation", slice(0, 2), _TRANSLATION),
+                           ("rotation", slice(2, 5), _ROTATION)):
+        data[f"carriage_{what}_nominal"] = (dims, np.asarray(q[sl], dtype=float))
+        data[f"carriage_{what}al_stiffness_nominal"] = (dims, np.asarray(kdiag[sl], float))
+        for stat, values in columns.items():
+            v = np.asarray(values, dtype=float) if solved else np.full(10, np.nan)
+            data[f"carriage_{what}_{stat}"] = (dims, v[:5][sl])
+            data[f"carriage_{what}al_stiffness_{stat}"] = (dims, v[5:][sl])
+    return coords, data
+
+
+def _hertz_constant(bearing) -> float:
+    return float(hertz_constants(bearing.ball_radius, bearing.conformity,
+                                 bearing.youngs_modulus,
+                                 bearing.poisson_ratio).load_deflection_constant)
+
+
+__all__ = ["CARRIAGE_COORDINATES", "CARRIAGE_VARIABLES", "LOAD_NAMES", "carriage_variables",
+           "CARRIAGE_FAILED", "CARRIAGE_NOT_CONVERGED", "CARRIAGE_SOLVED", "DOFS",
+           "CarriageResult", "CarriageState", "ball_velocity_deviation",
+           "carriage_groove_errors", "evaluate_carriage", "solve_config_carriage"]

@@ -314,7 +314,9 @@ SERIAL_BELOW = 4096
 
 
 @contextmanager
-def _serial_if_small(n):
+def serial_if_small(n):
+    """Run the parallel kernels inside on one thread when ``n`` balls are fewer than
+    :data:`SERIAL_BELOW` (no effect on the results: every kernel is thread-count invariant)."""
     if n >= SERIAL_BELOW:
         yield
         return
@@ -378,9 +380,29 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
                                  shape)
     nx = np.broadcast_to(side_load, shape).reshape(n)
     ny = np.broadcast_to(normal_load, shape).reshape(n)
-    resolve_seconds = 0.0
-    with _serial_if_small(n):
+    with serial_if_small(n):
         static = STATIC_MODELS[config.study.static_model](errors, nx, ny, config.bearing)
+    return ball_velocities(config, static, shape)
+
+
+def ball_velocities(config, static: StaticResult, shape) -> BallState:
+    """The study's velocity model on balls in a known contact state, with the re-solves.
+
+    Parameters
+    ----------
+    config : StudyConfig
+    static : StaticResult
+        n = prod(shape) balls, flattened.
+    shape : tuple
+        Shape of the returned per-ball arrays.
+
+    Returns
+    -------
+    BallState
+    """
+    n = int(np.prod(shape))
+    resolve_seconds = 0.0
+    with serial_if_small(n):
         force = static.normal_force
         dbeta = static.contact_angle_deviation
         solvable = static.converged & static.four_point

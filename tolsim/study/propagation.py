@@ -56,10 +56,15 @@ def propagation_caveat(config) -> str:
         return ""
     fields = [t.source for t in config.tolerances
               if t.scope == "rail" and t.correlation_length > 0 and t.distribution.is_random]
-    loads = (len(set(np.atleast_1d(config.loads.side_load))) > 1
-             or len(set(np.atleast_1d(config.loads.normal_load))) > 1)
+    if config.carriage is not None:  # balls enter and leave the carriage's load zone
+        loads = config.train.balls > 1
+        what = "a carriage whose balls pass through its load distribution"
+    else:
+        loads = (len(set(np.atleast_1d(config.loads.side_load))) > 1
+                 or len(set(np.atleast_1d(config.loads.normal_load))) > 1)
+        what = "loads that vary along the train"
     causes = ([f"rail random fields ({', '.join(fields)})"] if fields else []) + (
-        ["loads that vary along the train"] if loads else [])
+        [what] if loads else [])
     if not causes:
         return ""
     return (f"This study has {' and '.join(causes)}, so a ball's epsilon changes as it moves "
@@ -124,6 +129,46 @@ def first_contact_constant(initial_gap, velocity_deviation, groove_velocity, hor
     pair = np.empty(len(gap), dtype=np.int64)
     constant_contact_kernel(gap, eps, 0.5 * groove_velocity, float(horizon), time, pair)
     return time, pair
+
+
+def first_contact_tracks(initial_gap, velocity_deviation, groove_velocity, horizon, tracks=1):
+    """First contact of assemblies of ``tracks`` trains each (constant epsilon).
+
+    Each train runs alone (:func:`first_contact_constant`); an assembly's first contact is
+    the earliest of its trains'.
+
+    Parameters
+    ----------
+    initial_gap : array_like, shape (m, tracks * (balls - 1))
+        Gaps [m], track by track.
+    velocity_deviation : array_like, shape (m, tracks * balls)
+        epsilon per ball [-], track by track.
+    groove_velocity, horizon : float
+        As :func:`first_contact_constant`.
+    tracks : int
+        Trains per assembly.
+
+    Returns
+    -------
+    time : ndarray, shape (m,)
+        [s], inf if no train touches within the horizon.
+    pair : ndarray of int, shape (m,)
+        track * (balls - 1) + the trailing ball of the first touching pair; -1 if none.
+    """
+    if tracks == 1:
+        return first_contact_constant(initial_gap, velocity_deviation, groove_velocity,
+                                      horizon)
+    eps = np.asarray(velocity_deviation)
+    m = eps.shape[0]
+    balls = eps.shape[1] // tracks
+    time, pair = first_contact_constant(
+        np.asarray(initial_gap).reshape(m * tracks, balls - 1), eps.reshape(m * tracks, balls),
+        groove_velocity, horizon)
+    time, pair = time.reshape(m, tracks), pair.reshape(m, tracks)
+    first = np.argmin(time, axis=1)  # the first track on ties
+    rows = np.arange(m)
+    t = time[rows, first]
+    return t, np.where(np.isfinite(t), first * (balls - 1) + pair[rows, first], -1)
 
 
 def first_contact_along_track(config, block, initial_state=None):

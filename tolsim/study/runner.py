@@ -36,6 +36,8 @@ from numba.core import event as numba_event
 
 from tolsim import __version__
 from tolsim.study import saved_samples
+from tolsim.study.carriage import evaluate_carriage, solve_config_carriage
+from tolsim.study.carriage_track import first_contact_carriage_track
 from tolsim.study.evaluate import (
     MODEL_FAST,
     BallState,
@@ -44,7 +46,13 @@ from tolsim.study.evaluate import (
     loads_at,
     loads_per_ball,
 )
-from tolsim.study.propagation import first_contact_along_track, first_contact_constant
+from tolsim.study.friction import (
+    accumulator_from_state,
+    evaluate_friction,
+    friction_examples,
+    study_accumulator,
+)
+from tolsim.study.propagation import first_contact_along_track, first_contact_tracks
 from tolsim.study.sampling import (
     SPOT_CHECK_SCHEME,
     block_size_of,
@@ -106,6 +114,14 @@ class StudyResult:
     samples_maximum: int = 0  # the samples asked for (= config.study.samples without target)
     stackup: object = None  # tolsim.study.worst_case.LinearStackup: worst case and RSS
     samples: dict | None = None  # the first assemblies' rows (tolsim.study.saved_samples)
+    carriage_nominal: object = None  # tolsim.study.carriage.CarriageResult: nominal assembly
+    friction_examples: object = None  # tolsim.study.friction.FrictionExamples ([contact])
+
+    @property
+    def friction(self):
+        """The friction statistics of a study with ``[contact]``
+        (:class:`tolsim.study.friction.FrictionStatistics`), else None."""
+        return getattr(self.statistics, "friction", None)
 
     @property
     def stopping_rule(self) -> str:
@@ -215,7 +231,7 @@ def fingerprint(config) -> str:
 
 def default_chunk_blocks(config) -> int:
     """Blocks per chunk so that a chunk holds about :data:`CHUNK_BALLS` balls."""
-    per_block = config.study.block_size * config.train.balls
+    per_block = config.study.block_size * config.balls
     return max(1, CHUNK_BALLS // per_block)
 
 
@@ -271,22 +287,32 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
     (:func:`tolsim.study.saved_samples.sample_rows`).
     """
     out = []
-    balls = config.train.balls
+    balls = config.balls
+    carriage = None
     if config.study.propagation == "constant":
         # One pass over the whole chunk, then split per block.
         block, values = drawn if drawn is not None else draw_chunk(config, block_indices)
-        shape = block.initial_gap.shape[:1] + (balls,)
-        nx, ny = loads_per_ball(config, shape)
-        state = evaluate_balls(config, values, nx, ny)
-        t, pair = first_contact_constant(block.initial_gap, state.velocity_deviation,
-                                         config.motion.groove_velocity, config.motion.duration)
+        if config.carriage is not None:  # one carriage per assembly, its tracks' trains
+            state, carriage = evaluate_carriage(config, values)
+        else:
+            nx, ny = loads_per_ball(config, (block.size, balls))
+            state = evaluate_balls(config, values, nx, ny)
+        t, pair = first_contact_tracks(block.initial_gap, state.velocity_deviation,
+                                       config.motion.groove_velocity, config.motion.duration,
+                                       config.n_tracks)
+        friction = (None if config.contact is None  # after contact: trains and friction
+                    else evaluate_friction(config, block.initial_gap, state))
         offset = 0
         for index in block_indices:
             size = block_size_of(config, index)
             sl = slice(offset, offset + size)
             sub = state.rows(sl)
-            acc = Accumulator.for_config(config)
+            acc = study_accumulator(config)
             acc.add(sub, t[sl], pair[sl])
+            if carriage is not None:
+                acc.add_carriage(carriage.rows(sl))
+            if friction is not None:
+                acc.add_friction(friction.rows(sl))
             if offset == 0:  # the chunk's re-solves, counted once
                 acc.resolve_seconds = state.resolve_seconds
             start = index * config.study.block_size
@@ -299,12 +325,18 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
         for k in block_indices:
             b = sample_block(config, k)
             values = error_values(config, b)
-            # loads at the carriage positions, as during the integration
-            nx, ny = loads_at(config, b.initial_position)
-            state = evaluate_balls(config, values, nx, ny)
-            t, pair, ok, seconds = first_contact_along_track(config, b, state)
+            carriage = None
+            if config.carriage is not None:  # balls rolling through the carriage
+                t, pair, ok, seconds, state, carriage = first_contact_carriage_track(config, b)
+            else:
+                # loads at the carriage positions, as during the integration
+                nx, ny = loads_at(config, b.initial_position)
+                state = evaluate_balls(config, values, nx, ny)
+                t, pair, ok, seconds = first_contact_along_track(config, b, state)
             acc = Accumulator.for_config(config)
             acc.add(state, t, pair, ok)
+            if carriage is not None:  # the carriages at the start of the stroke
+                acc.add_carriage(carriage)
             acc.resolve_seconds += seconds
             rows = _spot_rows(state, b.start * balls, spot_indices)
             rows.update(saved_samples.sample_rows(config, save_samples, b.start, values,
@@ -451,7 +483,7 @@ def _load_checkpoint(path, fp) -> _Progress | None:
         with np.load(path, allow_pickle=False) as data:
             if str(data["fingerprint"]) != fp:
                 return None
-            acc = Accumulator.from_state(
+            acc = accumulator_from_state(
                 {k[4:]: data[k] for k in data.files if k.startswith("acc_")})
             acc.resolve_seconds = float(data["resolve_seconds"])
             next_block = int(data["next_block"])
@@ -479,7 +511,7 @@ def _spot_rows_of_shorter_run(config, plan_used, parts):
     plan = spot_check_plan(config)
     parts = list(parts)
     if repr(replace(plan, uniform=())) == repr(replace(plan_used, uniform=())):
-        balls_per_block = config.study.block_size * config.train.balls
+        balls_per_block = config.study.block_size * config.balls
         redo = np.unique(np.concatenate([plan.uniform, plan_used.uniform]) // balls_per_block)
         redo = redo[redo < len(parts)]
     else:
@@ -492,7 +524,7 @@ def _spot_rows_of_shorter_run(config, plan_used, parts):
 def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, progress=None,
               checkpoint_path=None, checkpoint_interval: float = 30.0,
               max_blocks: int | None = None, target: PrecisionTarget | None = None,
-              notify=None, save_samples: int = 0) -> StudyResult:
+              notify=None, save_samples: int = 0, scheduler=None) -> StudyResult:
     """Run a Monte Carlo tolerance study.
 
     Parameters
@@ -521,17 +553,24 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     save_samples : int
         Keep the inputs and outputs of the first this many assemblies (``samples`` of the
         result, :mod:`tolsim.study.saved_samples`); 0: none.
+    scheduler : str or distributed.Client, optional
+        Run the chunks, grouped into tasks, and the spot checks on dask.distributed
+        (:mod:`tolsim.study.distributed`; ``pip install "tolsim[dask]"``): a scheduler address
+        (``tcp://host:8786``), a scheduler file, ``local[:N]`` (a LocalCluster of N worker
+        processes, started and closed here), a connected Client or a dask cluster object
+        (a ``dask_jobqueue.SLURMCluster``, say; both left running). The results
+        are merged here in block order, so the result does not depend on it; ``workers``
+        must then be 1 (the cluster's workers do the work).
 
     Returns
     -------
     StudyResult
     """
-    if getattr(config, "carriage", None) is not None:
-        raise ValueError(f"{config.path}: studies with a [carriage] are not implemented yet "
-                         "(issue 12); tolsim.study.carriage.solve_config_carriage solves its "
-                         "load distribution")
     if not (isinstance(workers, int) and workers >= 1):
         raise ValueError(f"workers = {workers!r} must be a positive integer")
+    if scheduler is not None and workers != 1:
+        raise ValueError(f"workers = {workers} and a scheduler: the scheduler's workers do the "
+                         "work (local:N starts N of them); leave workers at 1")
     if not (isinstance(save_samples, int) and save_samples >= 0):
         raise ValueError(f"save_samples = {save_samples!r} must be a non-negative integer")
     retain_freed_memory()
@@ -545,7 +584,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     spot_indices = spot_check_plan(config)
     fp = fingerprint(config)
     # The committed state: replaced as a whole, never changed (module docstring).
-    committed = _Progress(0, Accumulator.for_config(config), [])
+    committed = _Progress(0, study_accumulator(config), [])
     if checkpoint_path is not None and os.path.exists(checkpoint_path):
         loaded = _load_checkpoint(checkpoint_path, fp)
         if loaded is None:
@@ -566,12 +605,19 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     chunks = [list(range(i, min(i + chunk_blocks, last_block)))
               for i in range(resumed, last_block, chunk_blocks)]
     notice = _CompileNotice(lambda: _say(notify, COMPILING_MESSAGE))
-    results = executor = watch = None
+    results = executor = watch = session = None
+    loop_ended = False
     last_save = time.perf_counter()
     merged_here = 0
     numba_event.register("numba:compile", notice)
     try:
-        if workers == 1:
+        if scheduler is not None:  # tasks on dask.distributed, merged below in block order
+            from tolsim.study.distributed import DaskSession
+
+            session = DaskSession(scheduler, notify=notify)
+            workers = session.workers  # recorded in the result
+            results = session.chunk_results(config, chunks, spot_indices, save_samples)
+        elif workers == 1:
             results = _prefetched(config, chunks, spot_indices, save_samples)
         else:
             import multiprocessing
@@ -608,6 +654,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
             if stop and committed.next_block < total_blocks:
                 raise StudyInterrupted(
                     f"stopped after {committed.next_block} of {total_blocks} blocks")
+        loop_ended = True
     except KeyboardInterrupt:
         # Ctrl-C: keep what is merged; only a committed state, never one half-merged
         if checkpoint_path is not None and committed.next_block > resumed:
@@ -620,7 +667,9 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         if executor is not None:
             executor.shutdown(wait=True, cancel_futures=True)
         elif results is not None:
-            results.close()  # stops the drawing thread of an unfinished run
+            results.close()  # stops the drawing thread (or the tasks) of an unfinished run
+        if session is not None and not loop_ended:
+            session.close()
     elapsed = time.perf_counter() - started
     acc = committed.statistics
     n_done = int(acc.n_assemblies)
@@ -629,7 +678,11 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     if n_done < st.samples:  # stopped at the target: the study of n_done assemblies
         result_config = config.with_overrides(samples=n_done)
         parts = _spot_rows_of_shorter_run(result_config, spot_indices, parts)
-    spots = finish_spot_checks(result_config, _concat_spots(parts))
+    if session is None:
+        spots = finish_spot_checks(result_config, _concat_spots(parts))
+    else:  # as a task; then the session is closed
+        with session:
+            spots = session.spot_checks(result_config, _concat_spots(parts))
     samples = saved_samples.take(result_config, parts, save_samples, spot_indices)
     meta = {"spot_check_seconds": time.perf_counter() - started - elapsed}
     sensitivity = None
@@ -640,10 +693,20 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         sensitivity = study_sensitivity(result_config,
                                         samples=config.study.sensitivity_samples)
         meta["sensitivity_seconds"] = time.perf_counter() - t0
-    stackup = linear_stackup(result_config)  # worst case and RSS: one small evaluation
+    # worst case and RSS: one small evaluation (of free balls; not for a carriage, whose
+    # balls are coupled through it)
+    stackup = None if config.carriage is not None else linear_stackup(result_config)
+    nominal = None
+    if config.carriage is not None:  # the load distribution without tolerances
+        try:
+            nominal = solve_config_carriage(config)
+        except ValueError:  # recorded as NaN; the sampled assemblies were counted anyway
+            nominal = None
+    examples = None if config.contact is None else friction_examples(result_config)
     return StudyResult(result_config, acc, spots, elapsed, workers, resumed, meta, sensitivity,
                        target=target, target_reached=reached, samples_maximum=st.samples,
-                       stackup=stackup, samples=samples)
+                       stackup=stackup, samples=samples, carriage_nominal=nominal,
+                       friction_examples=examples)
 
 
 def _say(notify, message):
@@ -686,11 +749,20 @@ def finish_spot_checks(config, rows: dict) -> SpotChecks:
         return SpotChecks(**rows, velocity_deviation_full=np.empty(0),
                           converged_full=np.empty(0, bool), valid_full=np.empty(0, bool),
                           status=status)
-    res = module.full(rows["contact_angle_deviation"], np.maximum(rows["normal_force"], 0.0),
-                      config.bearing, groove_velocity=config.motion.groove_velocity)
-    eps_full = np.asarray(res.velocity_deviation, dtype=float)
-    converged = np.asarray(getattr(res, "converged", np.ones(k, bool)), dtype=bool)
-    valid = np.asarray(getattr(res, "valid", converged), dtype=bool) & converged
+    # a ball without a contact state (its carriage was not solved) has nothing to check
+    finite = (np.all(np.isfinite(rows["contact_angle_deviation"]), axis=1)
+              & np.all(np.isfinite(rows["normal_force"]), axis=1))
+    eps_full = np.full(k, np.nan)
+    converged = np.zeros(k, bool)
+    valid = np.zeros(k, bool)
+    if finite.any():
+        res = module.full(rows["contact_angle_deviation"][finite],
+                          np.maximum(rows["normal_force"][finite], 0.0), config.bearing,
+                          groove_velocity=config.motion.groove_velocity)
+        eps_full[finite] = np.asarray(res.velocity_deviation, dtype=float)
+        conv = np.asarray(getattr(res, "converged", np.ones(finite.sum(), bool)), dtype=bool)
+        converged[finite] = conv
+        valid[finite] = np.asarray(getattr(res, "valid", conv), dtype=bool) & conv
     n_near = int(np.count_nonzero(rows["stratum"] == 1))
     status = f"{k} balls re-solved with the full model"
     if plan.near_limit:

@@ -23,7 +23,18 @@ Within a block the draws are, in this order:
    with spacing <= l/16 and interpolated linearly; between grid points this lowers the
    variance by at most (1 - exp(-1/16))/2 = 3 % (1.5 % in standard deviation), at the grid
    points it is exact;
-4. the initial gaps, shape (assemblies, balls - 1).
+4. the initial gaps, shape (assemblies, balls - 1);
+5. only with a ``[carriage]`` and ``along_track`` propagation, the balls that enter the
+   carriage's loaded zone during the stroke (:mod:`tolsim.study.carriage_track`), E =
+   :func:`entering_capacity` per track: their gaps to the ball ahead (from the gap
+   distribution), shape (assemblies, tracks * E), then each ``ball`` source in config order,
+   the same shape. Drawn after everything else, so the draws 1-4 are those of any other
+   study.
+
+With a ``[carriage]`` of T tracks an assembly holds T trains: the per-assembly sources are
+drawn once per track (rail and carriage grooves are ground per track), and every draw has T
+times the columns, track by track (:func:`_draw_widths`); with T = 1 the draws are those of a
+single train.
 
 Every distribution maps the standard normal z to its value
 (:meth:`tolsim.study.spec.Distribution.from_normal`), so QMC, fields and plain draws share
@@ -43,7 +54,7 @@ order).
 """
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.special import ndtri
@@ -81,15 +92,25 @@ def n_blocks(samples: int, block_size: int) -> int:
 class RailField:
     """A rail random field for a block: standard normal values on a grid [rail position, m].
 
-    ``values`` has shape (assemblies, points); position s_k = origin + k * spacing.
+    ``values`` has shape (assemblies * tracks, points), row a * tracks + t for track t of
+    assembly a (a carriage's tracks have a field each); position s_k = origin + k * spacing.
     """
 
     origin: float
     spacing: float
     values: np.ndarray
+    tracks: int = 1
 
     def at(self, position):
-        """Standard normal field value at rail positions, shape (assemblies, ...) [-]."""
+        """Standard normal field value at rail positions [-].
+
+        ``position``: shape (assemblies, ...) [m]; with several tracks the positions of each
+        assembly track by track, (assemblies, tracks * k) or (assemblies, tracks, k).
+        """
+        if self.tracks > 1:
+            pos = np.asarray(position)
+            rows = RailField(self.origin, self.spacing, self.values)
+            return rows.at(pos.reshape(self.values.shape[0], -1)).reshape(pos.shape)
         x = (np.asarray(position) - self.origin) / self.spacing
         k = np.clip(np.floor(x).astype(np.int64), 0, self.values.shape[1] - 2)
         w = np.clip(x - k, 0.0, 1.0)
@@ -113,10 +134,20 @@ class Block:
     fields : dict
         source -> :class:`RailField` for rail sources with a correlation length
         (``along_track`` propagation).
-    initial_gap : ndarray, shape (size, balls - 1)
-        Gaps between adjacent balls at t = 0 [m].
-    initial_position : ndarray, shape (size, balls)
-        Ball centres along the rail at t = 0 [m], train centroid at 0, ball 0 trailing.
+    initial_gap : ndarray, shape (size, tracks * (balls - 1))
+        Gaps between adjacent balls at t = 0 [m], track by track.
+    initial_position : ndarray, shape (size, tracks * balls)
+        Ball centres along the rail at t = 0 [m], each train's centroid at 0, ball 0
+        trailing, track by track.
+    entering_gap : ndarray, shape (size, tracks * E)
+        Carriage with ``along_track`` propagation only (else None): the gap [m] of each ball
+        that enters the loaded zone during the stroke to the ball ahead of it, in order of
+        entry, track by track (E = :func:`entering_capacity`).
+    entering : dict
+        Likewise: ``ball`` source -> standard normals of the entering balls, (size,
+        tracks * E).
+
+    ``tracks`` is 1 without a carriage (:attr:`tolsim.study.spec.StudyConfig.n_tracks`).
     """
 
     index: int
@@ -126,6 +157,8 @@ class Block:
     fields: dict
     initial_gap: np.ndarray
     initial_position: np.ndarray
+    entering_gap: np.ndarray | None = None
+    entering: dict = field(default_factory=dict)
 
 
 def per_assembly_sources(config):
@@ -156,8 +189,14 @@ def nominal_span(config):
 
 
 def field_extent(config, initial_span):
-    """Rail interval [m] the balls can visit: the train at t = 0 plus the ball travel."""
+    """Rail interval [m] the balls can visit: the train at t = 0 plus the ball travel.
+
+    With a carriage (``along_track``) the balls stay in its loaded zone, which travels the
+    whole stroke: a ball entering at the end of the stroke is at L/2 + stroke.
+    """
     travel = 0.5 * config.motion.stroke * 1.05 if config.study.propagation == "along_track" else 0
+    if travel and config.carriage is not None:
+        travel = config.motion.stroke
     pad = 2.0 * config.bearing.ball_radius
     return -initial_span - pad, initial_span + travel + pad
 
@@ -206,14 +245,36 @@ def block_size_of(config, index: int) -> int:
 
 
 def _draw_widths(config, grid):
-    """Name -> columns of each standard normal draw of a block, in the documented order."""
-    balls = config.train.balls
-    widths = {"factors": len(per_assembly_sources(config))}
-    widths.update({t.source: balls for t in config.tolerances if t.scope == "ball"})
-    widths["gap"] = max(balls - 1, 0)
+    """Name -> columns of each standard normal draw of a block, in the documented order.
+
+    With a carriage of T tracks every per-assembly source has T columns (one value per
+    track, source by source), ball sources and gaps T times a train's, track by track, and
+    a rail field one grid (or train) per track.
+    """
+    tracks, balls = config.n_tracks, config.train.balls
+    widths = {"factors": tracks * len(per_assembly_sources(config))}
+    widths.update({t.source: tracks * balls for t in config.tolerances if t.scope == "ball"})
+    widths["gap"] = tracks * max(balls - 1, 0)
     for source, (_, _, points) in grid.items():
-        widths[source] = balls if config.study.propagation == "constant" else points
+        widths[source] = tracks * (balls if config.study.propagation == "constant" else points)
+    if config.carriage is not None and config.study.propagation == "along_track":
+        entering = tracks * entering_capacity(config)
+        widths["entering_gap"] = entering
+        widths.update({f"entering_{t.source}": entering for t in config.tolerances
+                       if t.scope == "ball"})
     return widths
+
+
+def entering_capacity(config) -> int:
+    """Balls drawn per track to enter a carriage's loaded zone during the stroke.
+
+    Relative to the carriage the balls move at (1 - epsilon) v / 2 (:mod:`tolsim.study.
+    carriage_track`), so over the stroke s the balls of a track travel (1 - epsilon) s / 2
+    and, spaced at least a diameter D apart, at most that over D enter; with |epsilon| <=
+    5 %: floor(1.05 s / (2 D)) + 2.
+    """
+    diameter = 2.0 * config.bearing.ball_radius
+    return int(np.floor(1.05 * config.motion.stroke / (2.0 * diameter))) + 2
 
 
 def _draw(config, index, widths, out, row):
@@ -263,13 +324,20 @@ def sample_block(config, index: int, count: int = 1) -> Block:
     row = 0
     for k in range(index, index + count):
         row += _draw(config, k, widths, raw, row)
-    draws = {t.source: raw["factors"][:, j : j + 1]
-             for j, t in enumerate(per_assembly_sources(config))}
+    tracks, balls = config.n_tracks, config.train.balls
+    if tracks == 1:
+        draws = {t.source: raw["factors"][:, j : j + 1]
+                 for j, t in enumerate(per_assembly_sources(config))}
+    else:  # one value per track, the same for the balls of the track
+        draws = {t.source: np.repeat(raw["factors"][:, j * tracks : (j + 1) * tracks], balls,
+                                     axis=1)
+                 for j, t in enumerate(per_assembly_sources(config))}
     draws.update({t.source: raw[t.source] for t in config.tolerances if t.scope == "ball"})
     gaps = np.maximum(config.train.initial_gap.from_normal(raw["gap"]), 0.0)
-    pitch = 2.0 * config.bearing.ball_radius + gaps
-    position = np.concatenate([np.zeros((size, 1)), np.cumsum(pitch, axis=1)], axis=1)
+    pitch = (2.0 * config.bearing.ball_radius + gaps).reshape(size * tracks, balls - 1)
+    position = np.concatenate([np.zeros((size * tracks, 1)), np.cumsum(pitch, axis=1)], axis=1)
     position -= position.mean(axis=1, keepdims=True)
+    position = position.reshape(size, tracks * balls)
     fields = {}
     for t in config.tolerances:
         if t.source not in grid:
@@ -278,15 +346,26 @@ def sample_block(config, index: int, count: int = 1) -> Block:
         ell = t.correlation_length
         if st.propagation == "constant":
             # Exact: the Ornstein-Uhlenbeck process sampled at the ball centres themselves
-            # (Markov, so each ball conditions on the one behind it).
-            phi = np.exp(-np.diff(position, axis=1) / ell)
-            draws[t.source] = _ar1(phi, np.sqrt(1.0 - phi * phi), innovations)
+            # (Markov, so each ball conditions on the one behind it); one field per track.
+            along = position.reshape(size * tracks, balls)
+            phi = np.exp(-np.diff(along, axis=1) / ell)
+            draws[t.source] = _ar1(phi, np.sqrt(1.0 - phi * phi),
+                                   innovations.reshape(size * tracks, balls)).reshape(
+                size, tracks * balls)
             continue
         origin, spacing, points = grid[t.source]
         phi = np.full((1, points - 1), np.exp(-spacing / ell))
-        values = _ar1(phi, np.sqrt(1.0 - phi * phi), innovations)
-        fields[t.source] = RailField(origin, spacing, values)
-    return Block(index, index * st.block_size, size, draws, fields, gaps, position)
+        # one field per track: row a * tracks + t
+        values = _ar1(phi, np.sqrt(1.0 - phi * phi), innovations.reshape(size * tracks, points))
+        fields[t.source] = RailField(origin, spacing, values, tracks)
+    entering_gap, entering = None, {}
+    if "entering_gap" in raw:  # a carriage's balls entering its loaded zone (draw 5)
+        entering_gap = np.maximum(config.train.initial_gap.from_normal(raw["entering_gap"]),
+                                  0.0)
+        entering = {t.source: raw[f"entering_{t.source}"] for t in config.tolerances
+                    if t.scope == "ball"}
+    return Block(index, index * st.block_size, size, draws, fields, gaps, position,
+                 entering_gap, entering)
 
 
 def error_values(config, block: Block, rail_position=None):
@@ -318,6 +397,60 @@ def error_values(config, block: Block, rail_position=None):
     return {t.source: t.distribution.from_normal(z[t.source]) for t in config.tolerances}
 
 
+def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None):
+    """Error source values of balls moving through a carriage, in SI (``along_track``).
+
+    Each ball keeps its own ``ball`` draws (the initial ball j of a track those of the block,
+    the k-th ball to enter the track's loaded zone those of draw 5, module docstring); the
+    per-assembly sources are those of its track; a rail field is read at its rail position.
+
+    Parameters
+    ----------
+    config : StudyConfig
+        With a ``[carriage]`` (T tracks of n balls).
+    block : Block
+    ball_id : ndarray of int, shape (m, T, S)
+        The ball in each slot: j < n the initial ball j of the track, n + k the k-th entering
+        ball; a negative id gives the values of ball 0 (an empty slot, ignored by the caller).
+    rail_position : ndarray, shape (m, T, S)
+        Ball centres along the rail [m] (finite).
+    rows : array_like of int, optional
+        The block's assemblies of the m rows (default all, m = ``block.size``).
+
+    Returns
+    -------
+    dict
+        source -> ndarray (m, T, S) [m or rad].
+    """
+    tracks, balls = config.n_tracks, config.train.balls
+    rows = np.arange(block.size) if rows is None else np.asarray(rows)
+    shape = np.shape(ball_id)
+    ids = np.maximum(ball_id, 0)
+    z = {}
+    for t in config.tolerances:
+        if t.source in block.fields:
+            z[t.source] = _field_at(block.fields[t.source], rows, rail_position)
+        elif t.scope == "ball":
+            own = block.normals[t.source][rows].reshape(len(rows), tracks, balls)
+            new = block.entering[t.source][rows].reshape(len(rows), tracks, -1)
+            z[t.source] = np.take_along_axis(np.concatenate([own, new], axis=2), ids, axis=2)
+        else:  # one value per track
+            per_track = block.normals[t.source][rows].reshape(len(rows), tracks, -1)[:, :, :1]
+            z[t.source] = np.broadcast_to(per_track, shape)
+    for group in config.correlations:
+        _correlate(group, z)
+    return {t.source: t.distribution.from_normal(z[t.source]) for t in config.tolerances}
+
+
+def _field_at(rail_field: RailField, rows, position):
+    """``rail_field`` of the block's assemblies ``rows`` at positions (m, T, S) [-]."""
+    tracks = rail_field.tracks
+    values = rail_field.values.reshape(-1, tracks, rail_field.values.shape[1])[rows]
+    sub = RailField(rail_field.origin, rail_field.spacing,
+                    values.reshape(len(rows) * tracks, -1), tracks)
+    return sub.at(position)
+
+
 def _correlate(group, z):
     """Replace the independent normals xi of ``group``'s sources in ``z`` by L xi."""
     chol = group.cholesky
@@ -332,7 +465,7 @@ def _correlate(group, z):
 def choose_spot_checks(config) -> np.ndarray:
     """Sorted global ball indices (assembly * balls + ball): the candidates of the uniform
     stratum of the spot checks (all ``spot_checks`` of them; see :class:`SpotCheckPlan`)."""
-    total = config.study.samples * config.train.balls
+    total = config.study.samples * config.balls
     k = min(config.study.spot_checks, total)
     if k == 0:
         return np.empty(0, dtype=np.int64)

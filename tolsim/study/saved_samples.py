@@ -47,7 +47,8 @@ SAMPLE_VARIABLES = {
     f"{PREFIX}contact_time": (("sample",), "s", "time of the first ball-to-ball contact of "
                               "the train (missing: none within the horizon)", "f"),
     f"{PREFIX}contact_pair": (("sample",), "1", "adjacent pair of the first contact, named "
-                              "by its trailing ball (-1: none within the horizon)", "i"),
+                              "by its trailing ball; with a carriage track * (balls - 1) + "
+                              "trailing ball (-1: none within the horizon)", "i"),
 }
 
 
@@ -83,13 +84,13 @@ def sample_rows(config, save_samples, start, values, initial_gap, state, contact
     keep = len(first)
     if keep == 0:
         return {}
-    balls = config.train.balls
+    balls = config.balls  # all tracks of a carriage, track by track
     out = {f"{PREFIX}index": np.arange(start, start + keep, dtype=np.int64)}
     for t in config.tolerances:
         v = np.broadcast_to(values[t.source], (m, balls))
         out[f"{PREFIX}error_{t.source}"] = np.array(v[first], dtype=np.float64)
     out[f"{PREFIX}initial_gap"] = np.array(initial_gap[first], dtype=np.float64).reshape(
-        keep, max(balls - 1, 0))
+        keep, config.n_tracks * max(config.train.balls - 1, 0))
     out[f"{PREFIX}contact_angle_deviation"] = np.array(state.contact_angle_deviation[first])
     out[f"{PREFIX}normal_force"] = np.array(state.normal_force[first])
     out[f"{PREFIX}velocity_deviation"] = np.array(state.velocity_deviation[first])
@@ -137,9 +138,14 @@ def dataset_variables(config, samples: dict) -> dict:
             out["sample"] = (("sample",), values)
             continue
         values = np.array(values)
+        dims = SAMPLE_VARIABLES[name][0]
+        if config.carriage is not None and {"ball", "pair"} & set(dims):
+            # (sample, tracks * k, ...) -> (sample, track, k, ...)
+            values = values.reshape((len(values), config.n_tracks, -1) + values.shape[2:])
+            dims = dims[:1] + ("track",) + dims[1:]
         if name == f"{PREFIX}contact_time":
             values[~np.isfinite(values)] = np.nan  # no contact: missing
-        out[name] = (SAMPLE_VARIABLES[name][0], values)
+        out[name] = (dims, values)
     return out
 
 

@@ -51,6 +51,8 @@ from scipy.special import ndtri
 VELOCITY_DEVIATION = "velocity_deviation"
 #: Output name of the per-assembly contact indicator in :func:`study_sensitivity`.
 CONTACT = "contact"
+#: Output name of the per-assembly friction increase (a study with ``[contact]``).
+FRICTION_INCREASE = "friction_increase"
 #: Factor name of the initial gaps between balls in :func:`study_sensitivity`.
 INITIAL_GAP = "initial_gap"
 
@@ -358,36 +360,51 @@ def study_factors(config) -> tuple:
 
 def _mix(block_a, block_b, factor):
     """Block A with factor ``factor`` taken from block B (the AB_i of the design)."""
-    if factor == INITIAL_GAP:
+    if factor == INITIAL_GAP:  # with the gaps of the balls entering a carriage, if any
         return replace(block_a, initial_gap=block_b.initial_gap,
-                       initial_position=block_b.initial_position)
+                       initial_position=block_b.initial_position,
+                       entering_gap=block_b.entering_gap)
     normals, fields = dict(block_a.normals), dict(block_a.fields)
+    entering = dict(block_a.entering)
     if factor in fields:
         fields[factor] = block_b.fields[factor]
     else:
         normals[factor] = block_b.normals[factor]
-    return replace(block_a, normals=normals, fields=fields)
+    if factor in entering:  # a ball source: the entering balls' values go with it
+        entering[factor] = block_b.entering[factor]
+    return replace(block_a, normals=normals, fields=fields, entering=entering)
 
 
 def _evaluate_block(config, block):
     """epsilon per ball (size, balls) (NaN unresolved) and contact indicator (size,) (NaN
-    when the train has an unresolved ball and no certain contact)."""
+    when the train has an unresolved ball and no certain contact); with ``[contact]`` also
+    the friction increase (size,) [N] of the worst track (NaN when unresolved,
+    :mod:`tolsim.study.friction`)."""
+    from tolsim.study.carriage import evaluate_carriage
     from tolsim.study.evaluate import evaluate_balls, loads_at, loads_per_ball
-    from tolsim.study.propagation import first_contact_along_track, first_contact_constant
+    from tolsim.study.propagation import first_contact_along_track, first_contact_tracks
     from tolsim.study.sampling import error_values
 
-    balls = config.train.balls
+    balls = config.balls
     values = error_values(config, block)
     if config.study.propagation == "constant":
-        nx, ny = loads_per_ball(config, (block.size, balls))
-        state = evaluate_balls(config, values, nx, ny)
+        if config.carriage is not None:  # every assembly's carriage solved (issue 12)
+            state, _ = evaluate_carriage(config, values)
+        else:
+            nx, ny = loads_per_ball(config, (block.size, balls))
+            state = evaluate_balls(config, values, nx, ny)
         ok = state.valid.all(axis=1)
-        if balls > 1:
-            t, _ = first_contact_constant(block.initial_gap, state.velocity_deviation,
-                                          config.motion.groove_velocity,
-                                          config.motion.duration)
+        if config.train.balls > 1:
+            t, _ = first_contact_tracks(block.initial_gap, state.velocity_deviation,
+                                        config.motion.groove_velocity,
+                                        config.motion.duration, config.n_tracks)
         else:
             t = np.full(block.size, np.inf)
+    elif config.carriage is not None:  # balls rolling through the carriage (issue 12)
+        from tolsim.study.carriage_track import first_contact_carriage_track
+
+        t, _, ok, _, state, _ = first_contact_carriage_track(config, block)
+        ok = ok & state.valid.all(axis=1)
     else:
         nx, ny = loads_at(config, block.initial_position)
         state = evaluate_balls(config, values, nx, ny)
@@ -397,6 +414,11 @@ def _evaluate_block(config, block):
     # known only when every ball was resolved (NaN otherwise)
     hit = np.isfinite(t)
     contact = np.where(hit, 1.0, np.where(ok, 0.0, np.nan))
+    if config.contact is not None:  # after contact (issue 13): the friction increase
+        from tolsim.study.friction import evaluate_friction
+
+        friction = evaluate_friction(config, block.initial_gap, state)
+        return state.velocity_deviation, contact, friction.increase_max
     return state.velocity_deviation, contact
 
 
@@ -419,7 +441,9 @@ def study_sensitivity(config, samples: int = 2048, *, confidence_level=0.95,
         Outputs ``velocity_deviation`` (epsilon of a ball at a fixed train position, pooled
         over the positions: the share of the within-position variance, so the deterministic
         load variation along the train is not counted as a tolerance effect) and ``contact``
-        (1 if a pair of the train touches within the horizon). Factors as
+        (1 if a pair of the train touches within the horizon); with ``[contact]`` also
+        ``friction_increase`` (the worst track's friction increase per assembly [N],
+        :mod:`tolsim.study.friction`; unresolved assemblies left out). Factors as
         :func:`study_factors`; no factors gives an empty result (d = 0). With
         ``along_track`` propagation epsilon is taken at the start of the stroke (the balls'
         initial rail positions) while the contact indicator follows the whole stroke.
@@ -444,7 +468,8 @@ def study_sensitivity(config, samples: int = 2048, *, confidence_level=0.95,
     boot = np.random.Generator(np.random.PCG64(
         np.random.SeedSequence(config.study.seed, spawn_key=(3,))))
     per_output = {}
-    for k, name in enumerate((VELOCITY_DEVIATION, CONTACT)):
+    names = (VELOCITY_DEVIATION, CONTACT) + ((FRICTION_INCREASE,) if config.contact else ())
+    for k, name in enumerate(names):
         ys = [e[k] for e in evaluated]
         per_output[name] = indices_from_evaluations(
             ys[0], ys[1], np.stack(ys[2:]) if factors else np.empty((0,) + ys[0].shape), boot,
@@ -478,11 +503,13 @@ def sensitivity_variables(result: SensitivityResult) -> dict:
     dict
         ``"factor"`` -> ndarray of str (the source names, written as the ``factor_name``
         label along ``factor``) and every name of
-        :data:`SENSITIVITY_VARIABLES` -> ndarray (d,), ready for
+        :data:`SENSITIVITY_VARIABLES` -> ndarray (d,) (with ``[contact]`` also
+        ``sensitivity_friction_*``, declared in :mod:`tolsim.study.friction`), ready for
         ``xarray.Dataset.assign(**{k: (("factor",), v) ...})``.
     """
     out = {"factor": np.array(result.factors, dtype=str)}
-    for prefix, output in (("", VELOCITY_DEVIATION), ("_contact", CONTACT)):
+    for prefix, output in (("", VELOCITY_DEVIATION), ("_contact", CONTACT),
+                           ("_friction", FRICTION_INCREASE)):
         if output not in result.outputs:
             continue
         k = result.outputs.index(output)

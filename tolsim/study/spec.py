@@ -44,6 +44,8 @@ VELOCITY_MODELS = ("eq24", "analytic", "full")
 STATIC_MODELS = ("paired", "rigid", "solved", "linearised")
 PROPAGATIONS = ("constant", "along_track")
 SAMPLINGS = ("random", "sobol", "lhs")
+#: Models that give a ball's creep stiffness in a study with ``[contact]`` (issue 13).
+CREEP_MODELS = ("analytic", "full")
 #: Standard deviations either side of the mean taken as the reach of an unbounded normal
 #: (``normal``, untruncated ``cpk``) when its values are checked against the static model's
 #: range: P(|z| > 8) = 1.2e-15, so even 10^9 balls never draw beyond it.
@@ -321,14 +323,32 @@ class Carriage:
     ball_oversize_deviation : tuple of float
         Per-ball deviation from ``preload_oversize`` [m], track by track (n_tracks x
         balls_per_track values), or () for none.
+    end_relief_depth : float
+        Recess of the carriage flanks at the ends of the loaded zone [m] (crowning,
+        :func:`tolsim.physics.carriage.end_relief`; config key ``end_relief_depth_um``),
+        >= 0; 0: none. Used by ``along_track`` propagation.
+    end_relief_length : float
+        Length of the relieved part at each end of the loaded zone [m] (config key
+        ``end_relief_length_mm``), > 0 with a depth (at most half the loaded zone, checked
+        with the train); 0 without.
     """
 
     layout: CarriageLayout
     load: CarriageLoad
     preload_oversize: float = 0.0
     ball_oversize_deviation: tuple = ()
+    end_relief_depth: float = 0.0
+    end_relief_length: float = 0.0
 
     def __post_init__(self):
+        for name in ("end_relief_depth", "end_relief_length"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} = {value!r} m must be >= 0")
+        if (self.end_relief_depth > 0) != (self.end_relief_length > 0):
+            raise ValueError(f"end_relief_depth = {self.end_relief_depth!r} m and "
+                             f"end_relief_length = {self.end_relief_length!r} m: give both "
+                             "(> 0) or neither")
         n = self.layout.n_tracks * self.layout.balls_per_track
         if self.ball_oversize_deviation and len(self.ball_oversize_deviation) != n:
             raise ValueError(f"ball_oversize_deviation has {len(self.ball_oversize_deviation)} "
@@ -342,6 +362,50 @@ class Carriage:
         if self.ball_oversize_deviation:
             out += np.asarray(self.ball_oversize_deviation, dtype=float).reshape(shape)
         return out
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    """What happens after balls touch (tolsim issue 13): trains, contact forces, friction.
+
+    A study with ``[contact]`` follows every train over the stroke after its balls touch
+    (:mod:`tolsim.study.trains`) and reports the carriage friction force they cost
+    (:mod:`tolsim.study.friction`).
+
+    Attributes
+    ----------
+    ball_friction_coefficient : float
+        mu_bb [-], Coulomb coefficient of the ball-to-ball contacts (>= 0).
+    friction_increase_limit : float
+        Spec limit on the increase of a track's carriage friction force over its baseline
+        [N] (0: none; config key ``friction_increase_limit_N``).
+    creep_model : str
+        Which model gives each ball's creep stiffness K, braking sensitivity and free-rolling
+        carriage force: a name from :data:`CREEP_MODELS` (``full`` is slow).
+    examples : int
+        Example trajectories stored for plots (0: none).
+    travel_points : int
+        Points of the carriage-travel grid of the examples (>= 2).
+    """
+
+    ball_friction_coefficient: float = 0.1
+    friction_increase_limit: float = 0.0
+    creep_model: str = "analytic"
+    examples: int = 4
+    travel_points: int = 201
+
+    def __post_init__(self):
+        for name, ok in (
+                ("ball_friction_coefficient", np.isfinite(self.ball_friction_coefficient)
+                 and self.ball_friction_coefficient >= 0),
+                ("friction_increase_limit", np.isfinite(self.friction_increase_limit)
+                 and self.friction_increase_limit >= 0),
+                ("creep_model", self.creep_model in CREEP_MODELS),
+                ("examples", int(self.examples) == self.examples and self.examples >= 0),
+                ("travel_points", int(self.travel_points) == self.travel_points
+                 and self.travel_points >= 2)):
+            if not ok:
+                raise ValueError(f"contact {name} = {getattr(self, name)!r} is out of range")
 
 
 @dataclass(frozen=True)
@@ -413,9 +477,11 @@ class StudyConfig:
     overrides are written into it by :meth:`with_overrides`), so ``tolsim run`` on it
     reproduces the run. ``correlations`` holds the :class:`Correlation` groups of sources.
     ``carriage`` is the :class:`Carriage` of a config with ``[carriage]`` (issue 12); such a
-    config has no per-ball ``loads`` (None) and ``train`` only if it gives ``[train]``.
-    Studies with a carriage are not implemented yet: :func:`tolsim.study.runner.run_study`
-    refuses them.
+    config has no per-ball ``loads`` (None); its ``train`` is the train of one track: the
+    config's ``[train]`` (gap distribution, loaded zone) or, without one, ``balls_per_track``
+    balls with the fixed gap ``ball_pitch - D``. An assembly then holds ``n_tracks`` trains
+    (:attr:`balls` balls, track by track). ``contact`` holds the :class:`ContactSettings` of
+    a config with ``[contact]`` (issue 13), None without (the study stops at first contact).
     """
 
     bearing: Bearing
@@ -428,6 +494,17 @@ class StudyConfig:
     path: str = "<string>"
     correlations: tuple = ()
     carriage: Carriage | None = None
+    contact: ContactSettings | None = None
+
+    @property
+    def n_tracks(self) -> int:
+        """Tracks (trains) per assembly: the carriage's rows of balls, or 1."""
+        return 1 if self.carriage is None else self.carriage.layout.n_tracks
+
+    @property
+    def balls(self) -> int:
+        """Balls per assembly: ``n_tracks`` trains of ``train.balls``, track by track."""
+        return self.n_tracks * self.train.balls
 
     @property
     def data_files(self) -> dict:

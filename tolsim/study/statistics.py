@@ -102,12 +102,19 @@ class Accumulator:
         "n_resolved_full", "n_full_failed",
         "eps_mean", "eps_m2", "eps_min", "eps_max", "eps_histogram", "eps_underflow",
         "eps_overflow", "ball_count", "ball_mean", "ball_m2", "time_histogram", "time_min",
-        "time_max", "pair_count",
+        "time_max", "pair_count", "carriage_count", "carriage_failed", "carriage_mean",
+        "carriage_m2", "carriage_min", "carriage_max",
     )
+    #: Per-assembly carriage quantities of ``carriage_*`` (:meth:`add_carriage`): the
+    #: displacement q and the diagonal of the carriage stiffness, in ``DOFS`` order.
+    CARRIAGE_COLUMNS = 10
 
     def __init__(self, balls, velocity_deviation_range, velocity_deviation_bins, horizon,
-                 time_bins, velocity_deviation_limit=0.0):
+                 time_bins, velocity_deviation_limit=0.0, tracks=1):
         self.balls = int(balls)
+        self.tracks = int(tracks)
+        if self.tracks < 1 or self.balls % self.tracks:
+            raise ValueError(f"balls = {balls} must be a multiple of tracks = {tracks}")
         self.velocity_deviation_limit = float(velocity_deviation_limit)
         self.cluster = ClusterMoments.empty()
         self.eps_edges = np.linspace(velocity_deviation_range[0], velocity_deviation_range[1],
@@ -141,13 +148,59 @@ class Accumulator:
         self.time_histogram = np.zeros(time_bins, dtype=i8)
         self.time_min = np.inf
         self.time_max = -np.inf
-        self.pair_count = np.zeros(max(self.balls - 1, 1), dtype=i8)
+        self.pair_count = np.zeros(max(self.balls - self.tracks, 1), dtype=i8)
+        c = self.CARRIAGE_COLUMNS
+        self.carriage_count = i8(0)  # assemblies with a solved carriage
+        self.carriage_failed = i8(0)  # assemblies whose carriage was not solved
+        self.carriage_mean = np.zeros(c)
+        self.carriage_m2 = np.zeros(c)
+        self.carriage_min = np.full(c, np.inf)
+        self.carriage_max = np.full(c, -np.inf)
 
     @classmethod
     def for_config(cls, config):
         st = config.study
-        return cls(config.train.balls, st.velocity_deviation_range, st.velocity_deviation_bins,
-                   config.motion.duration, st.time_bins, st.velocity_deviation_limit)
+        return cls(config.balls, st.velocity_deviation_range, st.velocity_deviation_bins,
+                   config.motion.duration, st.time_bins, st.velocity_deviation_limit,
+                   config.n_tracks)
+
+    def _empty_like(self):
+        return Accumulator(self.balls, (self.eps_edges[0], self.eps_edges[-1]),
+                           len(self.eps_histogram), self.time_edges[-1],
+                           len(self.time_histogram), self.velocity_deviation_limit, self.tracks)
+
+    def add_carriage(self, carriage):
+        """Add the carriages of a block of assemblies (a :class:`tolsim.study.carriage.
+        CarriageState`): moments, min and max of the displacement and the diagonal
+        stiffness over the solved ones, and the count of the others."""
+        block = self._empty_like()
+        solved = carriage.status == 0
+        x = np.concatenate([carriage.displacement, carriage.stiffness], axis=1)[solved]
+        block.carriage_count = np.int64(len(x))
+        block.carriage_failed = np.int64(len(solved) - len(x))
+        if len(x):
+            block.carriage_mean = x.mean(axis=0)
+            block.carriage_m2 = ((x - block.carriage_mean) ** 2).sum(axis=0)
+            block.carriage_min = x.min(axis=0)
+            block.carriage_max = x.max(axis=0)
+        self._merge_carriage(block)
+
+    def _merge_carriage(self, other):
+        n_a = self.carriage_count
+        self.carriage_count, self.carriage_mean, self.carriage_m2 = _merge_moments(
+            n_a, self.carriage_mean, self.carriage_m2, other.carriage_count,
+            other.carriage_mean, other.carriage_m2)
+        self.carriage_count = np.int64(self.carriage_count)
+        self.carriage_failed = self.carriage_failed + other.carriage_failed
+        self.carriage_min = np.minimum(self.carriage_min, other.carriage_min)
+        self.carriage_max = np.maximum(self.carriage_max, other.carriage_max)
+
+    @property
+    def carriage_std(self) -> np.ndarray:
+        """Sample standard deviation of the carriage columns (NaN below 2 carriages)."""
+        n = int(self.carriage_count)
+        return np.sqrt(self.carriage_m2 / (n - 1)) if n > 1 else np.full(
+            self.CARRIAGE_COLUMNS, np.nan)
 
     # ---------------------------------------------------------------------------------------
     def add(self, state, contact_time, contact_pair, train_valid=None):
@@ -168,9 +221,7 @@ class Accumulator:
         from tolsim.study.evaluate import MODEL_FULL
 
         eps, valid = state.velocity_deviation, state.valid
-        block = Accumulator(self.balls, (self.eps_edges[0], self.eps_edges[-1]),
-                            len(self.eps_histogram), self.time_edges[-1],
-                            len(self.time_histogram), self.velocity_deviation_limit)
+        block = self._empty_like()
         limit = self.velocity_deviation_limit if self.velocity_deviation_limit > 0 else np.inf
         block.cluster = ClusterMoments.from_totals(assembly_totals(eps, limit))
         m = eps.shape[0]
@@ -237,6 +288,7 @@ class Accumulator:
         self.time_min = min(self.time_min, other.time_min)
         self.time_max = max(self.time_max, other.time_max)
         self.cluster = self.cluster.merge(other.cluster)
+        self._merge_carriage(other)
 
     def merged(self, other) -> "Accumulator":
         """A new accumulator: self followed by ``other`` (:meth:`merge` on a deep copy).
@@ -255,6 +307,7 @@ class Accumulator:
         out["eps_edges"] = self.eps_edges
         out["time_edges"] = self.time_edges
         out["velocity_deviation_limit"] = np.float64(self.velocity_deviation_limit)
+        out["tracks"] = np.int64(self.tracks)
         out["cluster_count"] = np.int64(self.cluster.count)
         out["cluster_mean"] = self.cluster.mean
         out["cluster_comoment"] = self.cluster.comoment
@@ -264,7 +317,8 @@ class Accumulator:
     def from_state(cls, state: dict):
         eps_edges, time_edges = state["eps_edges"], state["time_edges"]
         acc = cls(len(state["ball_count"]), (eps_edges[0], eps_edges[-1]), len(eps_edges) - 1,
-                  time_edges[-1], len(time_edges) - 1, float(state["velocity_deviation_limit"]))
+                  time_edges[-1], len(time_edges) - 1, float(state["velocity_deviation_limit"]),
+                  int(state["tracks"]))
         acc.cluster = ClusterMoments(int(state["cluster_count"]),
                                      np.array(state["cluster_mean"], dtype=float),
                                      np.array(state["cluster_comoment"], dtype=float))

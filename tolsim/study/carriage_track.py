@@ -1,0 +1,468 @@
+r"""Along-track propagation with a carriage: balls rolling through its loaded zone (issue 12).
+
+With ``propagation = "along_track"`` and a ``[carriage]``, each assembly's balls roll through
+the carriage's loaded zone while the carriage makes its stroke; the carriage is re-solved as
+they move, balls leave the zone at its trailing end and new ones enter at its leading end.
+:func:`first_contact_carriage_track` integrates a block of assemblies and finds the first
+ball-to-ball contact of each, as :func:`tolsim.study.propagation.first_contact_along_track`
+does for single trains.
+
+Frames and sign convention
+--------------------------
+Rail frame s (fixed) and carriage frame z = s - v t: the carriage's reference point is at
+s = v t, so at t = 0 the two coincide. The carriage moves towards +z; its leading end is at
+z = +L/2 and its trailing end at -L/2, L = ``train.loaded_zone_length`` (ball 0, the
+trailing ball, has the smallest z).
+
+A ball's centre moves along the rail at v_B = (1 + epsilon) v / 2 ([Lin2018] Eq. 23; the
+convention of :mod:`tolsim.study.propagation`, whose rail positions advance at that speed),
+so relative to the carriage
+
+    dz/dt = v_B - v = -(1 - epsilon) v / 2.
+
+Every ball drifts backwards through the carriage at about v/2; a ball with a larger epsilon
+(faster along the rail) drifts more slowly. (Written as -(1 + epsilon') v / 2, epsilon' =
+-epsilon.) The gap of pair j (trailing ball j, leading ball j + 1) changes at dg_j/dt =
+-(epsilon_j - epsilon_{j+1}) v / 2 in either frame: it closes when the trailing ball is the
+faster, as in the constant propagation.
+
+Loaded zone, exit and entry
+---------------------------
+A ball is loaded only while its centre is inside the loaded zone [-L/2, L/2]: the carriage is
+solved with the balls inside, each at its own z (:func:`tolsim.physics.carriage.
+solve_carriage_batch` with ``ball_z`` and ``loaded``; a ball outside carries nothing).
+
+* *Exit.* Drifting backwards, a ball leaves at the trailing end: when its centre passes
+  -L/2 (the time interpolated linearly within the step, exact for a constant epsilon).
+* *Entry.* A new ball enters at the leading end with a gap g_k drawn from the train's gap
+  distribution (draw 5 of :mod:`tolsim.study.sampling`, one independent gap per entering
+  ball, in order of entry): the k-th ball to enter a track enters when the ball ahead of it
+  (the zone's leading ball) has drifted to L/2 - D - g_k, so that it sits at L/2 with the gap
+  g_k: as soon as there is room for it. At the end of the step it is placed at
+  z_ahead + D + g_k (it is taken to move with the ball ahead during the part of the step
+  after its entry: a position error of at most |epsilon_k - epsilon_ahead| v dt / 2), and
+  its entry time is interpolated as the exit's. In a zone longer than the initial train the
+  balls enter one by one at the start of a step in which there is room, each at L/2.
+  It brings its own ``ball`` tolerances (draw 5), its track's rail and carriage values, and
+  reads the rail fields at its rail position.
+
+*The return path.* A ball that has left the zone runs through the end cap's turnaround and
+the return channel back to the leading end. There it is unloaded: no groove carries load on
+it, so it exerts nothing on the carriage and has no velocity deviation of its own (it is
+pushed along by the balls behind). Its contacts with other balls are contacts of free balls,
+which can spin and give way, not the contacts of loaded balls whose opposed surface
+velocities cost friction ([Lin2018] Sec. 3.2): they are not counted. Its order in the
+circuit is preserved (balls cannot pass each other in a channel), but it is not tracked
+further within the horizon: the balls that enter are new, independent draws. A ball could
+only come round again if the balls' drift over the stroke, about stroke/2, exceeds the
+length of the return path and the turnarounds (more than L): for such long strokes the
+re-entering balls are modelled as independent of the ones that left. The ones that left
+bring back the same tolerances (and so the same neighbours' epsilon differences) in their
+order; independent balls give every new pair a fresh epsilon difference, more chances of a
+fast-closing pair, so P(contact) is if anything overestimated (conservative). With
+stroke/2 <= L (``configs/carriage_preload.toml``: 50 mm against 120.6 mm) no ball comes
+round and the question does not arise.
+
+Integration
+-----------
+The explicit midpoint rule of :func:`tolsim.study.propagation.first_contact_along_track` over
+``study.time_steps`` steps of dt: epsilon_1 of every loaded ball with the carriage solved at
+the balls' positions at the start of the step, the positions at the midpoint, epsilon_2 with
+the carriage solved again there (a ball outside the zone at the midpoint keeps epsilon_1),
+then the step with epsilon_2. Each evaluation is one batched carriage solve over the
+assemblies still being followed, and every Newton starts from the assembly's own solution of
+its previous evaluation (so an assembly's results depend only on its own history, not on the
+batch, chunking or threads). Exits and entries are applied at the end of each step. Contacts
+are counted between loaded balls: adjacent balls of a track (in z order), both inside the
+zone at the time of contact and both resolved at every evaluation so far; the contact time is
+the linear interpolation of the gap within the step. An assembly's first contact is the
+earliest over its tracks; it is not followed after it.
+
+Unresolved balls (no velocity model takes them, :mod:`tolsim.study.evaluate`; every loaded
+ball of an assembly whose carriage did not converge or lifted off) are treated as in the
+single-train propagation: such a ball moves at the nominal -v/2 (epsilon = 0), closes no gap,
+and its assembly is invalid (``train_valid`` False) if a loaded ball was unresolved at any
+evaluation before the assembly's first contact. A ball in the loaded zone whose four contacts
+have opened (under an end relief deeper than the ball's approach, for one) is unresolved in
+this sense, as a ball that lost contact in the constant propagation: keep the relief depth
+below the preload oversize (module docstring of :mod:`tolsim.physics.carriage`) to unload
+the end balls gradually while they stay in four-point contact. An assembly is invalid, too,
+if it needs more entering balls than were drawn (:func:`tolsim.study.sampling.
+entering_capacity`) or more balls in its zone than it has slots (:func:`slot_capacity`).
+
+Cost: two batched carriage solves per step (each about 10 us of CPU per assembly of
+``configs/carriage_preload.toml``, 2 x 13 ball slots) plus the velocity model of the loaded
+balls and the bookkeeping; an assembly is followed until its first contact.
+``benchmarks/bench_carriage.py --along-track`` measures the study path.
+
+The balls at t = 0 are the block's trains at their sampled positions (each train's centroid
+at z = 0), not the nominal slots z_j of the constant propagation. A ball of a train longer
+than the zone that starts outside it is unloaded; in the t = 0 ball statistics it counts as a
+ball that lost contact.
+
+References
+----------
+.. [Lin2018] B. Lin, C. E. Okwudire, M. Duan, J. S. Wou, IMECE2018-88033 (Eq. 23, Sec. 3.2).
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tolsim._jit import jit
+from tolsim.physics.carriage import (
+    STATUS_CONVERGED,
+    CarriageLayout,
+    end_relief,
+    solve_carriage,
+    solve_carriage_batch,
+)
+from tolsim.physics.static import GrooveErrors
+from tolsim.study.carriage import CarriageState
+from tolsim.study.evaluate import (
+    MODEL_UNRESOLVED,
+    BallState,
+    StaticResult,
+    ball_velocities,
+    groove_error_fields,
+    serial_if_small,
+)
+from tolsim.study.sampling import entering_capacity, moving_ball_values
+
+
+def slot_capacity(config) -> int:
+    """Ball slots per track: the most balls a track's loaded zone can hold.
+
+    Centres at least a diameter D apart within [-L/2, L/2]: floor(L / D) + 1, and at least
+    the train's balls (a train longer than the zone at t = 0).
+    """
+    diameter = 2.0 * config.bearing.ball_radius
+    return max(int(config.train.balls),
+               int(np.floor(config.train.loaded_zone_length / diameter * (1 + 1e-12))) + 1)
+
+
+@dataclass
+class TrackTrace:
+    """What the integration did, for tests and plots (``trace`` of
+    :func:`first_contact_carriage_track`).
+
+    Per step k, at its start t_k (lists of length ``time_steps``, over the assemblies still
+    followed, ``rows``): ``ball_z`` (m_k, tracks, slots) [m] (NaN: empty slot), ``ball_id``
+    (m_k, tracks, slots) (-1 empty; j < balls the initial ball j, balls + k the k-th entering
+    ball of the track), ``velocity_deviation`` epsilon_1 [-] (NaN: outside the zone or
+    unresolved), ``normal_load`` N_y of the loaded balls [N] (NaN elsewhere).
+    ``exits`` and ``entries``: one row (assembly, track, ball id, time [s]) per event.
+    """
+
+    time: list = field(default_factory=list)
+    rows: list = field(default_factory=list)
+    ball_z: list = field(default_factory=list)
+    ball_id: list = field(default_factory=list)
+    velocity_deviation: list = field(default_factory=list)
+    normal_load: list = field(default_factory=list)
+    exits: list = field(default_factory=list)
+    entries: list = field(default_factory=list)
+
+    def events(self, kind: str) -> np.ndarray:
+        """``exits`` or ``entries`` as an array (k, 4): assembly, track, ball id, time [s]."""
+        rows = getattr(self, kind)
+        return np.array(rows, dtype=float).reshape(-1, 4)
+
+
+@jit
+def advance_kernel(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_zone,
+                   diameter, balls, t0, dt, overflow, exit_id, exit_time, entry_id,
+                   entry_time):
+    """Exits and entries at the end of a step, per assembly and track (in place).
+
+    ``z0``, ``z1`` (m, T, S): positions at the start and end of the step [m], slots in z
+    order (``count`` occupied); ``ball_id``, ``ball_ok`` move with their balls. A ball with
+    z1 < -half_zone leaves (exit time interpolated); the remaining ones close up; then, while
+    the leading ball is at or behind half_zone - diameter - g (g = ``entering_gap`` of the
+    next entering ball, ``entered`` so far), a ball enters with id balls + k: at the time the
+    leading ball passed that point, at z = half_zone, and moves with the leading ball for the
+    rest of the step (at its start if there was room before it: a zone longer than the
+    train). ``overflow`` is set where the slots or the drawn entering balls run out, or
+    the zone is empty. Events: ``exit_id``/``exit_time`` at the slot the ball left,
+    ``entry_id``/``entry_time`` at the slot it took (-1 / NaN elsewhere).
+    """
+    m, tracks, slots = z1.shape
+    capacity = entering_gap.shape[2]
+    for a in range(m):
+        for tr in range(tracks):
+            for j in range(slots):
+                exit_id[a, tr, j] = -1
+                exit_time[a, tr, j] = np.nan
+                entry_id[a, tr, j] = -1
+                entry_time[a, tr, j] = np.nan
+            c = count[a, tr]
+            keep = 0
+            lead0 = np.nan
+            for j in range(c):
+                if z1[a, tr, j] < -half_zone:
+                    exit_id[a, tr, j] = ball_id[a, tr, j]
+                    span = z0[a, tr, j] - z1[a, tr, j]
+                    frac = (z0[a, tr, j] + half_zone) / span if span > 0.0 else 0.0
+                    exit_time[a, tr, j] = t0 + min(max(frac, 0.0), 1.0) * dt
+                    continue
+                z0[a, tr, keep] = z0[a, tr, j]
+                z1[a, tr, keep] = z1[a, tr, j]
+                ball_id[a, tr, keep] = ball_id[a, tr, j]
+                ball_ok[a, tr, keep] = ball_ok[a, tr, j]
+                keep += 1
+            c = keep
+            if c == 0:
+                overflow[a] = True
+            else:
+                lead0 = z0[a, tr, c - 1]
+                drift = lead0 - z1[a, tr, c - 1]  # the leading ball's travel in the step
+                while True:
+                    k = entered[a, tr]
+                    if k >= capacity:
+                        overflow[a] = True
+                        break
+                    znew = z1[a, tr, c - 1] + diameter + entering_gap[a, tr, k]
+                    if znew > half_zone:
+                        break
+                    if c >= slots:
+                        overflow[a] = True
+                        break
+                    # it enters at L/2 when there is room, then moves with the ball ahead
+                    frac = (half_zone - znew) / drift if drift > 0.0 else 1.0
+                    if frac > 1.0:  # room since before the step: enters at its start
+                        frac = 1.0
+                        znew = half_zone - max(drift, 0.0)
+                    z1[a, tr, c] = znew
+                    z0[a, tr, c] = znew + drift
+                    ball_id[a, tr, c] = balls + k
+                    ball_ok[a, tr, c] = True
+                    entry_id[a, tr, c] = balls + k
+                    entry_time[a, tr, c] = t0 + dt - frac * dt
+                    entered[a, tr] = k + 1
+                    c += 1
+            for j in range(c, slots):
+                z0[a, tr, j] = np.nan
+                z1[a, tr, j] = np.nan
+                ball_id[a, tr, j] = -1
+                ball_ok[a, tr, j] = True
+            count[a, tr] = c
+
+
+class _Evaluation:
+    """The loaded balls of a block's assemblies at given positions: carriage, then epsilon."""
+
+    def __init__(self, config, block):
+        carriage = config.carriage
+        self.config, self.block = config, block
+        self.tracks, self.balls = config.n_tracks, config.train.balls
+        self.slots = slot_capacity(config)
+        self.half_zone = 0.5 * config.train.loaded_zone_length
+        lay = carriage.layout
+        self.layout = CarriageLayout(lay.track_x, lay.track_y, lay.track_orientation,
+                                     self.slots, lay.ball_pitch)
+        try:  # the start of every Newton until an assembly has its own solution
+            nominal = solve_carriage(lay, carriage.load, config.bearing,
+                                     oversize=carriage.oversize)
+            q0 = nominal.displacement if nominal.converged else np.zeros(5)
+        except ValueError:
+            q0 = np.zeros(5)
+        self.start = np.tile(q0, (block.size, 1))
+        self.resolve_seconds = 0.0
+
+    def __call__(self, ball_z, ball_id, t, rows):
+        """Evaluate the balls in slots (m_k, T, S) of assemblies ``rows`` at time t [s].
+
+        Returns (eps, ok, loaded, batch, state): epsilon (NaN unless loaded and resolved),
+        resolved (True where not loaded), loaded, the carriage batch and the BallState of the
+        loaded balls (flattened).
+        """
+        config, carriage = self.config, self.config.carriage
+        shape = ball_z.shape
+        occupied = ball_id >= 0
+        with np.errstate(invalid="ignore"):
+            loaded = occupied & (np.abs(ball_z) <= self.half_zone)
+        z = np.where(occupied, ball_z, 0.0)
+        values = moving_ball_values(config, self.block, ball_id,
+                                    z + config.motion.groove_velocity * t, rows)
+        fields = groove_error_fields(values, shape)
+        if carriage.end_relief_depth > 0:  # the carriage flanks TR, TL recede at the ends
+            h = end_relief(z, config.train.loaded_zone_length, carriage.end_relief_depth,
+                           carriage.end_relief_length)
+            fields["arc_centre_offset_normal"][:, 2:4] += h.reshape(-1, 1)
+        errors = GrooveErrors(**{k: v.reshape(shape + v.shape[1:]) for k, v in fields.items()})
+        with serial_if_small(z.size):  # as evaluate_carriage (no effect on the results)
+            batch = solve_carriage_batch(self.layout, carriage.load, config.bearing,
+                                         oversize=carriage.preload_oversize,
+                                         groove_errors=errors, ball_z=z, loaded=loaded,
+                                         start=self.start[rows])
+        solved = batch.status == STATUS_CONVERGED
+        self.start[rows[solved]] = batch.displacement[solved]
+        force = batch.normal_force[loaded]
+        static = StaticResult(
+            np.ascontiguousarray(batch.contact_angle_deviation[loaded]),
+            np.ascontiguousarray(np.where(np.isfinite(force), force, 0.0)),
+            batch.ball_converged[loaded] & np.broadcast_to(solved[:, None, None], shape)[loaded])
+        state = ball_velocities(config, static, (int(loaded.sum()),))
+        eps = np.full(shape, np.nan)
+        eps[loaded] = state.velocity_deviation
+        ok = np.ones(shape, dtype=bool)
+        ok[loaded] = state.valid
+        return eps, ok, loaded, batch, state
+
+
+def _initial_state(config, ball_z, loaded, batch, state):
+    """The BallState of the initial balls (slots 0..n-1 at t = 0), shape (m, tracks * n),
+    and the CarriageState of the t = 0 solve."""
+    m, tracks, slots = ball_z.shape
+    n = config.train.balls
+    full = (m, tracks, slots)
+    eps = np.full(full, np.nan)
+    valid = np.zeros(full, dtype=bool)
+    converged = np.ones(full, dtype=bool)
+    lost = np.ones(full, dtype=bool)  # outside the zone: no contact with the grooves
+    dbeta = np.full(full + (4,), np.nan)
+    force = np.zeros(full + (4,))
+    model = np.full(full, MODEL_UNRESOLVED, dtype=state.model.dtype)
+    eps[loaded] = state.velocity_deviation
+    valid[loaded] = state.valid
+    converged[loaded] = state.converged
+    lost[loaded] = state.loss_of_contact
+    dbeta[loaded] = state.contact_angle_deviation
+    force[loaded] = state.normal_force
+    model[loaded] = state.model
+
+    def first(x):
+        return np.ascontiguousarray(x[:, :, :n].reshape((m, tracks * n) + x.shape[3:]))
+
+    balls = BallState(first(eps), first(valid), first(converged), first(lost), first(dbeta),
+                      first(force), first(model), state.resolve_seconds)
+    stiffness = np.ascontiguousarray(np.diagonal(batch.stiffness, axis1=1, axis2=2))
+    carriage = CarriageState(batch.displacement, stiffness, batch.status.astype(np.int8))
+    return balls, carriage
+
+
+def first_contact_carriage_track(config, block, trace: TrackTrace | None = None):
+    """First contact of a block's carriage assemblies, balls rolling through the carriage.
+
+    Parameters
+    ----------
+    config : StudyConfig
+        With ``[carriage]`` and ``propagation = "along_track"``.
+    block : tolsim.study.sampling.Block
+        With the entering balls' draws (:func:`tolsim.study.sampling.sample_block`).
+    trace : TrackTrace, optional
+        Filled with the positions, epsilon and events of every step.
+
+    Returns
+    -------
+    time : ndarray (size,)
+        First contact [s], inf if none within the horizon.
+    pair : ndarray of int (size,)
+        track * (balls - 1) + j, j the position of the pair's trailing ball in the zone
+        counted from the trailing end (at most balls - 2: while a ball has entered and none
+        has left yet the zone holds more balls than the train, and its leading pairs share
+        the index balls - 2); -1 if none.
+    train_valid : ndarray of bool (size,)
+        False where a loaded ball was unresolved before the first contact, or the drawn
+        entering balls or the slots ran out (module docstring).
+    resolve_seconds : float
+        Full-model re-solves after the start of the stroke [s] (those at t = 0 are in the
+        BallState).
+    state : BallState
+        The initial balls at t = 0, shape (size, tracks * balls), for the epsilon statistics.
+    carriage : tolsim.study.carriage.CarriageState
+        The carriages at t = 0.
+    """
+    if config.carriage is None or config.study.propagation != "along_track":
+        raise ValueError("first_contact_carriage_track needs a config with [carriage] and "
+                         "propagation = 'along_track'")
+    if block.entering_gap is None:
+        raise ValueError("the block holds no entering balls: draw it with sample_block from "
+                         "a config with [carriage] and propagation = 'along_track'")
+    st, motion = config.study, config.motion
+    v, steps = motion.groove_velocity, st.time_steps
+    dt = motion.duration / steps
+    diameter = 2.0 * config.bearing.ball_radius
+    evaluate = _Evaluation(config, block)
+    tracks, n, slots = evaluate.tracks, evaluate.balls, evaluate.slots
+    half = evaluate.half_zone
+    m = block.size
+    capacity = entering_capacity(config)
+    ball_z = np.full((m, tracks, slots), np.nan)
+    ball_z[:, :, :n] = block.initial_position.reshape(m, tracks, n)
+    ball_id = np.full((m, tracks, slots), -1, dtype=np.int64)
+    ball_id[:, :, :n] = np.arange(n)
+    ball_ok = np.ones((m, tracks, slots), dtype=bool)  # resolved at every evaluation so far
+    count = np.full((m, tracks), n, dtype=np.int64)
+    entered = np.zeros((m, tracks), dtype=np.int64)
+    entering_gap = np.ascontiguousarray(block.entering_gap.reshape(m, tracks, capacity))
+    time = np.full(m, np.inf)
+    pair = np.full(m, -1, dtype=np.int64)
+    valid = np.ones(m, dtype=bool)
+    active = np.ones(m, dtype=bool)
+    state0 = carriage0 = None
+    resolve_seconds = 0.0
+    for k in range(steps):
+        t0 = k * dt
+        rows = np.flatnonzero(active)
+        if rows.size == 0:
+            break
+        z0, ids = ball_z[rows], ball_id[rows]
+        eps1, ok1, loaded1, batch, state = evaluate(z0, ids, t0, rows)
+        if k == 0:
+            state0, carriage0 = _initial_state(config, z0, loaded1, batch, state)
+        else:
+            resolve_seconds += state.resolve_seconds
+        if trace is not None:
+            trace.time.append(t0)
+            trace.rows.append(rows)
+            trace.ball_z.append(z0.copy())
+            trace.ball_id.append(ids.copy())
+            trace.velocity_deviation.append(eps1)
+            normal = np.where(loaded1, batch.normal_load, np.nan)
+            trace.normal_load.append(normal)
+        e1 = np.nan_to_num(eps1)
+        mid = z0 - 0.5 * dt * (1.0 - e1) * 0.5 * v
+        eps2, ok2, loaded2, _, state = evaluate(mid, ids, t0 + 0.5 * dt, rows)
+        resolve_seconds += state.resolve_seconds
+        e2 = np.where(loaded2, np.nan_to_num(eps2), e1)  # outside at the midpoint: epsilon_1
+        z1 = z0 - dt * (1.0 - e2) * 0.5 * v
+        ok = ball_ok[rows] & ok1 & ok2
+        valid[rows] &= (ok1 & ok2).all(axis=(1, 2))
+        # contacts between adjacent loaded balls, both resolved so far
+        with np.errstate(invalid="ignore", divide="ignore"):
+            gap0 = z0[..., 1:] - z0[..., :-1] - diameter
+            gap1 = z1[..., 1:] - z1[..., :-1] - diameter
+            closing = (gap1 <= 0.0) & (gap0 > gap1) & ok[..., 1:] & ok[..., :-1]
+            frac = np.where(gap0 <= 0.0, 0.0, gap0 / (gap0 - gap1))
+            behind = z0[..., :-1] + frac * (z1[..., :-1] - z0[..., :-1])
+            ahead = z0[..., 1:] + frac * (z1[..., 1:] - z0[..., 1:])
+            closing &= (behind >= -half) & (ahead <= half)
+        tc = np.where(closing, t0 + frac * dt, np.inf).reshape(len(rows), -1)
+        if tc.shape[1]:  # (a zone that holds one ball has no pairs)
+            first = np.argmin(tc, axis=1)  # the first track, then the trailing pair, on ties
+            tmin = tc[np.arange(len(rows)), first]
+            hit = np.isfinite(tmin)
+            time[rows[hit]] = tmin[hit]
+            track, slot = np.divmod(first[hit], slots - 1)
+            pair[rows[hit]] = track * (n - 1) + np.minimum(slot, max(n - 2, 0))
+            active[rows[hit]] = False
+        # exits at the trailing end, entries at the leading end
+        overflow = np.zeros(len(rows), dtype=bool)
+        sub_count, sub_entered = count[rows], entered[rows]
+        events = [np.empty(z0.shape, np.int64), np.empty(z0.shape),
+                  np.empty(z0.shape, np.int64), np.empty(z0.shape)]
+        advance_kernel(z0, z1, ids, ok, sub_count, sub_entered, entering_gap[rows], half,
+                       diameter, n, t0, dt, overflow, *events)
+        ball_z[rows], ball_id[rows], ball_ok[rows] = z1, ids, ok
+        count[rows], entered[rows] = sub_count, sub_entered
+        valid[rows] &= ~overflow
+        if trace is not None:
+            for ident, when, out in ((events[0], events[1], trace.exits),
+                                     (events[2], events[3], trace.entries)):
+                for a, tr, j in zip(*np.nonzero(ident >= 0), strict=True):
+                    out.append((rows[a], tr, ident[a, tr, j], when[a, tr, j]))
+    return time, pair, valid, resolve_seconds, state0, carriage0
+
+
+__all__ = ["TrackTrace", "advance_kernel", "first_contact_carriage_track", "slot_capacity"]

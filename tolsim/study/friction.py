@@ -1,0 +1,950 @@
+r"""What contact costs: the carriage friction of ball trains in a study (issue 13, part 3).
+
+A study with ``[contact]`` (:class:`tolsim.study.spec.ContactSettings`) follows every train of
+every sampled assembly over the stroke after its balls touch and records what the carriage pays
+for it. Each ball's creep coefficients come from the single-ball physics (the loaded analytic
+model, :mod:`tolsim.physics.ball_loads`, through
+:func:`tolsim.physics.analytic.creep_coefficients_kernel`, its fast path at zero load; or
+:func:`tolsim.physics.friction.full`), the trains from :mod:`tolsim.study.trains`; what is
+added here is the carriage friction force of a track over the stroke, its reduction to one row
+per assembly, the streamed statistics (:class:`FrictionStatistics`) and the result-file
+variables (:data:`FRICTION_VARIABLES`).
+
+Nomenclature: F_c,i -> ``carriage_force`` of ball i [N] (> 0 opposes the carriage motion);
+F_0,i -> ``free_rolling_carriage_force``; a_i = dF_c/dP -> ``carriage_force_per_push``;
+b_i = dF_c/d(Q_back + Q_front) -> ``carriage_force_per_neighbour_force``; Q_j -> contact
+force of pair j (balls j, j + 1) [N]; F_track -> the track's carriage friction force [N].
+
+The friction force of a track
+-----------------------------
+The loaded analytic model is linear in the loads (:mod:`tolsim.physics.ball_loads`): a ball
+with net push P_i = Q_{i-1} - Q_i and neighbour-force sum S_i = Q_{i-1} + Q_i carries
+
+    F_c,i = F_0,i + a_i P_i + b_i S_i.
+
+The track's carriage friction force is the sum over its balls. Each contact force Q_j
+enters P and S of its two balls (P_{j+1} += Q_j, P_j -= Q_j, S_j += Q_j, S_{j+1} += Q_j),
+so the increase over the baseline F_0 = sum_i F_0,i is a sum over the pairs
+
+    F_track(t) - F_0 = sum_j k_j Q_j(t),   k_j = (a_{j+1} - a_j) + (b_j + b_{j+1}).     (1)
+
+For the nominal ball a_i = -1/2 and b_i = mu_bb / (2 cos beta_0), so k_j = mu_bb / cos beta_0
+(0.141 for mu_bb = 0.1 at 45 deg): the push itself costs nothing on net (both balls of a
+pair share it between the grooves alike, and a cluster's pushes sum to zero), while the
+Coulomb friction at the ball-ball contact brakes both balls, and the grooves pay for that
+couple. Deviations from the nominal ball add (a_{j+1} - a_j) Q_j, 1e-3 to 1e-2 Q_j.
+Example, the two balls of [Lin2018] Sec. 3.2 case (a) (configs/paper_case_study.toml with
+``[contact]``; epsilon +-0.789 % from the full model, K = 673 N each from the analytic one):
+they touch at 6.34 s and then push with Q = K epsilon_1 = 5.31 N; with a = -0.504, -0.496
+and b = 0.0707, k = 0.149 and the track's friction rises by 0.79 N over its 2.82 N baseline
+(+28 %) for the rest of the stroke (tests/test_friction_study.py).
+
+With constant epsilon the contact forces are piecewise constant between events
+(:func:`tolsim.study.trains.train_contact_constant` with ``segments=True``), so (1) is too,
+and every figure over the stroke is exact (no time step): the time mean of the increase
+(the segment durations as weights), its maximum and minimum, the ripple of F_track
+(max - min over the stroke; the baseline is constant), the largest ball-to-ball force, the
+fraction of the stroke with any contact, and the multi-ball clusters formed.
+
+One row per assembly: the worst track
+-------------------------------------
+An assembly with a carriage has several tracks (trains). Its row is that of its **worst
+track: the one with the largest maximum increase** (ties, e.g. no contact anywhere: the larger
+baseline, then the first track). All figures of the row (baseline, mean increase, ripple,
+largest contact force, contact fraction, clusters) belong to that one track, so they stay
+consistent with each other. Without a carriage the assembly is its train.
+
+Unresolved and sliding trains (counted, bounded, never dropped)
+---------------------------------------------------------------
+* A ball without epsilon (unresolved in :mod:`tolsim.study.evaluate`), or whose creep
+  coefficients are not finite (K <= 0, |c K| >= 1 where the train model does not apply, a
+  ``full`` creep solve that failed), leaves its train unresolved: the train is not followed.
+* **Sliding.** The linear creep law holds while each ball rolls. It stops when the push on a
+  ball reaches its traction capacity, |P_i| >= P_cap,i, or the neighbour forces stall its
+  rotation, S_i >= braking capacity (:mod:`tolsim.physics.ball_loads`). Every segment of a
+  train is checked against the capacities at zero neighbour force (the traction capacity
+  through a lower bound, :func:`tolsim.physics.analytic.creep_coefficients_kernel`). The
+  braking only raises the traction capacity (it adds a non-negative term to the function whose
+  minimum is P_cap), so this check is conservative: it may flag a ball that would still roll,
+  never miss one. A train with a sliding ball is **unresolved from the onset of sliding**: the
+  quasi-static creep model says nothing about a sliding ball's speed, and capping its force
+  would invent a result. Up to the onset the figures are exact, so the largest increase before
+  it is a lower bound of the train's maximum.
+* An assembly is resolved when all its tracks are. Its friction figures enter the
+  histograms, quantiles and moments only then (estimates over the resolved assemblies, as for
+  the time to contact). The exceedance of the spec limit L (``friction_increase_limit_N``)
+  is counted like P(contact) in :mod:`tolsim.study.statistics`: an assembly *certainly*
+  exceeds when a resolved track, or a sliding track before its onset, has an increase above
+  L; with k such assemblies, u unresolved ones without a certain exceedance and N in all,
+  P(increase > L) is k / (N - u) with its Clopper-Pearson interval, and the
+  partial-identification bounds [k / N, (k + u) / N] hold whatever the unresolved ones did.
+
+Which creep model
+-----------------
+``creep_model = "analytic"`` (default): K, the braking sensitivity c, F_0, a, b and the
+capacities from the loaded analytic model at the ball's own loaded contact state (dbeta_i, F_i
+from the study's static model; :func:`tolsim.physics.analytic.creep_coefficients_kernel`, one
+vectorised call per chunk, about 7 M balls/s on 2 cores), for every ball, also those whose
+epsilon the study took from the full model (K is a smooth property of the contact state: the
+analytic K is 2.6-5.7 % below the full model's on the paper's ball, tests/test_ball_push.py).
+``"full"``: K, c, F_0 and the traction and braking capacities from
+:func:`tolsim.physics.friction.full` at zero load (slow: about 1e4 balls/s); the carriage-force
+slopes a, b stay the analytic ones (the full model gives the force at a load, not its slopes).
+The train's epsilon is always the study's epsilon of the ball.
+
+Examples
+--------
+:func:`friction_examples` stores ``examples`` trajectories for plots: the friction force of
+the worst track, its ball positions and contact forces on a grid of ``travel_points``
+carriage positions. They are taken from the first random block of the study (so they depend
+on the seed only, not on the chunking or the number of samples): the first assemblies, in
+order, whose worst track has a ball-to-ball contact, then, if there are too few, the first
+resolved ones without.
+"""
+
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+
+import numba
+import numpy as np
+from numba import prange
+
+from tolsim._jit import pjit
+from tolsim.physics._fastmath import cbrt_nonnegative
+from tolsim.physics.analytic import LOAD_COLUMNS, creep_coefficients_kernel
+from tolsim.physics.geometry import K_F_PAPER
+from tolsim.physics.hertz import hertz_constants
+from tolsim.study.estimators import histogram_quantiles
+from tolsim.study.statistics import QUANTILES, Accumulator, _merge_moments, clopper_pearson
+from tolsim.study.trains import train_contact_constant
+
+#: Columns of the per-ball creep coefficients (:data:`tolsim.physics.analytic.LOAD_COLUMNS`).
+_K = LOAD_COLUMNS.index("creep_stiffness")
+_C = LOAD_COLUMNS.index("braking_sensitivity")
+_F0 = LOAD_COLUMNS.index("free_rolling_carriage_force")
+_A = LOAD_COLUMNS.index("carriage_force_per_push")
+_B = LOAD_COLUMNS.index("carriage_force_per_neighbour_force")
+_PCAP = LOAD_COLUMNS.index("traction_capacity")
+_BCAP = LOAD_COLUMNS.index("braking_capacity")
+
+#: Per-assembly figures with streamed moments, in :attr:`FrictionStatistics.COLUMNS` order.
+COLUMNS = ("baseline", "increase_max", "increase_mean", "ripple", "contact_force_max",
+           "contact_fraction", "clusters_formed")
+#: Per-assembly figures with a histogram (all forces [N], on :data:`FORCE_EDGES`).
+HISTOGRAM_COLUMNS = ("increase_max", "ripple", "contact_force_max")
+#: Edges of the force histograms [N]: a first bin [0, 1e-6 N) for "no force", then 50 bins
+#: per decade up to 1e4 N (quantiles within one bin: a relative 4.7 %, or 1e-6 N; a quantile
+#: in the first bin is reported as 0). Below 0 and from 1e4 N up the values are counted as
+#: underflow and overflow.
+FORCE_EDGES = np.concatenate([[0.0], np.logspace(-6.0, 4.0, 10 * 50 + 1)])
+
+
+# --------------------------------------------------------------------------------------------
+# Per-ball creep coefficients (one vectorised kernel call per chunk)
+# --------------------------------------------------------------------------------------------
+def _creep_analytic(dbeta, force, bearing, ball_friction):
+    """LOAD_COLUMNS of the loaded analytic model at zero load, (balls, 9)
+    (:func:`tolsim.physics.analytic.creep_coefficients_kernel`)."""
+    n = len(dbeta)
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    load = np.empty((n, len(LOAD_COLUMNS)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        creep_coefficients_kernel(dbeta, force, cbrt_nonnegative(force),
+                                  bearing.nominal_contact_angle, bearing.ball_radius,
+                                  hc.semi_major_coefficient, hc.elliptic_e, K_F_PAPER,
+                                  bearing.friction_coefficient, float(ball_friction), load)
+    return load
+
+
+def _creep_full(dbeta, force, bearing, ball_friction):
+    """As :func:`_creep_analytic`, with K, c, F_0 and the capacities from the full model
+    (NaN where it cannot take the ball or does not converge); the slopes a, b analytic."""
+    from tolsim.physics.friction import full
+
+    load = _creep_analytic(dbeta, force, bearing, ball_friction)
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    beta = bearing.nominal_contact_angle + dbeta
+    with np.errstate(invalid="ignore"):
+        takes = (np.all(np.isfinite(dbeta) & np.isfinite(force) & (force > 0), axis=1)
+                 & np.all((beta > 0) & (beta < 0.5 * np.pi), axis=1)
+                 & np.all(hc.semi_major_coefficient * np.cbrt(force)
+                          < 0.5 * bearing.ball_radius, axis=1))
+    columns = [_K, _C, _F0, _PCAP, _BCAP]
+    load[:, columns] = np.nan
+    idx = np.flatnonzero(takes)
+    if len(idx):
+        res = full(dbeta[idx], force[idx], bearing, push=0.0, ball_friction=ball_friction)
+        good = np.asarray(res.valid, dtype=bool)
+        rows = idx[good]
+        for col, name in zip(columns, ("creep_stiffness", "braking_sensitivity",
+                                       "free_rolling_carriage_force", "traction_capacity",
+                                       "braking_capacity"), strict=True):
+            load[rows, col] = np.asarray(getattr(res, name))[good]
+    return load
+
+
+#: Creep models by name (``contact.creep_model``): f(dbeta, force, bearing, mu_bb) ->
+#: (balls, len(LOAD_COLUMNS)) at zero load.
+CREEP_MODELS = {"analytic": _creep_analytic, "full": _creep_full}
+
+
+def ball_creep_coefficients(config, state) -> np.ndarray:
+    """Creep coefficients of every ball from its own loaded contact state.
+
+    Parameters
+    ----------
+    config : tolsim.study.spec.StudyConfig
+        With ``contact`` settings.
+    state : tolsim.study.evaluate.BallState
+        Balls of shape (m, tracks * balls).
+
+    Returns
+    -------
+    ndarray, shape (m * tracks * balls, len(LOAD_COLUMNS))
+        The columns of :data:`tolsim.physics.analytic.LOAD_COLUMNS` at zero load (K [N],
+        c [1/N], F_0 [N], a, b [-], P_cap, braking capacity [N]); NaN for an unresolved ball
+        (``state.valid`` False: its contact state may be missing or partial).
+    """
+    dbeta = np.ascontiguousarray(state.contact_angle_deviation.reshape(-1, 4))
+    force = np.ascontiguousarray(state.normal_force.reshape(-1, 4))
+    load = CREEP_MODELS[config.contact.creep_model](dbeta, force, config.bearing,
+                                                   config.contact.ball_friction_coefficient)
+    unresolved = ~np.asarray(state.valid).reshape(-1)
+    if unresolved.any():
+        load[unresolved] = np.nan
+    return load
+
+
+# --------------------------------------------------------------------------------------------
+# The stroke of a train: exact figures from the piecewise-constant segments (kernel)
+# --------------------------------------------------------------------------------------------
+@pjit
+def stroke_friction_kernel(segment_start, segment_force, valid, load, horizon, out_baseline,
+                           out_mean, out_max, out_min, out_sliding, out_max_rolling):
+    """Carriage friction of trains over the stroke from their segments; unchecked.
+
+    ``segment_start`` (trains, S) [s] padded with inf, ``segment_force`` (trains, S, n - 1)
+    [N], ``valid`` (trains,), ``load`` (trains, n, len(LOAD_COLUMNS)). Writes per train the
+    baseline sum_i F_0,i [N], the time mean, maximum and minimum over [0, horizon] of the
+    increase (1) [N] (NaN for an invalid train), whether a ball slides in some segment (the
+    capacities at zero neighbour force, module docstring) and the largest increase before
+    the first sliding segment (-inf if it slides from the start).
+    """
+    trains, segments = segment_start.shape
+    n = load.shape[1]
+    for t in prange(trains):
+        base = 0.0
+        for i in range(n):
+            base += load[t, i, _F0]
+        out_baseline[t] = base
+        if not valid[t]:
+            out_mean[t] = np.nan
+            out_max[t] = np.nan
+            out_min[t] = np.nan
+            out_sliding[t] = False
+            out_max_rolling[t] = np.nan
+            continue
+        total = 0.0
+        high = -np.inf
+        low = np.inf
+        slid = False
+        rolling = -np.inf
+        for s in range(segments):
+            start = segment_start[t, s]
+            if not start <= horizon:  # padding
+                break
+            end = horizon
+            if s + 1 < segments and segment_start[t, s + 1] < horizon:
+                end = segment_start[t, s + 1]
+            increase = 0.0
+            for j in range(n - 1):
+                k = ((load[t, j + 1, _A] - load[t, j, _A])
+                     + (load[t, j, _B] + load[t, j + 1, _B]))
+                increase += k * segment_force[t, s, j]
+            if not slid:
+                for i in range(n):
+                    back = segment_force[t, s, i - 1] if i > 0 else 0.0
+                    front = segment_force[t, s, i] if i < n - 1 else 0.0
+                    if (abs(back - front) >= load[t, i, _PCAP]
+                            or back + front >= load[t, i, _BCAP]):
+                        slid = True
+                if not slid and increase > rolling:
+                    rolling = increase
+            total += increase * (end - start)
+            if increase > high:
+                high = increase
+            if increase < low:
+                low = increase
+        out_mean[t] = total / horizon
+        out_max[t] = high
+        out_min[t] = low
+        out_sliding[t] = slid
+        out_max_rolling[t] = rolling
+
+
+@pjit
+def train_inputs_kernel(eps, load, out_stiffness, out_braking):
+    """K and c of the balls for :func:`tolsim.study.trains.train_contact_constant`: NaN K
+    (and c = 0) for a ball that leaves its train unresolved (module docstring): epsilon, K,
+    c, F_0, a or b not finite, K <= 0 or |c K| >= 1."""
+    for t in prange(eps.shape[0]):
+        for i in range(eps.shape[1]):
+            k = load[t, i, _K]
+            c = load[t, i, _C]
+            usable = (np.isfinite(eps[t, i]) and np.isfinite(k) and k > 0.0
+                      and np.isfinite(c) and abs(c * k) < 1.0
+                      and np.isfinite(load[t, i, _F0]) and np.isfinite(load[t, i, _A])
+                      and np.isfinite(load[t, i, _B]))
+            out_stiffness[t, i] = k if usable else np.nan
+            out_braking[t, i] = c if usable else 0.0
+
+
+@dataclass
+class FrictionState:
+    """Friction figures of m assemblies over the stroke, one row each (its worst track).
+
+    Attributes
+    ----------
+    baseline : ndarray (m,)
+        Carriage friction force of the worst track without ball-to-ball contact,
+        sum_i F_0,i [N].
+    increase_max, increase_mean : ndarray (m,)
+        Largest and time-mean increase of the track's friction force over its baseline [N].
+    ripple : ndarray (m,)
+        max - min of the track's friction force over the stroke [N].
+    contact_force_max : ndarray (m,)
+        Largest ball-to-ball force of the track over the stroke [N].
+    contact_fraction : ndarray (m,)
+        Fraction of the stroke with any contact in the track [-].
+    clusters_formed : ndarray (m,)
+        Multi-ball clusters formed in the track over the stroke.
+    worst_track : ndarray of int (m,)
+        The track of the row (-1 when unresolved).
+    resolved : ndarray of bool (m,)
+        Every track followed over the whole stroke; the figures above are NaN otherwise.
+    exceeds : ndarray of bool (m,)
+        The increase certainly exceeds the spec limit (False without a limit).
+    sliding : ndarray of bool (m,)
+        Some ball of some track slides during the stroke (the assembly is unresolved).
+    """
+
+    baseline: np.ndarray
+    increase_max: np.ndarray
+    increase_mean: np.ndarray
+    ripple: np.ndarray
+    contact_force_max: np.ndarray
+    contact_fraction: np.ndarray
+    clusters_formed: np.ndarray
+    worst_track: np.ndarray
+    resolved: np.ndarray
+    exceeds: np.ndarray
+    sliding: np.ndarray
+
+    def rows(self, sl) -> "FrictionState":
+        """The assemblies ``sl`` (a slice)."""
+        return FrictionState(**{k: v[sl] for k, v in self.__dict__.items()})
+
+    def columns(self) -> np.ndarray:
+        """The :data:`COLUMNS` as an (m, 7) float array."""
+        return np.stack([np.asarray(getattr(self, c), dtype=float) for c in COLUMNS], axis=1)
+
+
+@dataclass
+class _Trains:
+    """What :func:`_follow_trains` computed per train (trains = m * tracks)."""
+
+    load: np.ndarray  # (trains, n, len(LOAD_COLUMNS))
+    valid: np.ndarray  # (trains,) the train was followed
+    velocity_deviation: np.ndarray  # (trains, n)
+    stiffness: np.ndarray  # (trains, n), NaN for a ball that makes the train unresolved
+    braking: np.ndarray  # (trains, n)
+
+
+def _follow_trains(config, initial_gap, state):
+    """(FrictionState of the assemblies, _Trains): the trains of ``state`` over the stroke."""
+    tracks, n = config.n_tracks, config.train.balls
+    m = state.velocity_deviation.shape[0]
+    trains = m * tracks
+    load = ball_creep_coefficients(config, state).reshape(trains, n, len(LOAD_COLUMNS))
+    eps = np.ascontiguousarray(state.velocity_deviation.reshape(trains, n))
+    stiffness, braking = np.empty((trains, n)), np.empty((trains, n))
+    train_inputs_kernel(eps, load, stiffness, braking)
+    horizon = config.motion.duration
+    result = train_contact_constant(np.asarray(initial_gap).reshape(trains, max(n - 1, 0)),
+                                    eps, stiffness, config.motion.groove_velocity, horizon,
+                                    braking_sensitivity=braking, segments=True)
+    baseline, mean, high, low = (np.empty(trains) for _ in range(4))
+    sliding = np.empty(trains, dtype=np.bool_)
+    rolling = np.empty(trains)
+    stroke_friction_kernel(result.segment_start, result.segment_contact_force, result.valid,
+                           load, horizon, baseline, mean, high, low, sliding, rolling)
+    track_ok = result.valid & ~sliding & np.isfinite(baseline)
+    limit = config.contact.friction_increase_limit
+    if limit > 0:
+        certain = ((track_ok & (high > limit))
+                   | (result.valid & sliding & (rolling > limit)))
+    else:
+        certain = np.zeros(trains, dtype=bool)
+
+    def per_assembly(x):
+        return x.reshape(m, tracks)
+
+    ok = per_assembly(track_ok)
+    resolved = ok.all(axis=1)
+    increase = np.where(ok, per_assembly(high), -np.inf)
+    ties = increase == increase.max(axis=1, keepdims=True)
+    worst = np.argmax(np.where(ties, per_assembly(baseline), -np.inf), axis=1)
+    rows = np.arange(m)
+
+    def pick(x, fill=np.nan):
+        return np.where(resolved, per_assembly(x)[rows, worst], fill)
+
+    figures = FrictionState(
+        baseline=pick(baseline),
+        increase_max=pick(high),
+        increase_mean=pick(mean),
+        ripple=pick(high - low),
+        contact_force_max=pick(result.contact_force_max),
+        contact_fraction=pick(result.contact_fraction),
+        clusters_formed=pick(result.clusters_formed.astype(float)),
+        worst_track=np.where(resolved, worst, -1).astype(np.int64),
+        resolved=resolved,
+        exceeds=per_assembly(certain).any(axis=1),
+        sliding=per_assembly(result.valid & sliding).any(axis=1),
+    )
+    return figures, _Trains(load, result.valid, eps, stiffness, braking)
+
+
+def evaluate_friction(config, initial_gap, state) -> FrictionState:
+    """Friction figures of assemblies over the stroke (module docstring).
+
+    Parameters
+    ----------
+    config : tolsim.study.spec.StudyConfig
+        With ``contact`` settings and ``constant`` propagation.
+    initial_gap : ndarray, shape (m, tracks * (balls - 1))
+        Gaps at the start of the stroke [m], track by track.
+    state : tolsim.study.evaluate.BallState
+        The evaluated balls, shape (m, tracks * balls).
+
+    Returns
+    -------
+    FrictionState
+    """
+    return _follow_trains(config, initial_gap, state)[0]
+
+
+# --------------------------------------------------------------------------------------------
+# Streamed statistics
+# --------------------------------------------------------------------------------------------
+class FrictionStatistics:
+    """Mergeable statistics of the friction figures of assemblies (module docstring).
+
+    Exact counts (assemblies, resolved, sliding, certain exceedances); over the resolved
+    assemblies the count, mean and M2 (Chan et al.), min and max of every column of
+    :data:`COLUMNS`, and fixed-bin histograms (:data:`FORCE_EDGES`, with underflow and
+    overflow counts) of :data:`HISTOGRAM_COLUMNS`. Merging in block order makes the result
+    independent of the chunking, as :class:`tolsim.study.statistics.Accumulator`.
+
+    Parameters
+    ----------
+    friction_increase_limit : float
+        Spec limit L on the increase [N] (0: none).
+    """
+
+    #: array attributes, in the order they are saved
+    FIELDS = ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_exceed", "count",
+              "mean", "m2", "minimum", "maximum", "histogram", "underflow", "overflow")
+
+    def __init__(self, friction_increase_limit=0.0):
+        self.friction_increase_limit = float(friction_increase_limit)
+        self.edges = FORCE_EDGES.copy()
+        c, h = len(COLUMNS), len(HISTOGRAM_COLUMNS)
+        i8 = np.int64
+        self.n_assemblies = i8(0)
+        self.n_resolved = i8(0)
+        self.n_unresolved = i8(0)  # unresolved without a certain exceedance
+        self.n_sliding = i8(0)
+        self.n_exceed = i8(0)
+        self.count = i8(0)
+        self.mean = np.zeros(c)
+        self.m2 = np.zeros(c)
+        self.minimum = np.full(c, np.inf)
+        self.maximum = np.full(c, -np.inf)
+        self.histogram = np.zeros((h, len(self.edges) - 1), dtype=i8)
+        self.underflow = np.zeros(h, dtype=i8)
+        self.overflow = np.zeros(h, dtype=i8)
+
+    @classmethod
+    def for_config(cls, config) -> "FrictionStatistics":
+        return cls(config.contact.friction_increase_limit)
+
+    def add(self, figures: FrictionState):
+        """Add one block of assemblies."""
+        block = FrictionStatistics(self.friction_increase_limit)
+        resolved = np.asarray(figures.resolved, dtype=bool)
+        exceeds = np.asarray(figures.exceeds, dtype=bool)
+        block.n_assemblies = np.int64(len(resolved))
+        block.n_resolved = np.int64(np.count_nonzero(resolved))
+        block.n_unresolved = np.int64(np.count_nonzero(~resolved & ~exceeds))
+        block.n_sliding = np.int64(np.count_nonzero(figures.sliding))
+        block.n_exceed = np.int64(np.count_nonzero(exceeds))
+        x = figures.columns()[resolved]
+        block.count = np.int64(len(x))
+        if len(x):
+            block.mean = x.mean(axis=0)
+            block.m2 = ((x - block.mean) ** 2).sum(axis=0)
+            block.minimum = x.min(axis=0)
+            block.maximum = x.max(axis=0)
+            top = len(self.edges) - 1
+            for h, name in enumerate(HISTOGRAM_COLUMNS):
+                v = x[:, COLUMNS.index(name)]
+                k = np.searchsorted(self.edges, v, side="right") - 1  # bin [e_k, e_k+1)
+                block.underflow[h] = np.count_nonzero(k < 0)
+                block.overflow[h] = np.count_nonzero(k >= top)
+                block.histogram[h] = np.bincount(k[(k >= 0) & (k < top)], minlength=top)
+        self.merge(block)
+
+    def merge(self, other: "FrictionStatistics"):
+        """Merge ``other`` into self (the order of merges is part of the result)."""
+        for name in ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_exceed",
+                     "histogram", "underflow", "overflow"):
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        count, self.mean, self.m2 = _merge_moments(self.count, self.mean, self.m2,
+                                                   other.count, other.mean, other.m2)
+        self.count = np.int64(count)
+        self.minimum = np.minimum(self.minimum, other.minimum)
+        self.maximum = np.maximum(self.maximum, other.maximum)
+
+    def state(self) -> dict:
+        """All arrays, for a checkpoint."""
+        out = {name: np.asarray(getattr(self, name)) for name in self.FIELDS}
+        out["edges"] = self.edges
+        out["friction_increase_limit"] = np.float64(self.friction_increase_limit)
+        return out
+
+    @classmethod
+    def from_state(cls, state: dict) -> "FrictionStatistics":
+        out = cls(float(state["friction_increase_limit"]))
+        out.edges = np.array(state["edges"], dtype=float)
+        for name in cls.FIELDS:
+            value = np.asarray(state[name])
+            setattr(out, name, value.copy() if value.ndim else value[()])
+        return out
+
+    # ---------------------------------------------------------------------------------------
+    def column_mean(self, name) -> float:
+        """Mean of a column over the resolved assemblies (NaN with none)."""
+        return float(self.mean[COLUMNS.index(name)]) if self.count else float("nan")
+
+    def column_std(self, name) -> float:
+        """Sample standard deviation of a column (NaN below 2 resolved assemblies)."""
+        n = int(self.count)
+        return (float(np.sqrt(self.m2[COLUMNS.index(name)] / (n - 1))) if n > 1
+                else float("nan"))
+
+    def quantiles(self, name, levels=QUANTILES) -> np.ndarray:
+        """Quantiles of a histogram column from its histogram (within one bin; 0 in the first
+        bin, "no force"), clipped to the exact [min, max] [N]."""
+        h = HISTOGRAM_COLUMNS.index(name)
+        q = histogram_quantiles(self.histogram[h], self.edges, levels, self.underflow[h],
+                                self.overflow[h])
+        q = np.where((q >= 0) & (q < self.edges[1]), 0.0, q)
+        c = COLUMNS.index(name)
+        return np.clip(q, self.minimum[c], self.maximum[c]) if self.count else q
+
+    def exceedance_probability(self, confidence: float = 0.95):
+        """P(increase > limit) over the assemblies whose outcome is known, k / (N - u), and
+        its Clopper-Pearson interval; NaN without a limit."""
+        if not self.friction_increase_limit > 0:
+            return float("nan"), float("nan"), float("nan")
+        known = int(self.n_assemblies) - int(self.n_unresolved)
+        return clopper_pearson(int(self.n_exceed), known, confidence)
+
+    def exceedance_bounds(self, confidence: float = 0.95):
+        """(k / N, (k + u) / N, CP lower end of k of N, CP upper end of k + u of N)."""
+        if not self.friction_increase_limit > 0:
+            return (float("nan"),) * 4
+        n, k, u = int(self.n_assemblies), int(self.n_exceed), int(self.n_unresolved)
+        low, ci_low, _ = clopper_pearson(k, n, confidence)
+        high, _, ci_high = clopper_pearson(k + u, n, confidence)
+        return low, high, ci_low, ci_high
+
+
+class FrictionAccumulator(Accumulator):
+    """:class:`~tolsim.study.statistics.Accumulator` with the friction statistics of a study
+    with ``[contact]`` in :attr:`friction` (a :class:`FrictionStatistics`), merged and
+    checkpointed with it (state keys ``friction_*``)."""
+
+    def __init__(self, *args, friction=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.friction = friction
+
+    @classmethod
+    def for_config(cls, config):
+        acc = super().for_config(config)
+        acc.friction = FrictionStatistics.for_config(config)
+        return acc
+
+    def add_friction(self, figures: FrictionState):
+        """Add the friction figures of the block's assemblies."""
+        self.friction.add(figures)
+
+    def merge(self, other):
+        super().merge(other)
+        extra = getattr(other, "friction", None)
+        if extra is not None:
+            self.friction.merge(extra)
+
+    def state(self) -> dict:
+        out = super().state()
+        out.update({f"friction_{k}": v for k, v in self.friction.state().items()})
+        return out
+
+    @classmethod
+    def from_state(cls, state: dict):
+        acc = super().from_state(state)
+        acc.friction = FrictionStatistics.from_state(
+            {k[len("friction_"):]: v for k, v in state.items() if k.startswith("friction_")})
+        return acc
+
+
+def study_accumulator(config) -> Accumulator:
+    """An empty accumulator for a study: with friction statistics when it has ``[contact]``.
+
+    Raises
+    ------
+    ValueError
+        For ``[contact]`` with ``along_track`` propagation (not supported yet).
+    """
+    if config.contact is None:
+        return Accumulator.for_config(config)
+    if config.study.propagation != "constant":
+        raise ValueError(f"propagation = {config.study.propagation!r}: a study with [contact] "
+                         "supports 'constant' propagation only (along_track is not supported "
+                         "yet)")
+    return FrictionAccumulator.for_config(config)
+
+
+def accumulator_from_state(state: dict) -> Accumulator:
+    """The accumulator saved in ``state`` (a checkpoint), with or without friction."""
+    cls = FrictionAccumulator if "friction_n_assemblies" in state else Accumulator
+    return cls.from_state(state)
+
+
+# --------------------------------------------------------------------------------------------
+# Examples
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FrictionExamples:
+    """Example trajectories of the worst track of a few assemblies (module docstring).
+
+    Shapes: k examples, S travel points, n balls per track.
+
+    Attributes
+    ----------
+    assembly, track : ndarray of int (k,)
+        Which assembly of the study (its index) and which of its tracks.
+    travel : ndarray (S,)
+        Carriage travel v t [m], 0 to the stroke.
+    baseline : ndarray (k,)
+        The track's friction force without ball-to-ball contact [N].
+    friction_force : ndarray (k, S)
+        The track's carriage friction force [N].
+    contact_force : ndarray (k, S, n - 1)
+        Ball-to-ball forces Q_j [N].
+    ball_position : ndarray (k, S, n)
+        Ball centres along the rail less the nominal travel v t / 2 of a free ball [m]
+        (the train's centroid at 0 at the start; ball 0 trailing).
+    """
+
+    assembly: np.ndarray
+    track: np.ndarray
+    travel: np.ndarray
+    baseline: np.ndarray
+    friction_force: np.ndarray
+    contact_force: np.ndarray
+    ball_position: np.ndarray
+
+
+def _evaluate_assemblies(config, block):
+    """The balls of a block, as :func:`tolsim.study.runner.run_chunk` evaluates them."""
+    from tolsim.study.carriage import evaluate_carriage
+    from tolsim.study.evaluate import evaluate_balls, loads_per_ball
+    from tolsim.study.sampling import error_values
+
+    values = error_values(config, block)
+    if config.carriage is not None:
+        return evaluate_carriage(config, values)[0]
+    nx, ny = loads_per_ball(config, (block.size, config.balls))
+    return evaluate_balls(config, values, nx, ny)
+
+
+#: Assemblies of the first block looked at first for the examples (all of it if too few touch).
+EXAMPLE_WINDOW = 128
+
+
+@contextmanager
+def _one_thread():
+    """Run the kernels on one thread (a few thousand balls: the thread pool costs more)."""
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(threads)
+
+
+def _first_assemblies(block, count):
+    """The first ``count`` assemblies of a block (``constant`` propagation)."""
+    return replace(block, size=count, normals={k: v[:count] for k, v in block.normals.items()},
+                   initial_gap=block.initial_gap[:count],
+                   initial_position=block.initial_position[:count])
+
+
+def choose_examples(figures: FrictionState, count: int) -> np.ndarray:
+    """Indices of the example assemblies: the first resolved ones with a contact in their
+    worst track, in order, then the first resolved ones without."""
+    resolved = np.asarray(figures.resolved, dtype=bool)
+    touched = resolved & (np.nan_to_num(figures.contact_fraction) > 0)
+    order = np.concatenate([np.flatnonzero(touched), np.flatnonzero(resolved & ~touched)])
+    return order[:max(int(count), 0)]
+
+
+def friction_examples(config) -> FrictionExamples | None:
+    """The example trajectories of a study with ``[contact]`` (None with ``examples = 0``).
+
+    From the first random block of the study (module docstring); each example's worst track
+    is followed again on a grid of ``travel_points`` carriage positions.
+    """
+    from tolsim.study.sampling import sample_block
+
+    count = config.contact.examples
+    if count == 0:
+        return None
+    whole = sample_block(config, 0)
+    with _one_thread():
+        # the first assemblies of the block, then all of it if too few of them touch: the
+        # examples are the same either way (choose_examples takes them in order)
+        for size in sorted({min(EXAMPLE_WINDOW, whole.size), whole.size}):
+            block = _first_assemblies(whole, size)
+            state = _evaluate_assemblies(config, block)
+            figures, trains = _follow_trains(config, block.initial_gap, state)
+            chosen = choose_examples(figures, count)
+            if np.count_nonzero(figures.contact_fraction[chosen] > 0) == count:
+                break
+        return _example_trajectories(config, block, figures, trains, chosen)
+
+
+def _example_trajectories(config, block, figures, trains, chosen):
+    """:class:`FrictionExamples` of the assemblies ``chosen`` of ``block``."""
+    tracks, n = config.n_tracks, config.train.balls
+    rows = chosen * tracks + figures.worst_track[chosen]
+    gap = np.asarray(block.initial_gap).reshape(-1, max(n - 1, 0))[rows]
+    result = train_contact_constant(gap, trains.velocity_deviation[rows],
+                                    trains.stiffness[rows], config.motion.groove_velocity,
+                                    config.motion.duration,
+                                    braking_sensitivity=trains.braking[rows],
+                                    samples=config.contact.travel_points)
+    load = trains.load[rows]
+    coefficient = ((load[:, 1:, _A] - load[:, :-1, _A]) + (load[:, :-1, _B] + load[:, 1:, _B]))
+    baseline = figures.baseline[chosen]
+    force = baseline[:, None] + np.einsum("ksj,kj->ks", result.grid_contact_force, coefficient)
+    start = np.asarray(block.initial_position).reshape(-1, n)[rows]
+    return FrictionExamples(
+        assembly=(block.start + chosen).astype(np.int64),
+        track=figures.worst_track[chosen].astype(np.int64),
+        travel=result.travel,
+        baseline=baseline,
+        friction_force=force,
+        contact_force=result.grid_contact_force,
+        ball_position=start[:, None, :] + result.grid_displacement,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Result-file variables
+# --------------------------------------------------------------------------------------------
+_HIST_WHAT = {"friction_increase": "the increase of the worst track's largest carriage "
+                                   "friction force over its baseline",
+              "friction_ripple": "the ripple (max - min over the stroke) of the worst track's "
+                                 "carriage friction force",
+              "contact_force_max": "the largest ball-to-ball force of the worst track over "
+                                   "the stroke"}
+_HIST_COLUMN = {"friction_increase": "increase_max", "friction_ripple": "ripple",
+                "contact_force_max": "contact_force_max"}
+
+#: Coordinates of the friction variables: name -> (dims, units, long_name, kind).
+FRICTION_COORDINATES = {
+    "force_bin": (("force_bin",), "N", "centre of a force histogram bin (friction increase, "
+                                       "ripple, contact force)", "f"),
+    "force_bin_bounds": (("force_bin", "bounds"), "N", "edges of a force histogram bin", "f"),
+    "example": (("example",), "1", "example trajectory number", "i"),
+    "travel": (("travel",), "m", "carriage travel since the start of the stroke", "f"),
+}
+
+#: Declarations for :mod:`tolsim.io.schema` of the variables of a study with ``[contact]``:
+#: name -> (dims, units, long_name, kind). "Worst track": the track of an assembly with the
+#: largest friction increase (:mod:`tolsim.study.friction`); statistics over the assemblies
+#: whose friction is resolved.
+FRICTION_VARIABLES = {
+    "ball_friction_coefficient": ((), "1", "Coulomb friction coefficient of the "
+                                           "ball-to-ball contacts", "f"),
+    "friction_increase_limit": ((), "N", "specification limit on the friction increase "
+                                         "(NaN: none)", "f"),
+    "friction_force_baseline": ((), "N", "mean over assemblies of the carriage friction "
+                                         "force of the worst track without ball-to-ball "
+                                         "contact (its free-rolling baseline)", "f"),
+    "friction_force_baseline_std": ((), "N", "standard deviation over assemblies of the "
+                                             "worst track's free-rolling baseline", "f"),
+    "friction_increase_stroke_mean": ((), "N", "mean over assemblies of the time-mean "
+                                               "increase of the worst track's carriage "
+                                               "friction force over the stroke", "f"),
+    "friction_increase_max": ((), "N", "largest friction increase of an assembly", "f"),
+    "contact_fraction_mean": ((), "1", "mean over assemblies of the fraction of the stroke "
+                                       "with a ball-to-ball contact in the worst track", "f"),
+    "clusters_formed_mean": ((), "1", "mean over assemblies of the multi-ball clusters "
+                                      "formed in the worst track over the stroke", "f"),
+    "friction_exceedance_probability": ((), "1", "probability that the friction increase "
+                                                 "exceeds its limit, over the assemblies "
+                                                 "whose outcome is known", "f"),
+    "friction_exceedance_probability_ci_lower": ((), "1", "lower end of the 95 % "
+                                                          "Clopper-Pearson interval of the "
+                                                          "friction exceedance probability",
+                                                 "f"),
+    "friction_exceedance_probability_ci_upper": ((), "1", "upper end of the 95 % "
+                                                          "Clopper-Pearson interval of the "
+                                                          "friction exceedance probability",
+                                                 "f"),
+    "friction_exceedance_probability_bound_lower": ((), "1", "lower partial-identification "
+                                                             "bound of the friction "
+                                                             "exceedance probability", "f"),
+    "friction_exceedance_probability_bound_upper": ((), "1", "upper partial-identification "
+                                                             "bound of the friction "
+                                                             "exceedance probability", "f"),
+    "n_assemblies_friction_resolved": ((), "1", "assemblies whose every track was followed "
+                                                "over the whole stroke", "i"),
+    "n_assemblies_friction_unresolved": ((), "1", "assemblies with an unresolved or sliding "
+                                                  "track and no certain exceedance", "i"),
+    "n_assemblies_sliding": ((), "1", "assemblies with a ball that slides (push beyond its "
+                                      "traction capacity or braking beyond its stall)", "i"),
+    "n_friction_exceedance": ((), "1", "assemblies whose friction increase certainly "
+                                       "exceeds its limit", "i"),
+    "example_assembly": (("example",), "1", "assembly of the example (index in the study)",
+                         "i"),
+    "example_track": (("example",), "1", "track of the example (the assembly's worst)", "i"),
+    "example_friction_force": (("example", "travel"), "N", "carriage friction force of the "
+                                                           "example track", "f"),
+    "example_friction_force_baseline": (("example",), "N", "carriage friction force of the "
+                                                           "example track without "
+                                                           "ball-to-ball contact", "f"),
+    "example_ball_position": (("example", "travel", "ball"), "m", "ball centre along the rail "
+                              "less the nominal travel of a free ball (half the carriage "
+                              "travel)", "f"),
+    "example_contact_force": (("example", "travel", "pair"), "N", "ball-to-ball contact force "
+                              "of the example track", "f"),
+}
+for _name, _what in _HIST_WHAT.items():
+    FRICTION_VARIABLES.update({
+        f"{_name}_mean": ((), "N", f"mean over assemblies of {_what}", "f"),
+        f"{_name}_std": ((), "N", f"standard deviation over assemblies of {_what}", "f"),
+        f"{_name}_quantile": (("quantile",), "N", f"quantile of {_what} (from the "
+                                                  "histogram)", "f"),
+        f"{_name}_histogram": (("force_bin",), "1", f"number of assemblies per bin of {_what}",
+                               "i"),
+        f"{_name}_underflow": ((), "1", f"assemblies with {_what} below 0", "i"),
+        f"{_name}_overflow": ((), "1", f"assemblies with {_what} above the histogram range",
+                              "i"),
+    })
+
+# Sobol' indices of the friction increase (tolsim.study.sensitivity, output
+# ``friction_increase``), named like its SENSITIVITY_VARIABLES
+for _index, _label in (("first_order", "first-order"), ("total", "total-effect")):
+    for _suffix, _end in (("", ""), ("_ci_lower", "lower"), ("_ci_upper", "upper")):
+        FRICTION_VARIABLES[f"sensitivity_friction_{_index}{_suffix}"] = (
+            ("factor",), "1", f"{_label} variance-based index of the friction increase"
+            + (f", {_end} end of the 95 % bootstrap interval" if _end else ""), "f")
+
+#: A sentence for the result file on what the friction figures are.
+FRICTION_ASSUMPTIONS = (
+    "per assembly the worst track (largest increase of its carriage friction force over its "
+    "free-rolling baseline); constant epsilon, event-driven trains, the linear creep model of "
+    "the loaded analytic model (K, braking, carriage-force slopes per ball); a train with a "
+    "sliding ball is unresolved from the onset of sliding; statistics over the resolved "
+    "assemblies, the exceedance probability bounded over all")
+
+
+def friction_variables(result) -> tuple:
+    """(coordinates, data variables, attributes) of a study with ``[contact]``.
+
+    ``result``: a :class:`tolsim.study.runner.StudyResult` whose statistics carry
+    :class:`FrictionStatistics` (``statistics.friction``) and, optionally, its
+    ``friction_examples``.
+    """
+    config = result.config
+    stats = result.statistics.friction
+    levels = np.asarray(QUANTILES)
+    edges = stats.edges
+    coords = {
+        "force_bin": (("force_bin",), 0.5 * (edges[:-1] + edges[1:])),
+        "force_bin_bounds": (("force_bin", "bounds"), np.stack([edges[:-1], edges[1:]], 1)),
+    }
+    limit = config.contact.friction_increase_limit
+    p, lo, hi = stats.exceedance_probability()
+    bounds = stats.exceedance_bounds()
+    c = COLUMNS.index
+    known = int(stats.count) > 0
+    data = {
+        "ball_friction_coefficient": float(config.contact.ball_friction_coefficient),
+        "friction_increase_limit": float(limit) if limit > 0 else np.nan,
+        "friction_force_baseline": stats.column_mean("baseline"),
+        "friction_force_baseline_std": stats.column_std("baseline"),
+        "friction_increase_stroke_mean": stats.column_mean("increase_mean"),
+        "friction_increase_max": float(stats.maximum[c("increase_max")]) if known else np.nan,
+        "contact_fraction_mean": stats.column_mean("contact_fraction"),
+        "clusters_formed_mean": stats.column_mean("clusters_formed"),
+        "friction_exceedance_probability": p,
+        "friction_exceedance_probability_ci_lower": lo,
+        "friction_exceedance_probability_ci_upper": hi,
+        "friction_exceedance_probability_bound_lower": bounds[0],
+        "friction_exceedance_probability_bound_upper": bounds[1],
+        "n_assemblies_friction_resolved": np.int64(stats.n_resolved),
+        "n_assemblies_friction_unresolved": np.int64(stats.n_unresolved),
+        "n_assemblies_sliding": np.int64(stats.n_sliding),
+        "n_friction_exceedance": np.int64(stats.n_exceed),
+    }
+    for name, column in _HIST_COLUMN.items():
+        h = HISTOGRAM_COLUMNS.index(column)
+        data.update({
+            f"{name}_mean": stats.column_mean(column),
+            f"{name}_std": stats.column_std(column),
+            f"{name}_quantile": (("quantile",), stats.quantiles(column, levels)),
+            f"{name}_histogram": (("force_bin",), stats.histogram[h]),
+            f"{name}_underflow": np.int64(stats.underflow[h]),
+            f"{name}_overflow": np.int64(stats.overflow[h]),
+        })
+    examples = getattr(result, "friction_examples", None)
+    if examples is not None and len(examples.assembly):
+        coords["example"] = (("example",), np.arange(len(examples.assembly), dtype=np.int64))
+        coords["travel"] = (("travel",), np.asarray(examples.travel, dtype=float))
+        data.update({
+            "example_assembly": (("example",), examples.assembly),
+            "example_track": (("example",), examples.track),
+            "example_friction_force": (("example", "travel"), examples.friction_force),
+            "example_friction_force_baseline": (("example",), examples.baseline),
+            "example_ball_position": (("example", "travel", "ball"), examples.ball_position),
+            "example_contact_force": (("example", "travel", "pair"), examples.contact_force),
+        })
+    attrs = {"friction_assumptions": FRICTION_ASSUMPTIONS,
+             "contact_creep_model": config.contact.creep_model}
+    return coords, data, attrs
+
+
+__all__ = ["COLUMNS", "CREEP_MODELS", "FORCE_EDGES", "FRICTION_ASSUMPTIONS",
+           "FRICTION_COORDINATES", "FRICTION_VARIABLES", "HISTOGRAM_COLUMNS",
+           "FrictionAccumulator", "FrictionExamples", "FrictionState", "FrictionStatistics",
+           "accumulator_from_state", "ball_creep_coefficients", "choose_examples",
+           "evaluate_friction", "friction_examples", "friction_variables",
+           "stroke_friction_kernel", "study_accumulator"]
