@@ -245,3 +245,29 @@ def test_carriage_study_config_errors_name_the_key():
     with pytest.raises(ConfigError, match=r"train\.balls"):
         parse_config(text.replace("[train]                           # the gaps between the "
                                   "balls of a track\nballs = 12", "[train]\nballs = 11"))
+
+
+def test_tolsim_carriage_seed_solves_the_first_assembly_of_that_run(capsys):
+    # `tolsim carriage CONFIG --seed N` is assembly 0 of `tolsim run CONFIG --seed N`: the
+    # same draws, so the same contact state as the study's batched solve (1e-9 of the force).
+    import json
+
+    from tolsim.cli import main
+
+    c = config(samples=3).with_overrides(seed=7)
+    values = error_values(c, sample_block(c, 0))
+    state, _ = evaluate_carriage(c, values)
+    one = solve_config_carriage(load_config(CONFIG), seed=7).solution
+    scale = one.normal_force.max()
+    assert_allclose(state.normal_force[0].reshape(one.normal_force.shape), one.normal_force,
+                    rtol=0, atol=1e-9 * scale)
+    nominal = solve_config_carriage(load_config(CONFIG)).solution
+    assert np.abs(one.normal_force - nominal.normal_force).max() > 0.1  # errors do act
+    assert main(["carriage", str(CONFIG), "--seed", "7", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["seed"] == 7
+    assert_allclose([b["normal_force_n"] for b in out["balls"]],
+                    one.normal_force.reshape(-1, 4), rtol=1e-12)
+    assert main(["carriage", str(CONFIG), "--seed", "-1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--seed" in err

@@ -12,7 +12,9 @@ from tolsim.physics.geometry import CONTACTS
 DESCRIPTION = """\
 Load distribution of one rigid carriage on its preloaded ball tracks (tolsim issue 12), for
 a study config with a [carriage] section: the nominal assembly (the config's preload class
-and per-ball oversize deviations; no sampled tolerances).
+and per-ball oversize deviations; no sampled tolerances), or with --seed N one sampled
+assembly: the first assembly of `tolsim run CONFIG --seed N` (its groove errors per track
+and ball sizes drawn from the config's [tolerances]).
 
 Per ball (track t, ball j, ball 0 trailing, at z along the rail): the four contact forces
 F_BL F_BR F_TR F_TL and contact-angle deviations dbeta in the ball's module frame, the
@@ -29,6 +31,7 @@ Examples:
   tolsim carriage configs/carriage_preload.toml
   tolsim carriage configs/carriage_preload.toml --json
   tolsim carriage configs/carriage_preload.toml --plot load_distribution.png
+  tolsim carriage configs/carriage_preload.toml --seed 7   # one sampled assembly
 """
 
 #: JSON names of the displacement, in DOFS order, and the factor from SI.
@@ -46,6 +49,9 @@ def add_parser(subparsers, formatter_class=None):
     )
     p.add_argument("config", metavar="CONFIG", help="study config (TOML) with [carriage]")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--seed", type=int, metavar="N",
+                   help="solve one sampled assembly instead of the nominal one: the first "
+                        "assembly of 'tolsim run CONFIG --seed N' (N >= 0)")
     p.add_argument("--plot", metavar="FILE.png",
                    help="also write the load distribution (ball force against position, per "
                         "track) to this PNG file")
@@ -57,7 +63,7 @@ def _finite(value):
     return value if math.isfinite(value) else None
 
 
-def evaluate(config) -> dict:
+def evaluate(config, seed=None) -> dict:
     """The JSON-ready result of the nominal carriage of ``config`` (issue 12's interface).
 
     Raises
@@ -68,7 +74,7 @@ def evaluate(config) -> dict:
     from tolsim.study.carriage import solve_config_carriage
 
     try:
-        result = solve_config_carriage(config)
+        result = solve_config_carriage(config, seed)
     except ValueError as exc:
         raise UsageError(f"{config.path}: {exc}") from None
     sol = result.solution
@@ -95,6 +101,7 @@ def evaluate(config) -> dict:
     carriage = config.carriage
     return {
         "config": config.path,
+        "seed": seed,
         "preload_oversize_um": carriage.preload_oversize * 1e6,
         "load": {"lateral_n": carriage.load.lateral_force,
                  "vertical_n": carriage.load.vertical_force,
@@ -125,7 +132,9 @@ def _text(out) -> str:
     load = out["load"]
     lines = [
         f"carriage of {out['config']}: {len({b['track'] for b in out['balls']})} tracks, "
-        f"preload oversize {out['preload_oversize_um']:g} um",
+        f"preload oversize {out['preload_oversize_um']:g} um, "
+        + ("nominal assembly" if out.get("seed") is None else
+           f"sampled assembly (the first of seed {out['seed']})"),
         f"load: lateral {load['lateral_n']:g} N, vertical {load['vertical_n']:g} N, pitch "
         f"{load['pitch_moment_n_m']:g} N m, yaw {load['yaw_moment_n_m']:g} N m, roll "
         f"{load['roll_moment_n_m']:g} N m",
@@ -184,7 +193,9 @@ def run(args) -> int:
     if config.carriage is None:
         raise UsageError(f"{args.config}: has no [carriage] section (tolsim carriage needs "
                          "one; see configs/carriage_preload.toml)")
-    out = evaluate(config)
+    if args.seed is not None and args.seed < 0:
+        raise UsageError(f"--seed = {args.seed} must be >= 0")
+    out = evaluate(config, args.seed)
     if args.plot:
         from tolsim.reports.carriage import plot_load_distribution
 

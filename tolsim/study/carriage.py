@@ -75,13 +75,17 @@ def ball_velocity_deviation(solution: CarriageSolution, bearing, groove_velocity
     return eps.reshape(shape), model.reshape(shape)
 
 
-def solve_config_carriage(config) -> CarriageResult:
-    """Solve the nominal carriage assembly of a config with ``[carriage]``.
+def solve_config_carriage(config, seed: int | None = None) -> CarriageResult:
+    """Solve the nominal carriage assembly of a config with ``[carriage]``, or one sampled.
 
     Parameters
     ----------
     config : tolsim.study.spec.StudyConfig
         With ``config.carriage`` set.
+    seed : int, optional
+        Solve the first assembly of the study run with this seed (assembly 0 of ``tolsim run
+        CONFIG --seed SEED``: the same draws, so ``--save-samples`` of that run holds its
+        errors) instead of the nominal one.
 
     Returns
     -------
@@ -93,11 +97,20 @@ def solve_config_carriage(config) -> CarriageResult:
         A config without ``[carriage]``; a load the track layout cannot carry; a carriage
         that lifts off (messages from :func:`tolsim.physics.carriage.solve_carriage`).
     """
+    from tolsim.study.sampling import error_values, sample_block
+
     carriage = config.carriage
     if carriage is None:
         raise ValueError(f"{config.path} has no [carriage] section")
+    errors = None
+    if seed is not None:
+        first = config.with_overrides(seed=seed, samples=1)
+        values = error_values(first, sample_block(first, 0))
+        sampled = carriage_groove_errors(first, values, 1)
+        errors = GrooveErrors(**{f: np.asarray(getattr(sampled, f))[0]
+                                 for f in GrooveErrors.TRAILING})
     solution = solve_carriage(carriage.layout, carriage.load, config.bearing,
-                              oversize=carriage.oversize)
+                              oversize=carriage.oversize, groove_errors=errors)
     eps, model = ball_velocity_deviation(solution, config.bearing,
                                          config.motion.groove_velocity)
     return CarriageResult(solution, eps, model)
