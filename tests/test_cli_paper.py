@@ -1,4 +1,5 @@
-"""``tolsim paper``: Table 2 against the paper, Fig. 9 contact time, every file produced."""
+"""``tolsim paper``: Table 2 against the paper, Fig. 9 contact time, every file produced, and
+the after-contact panel beyond the paper (tolsim's extension) against a study's numbers."""
 
 import csv
 
@@ -79,9 +80,10 @@ def test_fig9_contact_time(table):
 def test_tolsim_paper_writes_every_file(tmp_path, capsys):
     out = tmp_path / "paper"
     assert main(["paper", "--out", str(out), "--quick"]) == 0
-    names = {"fig4.png", "fig7.png", "fig9.png", "table2.csv", "table2.md", "README.md"}
+    names = {"fig4.png", "fig7.png", "fig9.png", "after_contact.png", "table2.csv",
+             "table2.md", "README.md"}
     assert names <= {p.name for p in out.iterdir()}
-    for name in ("fig4.png", "fig7.png", "fig9.png"):
+    for name in ("fig4.png", "fig7.png", "fig9.png", "after_contact.png"):
         data = (out / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
     with open(out / "table2.csv", newline="") as fh:
@@ -95,7 +97,47 @@ def test_tolsim_paper_writes_every_file(tmp_path, capsys):
     v = _value(table, "a", 1, "full", "static")
     assert f"{v:+.3f}" in readme and "within tolerance" in readme
     assert "| (a) |" in (out / "table2.md").read_text()
-    assert "wrote 6 files" in capsys.readouterr().out
+    assert "wrote 7 files" in capsys.readouterr().out
+    assert "tolsim's extension, not in the paper" in readme
+
+
+def test_after_contact_panel_matches_the_study_path():
+    # Beyond the paper (tolsim's extension): the panel's two balls of Sec. 3.2 case (a) after
+    # they touch must give the numbers of a study of configs/paper_case_study.toml with
+    # [contact] (tolsim.study.friction): contact at 6.34 s, then Q = 5.31 N and the track's
+    # friction +0.79 N over its 2.82 N baseline (K = 673 N each). Tolerance 1e-9 relative:
+    # the same full-model epsilon and analytic coefficients on both paths (the study's creep
+    # kernel agrees with analytic() to round-off, tests/test_friction_study.py).
+    from pathlib import Path
+
+    from tolsim.io.config import load_config, parse_config
+    from tolsim.study import friction as fr
+    from tolsim.study.runner import run_study
+
+    data = paper.after_contact_data()
+    full = data["full"]
+    np.testing.assert_allclose([full["contact_time"], full["contact_force"],
+                                full["increase"], data["baseline"]],
+                               [6.34, 5.31, 0.79, 2.82], atol=0.005)
+    np.testing.assert_allclose(data["creep_stiffness"], 673.2, atol=0.05)
+    config = Path(__file__).resolve().parent.parent / "configs" / "paper_case_study.toml"
+    text = load_config(config).text + "\n[contact]\n"
+    result = run_study(parse_config(text, "paper_case_contact.toml"))
+    stats, j = result.friction, fr.COLUMNS.index
+    assert stats.n_resolved == stats.n_assemblies == 16
+    np.testing.assert_allclose(stats.maximum[j("contact_force_max")], full["contact_force"],
+                               rtol=1e-9)
+    np.testing.assert_allclose(stats.maximum[j("increase_max")], full["increase"], rtol=1e-9)
+    np.testing.assert_allclose(stats.maximum[j("baseline")], data["baseline"], rtol=1e-9)
+    np.testing.assert_allclose(stats.maximum[j("contact_fraction")],
+                               (10.0 - full["contact_time"]) / 10.0, rtol=1e-9)
+    # the exact steps: no force before the contact, Q after it; the formula's epsilon
+    # (Eq. 24) touches later (Fig. 9a) and pushes less
+    np.testing.assert_array_equal(full["segment_time"], [0.0, full["contact_time"]])
+    np.testing.assert_array_equal(full["segment_contact_force"], [0.0, full["contact_force"]])
+    formula = data["formula"]
+    assert full["contact_time"] < formula["contact_time"] < 6.7
+    assert formula["contact_force"] < full["contact_force"]
 
 
 def test_tolsim_paper_bad_out(tmp_path, capsys):

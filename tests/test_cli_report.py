@@ -89,7 +89,9 @@ def test_report_every_config(results, name, tmp_path, capsys):
     assert "<td>initial_gap</td>" in tolerances[: tolerances.index("</table>")]
     assert "id='assumptions'" in page and "VALIDITY_ERROR_BUDGET" in page
     carriage = config.carriage is not None  # its section 3 moves the later ones down
-    assert f"{8 if carriage else 7}. Model check: {config.study.velocity_model} versus" in page
+    friction = config.contact is not None  # and so does "What contact costs" ([contact])
+    model_check = f"{7 + carriage + friction}. Model check: {config.study.velocity_model} versus"
+    assert model_check in page
     assert (out / "report.pdf").read_bytes()[:5] == b"%PDF-"
     # issue 17: worst case and RSS beside the Monte Carlo, from the file's stack-up (none for
     # a carriage, whose balls are coupled: the page says so)

@@ -1,4 +1,5 @@
-"""``tolsim paper``: reproduce the source paper's Fig. 4, 7, 9 and Table 2.
+"""``tolsim paper``: reproduce the source paper's Fig. 4, 7, 9 and Table 2, and go one step
+beyond it (the balls of Sec. 3.2 after they touch, labelled as tolsim's extension).
 
 A thin layer over :func:`tolsim.reports.paper.make_paper`.
 """
@@ -16,6 +17,9 @@ and write them, with the paper's own numbers beside ours, to a folder:
   fig4.png    friction force and spin moment of one contact against c/a (Fig. 4)
   fig7.png    epsilon over rho and theta: full model, point model, formula, difference (Fig. 7)
   fig9.png    ball-to-ball contact of the two balls of Sec. 3.2, cases (a) and (b) (Fig. 9)
+  after_contact.png
+              beyond the paper (tolsim's extension): the two balls of Sec. 3.2 case (a)
+              after they touch, their contact force and the carriage friction force
   table2.csv  Table 2, ours and the paper's values (table2.md: the same in Markdown)
   README.md   what matches the paper, what does not, by how much and why
 

@@ -495,8 +495,8 @@ def friction_assumptions(ds, config, data) -> list:
         "rotation, the linear creep law ends: the train is unresolved from the onset of "
         "sliding (never capped or dropped); its increase before the onset counts as a "
         "certain exceedance when above the limit, the rest is bounded in P(exceedance)"
-        + (f"; {sliding:,} assemblies with a sliding ball and {unresolved:,} unresolved "
-           "without a certain exceedance here" if sliding is not None else ""),
+        + (f"; {sliding:,} {contact_unit(ds)[1]} with a sliding ball and {unresolved:,} "
+           "unresolved without a certain exceedance here" if sliding is not None else ""),
         "tolsim.study.friction (unresolved and sliding trains); result file "
         "(n_assemblies_sliding, n_assemblies_friction_unresolved)")
     return rows

@@ -9,6 +9,10 @@
   model, (c) the analytical formula (Eq. 24 / 26), (d) full minus formula;
 * ``fig9.png``: deviation of ball position from v t / 2 for the two balls of Sec. 3.2,
   (a) colliding (contact time marked), (b) mitigated;
+* ``after_contact.png``: beyond the paper, labelled as tolsim's extension: the two balls of
+  Sec. 3.2 case (a) after they touch (:func:`after_contact_data`), their positions, their
+  contact force and the carriage friction force of their track against time, on the path of
+  a study with ``[contact]`` (:mod:`tolsim.study.trains`, :mod:`tolsim.study.friction`);
 * ``table2.csv`` and ``table2.md``: Table 2 with the paper's values beside ours;
 * ``README.md``: what matches, what does not, by how much and why; every number in it is
   computed at generation time.
@@ -27,7 +31,15 @@ import numpy as np
 import pandas as pd
 
 from tolsim import __version__
-from tolsim.physics.geometry import K_F_PAPER, TABLE1, TABLE1_GROOVE_VELOCITY
+from tolsim.physics.analytic import analytic, eq24
+from tolsim.physics.friction import full
+from tolsim.physics.geometry import (
+    K_F_PAPER,
+    TABLE1,
+    TABLE1_GROOVE_VELOCITY,
+    TABLE1_NORMAL_LOAD,
+    paired_forces,
+)
 from tolsim.reports.style import (
     LIMIT_COLOUR,
     SERIES_COLOURS,
@@ -37,6 +49,7 @@ from tolsim.reports.style import (
 )
 from tolsim.study import paper_data
 from tolsim.study.propagation import first_contact_constant
+from tolsim.study.trains import train_contact_constant
 
 #: Sec. 3.2: initial gap between the two balls, 0.1 R_B [m].
 FIG9_GAP = 0.1 * TABLE1.ball_radius
@@ -395,6 +408,161 @@ def plot_fig9(data: pd.DataFrame, gap=FIG9_GAP, groove_velocity=TABLE1_GROOVE_VE
 
 
 # --------------------------------------------------------------------------------------------
+# Beyond the paper: the two balls of Sec. 3.2 after they touch (tolsim's extension)
+# --------------------------------------------------------------------------------------------
+#: Coulomb coefficient mu_bb of the ball-to-ball contact in the after-contact panel: the
+#: ``[contact]`` default (steel on steel, boundary lubrication). Not in the paper.
+AFTER_CONTACT_BALL_FRICTION = 0.1
+#: Points of the time grid of the after-contact panel (the forces are drawn exactly, from the
+#: event-driven segments; the grid is for the ball positions).
+AFTER_CONTACT_SAMPLES = 2001
+#: Sources of epsilon in the after-contact panel: the study's (the full model with the paired
+#: forces, which ``configs/paper_case_study.toml`` re-solves the balls with) and the formula's.
+AFTER_CONTACT_SOURCES = ("full", "formula")
+
+
+def after_contact_data(bearing=TABLE1, gap=FIG9_GAP, groove_velocity=TABLE1_GROOVE_VELOCITY,
+                       duration=FIG9_DURATION, ball_friction=AFTER_CONTACT_BALL_FRICTION,
+                       samples=AFTER_CONTACT_SAMPLES) -> dict:
+    """The two balls of [Lin2018] Sec. 3.2 case (a) after they touch (not in the paper).
+
+    The path of a study of ``configs/paper_case_study.toml`` with ``[contact]``
+    (:mod:`tolsim.study.friction`): the paper's paired forces and rigid angles
+    (dbeta = (-theta, theta, 0, 0), rho = -/+0.6, N_y = 200 N); each ball's creep stiffness
+    K, braking sensitivity c, free-rolling carriage force F_0 and carriage-force slopes a, b
+    from the loaded analytic model at zero load (:func:`tolsim.physics.analytic.analytic`
+    with ``push=0``); the train from :func:`tolsim.study.trains.train_contact_constant`
+    (event-driven, exact); the track's carriage friction force
+    F = F_0,1 + F_0,2 + k Q with k = (a_2 - a_1) + (b_1 + b_2) (Eq. 1 of
+    :mod:`tolsim.study.friction`). epsilon comes from the full model with the same forces
+    (``"full"``, as the study re-solves these balls, outside Eq. 24's budget) or from the
+    formula, Eq. (24) (``"formula"``).
+
+    Returns
+    -------
+    dict
+        ``creep_stiffness`` (2,) [N], ``braking_sensitivity`` (2,) [1/N],
+        ``free_rolling_carriage_force`` (2,) [N], ``coupling`` k [-], ``baseline`` [N],
+        ``time`` (S,) [s], and per source in :data:`AFTER_CONTACT_SOURCES` a dict with
+        ``velocity_deviation`` (2,), ``contact_time`` [s] (inf: none), ``contact_force``
+        after contact [N], ``cluster_velocity_deviation`` [-], ``increase`` [N],
+        ``segment_time`` and ``segment_contact_force`` (the exact steps, [s] and [N]) and
+        ``displacement`` (S, 2) [m] (each ball's centre less v t / 2).
+    """
+    theta = np.deg2rad(paper_data.TABLE2_THETA_DEG)
+    dbeta = np.array([[-theta, theta, 0.0, 0.0]] * 2)
+    force = np.array([paired_forces(rho * TABLE1_NORMAL_LOAD, TABLE1_NORMAL_LOAD,
+                                    bearing.nominal_contact_angle)
+                      for rho in paper_data.TABLE2_SIDE_FORCE_RATIO.values()])
+    loaded = analytic(dbeta, force, bearing, push=0.0, ball_friction=ball_friction)
+    k = np.asarray(loaded.creep_stiffness, dtype=float)
+    c = np.asarray(loaded.braking_sensitivity, dtype=float)
+    f0 = np.asarray(loaded.free_rolling_carriage_force, dtype=float)
+    a = np.asarray(loaded.carriage_force_per_push, dtype=float)
+    b = np.asarray(loaded.carriage_force_per_neighbour_force, dtype=float)
+    coupling = float((a[1] - a[0]) + (b[0] + b[1]))
+    eps = {"full": np.asarray(full(dbeta, force, bearing).velocity_deviation, dtype=float),
+           "formula": np.asarray(eq24(dbeta, force, bearing).velocity_deviation, dtype=float)}
+    out = {"creep_stiffness": k, "braking_sensitivity": c, "free_rolling_carriage_force": f0,
+           "coupling": coupling, "baseline": float(f0.sum()), "ball_friction": ball_friction,
+           "gap": gap, "groove_velocity": groove_velocity, "duration": duration}
+    for source in AFTER_CONTACT_SOURCES:
+        res = train_contact_constant(np.array([[gap]]), eps[source][None, :], k[None, :],
+                                     groove_velocity, duration,
+                                     braking_sensitivity=c[None, :], samples=samples,
+                                     segments=True)
+        starts = np.asarray(res.segment_start[0], dtype=float)
+        keep = starts <= duration
+        q = float(res.contact_force[0, 0])
+        out["time"] = np.asarray(res.travel, dtype=float) / groove_velocity
+        out[source] = {
+            "velocity_deviation": eps[source],
+            "contact_time": float(res.first_contact_time[0]),
+            "contact_force": q,
+            "cluster_velocity_deviation": float(res.velocity[0, 0]),
+            "increase": coupling * q,
+            "segment_time": starts[keep],
+            "segment_contact_force": np.asarray(res.segment_contact_force[0, keep, 0],
+                                                dtype=float),
+            "displacement": np.asarray(res.grid_displacement[0], dtype=float),
+        }
+    return out
+
+
+@styled
+def plot_after_contact(data: dict):
+    """Beyond the paper (tolsim's extension): (a) the two balls of Sec. 3.2 case (a) as in
+    Fig. 9(a), on after they touch; (b) their contact force; (c) the carriage friction force
+    of their track, against time."""
+    fig, (ax_z, ax_q, ax_f) = new_figure(13.0, 4.6, ncols=3)
+    t = data["time"]
+    duration, gap = data["duration"], data["gap"]
+    styles = {"full": dict(ls="-", lw=1.8), "formula": dict(ls="--", lw=1.2)}
+    names = {"full": "ε from the full model (the study's)",
+             "formula": "ε from the formula, Eq. (24)"}
+    for source in AFTER_CONTACT_SOURCES:
+        d = data[source]
+        name = names[source]
+        u = d["displacement"]
+        ax_z.plot(t, 1e3 * u[:, 0], color=SERIES_COLOURS[0], **styles[source],
+                  label=f"ball 1, {name}")
+        ax_z.plot(t, 1e3 * (gap + u[:, 1]), color=SERIES_COLOURS[1], **styles[source],
+                  label=f"ball 2 + initial gap, {name}")
+        tc = d["contact_time"]
+        step_t = np.concatenate([d["segment_time"], [duration]])
+        step_q = np.concatenate([d["segment_contact_force"], d["segment_contact_force"][-1:]])
+        ax_q.step(step_t, step_q, where="post", color=SERIES_COLOURS[2], **styles[source],
+                  label=f"{name}: Q = {d['contact_force']:.2f} N from t = {tc:.2f} s")
+        ax_f.step(step_t, data["baseline"] + data["coupling"] * step_q, where="post",
+                  color=SERIES_COLOURS[3], **styles[source],
+                  label=f"{name}: +{d['increase']:.2f} N "
+                        f"(+{100 * d['increase'] / data['baseline']:.0f} %)")
+        if np.isfinite(tc):
+            for ax in (ax_z, ax_q, ax_f):
+                ax.axvline(tc, color=LIMIT_COLOUR, lw=0.8, ls=styles[source]["ls"])
+    ax_f.axhline(data["baseline"], color="0.45", lw=1.0, ls=":",
+                 label=f"free-rolling baseline 2 F₀ = {data['baseline']:.2f} N")
+    k = data["creep_stiffness"]
+    ax_z.set_title("(a) positions: Fig. 9(a) carried on after contact", fontsize=10)
+    ax_z.set_ylabel("deviation of position from v t/2 [mm]")
+    ax_z.set_ylim(-0.25, 0.75)
+    ax_z.legend(loc="lower right", fontsize=7, framealpha=0.9)
+    ax_q.set_title(f"(b) ball-to-ball contact force Q (K = {k[0]:.0f} N each)", fontsize=10)
+    ax_q.set_ylabel("contact force Q [N]")
+    top = max(data[s]["contact_force"] for s in AFTER_CONTACT_SOURCES)
+    ax_q.set_ylim(-0.05 * top, 1.5 * top if top > 0 else 1.0)
+    ax_q.legend(loc="upper left", fontsize=7.5, framealpha=0.9)
+    ax_f.set_title(f"(c) carriage friction force of the track (μ_bb = "
+                   f"{data['ball_friction']:.2g})", fontsize=10)
+    ax_f.set_ylabel("carriage friction force F [N]")
+    rise = max(data[s]["increase"] for s in AFTER_CONTACT_SOURCES)
+    ax_f.set_ylim(data["baseline"] - 0.3 * rise, data["baseline"] + 1.8 * rise)
+    ax_f.legend(loc="upper left", fontsize=7.5, framealpha=0.9)
+    for ax in (ax_z, ax_q, ax_f):
+        ax.set_xlabel("time t [s]")
+        ax.set_xlim(0, duration)
+    fig.suptitle("Beyond the paper (tolsim's extension, not in [Lin2018]): the two balls of "
+                 "Sec. 3.2 case (a) after they touch\nquasi-static train, creep stiffness K "
+                 "and carriage force of each ball from the loaded analytic model; θ = 2°, "
+                 "ρ = ∓0.6, v = 10 mm/s", fontsize=10.5)
+    return fig
+
+
+def _after_contact_summary(data: dict) -> dict:
+    """The numbers of the after-contact panel (README and ``summary``)."""
+    out = {"creep_stiffness": [float(x) for x in data["creep_stiffness"]],
+           "baseline": data["baseline"], "coupling": data["coupling"],
+           "ball_friction": data["ball_friction"]}
+    for source in AFTER_CONTACT_SOURCES:
+        d = data[source]
+        out[source] = {"velocity_deviation": [float(x) for x in d["velocity_deviation"]],
+                       "contact_time": d["contact_time"], "contact_force": d["contact_force"],
+                       "increase": d["increase"],
+                       "cluster_velocity_deviation": d["cluster_velocity_deviation"]}
+    return out
+
+
+# --------------------------------------------------------------------------------------------
 # README
 # --------------------------------------------------------------------------------------------
 def _ties(values, tolerance):
@@ -468,8 +636,47 @@ def _fig4_summary(curves, slopes):
     return {"max_nonlinearity": max(dev), "max_moment": max(moment)}
 
 
-def readme_text(table, checks, slopes, grid, fig9, grids, curves=None) -> str:
-    """README.md of the reproduction (numbers from the arguments only).
+def _after_contact_readme(after) -> list:
+    """README lines on the after-contact panel (none without it). Every number is rounded
+    far above round-off, so two runs write the same bytes."""
+    if after is None:
+        return []
+    k = after["creep_stiffness"]
+    f0 = after["free_rolling_carriage_force"]
+    fu, fo = after["full"], after["formula"]
+    eps = 100 * abs(fu["velocity_deviation"][0])
+    return [
+        "## Beyond the paper: after contact (tolsim's extension, not in the paper)",
+        "",
+        "The paper stops where the balls touch. tolsim follows them on (`after_contact.png`, "
+        "labelled as tolsim's extension; the paper has nothing to compare it with). The two "
+        "balls of case (a) then move as one cluster at the K-weighted mean of their ε and "
+        "push each other with Q = K₁K₂(ε₁ − ε₂)/(K₁ + K₂); the Coulomb friction at their "
+        f"contact (μ_bb = {after['ball_friction']:.2g}) brakes both balls, and the grooves pay "
+        "for it in carriage friction (`tolsim.study.trains`, `tolsim.study.friction`). From "
+        "the loaded analytic model at each ball's paired forces: creep stiffness "
+        f"K = {k[0]:.0f} N each, free-rolling carriage friction F₀ = {f0[0]:.2f} N each, and "
+        f"a friction cost of k = {after['coupling']:.3f} N per newton of Q.",
+        "",
+        f"* ε from the full model (±{eps:.3f} %, as a study of "
+        "`configs/paper_case_study.toml` re-solves these balls): contact at "
+        f"t = {fu['contact_time']:.2f} s, then Q = {fu['contact_force']:.2f} N, and the "
+        f"track's carriage friction force rises by {fu['increase']:.2f} N over its "
+        f"{after['baseline']:.2f} N baseline (+{100 * fu['increase'] / after['baseline']:.0f} "
+        "%) for the rest of the stroke.",
+        f"* ε from the formula, Eq. (24) (±{100 * abs(fo['velocity_deviation'][0]):.3f} %): "
+        f"contact at t = {fo['contact_time']:.2f} s, Q = {fo['contact_force']:.2f} N, "
+        f"+{fo['increase']:.2f} N.",
+        "",
+        "The same numbers come out of `tolsim run` on that config with a `[contact]` section "
+        "(tests/test_cli_paper.py).",
+        "",
+    ]
+
+
+def readme_text(table, checks, slopes, grid, fig9, grids, curves=None, after=None) -> str:
+    """README.md of the reproduction (numbers from the arguments only; ``after``: the
+    after-contact panel's :func:`after_contact_data`, tolsim's extension).
 
     The text is a function of the model results alone, so two runs give the same bytes: no
     timing (``tolsim paper`` prints it), no value that only round-off decides (ties of
@@ -491,7 +698,9 @@ def readme_text(table, checks, slopes, grid, fig9, grids, curves=None) -> str:
         "below is computed by that command from the models; nothing is typed in by hand "
         "except the paper's own printed values (Table 2, k_f = −1.38).",
         "",
-        "Files: `fig4.png`, `fig7.png`, `fig9.png`, `table2.csv`, `table2.md`.",
+        "Files: `fig4.png`, `fig7.png`, `fig9.png`, `table2.csv`, `table2.md`"
+        + (", and `after_contact.png`, beyond the paper (tolsim's extension)."
+           if after is not None else "."),
         "",
         "The text extraction of the paper has no figures, so Fig. 4, 7 and 9 are checked "
         "against what the paper's text says about them, and against Table 2, which it "
@@ -614,6 +823,7 @@ def readme_text(table, checks, slopes, grid, fig9, grids, curves=None) -> str:
         "",
         "The paper's text gives no contact time; the figure is missing from the extraction.",
         "",
+        *_after_contact_readme(after),
         "## Reproduce",
         "",
         "```",
@@ -681,10 +891,15 @@ def make_paper(folder="reports/paper", *, quick=False, progress=None) -> PaperOu
     f9 = fig9_data(table)
     save_png(plot_fig9(f9), path("fig9.png"))
 
+    say("beyond the paper: after contact (tolsim's extension)")
+    after = after_contact_data()
+    save_png(plot_after_contact(after), path("after_contact.png"))
+
     with open(path("README.md"), "w", encoding="utf-8") as fh:
-        fh.write(readme_text(table, checks, slopes, grid, f9, grids, curves))
+        fh.write(readme_text(table, checks, slopes, grid, f9, grids, curves, after))
     out.elapsed = time.perf_counter() - started
     out.table2 = table
     out.summary = {"table2_checks": checks, "fig7": _fig7_summary(grid),
-                   "fig9": f9.to_dict("records"), "fig4": slopes.to_dict("records")}
+                   "fig9": f9.to_dict("records"), "fig4": slopes.to_dict("records"),
+                   "after_contact": _after_contact_summary(after)}
     return out

@@ -8,7 +8,9 @@ and writes them with :class:`matplotlib.backends.backend_pdf.PdfPages`:
    each comes from;
 3. in a study with a ``[carriage]``, the carriage section (load case, preload, tracks with
    the nominal load distribution and its figure, displacement and stiffness, solved
-   carriages), then the figures of the HTML report, with their captions;
+   carriages), then the figures of the HTML report, with their captions; in a study with
+   ``[contact]`` the section "What contact costs" takes the place of its figure (its
+   paragraphs, tables and notes around the friction figure);
 4. the review and sign-off block: prepared by / reviewed by / approved by, each with name,
    function, date and a signature line, the decision, comments, and the SHA-256 of the
    result file that the signatures refer to.
@@ -310,6 +312,25 @@ def _carriage_section(doc, carriage, png, caption):
             doc.image(png, caption)
 
 
+def _friction_section(doc, friction, png, caption):
+    """The section "What contact costs" of a study with ``[contact]`` where its figure comes:
+    its heading, paragraphs and tables, the friction figure after table ``figure_after``,
+    and its notes."""
+    doc.heading(friction["heading"], size=11.5)
+    for text in friction.get("paragraphs", ()):
+        doc.paragraph(text, size=8.5)
+    for k, table in enumerate(friction.get("tables", ())):
+        doc.heading(table.heading, size=10.5)
+        doc.table(list(table.header), [[str(c) for c in row] for row in table.rows],
+                  list(table.widths))
+        if table.note:
+            doc.paragraph(table.note, size=7.5, colour="0.4")
+        if k == friction.get("figure_after") and png is not None:
+            doc.image(png, caption)
+    for text in friction.get("notes", ()):
+        doc.paragraph(text, size=7.5, colour="0.4")
+
+
 def write_pdf(path, **report) -> str:
     """Write the PDF report (the pages of :func:`report_pages`).
 
@@ -337,7 +358,8 @@ def write_pdf(path, **report) -> str:
 
 
 def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assumptions,
-                 figures, captions, sections, result_path, sign_off, carriage=None) -> list:
+                 figures, captions, sections, result_path, sign_off, carriage=None,
+                 friction=None) -> list:
     """The pages of the PDF report, A4 portrait Figures in order.
 
     Parameters
@@ -365,6 +387,11 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
         ``heading``, ``paragraphs``, ``tables`` (objects with ``heading``, ``header``,
         ``rows``, ``widths`` and ``note``, :class:`tolsim.reports.study.ReportTable`) and
         ``figure_after``, the table that ``figures["carriage"]`` follows.
+    friction : dict, optional
+        The section "What contact costs" of a study with ``[contact]``
+        (:func:`tolsim.reports.study.friction_content`): ``heading``, ``paragraphs``,
+        ``tables``, ``figure_after`` (the table that ``figures["friction"]`` follows) and
+        ``notes``; drawn where the friction figure comes.
 
     Returns
     -------
@@ -411,6 +438,9 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
     for name, png in figures.items():
         if name == "carriage" and carriage is not None:
             continue  # drawn in its section
+        if name == "friction" and friction is not None:
+            _friction_section(doc, friction, png, captions.get(name, ""))
+            continue
         doc.image(png, captions.get(name, ""), heading=sections.get(name, name))
     doc.new_page()
     _sign_off(doc, sha, *sign_off)

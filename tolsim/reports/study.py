@@ -1018,8 +1018,9 @@ def _quantile_of(ds, name, level):
         return np.nan
     levels = np.asarray(ds["quantile"], dtype=float)
     k = int(np.argmin(np.abs(levels - level)))
-    return float(np.asarray(ds[name], dtype=float)[k]) if abs(levels[k] - level) < 1e-9 \
-        else np.nan
+    if abs(levels[k] - level) > 1e-9:
+        return np.nan
+    return float(np.asarray(ds[name], dtype=float)[k])
 
 
 def _force_survival(ds, prefix):
@@ -1042,6 +1043,15 @@ def _ball_diameter(ds, config):
         z = np.asarray(ds["example_ball_position"], dtype=float)
         return float(np.nanmin(np.diff(z, axis=-1)))
     return np.nan
+
+
+def _busiest_example(ds) -> int:
+    """The example whose track has a ball-to-ball contact over the longest part of the
+    stroke (the first on a tie; 0 without contact forces in the file)."""
+    if "example_contact_force" not in ds.variables or ds.sizes.get("pair", 0) == 0:
+        return 0
+    q = np.asarray(ds["example_contact_force"], dtype=float)  # (example, travel, pair)
+    return int(np.argmax(np.mean(np.any(q > 0, axis=2), axis=1)))
 
 
 def _example_label(ds, e):
@@ -1090,17 +1100,18 @@ def plot_friction(ds, sens=None, ball_diameter=np.nan):
         curves[prefix] = s
         if prefix == "friction_ripple" and np.array_equal(s, curves.get("friction_increase")):
             ax_d.plot([], [], color="0.3", ls=ls, lw=1.4,
-                      label=label.split(" (")[0] + ": the same curve here (no contact at "
-                            "the start of the stroke)")
+                      label="ripple (max − min): the same curve here")
             continue
         colour = {"friction_increase": SERIES_COLOURS[0], "friction_ripple": SERIES_COLOURS[4],
                   "contact_force_max": SERIES_COLOURS[2]}[prefix]
-        ax_d.step(x[1:], s[1:], where="pre", color=colour, ls=ls, lw=1.6 if ls == "-" else 1.3,
-                  label=label)
-        nz = np.flatnonzero(s[1:-1] > 0)
+        # at each bin's lower edge the fraction at or above it: an upper step within the bin
+        ax_d.step(x[1:], s[1:], where="post", color=colour, ls=ls,
+                  lw=1.6 if ls == "-" else 1.3, label=label)
+        counts = np.asarray(ds[f"{prefix}_histogram"], dtype=float)
+        nz = np.flatnonzero(counts[1:] > 0) + 1  # bins with a rise (bin 0: below 1 µN)
         if nz.size:
-            low = min(low, x[1 + nz[0]])
-            top = max(top, x[1 + nz[-1] + 1])
+            low = min(low, x[nz[0]])
+            top = max(top, x[nz[-1] + 1])
         floor = min(floor, 0.5 / total)
     resolved = _i(ds, "n_assemblies_friction_resolved")
     p, lo, hi = (_f(ds, f"friction_exceedance_probability{s}") for s in ("", "_ci_lower",
@@ -1151,10 +1162,11 @@ def plot_friction(ds, sens=None, ball_diameter=np.nan):
     ax_t.set_title("(b) examples: rise of the track's friction force over its baseline F₀",
                    fontsize=10)
 
-    # (c) the balls of the first example, as Fig. 9 of the paper draws them
+    # (c) the balls of one example, as Fig. 9 of the paper draws them
     if "example_ball_position" in ds.variables:
         travel = 1e3 * np.asarray(ds["travel"], dtype=float)
-        z = np.asarray(ds["example_ball_position"], dtype=float)[0]  # (travel, ball)
+        e = _busiest_example(ds)
+        z = np.asarray(ds["example_ball_position"], dtype=float)[e]  # (travel, ball)
         n = z.shape[1]
         if np.isfinite(ball_diameter):
             y = 1e6 * (z - z[0, 0] - ball_diameter * np.arange(n))
@@ -1164,18 +1176,30 @@ def plot_friction(ds, sens=None, ball_diameter=np.nan):
             y = 1e6 * (z - z[0])
             ylabel = "ball centre − v t/2 − its start [µm]"
             note = "D unknown: each ball from its own start"
-        import matplotlib
+        from matplotlib import colormaps
 
-        cmap = matplotlib.colormaps["viridis"]
+        cmap = colormaps["viridis"]
         for i in range(n):
             ax_z.plot(travel, y[:, i], color=cmap(i / max(n - 1, 1)), lw=1.3,
                       label=(f"ball {i + 1}" + (" (trailing)" if i == 0 else
                                                " (leading)" if i == n - 1 else ""))
                       if i in (0, n - 1) else None)
+        if "example_contact_force" in ds.variables and n > 1:
+            q = np.asarray(ds["example_contact_force"], dtype=float)[e]  # (travel, pair)
+            label = "a contact forms (first travel point with a force)"
+            for j in range(n - 1):
+                hit = np.flatnonzero(q[:, j] > 0)
+                if hit.size:
+                    ax_z.plot(travel[hit[0]], y[hit[0], j + 1], "o", color=LIMIT_COLOUR, ms=4,
+                              zorder=5, label=label)
+                    label = None
         ax_z.set_xlim(travel[0], travel[-1])
-        ax_z.legend(loc="best", fontsize=7.5, framealpha=0.9)
+        low_y, high_y = float(np.nanmin(y)), float(np.nanmax(y))
+        span = max(high_y - low_y, 1.0)
+        ax_z.set_ylim(low_y - 0.05 * span, high_y + 0.3 * span)  # room for the legend
+        ax_z.legend(loc="upper left", fontsize=7.5, framealpha=0.9, ncols=2)
         ax_z.set_ylabel(ylabel, fontsize=8.5)
-        ax_z.set_title(f"(c) the {n} balls of example 1 along the stroke ({note})",
+        ax_z.set_title(f"(c) the {n} balls of example {e + 1} along the stroke ({note})",
                        fontsize=10)
     else:
         ax_z.set_title("(c) ball positions", fontsize=10)
@@ -1213,11 +1237,11 @@ def plot_friction(ds, sens=None, ball_diameter=np.nan):
                   transform=ax_s.transAxes, ha="center", va="center")
         ax_s.set_yticks([])
     ax_s.set_xlabel("Sobol' index [-] (bars: 95 % bootstrap interval)")
+    ax_s.set_ylabel("tolerance source")
     ax_s.set_title("(d) drivers: Sobol' indices of the friction increase", fontsize=10)
-    worst = f" (the worst of its {counted(tracks_of(ds), 'track')})" if tracks_of(ds) else ""
-    fig.suptitle(f"What contact costs: the carriage friction force of the track{worst} per "
-                 f"{one} after its balls touch, μ_bb = {_f(ds, 'ball_friction_coefficient'):.3g}",
-                 fontsize=10.5)
+    whose = (f"the worst track of each {one}" if tracks_of(ds) else f"each {one}")
+    fig.suptitle(f"What contact costs: the carriage friction force of {whose} after its balls "
+                 f"touch, μ_bb = {_f(ds, 'ball_friction_coefficient'):.3g}", fontsize=10.5)
     return fig
 
 
@@ -1227,10 +1251,10 @@ def friction_summary(ds) -> str:
     one = contact_unit(ds)[0]
     per = f"per {one}" + (" (its worst track)" if tracks_of(ds) else "")
     base = _f(ds, "friction_force_baseline")
+    median, q99 = (_quantile_of(ds, "friction_increase_quantile", q) for q in (0.5, 0.99))
     text = (f"Friction after contact {per}: the carriage friction force rises over its "
-            f"{_force_text(base)} baseline by a median {_force_text(_quantile_of(ds, 'friction_increase_quantile', 0.5))}, "
-            f"99 % quantile {_force_text(_quantile_of(ds, 'friction_increase_quantile', 0.99))} "
-            f"(largest {_force_text(_f(ds, 'friction_increase_max'))})")
+            f"{_sig(base)} N baseline by a median {_force_text(median)}, 99 % quantile "
+            f"{_force_text(q99)} (largest {_force_text(_f(ds, 'friction_increase_max'))})")
     limit = _f(ds, "friction_increase_limit")
     if np.isfinite(limit) and limit > 0:
         p, lo, hi = (_f(ds, f"friction_exceedance_probability{s}") for s in (
@@ -1245,10 +1269,10 @@ FRICTION_CAPTION = (
     "its free-rolling baseline (the largest rise over the stroke), with the spec limit and "
     "P(increase > limit) with its 95 % interval; the ripple and the largest ball-to-ball "
     "force beside it. (b) The rise against the carriage travel for the stored examples. "
-    "(c) The balls of the first example along the stroke, each less the nominal travel v t/2 "
-    "of a free ball and its place in a touching train, so that touching balls share a line "
-    "(as the paper's Fig. 9 draws its two balls). (d) The tolerances that drive the rise: "
-    "Sobol' indices of the increase.")
+    "(c) The balls of the example with the longest contact along the stroke, each less the "
+    "nominal travel v t/2 of a free ball and its place in a touching train, so that touching "
+    "balls share a line (as the paper's Fig. 9 draws its two balls). (d) The tolerances that "
+    "drive the rise: Sobol' indices of the increase.")
 
 
 def friction_content(ds, sens=None) -> dict:
@@ -1285,18 +1309,19 @@ def friction_content(ds, sens=None) -> dict:
              "rises most)" if tracks else "its track")
     paragraphs = [
         f"For every sampled {one} the study follows "
-        + ("each of its trains" if tracks else "its train")
+        + ("each of its trains" if tracks else "its balls")
         + f" over the {travel:.4g} mm stroke after the balls touch (tolsim's extension of the "
         "paper, which stops at the first contact). Balls in contact move together as a "
         "cluster and push each other with forces set by their creep stiffness; the Coulomb "
         f"friction at each ball-to-ball contact (μ_bb = {mu_bb:.3g}) brakes both balls, and "
         "the grooves pay for it in carriage friction. The model and its sources are in the "
         "assumptions table (topic \"after contact\").",
-        f"Each {one} counts with {worst}: its free-rolling baseline F₀ (the friction force "
+        ("Each assembly counts with " + worst if tracks else "Each train counts with its "
+         "own friction force") + ": its free-rolling baseline F₀ (the friction force "
         "without ball-to-ball contact, from spin and differential slip), the increase (the "
         "largest rise of its friction force over F₀ during the stroke), the ripple (max − min "
         "over the stroke), the largest ball-to-ball force and the fraction of the stroke with "
-        f"a contact. The statistics are over the {resolved:,} {many} whose trains were "
+        f"a contact. The statistics are over the {resolved:,} {many} whose balls were "
         f"followed over the whole stroke; P(increase > limit) is bounded over all {n_asm:,}.",
     ]
     p, lo, hi = (_f(ds, f"friction_exceedance_probability{s}") for s in ("", "_ci_lower",
@@ -1306,7 +1331,7 @@ def friction_content(ds, sens=None) -> dict:
             ("creep model (K, F₀ of each ball)", str(ds.attrs.get("contact_creep_model", "?")),
              "config ([contact] creep_model)"),
             ("free-rolling baseline F₀ of the track: mean ± std",
-             f"{_force_text(_f(ds, 'friction_force_baseline'))} ± "
+             f"{_sig(_f(ds, 'friction_force_baseline'))} N ± "
              f"{_force_text(_f(ds, 'friction_force_baseline_std'))}", "friction_force_baseline"),
             ("increase over F₀: mean / median / 99 %",
              f"{_force_text(_f(ds, 'friction_increase_mean'))} / "
@@ -1324,14 +1349,13 @@ def friction_content(ds, sens=None) -> dict:
                      f"{many} whose outcome is known; Clopper-Pearson)",
                      "friction_exceedance_probability, _ci_lower, _ci_upper"))
         if unresolved:
+            bounds = (format_fraction(_f(ds, f"friction_exceedance_probability_bound_{end}"))
+                      for end in ("lower", "upper"))
             rows.append((f"bounds over all {n_asm:,} {many} ({unresolved:,} unresolved counted "
-                         "as below / above the limit)",
-                         f"{format_fraction(_f(ds, 'friction_exceedance_probability_bound_lower'))}"
-                         " to "
-                         f"{format_fraction(_f(ds, 'friction_exceedance_probability_bound_upper'))}",
+                         "as below / above the limit)", " to ".join(bounds),
                          "friction_exceedance_probability_bound_lower, _upper"))
     rows += [
-        ("time-mean increase over the stroke (mean over the assemblies)",
+        (f"time-mean increase over the stroke (mean over the {many})",
          _force_text(_f(ds, "friction_increase_stroke_mean")), "friction_increase_stroke_mean"),
         ("largest ball-to-ball force: mean / median / 99 %",
          f"{_force_text(_f(ds, 'contact_force_max_mean'))} / "
@@ -1577,6 +1601,8 @@ def headline(ds, sens=None) -> list:
            f"{n_asm - n_unres:,} {many} whose outcome is known)."]
     if tracks_of(ds):
         out.append(carriage_summary(ds))
+    if has_friction(ds):
+        out.append(friction_summary(ds))
     if sens is not None and "contact" in getattr(sens, "outputs", ()):
         k = list(sens.outputs).index("contact")
         total = np.asarray(sens.total[k], dtype=float)
@@ -1667,7 +1693,8 @@ def _table_html(table):
     return parts
 
 
-def _html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None):
+def _html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None,
+          friction=None):
     a = ds.attrs
     n_asm = _i(ds, "n_assemblies")
     one, many = contact_unit(ds)
@@ -1778,6 +1805,15 @@ def _html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None):
     fig("velocity_deviation")
     parts.append(f"<h2>{html.escape(titles['contact'])}</h2>")
     fig("contact")
+    if has_friction(ds):
+        friction = friction if friction is not None else friction_content(ds, sens)
+        parts.append(f"<h2 id='friction'>{html.escape(friction['heading'])}</h2>")
+        parts += [f"<p>{html.escape(text)}</p>" for text in friction["paragraphs"]]
+        for k, table in enumerate(friction["tables"]):
+            parts += _table_html(table)
+            if k == friction["figure_after"]:
+                fig("friction")
+        parts += [f"<p class='muted'>{html.escape(text)}</p>" for text in friction["notes"]]
     parts.append(f"<h2>{html.escape(titles['quality'])}</h2>")
     if q:
         prop, cap = q["_proportion"], q["_capability"]
@@ -1813,6 +1849,10 @@ def _html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None):
     parts += _stackup_rows(ds)
     parts.append(f"<h2>{html.escape(titles['sensitivity'])}</h2>")
     titles_out = output_titles(one)
+    if friction_indices(sens) is not None:
+        parts.append("<p class='muted'>The drivers of the friction increase are ranked in "
+                     f"section {html.escape(titles['friction'].split('.')[0])}.</p>")
+    sens = _without_output(sens)
     if sens is None:
         parts.append(f"<p>{html.escape(sens_source)}</p>")
     elif len(sens.factors) == 0:
@@ -1866,7 +1906,7 @@ def _html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None):
 # --------------------------------------------------------------------------------------------
 def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
                 progress=None, pdf=True, out_of_spec_limit=None,
-                cpk_minimum=None) -> ReportOutputs:
+                cpk_minimum=None, friction_exceedance_limit=None) -> ReportOutputs:
     """Write ``report.html``, ``report.pdf`` and the PNGs of a result file into ``folder``.
 
     Parameters
@@ -1886,6 +1926,9 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     out_of_spec_limit, cpk_minimum : float, optional
         Allowed fraction of balls out of spec and required Cpk for the verdict
         (:func:`tolsim.reports.verdict.study_verdict`); the config has no keys for them.
+    friction_exceedance_limit : float, optional
+        Allowed fraction of assemblies whose friction increase exceeds the config's limit
+        (a study with ``[contact]``), for the verdict; the config has no key for it.
 
     Returns
     -------
@@ -1922,7 +1965,8 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     q = quality.dataset_quality(ds)
     out.quality = q
     out.verdict = study_verdict(ds, q, out_of_spec_limit=out_of_spec_limit,
-                                cpk_minimum=cpk_minimum)
+                                cpk_minimum=cpk_minimum,
+                                friction_exceedance_limit=friction_exceedance_limit)
 
     say("figures")
     figs = {}
@@ -1933,10 +1977,13 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
                                                carriage["preload_ball_load"])
     figs.update({"velocity_deviation": plot_velocity_deviation(ds),
                  "contact": plot_contact(ds), "spot_checks": plot_spot_checks(ds)})
+    if has_friction(ds):  # a study with [contact]: what contact costs
+        out.friction = friction_content(ds, sens)
+        figs["friction"] = plot_friction(ds, sens, _ball_diameter(ds, _config_or_none(ds)))
     if q:
         figs["quality"] = plot_quality(ds, q)
     if sens is not None and len(sens.factors):
-        figs["sensitivity"] = plot_sensitivity(sens, contact_unit(ds)[0])
+        figs["sensitivity"] = plot_sensitivity(_without_output(sens), contact_unit(ds)[0])
     pngs = {}
     for name, fig in figs.items():
         pngs[name] = render_png(fig)
@@ -1947,35 +1994,42 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     say("report.html")
     out.html = os.path.join(folder, "report.html")
     with open(out.html, "w", encoding="utf-8") as fh:
-        fh.write(_html(ds, pngs, sens, source, q, os.fspath(path), out.verdict, carriage))
+        fh.write(_html(ds, pngs, sens, source, q, os.fspath(path), out.verdict, carriage,
+                       out.friction))
     if pdf:
         say("report.pdf")
         out.pdf = write_report_pdf(ds, figs, sens, out.verdict, path,
-                                   os.path.join(folder, "report.pdf"), carriage)
+                                   os.path.join(folder, "report.pdf"), carriage, out.friction)
     return out
 
 
-def write_report_pdf(ds, figs, sens, verdict, path, pdf_path, carriage=None) -> str:
+def write_report_pdf(ds, figs, sens, verdict, path, pdf_path, carriage=None,
+                     friction=None) -> str:
     """The PDF of a report (:func:`tolsim.reports.pdf.write_pdf`): ``figs`` are the report's
     Figures by name, rendered again at :data:`tolsim.reports.pdf.FIGURE_DPI`; ``carriage``
-    the section of a carriage study (:func:`carriage_content`, made when not given)."""
+    the section of a carriage study (:func:`carriage_content`, made when not given),
+    ``friction`` that of a study with ``[contact]`` (:func:`friction_content`, likewise)."""
     from tolsim.reports import pdf
 
-    return pdf.write_pdf(pdf_path, **pdf_content(ds, figs, sens, verdict, path, carriage))
+    return pdf.write_pdf(pdf_path, **pdf_content(ds, figs, sens, verdict, path, carriage,
+                                                 friction))
 
 
-def pdf_content(ds, figs, sens, verdict, path, carriage=None) -> dict:
+def pdf_content(ds, figs, sens, verdict, path, carriage=None, friction=None) -> dict:
     """The arguments of :func:`tolsim.reports.pdf.report_pages` for a result file (with
-    ``carriage``, the section of :func:`carriage_content`, in a carriage study)."""
+    ``carriage``, the section of :func:`carriage_content`, in a carriage study, and
+    ``friction``, the section of :func:`friction_content`, in a study with ``[contact]``)."""
     from tolsim.reports import pdf
 
-    order = ("carriage", "velocity_deviation", "contact", "quality", "sensitivity",
-             "spot_checks")
+    order = ("carriage", "velocity_deviation", "contact", "friction", "quality",
+             "sensitivity", "spot_checks")
     pngs = {name: render_png(figs[name], dpi=pdf.FIGURE_DPI) for name in order if name in figs}
     extra = {}
     if tracks_of(ds):
         extra["carriage"] = carriage if carriage is not None else carriage_content(
             ds, _config_or_none(ds))
+    if has_friction(ds):
+        extra["friction"] = friction if friction is not None else friction_content(ds, sens)
     a = ds.attrs
     subtitle = (f"Result file {os.path.basename(os.fspath(path))}, report by tolsim "
                 f"{__version__} on {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}; "
