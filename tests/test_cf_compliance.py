@@ -35,6 +35,10 @@ CHECKER = "cf:1.10"
 SAMPLES = {"constant": 64, "along_track": 8}
 SENSITIVITY_SAMPLES = 16
 SPOT_CHECKS = 3
+#: a rare-event estimator (configs/rare_contact.toml): the fewest samples per level of subset
+#: simulation at p0 = 0.1 (10 chains), and few importance samples
+SAMPLES_PER_LEVEL = 100
+IMPORTANCE_SAMPLES = 100
 #: a config without random tolerances, run with the indices on: an empty ``factor`` dimension
 EMPTY_FACTORS = "paper_mitigated.toml"
 
@@ -67,7 +71,9 @@ def small(path):
     study = replace(st, samples=SAMPLES[st.propagation],
                     spot_checks=min(st.spot_checks, SPOT_CHECKS),
                     sensitivity_samples=SENSITIVITY_SAMPLES if path.name == EMPTY_FACTORS
-                    else min(st.sensitivity_samples, SENSITIVITY_SAMPLES))
+                    else min(st.sensitivity_samples, SENSITIVITY_SAMPLES),
+                    samples_per_level=SAMPLES_PER_LEVEL, p0=0.1,
+                    importance_samples=IMPORTANCE_SAMPLES)
     return replace(config, study=study)
 
 
@@ -76,6 +82,9 @@ def test_configs_are_covered_with_sensitivity():
     with_sensitivity = [p.name for p in CONFIG_FILES
                         if p.name != EMPTY_FACTORS and small(p).study.sensitivity_samples]
     assert with_sensitivity, "no config checks the sensitivity (factor) variables"
+    # and one the variables of a rare-event estimator (the importance sampling file with its
+    # design point is checked in tests/test_rare_study.py)
+    assert [p.name for p in CONFIG_FILES if small(p).study.estimator != "monte_carlo"]
 
 
 @pytest.mark.slow  # the checker takes a few seconds per file

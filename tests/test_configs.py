@@ -20,9 +20,11 @@ SAMPLES = {
     "whatif_along_track.toml": 200,
     "known_answer.toml": 4096,  # the closed-form checks are in tests/test_known_answer.py
     "friction_yaw.toml": 1024,  # its checks are in tests/test_friction_study.py
+    "rare_contact.toml": 1024,  # subset simulation after; its checks: tests/test_rare_study.py
 }
-#: Configs with a [carriage] (issue 12): `tolsim run` refuses them until studies with a
-#: carriage exist, so they are run through `tolsim carriage` here instead.
+#: Configs with a [carriage] (issue 12): their studies are checked in
+#: tests/test_carriage_study.py (and tests/test_cf_compliance.py runs them); here their
+#: `tolsim carriage` load distribution.
 CARRIAGE_CONFIGS = ("carriage_preload.toml",)
 
 

@@ -170,6 +170,52 @@ def _pct(x):
     return f"{100 * x:+.3f} %"
 
 
+def _estimated(ds, name) -> bool:
+    """Whether a rare-event estimator (not the plain run) made the probability ``name``."""
+    return name in ds and ds[name].attrs.get("estimator", "monte_carlo") != "monte_carlo"
+
+
+def _estimator_lines(ds, prefix, title) -> list:
+    """Lines on a probability made by a rare-event estimator (issue 15): which estimator, P
+    with its CV and interval, the evaluations; importance sampling's design point; a
+    fallback; or why there is no number."""
+    from tolsim.study.rare_events import ESTIMATOR_TITLES
+
+    var = ds[prefix]
+    a = var.attrs
+    name = ESTIMATOR_TITLES.get(a["estimator"], a["estimator"])
+    evaluations = int(ds[f"{prefix}_evaluations"])
+    unresolved = int(ds[f"{prefix}_unresolved_evaluations"])
+    if a.get("estimator_status", "ok") != "ok":
+        lines = [f"{title}: no estimate ({name}, {evaluations:,} evaluations): "
+                 f"{a.get('estimator_message', a.get('estimator_status'))}"]
+    else:
+        cv = float(ds[f"{prefix}_coefficient_of_variation"])
+        interval = a.get("interval", "").split(" (")[0]
+        lines = [f"{title} = {float(var):.3g} by {name}: CV {cv:.2g}, 95 % CI "
+                 f"[{float(ds[f'{prefix}_ci_lower']):.3g}, "
+                 f"{float(ds[f'{prefix}_ci_upper']):.3g}] ({interval}, approximate), "
+                 f"{evaluations:,} evaluations ({float(a.get('estimator_seconds', 0)):.2g} s)"]
+        if unresolved:
+            lines.append(f"  {unresolved:,} evaluated assemblies unresolved: bounds "
+                         f"[{float(ds[f'{prefix}_bound_lower']):.3g}, "
+                         f"{float(ds[f'{prefix}_bound_upper']):.3g}], 95 % interval "
+                         f"[{float(ds[f'{prefix}_bounds_ci_lower']):.3g}, "
+                         f"{float(ds[f'{prefix}_bounds_ci_upper']):.3g}]")
+    if a.get("estimator_note"):
+        lines.append(f"  note: {a['estimator_note']}")
+    event = {"contact_probability": "contact", "friction_exceedance_probability":
+             "friction_exceedance"}.get(prefix, "velocity_deviation_exceedance")
+    beta = f"{event}_reliability_index"
+    if a["estimator"] == "importance" and beta in ds:
+        b = ds[beta].attrs
+        form = float(ds[f"{event}_form_probability"])
+        lines.append(f"  design point ({b.get('design_point_component', '')}, beta "
+                     f"{float(ds[beta]):.3g}; FORM {form:.3g}, summed over the components): "
+                     f"{b.get('design_point_description', '')}")
+    return lines
+
+
 def _friction_text(ds) -> list:
     """Lines on the friction of a study with [contact]: increase and P(increase > limit)."""
     inc = ds["friction_increase_quantile"]
@@ -187,7 +233,12 @@ def _friction_text(ds) -> list:
         f"during {100 * float(ds.contact_fraction_mean):.3g} % of the stroke on average "
         f"({resolved} of {n_asm} assemblies resolved)"]
     limit = float(ds.friction_increase_limit)
-    if limit == limit:  # a limit is set (NaN otherwise)
+    if limit == limit and _estimated(ds, "friction_exceedance_probability"):
+        lines.extend(_estimator_lines(ds, "friction_exceedance_probability",
+                                      f"P(friction increase > {limit:.4g} N)"))
+        lines.append(f"  plain run: {int(ds.n_friction_exceedance)} of "
+                     f"{n_asm - unresolved} assemblies whose outcome is known exceed it")
+    elif limit == limit:  # a limit is set (NaN otherwise)
         k = int(ds.n_friction_exceedance)
         lines.append(
             f"P(friction increase > {limit:.4g} N) = "
@@ -230,16 +281,27 @@ def summary(ds, output, elapsed) -> str:
         f"1-99 % {_pct(at(q, 0.01))} .. {_pct(at(q, 0.99))}, "
         f"range {_pct(float(ds.velocity_deviation_min))} .. "
         f"{_pct(float(ds.velocity_deviation_max))}",
-        f"P(contact within {float(ds.horizon):.4g} s, stroke "
-        f"{1e3 * float(ds.horizon * ds.groove_velocity):.4g} mm) = "
-        f"{float(ds.contact_probability):.4f}  95 % CI "
-        f"[{float(ds.contact_probability_ci_lower):.4f}, "
-        f"{float(ds.contact_probability_ci_upper):.4f}]  "
-        f"({int(ds.n_contact)} of {n_asm - n_unres} {trains} whose outcome is known)",
     ]
+    contact = (f"P(contact within {float(ds.horizon):.4g} s, stroke "
+               f"{1e3 * float(ds.horizon * ds.groove_velocity):.4g} mm)")
+    rare = _estimated(ds, "contact_probability")
+    if rare:  # a rare-event estimator (issue 15); the plain run's count beside it
+        lines.extend(_estimator_lines(ds, "contact_probability", contact))
+        lines.append(f"  plain run: {int(ds.n_contact)} contacts in {n_asm - n_unres} "
+                     f"{trains} whose outcome is known")
+    else:
+        lines.append(
+            f"{contact} = {float(ds.contact_probability):.4f}  95 % CI "
+            f"[{float(ds.contact_probability_ci_lower):.4f}, "
+            f"{float(ds.contact_probability_ci_upper):.4f}]  "
+            f"({int(ds.n_contact)} of {n_asm - n_unres} {trains} whose outcome is known)")
+    if _estimated(ds, "velocity_deviation_exceedance_probability"):
+        lines.extend(_estimator_lines(
+            ds, "velocity_deviation_exceedance_probability",
+            f"P(an assembly has |epsilon| > {100 * float(ds.velocity_deviation_limit):.3g} %)"))
     if tracks:
         lines.append(_carriage_text(ds))
-    if n_unres:
+    if n_unres and not rare:
         lines.append(
             f"  bounds over all {n_asm} trains, with the {n_unres} unresolved ones counted "
             f"as no contact / contact: [{float(ds.contact_probability_bound_lower):.4f}, "

@@ -25,9 +25,11 @@ import numpy as np
 
 from tolsim.physics.carriage import CarriageLayout, CarriageLoad
 from tolsim.physics.geometry import Bearing
+from tolsim.study.rare_events import MIN_CHAINS
 from tolsim.study.spec import (
     CREEP_MODELS,
     DISTRIBUTIONS,
+    ESTIMATORS,
     PLAUSIBLE_NORMAL_RANGE,
     PROPAGATIONS,
     SAMPLINGS,
@@ -721,8 +723,41 @@ def _study(t: _Table) -> StudySettings:
     if s.cpk_minimum > 0 and s.velocity_deviation_limit == 0:
         raise t.error("cpk_minimum", "needs a limit on |epsilon| "
                                      "(velocity_deviation_limit_percent) to define Cpk")
+    s = _estimator(t, s)
     t.finish()
     return s
+
+
+#: Keys of ``[study]`` read by each rare-event estimator (importance falls back to subset).
+ESTIMATOR_KEYS = {"monte_carlo": (), "subset": ("samples_per_level", "p0", "max_levels"),
+                  "importance": ("samples_per_level", "p0", "max_levels", "importance_samples")}
+
+
+def _estimator(t: _Table, s: StudySettings) -> StudySettings:
+    """``[study] estimator`` and its settings (issue 15; :mod:`tolsim.study.limit_state`)."""
+    estimator = t.string("estimator", ESTIMATORS, default="monte_carlo")
+    for key in ("samples_per_level", "p0", "max_levels", "importance_samples"):
+        if t.has(key) and key not in ESTIMATOR_KEYS[estimator]:
+            raise t.error(key, f"has no effect with estimator = {estimator!r}; remove it or "
+                               "choose an estimator that uses it (subset: samples_per_level, "
+                               "p0, max_levels; importance: also importance_samples)")
+    n = t.integer("samples_per_level", default=1000, minimum=1)
+    p0 = t.quantity("p0", "dimensionless", default=0.1)
+    if not 0 < p0 <= 0.5:
+        raise t.error("p0", f"= {t.data['p0']!r} must be in (0, 0.5]")
+    chains = n * p0
+    if round(chains) < MIN_CHAINS:
+        raise t.error("samples_per_level", f"= {n} gives {chains:g} chains at p0 = {p0:g}; "
+                                           f"at least {MIN_CHAINS} are needed "
+                                           f"(samples_per_level >= {math.ceil(MIN_CHAINS / p0)})")
+    if abs(chains - round(chains)) > 1e-9 * n or n % round(chains):
+        raise t.error("samples_per_level", f"= {n} with p0 = {p0:g}: samples_per_level * p0 "
+                                           f"= {chains:g} must be a whole number of chains "
+                                           "that divides samples_per_level")
+    return replace(s, estimator=estimator, samples_per_level=n, p0=float(p0),
+                   max_levels=t.integer("max_levels", default=20, minimum=1),
+                   importance_samples=t.integer("importance_samples", default=2000,
+                                                minimum=2))
 
 
 def _draw_scope(tolerance) -> str:
@@ -881,8 +916,16 @@ def parse_config(text: str, path: str = "<string>") -> StudyConfig:
             raise source.error(key, None, "is not a known section (bearing, motion, train, "
                                           "loads, carriage, tolerances, correlation, study, "
                                           "contact)")
-    return StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
-                       correlations, carriage, contact)
+    config = StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
+                         correlations, carriage, contact)
+    if study.estimator != "monte_carlo":  # a rare-event estimator needs a limit state
+        from tolsim.study.limit_state import check_supported
+
+        try:
+            check_supported(config)
+        except ValueError as exc:
+            raise study_table.error("estimator", str(exc).removeprefix("estimator ")) from None
+    return config
 
 
 def default_config_text() -> str:

@@ -21,12 +21,21 @@ from tolsim.physics.geometry import CONTACTS
 from tolsim.study import saved_samples
 from tolsim.study.carriage import carriage_variables
 from tolsim.study.friction import friction_variables
+from tolsim.study.limit_state import EVENT_PROBABILITY, rare_event_variables
 from tolsim.study.propagation import propagation_assumption, propagation_caveat
 from tolsim.study.quality import dataset_quality
 from tolsim.study.sampling import SPOT_CHECK_STRATA
 from tolsim.study.sensitivity import sensitivity_variables
 from tolsim.study.statistics import QUANTILES
 from tolsim.study.worst_case import stackup_variables
+
+#: The probability variables of the plain run (contact, friction exceedance): each carries the
+#: attribute ``estimator`` (``monte_carlo`` unless a rare-event estimator made it, issue 15).
+PLAIN_PROBABILITY_VARIABLES = tuple(
+    f"{prefix}{suffix}" for prefix in (EVENT_PROBABILITY["contact"],
+                                       EVENT_PROBABILITY["friction_exceedance"])
+    for suffix in ("", "_ci_lower", "_ci_upper", "_bound_lower", "_bound_upper",
+                   "_bounds_ci_lower", "_bounds_ci_upper"))
 
 
 def _nan_if_zero(value):
@@ -234,6 +243,14 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
                               factor_name=("factor", names))
         ds = ds.assign({name: (("factor",), values) for name, values in variables.items()})
         ds.attrs["sensitivity_samples"] = int(st.sensitivity_samples)
+    rare_attrs = {}
+    if getattr(result, "rare_events", None):  # a rare-event estimator (issue 15)
+        factors, rare_data, rare_attrs, rare_globals = rare_event_variables(result)
+        if factors is not None and "factor" not in ds.coords:
+            ds = ds.assign_coords(factor=("factor", np.arange(len(factors), dtype=np.int64)),
+                                  factor_name=("factor", np.array(factors, dtype=str)))
+        ds = ds.assign(rare_data)
+        ds.attrs.update(rare_globals)
     if getattr(result, "stackup", None) is not None:  # worst case and RSS
         ds = ds.assign(stackup_variables(result.stackup))
     if getattr(result, "samples", None):  # the saved assemblies, along ``sample``
@@ -242,6 +259,14 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
     quality = {k: v for k, v in dataset_quality(ds).items() if not k.startswith("_")}
     ds = ds.assign({name: float(value) for name, value in quality.items()})
     schema.apply_attributes(ds)
+    for name in PLAIN_PROBABILITY_VARIABLES:  # which estimator made each number
+        if name in ds:
+            ds[name].attrs.update(rare_attrs.get(name, {"estimator": "monte_carlo"}))
+            if name.endswith(("probability", "_ci_lower", "_ci_upper")) and \
+                    "bounds" not in name and name not in rare_attrs:
+                ds[name].attrs["interval"] = "Clopper-Pearson"
+    for name, attrs in rare_attrs.items():
+        ds[name].attrs.update(attrs)
     if "sample_model" in ds:
         ds["sample_model"].attrs.update(saved_samples.flag_attributes())  # CF 3.5 flags
     ds["spot_check_stratum"].attrs.update(  # CF 3.5 flags

@@ -18,6 +18,15 @@ first dim), ``carriage_translation`` (u_x, u_y), ``carriage_rotation`` (pitch, y
 adds ``force_bin`` (force histogram bins) and, with examples, ``example`` and ``travel``
 (carriage travel of the example trajectories).
 
+A study run with a rare-event estimator (``[study] estimator``, issue 15) reports that
+estimator's numbers in the events' probability variables (``contact_probability`` ...,
+attribute ``estimator``; every file marks its plain Monte Carlo numbers ``monte_carlo``) and
+adds the variables declared in :mod:`tolsim.study.limit_state` (coefficient of variation,
+evaluations, the |epsilon| exceedance, and for importance sampling the design point along
+``factor``). The interval variables of the contact and friction probabilities are therefore
+worded for any estimator (its method in their ``interval`` attribute); files written before
+keep their "Clopper-Pearson" long names, which :func:`validate` still accepts.
+
 The file passes the CF checker (``compliance-checker --test=cf:1.10``, see
 ``tests/test_cf_compliance.py``): coordinate variables are numeric, strictly monotonic and
 without ``_FillValue`` (:func:`tolsim.io.netcdf.write_dataset`); the names along ``contact``
@@ -32,6 +41,7 @@ from dataclasses import dataclass
 
 from tolsim.study.carriage import CARRIAGE_COORDINATES, CARRIAGE_VARIABLES
 from tolsim.study.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
+from tolsim.study.limit_state import INTERVAL_VARIABLES, RARE_EVENT_VARIABLES
 from tolsim.study.quality import QUALITY_VARIABLES
 from tolsim.study.saved_samples import SAMPLE_VARIABLES
 from tolsim.study.sensitivity import SENSITIVITY_VARIABLES
@@ -73,6 +83,7 @@ class Variable:
     kind: str = "f"  # numpy dtype kind: f float, i integer, U/O/S string
     required: bool = True
     track_axis: int | None = None  # where a study with a carriage inserts its ``track`` dim
+    former_long_names: tuple = ()  # also accepted when a file is read (older files)
 
     def dims_in(self, ds) -> tuple:
         """The dims expected in ``ds``: with a ``track_axis`` and a ``track`` dimension in
@@ -240,6 +251,17 @@ DATA_VARIABLES = {
        for name, (dims, units, long_name, kind) in FRICTION_VARIABLES.items()},
 }
 
+# a rare-event estimator (issue 15): declared in tolsim.study.limit_state, optional here
+DATA_VARIABLES.update({name: V(dims, units, long_name, kind, required=False)
+                       for name, (dims, units, long_name, kind) in RARE_EVENT_VARIABLES.items()})
+# the intervals of the contact and friction probabilities come from the study's estimator
+# (Clopper-Pearson for plain Monte Carlo; its method in their ``interval`` attribute): worded
+# for any estimator since issue 15, the former Clopper-Pearson wording still valid on reading
+for _name, (_dims, _units, _long_name, _kind) in INTERVAL_VARIABLES.items():
+    _old = DATA_VARIABLES[_name]
+    DATA_VARIABLES[_name] = V(_dims, _units, _long_name, _kind, required=_old.required,
+                              former_long_names=(_old.long_name,))
+
 VARIABLES = {**COORDINATES, **DATA_VARIABLES}
 
 
@@ -274,6 +296,8 @@ def validate(ds):
             raise SchemaError(f"variable {name!r} has dtype {var.dtype}, expected kind "
                               f"{decl.kind!r}")
         for attr in ("units", "long_name"):
+            if attr == "long_name" and var.attrs.get(attr) in decl.former_long_names:
+                continue
             if var.attrs.get(attr) != getattr(decl, attr):
                 raise SchemaError(f"variable {name!r} attribute {attr!r} is "
                                   f"{var.attrs.get(attr)!r}, expected {getattr(decl, attr)!r}")

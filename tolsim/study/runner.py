@@ -22,6 +22,17 @@ which the 95 % interval of P(contact) is narrow enough; ``samples`` is then the 
 later blocks of that chunk are dropped, so the result, whose config says the assemblies
 actually run, is bit-identical to a fixed run of that many (the spot checks are those of that
 run too). The interval is not corrected for the data-dependent stopping.
+
+Rare events (issue 15): with ``[study] estimator = "subset"`` or ``"importance"`` the plain
+Monte Carlo run of ``samples`` assemblies is made as always (it gives the epsilon
+statistics, the time to contact, the spot checks and a first P(contact)), and *after* it the
+estimator runs on every event the study defines (:func:`tolsim.study.limit_state.
+estimate_events`: contact within the horizon, |epsilon| and friction spec exceedance), in
+this process (``workers`` and ``scheduler`` serve the plain run), seeded from the study's
+seed with the spawn key documented there, and not checkpointed (it takes seconds where the
+plain run would need millions of assemblies). Its results are ``rare_events`` of the
+:class:`StudyResult`; the result file reports them as the events' probabilities. A precision
+target applies to plain Monte Carlo only and is refused with another estimator.
 """
 
 import hashlib
@@ -52,6 +63,7 @@ from tolsim.study.friction import (
     friction_examples,
     study_accumulator,
 )
+from tolsim.study.limit_state import check_supported, estimate_events
 from tolsim.study.propagation import first_contact_along_track, first_contact_tracks
 from tolsim.study.sampling import (
     SPOT_CHECK_SCHEME,
@@ -116,6 +128,8 @@ class StudyResult:
     samples: dict | None = None  # the first assemblies' rows (tolsim.study.saved_samples)
     carriage_nominal: object = None  # tolsim.study.carriage.CarriageResult: nominal assembly
     friction_examples: object = None  # tolsim.study.friction.FrictionExamples ([contact])
+    # a rare-event estimator (study.estimator): event -> tolsim.study.limit_state.EventEstimate
+    rare_events: dict | None = None
 
     @property
     def friction(self):
@@ -573,6 +587,12 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
                          "work (local:N starts N of them); leave workers at 1")
     if not (isinstance(save_samples, int) and save_samples >= 0):
         raise ValueError(f"save_samples = {save_samples!r} must be a non-negative integer")
+    if config.study.estimator != "monte_carlo":  # before any work
+        check_supported(config)
+        if target is not None:
+            raise ValueError(f"a precision target applies to plain Monte Carlo; with "
+                             f"estimator = {config.study.estimator!r} the interval comes from "
+                             "the estimator (set samples_per_level or importance_samples)")
     retain_freed_memory()
     st = config.study
     total_blocks = n_blocks(st.samples, st.block_size)
@@ -703,10 +723,15 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         except ValueError:  # recorded as NaN; the sampled assemblies were counted anyway
             nominal = None
     examples = None if config.contact is None else friction_examples(result_config)
+    rare = None
+    if config.study.estimator != "monte_carlo":  # after the plain run (module docstring)
+        t0 = time.perf_counter()
+        rare = estimate_events(result_config, batch_size=st.block_size, notify=notify)
+        meta["rare_event_seconds"] = time.perf_counter() - t0
     return StudyResult(result_config, acc, spots, elapsed, workers, resumed, meta, sensitivity,
                        target=target, target_reached=reached, samples_maximum=st.samples,
                        stackup=stackup, samples=samples, carriage_nominal=nominal,
-                       friction_examples=examples)
+                       friction_examples=examples, rare_events=rare)
 
 
 def _say(notify, message):

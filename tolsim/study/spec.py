@@ -44,6 +44,8 @@ VELOCITY_MODELS = ("eq24", "analytic", "full")
 STATIC_MODELS = ("paired", "rigid", "solved", "linearised")
 PROPAGATIONS = ("constant", "along_track")
 SAMPLINGS = ("random", "sobol", "lhs")
+#: Estimators of the event probabilities (``[study] estimator``; issue 15).
+ESTIMATORS = ("monte_carlo", "subset", "importance")
 #: Models that give a ball's creep stiffness in a study with ``[contact]`` (issue 13).
 CREEP_MODELS = ("analytic", "full")
 #: Standard deviations either side of the mean taken as the reach of an unbounded normal
@@ -448,6 +450,19 @@ class StudySettings:
         Base sample size of the variance-based sensitivity analysis run after the study
         (0: none); it costs sensitivity_samples (d + 2) extra assemblies for d random
         tolerance sources (:func:`tolsim.study.sensitivity.study_sensitivity`).
+    estimator : str
+        Estimator of the event probabilities, a name from :data:`ESTIMATORS`: ``monte_carlo``
+        (the plain run alone), ``subset`` or ``importance`` (run after the plain run on every
+        event the study defines, :mod:`tolsim.study.limit_state`).
+    samples_per_level : int
+        Subset simulation: samples per level n (n p0 chains of 1 / p0 states; also the
+        fallback of ``importance``).
+    p0 : float
+        Subset simulation: conditional probability of each intermediate level [-].
+    max_levels : int
+        Subset simulation: most levels (the smallest P it reaches is about p0^max_levels).
+    importance_samples : int
+        Importance sampling: samples around the design point.
     """
 
     samples: int = 10_000
@@ -467,6 +482,11 @@ class StudySettings:
     out_of_spec_limit: float = 0.0
     cpk_minimum: float = 0.0
     sensitivity_samples: int = 0
+    estimator: str = "monte_carlo"
+    samples_per_level: int = 1000
+    p0: float = 0.1
+    max_levels: int = 20
+    importance_samples: int = 2000
 
 
 @dataclass(frozen=True)

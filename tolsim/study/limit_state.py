@@ -1,0 +1,1075 @@
+r"""The standard-normal space of a study and its limit states, for the rare-event estimators.
+
+:mod:`tolsim.study.rare_events` estimates P(g(U) <= 0) for U ~ N(0, I_d) and a limit state g
+on arrays of shape (n, d). This module gives a study's d, the map from U to the study's
+:class:`~tolsim.study.sampling.Block` and the limit state g of each event the study defines
+(issue 15), and runs the estimator the config names for each event
+(:func:`estimate_events`, called by :func:`tolsim.study.runner.run_study` after its plain
+Monte Carlo run).
+
+The standard-normal space
+-------------------------
+One assembly is one row u of d independent standard normals: exactly the draws of one
+assembly in a random block (:mod:`tolsim.study.sampling`), in the same order, so that
+:func:`block_from_normals` is the inverse of the draw layout. The columns, in order
+(:func:`column_layout`; T tracks, n balls per track, all track by track):
+
+1. ``factors``: T per per-assembly source (``carriage`` sources and ``rail`` sources without
+   a correlation length, in config order), source by source, track by track within a source;
+2. each ``ball`` source, in config order: T n (one per ball);
+3. ``gap``: T (n - 1), the initial gaps;
+4. each rail random field (a ``rail`` source with a correlation length), in config order: its
+   AR(1) innovations, T n (``constant`` propagation: the field at the ball centres) or T times
+   the grid points (``along_track``);
+5. a carriage with ``along_track`` propagation only: ``entering_gap`` and
+   ``entering_<source>`` of each ball source, T E each.
+
+A column belongs to a source even when its distribution is fixed (the draws are made all the
+same; g does not depend on it). The marginal maps, correlations (Cholesky of the
+independent xi, :func:`tolsim.study.sampling.error_values`) and the AR(1) recursion of the
+fields are those of :func:`tolsim.study.sampling.sample_block`, applied row by row, so a row
+of U drawn the sampler's way gives the sampler's assembly bit for bit
+(``tests/test_rare_study.py``). With ``sampling = "sobol"`` or ``"lhs"`` the plain run's
+per-assembly factors come from a quasi-random design; the rare-event estimators draw every
+column as an independent standard normal (the same distribution).
+
+Limit states (failure where g <= 0; NaN: unresolved)
+----------------------------------------------------
+Each is computed on the block built from U through the study's own evaluation path
+(:func:`tolsim.study.sampling.error_values`, :func:`tolsim.study.evaluate.evaluate_balls` or
+:func:`tolsim.study.carriage.evaluate_carriage`, the propagation, the friction of the
+trains), row by row: the value of a row does not depend on the other rows of the call (no
+BLAS product mixes rows), so the estimators' results do not depend on the batch size.
+
+``contact`` (every study with at least two balls per track) [m]
+    ``constant`` propagation: the smallest margin over the adjacent pairs of every track,
+    g = min_j (g0_j - c_j(T)), c_j(T) = (eps_j - eps_{j+1}) v T / 2 the closure of pair j at
+    the horizon T ([Lin2018] Sec. 3.2; :mod:`tolsim.study.propagation`, mode a). g <= 0 iff
+    a pair touches within the horizon, as :func:`~tolsim.study.propagation.
+    first_contact_tracks` decides (a gap of exactly 0 that does not close, where the kernel
+    needs a closing rate > 0, is given the smallest positive g). The event is a *series
+    system*: the union of its pairs' events, each with a smooth margin g_j (the components,
+    :func:`component_values`); g is smooth except where two pairs tie for the minimum.
+
+    ``along_track`` (single trains): the smallest gap of a resolved pair at the end of any
+    integration step, g = min_{k, j} g_j(t_k), from the midpoint integration of
+    :func:`~tolsim.study.propagation.first_contact_along_track` (the same arithmetic); g <= 0
+    iff that function reports a contact (a gap that reaches exactly 0 without closing
+    further is given the smallest positive g). It is continuous but not smooth (the minimum
+    over a time grid): importance sampling is not attempted (FORM needs a smooth limit state)
+    and subset simulation is used, with one line saying so. (A contact *time* would not do:
+    without contact within the horizon there is none, and g would be flat.) With a
+    ``[carriage]`` and ``along_track`` the rare-event estimators are not available (balls
+    enter and leave the loaded zone; :func:`check_supported`).
+
+    Unresolved: a train with a contact of resolved balls has g <= 0 (certain, as the plain
+    run counts it); otherwise a train with an unresolved ball (at any evaluation) gives NaN.
+``velocity_deviation_exceedance`` (a ``velocity_deviation_limit``, L) [-]
+    g = L - max_b |eps_b| over the balls of the assembly: the probability that an
+    **assembly** has a ball beyond the limit (the plain run's ppm are per ball). With
+    ``along_track`` the balls' epsilon at the start of the stroke (as the plain run's epsilon
+    statistics). An unresolved ball gives NaN unless a resolved ball of the assembly exceeds.
+    A series system of 2 T n components, L - eps_b and L + eps_b (each ball, either side).
+``friction_exceedance`` (``[contact]`` with a ``friction_increase_limit``, L) [-]
+    The increase of the worst track's friction force needs a contact: without one it is 0,
+    and g = (L - increase) / L would be flat (1) over most of the space, which stops subset
+    simulation. So, dimensionless::
+
+        g = (L - increase_max) / L            with a contact in the assembly (g <= 1),
+        g = 1 + g_contact / (v T / 2)         without one (g > 1),
+
+    g_contact the contact margin above [m] and v T / 2 the travel over which it is
+    measured (g_contact / (v T / 2) is the margin in epsilon-difference units). g <= 0 iff the
+    increase reaches L (:mod:`tolsim.study.friction`; the plain run counts > L, a tie of
+    measure zero). g jumps at the contact boundary (the contact forces start at K delta-eps),
+    so importance sampling is not attempted; subset simulation is used, as for along_track.
+    An unresolved or sliding assembly whose increase certainly exceeds L (as the plain run's
+    count) gets g = 0, any other unresolved one NaN.
+
+An assembly whose error values lie beyond the range the static model accepts (a point far out
+in U, which the sampler never draws: the config keeps every distribution inside,
+:func:`outside_model_range`) is unresolved, NaN, instead of stopping the estimator.
+
+Estimators
+----------
+``subset``: :func:`~tolsim.study.rare_events.subset_simulation` on g, for every event.
+``importance``: on a smooth series event (``contact`` with ``constant`` propagation,
+``velocity_deviation_exceedance``), FORM on *every component* and importance sampling from
+the mixture of the shifted normals around their design points
+(:func:`series_importance_sampling`). Around the one design point that FORM finds on g
+itself, the samples miss the other pairs' failure domains: on ``configs/rare_contact.toml``
+that gave P(contact) = 1.8e-4 (95 % interval 1.6e-4 to 2.0e-4) for a true 1.18e-3, the pairs of
+the train having betas of 3.44 to 3.58. On the other events (``along_track``, friction) it is
+not attempted, and where FORM fails on a component, or no sample fails, subset simulation
+runs instead: each time :attr:`EventEstimate.note` says so in one line.
+
+Seeds
+-----
+The estimator of event e draws from ``SeedSequence(seed, spawn_key=(4, EVENT_KEYS[e]))``
+(:data:`RARE_EVENT_SPAWN_KEY`; the plain run uses (0, k) and (1, ...), the sensitivity
+analysis (2,) and (3,)), so the events' estimates are independent of each other and of the
+plain run, and reproducible. :mod:`tolsim.study.rare_events` adds its own stream key below.
+
+The design point in physical units
+----------------------------------
+Importance sampling reports u* in the standard space. :func:`design_point_summary` maps it
+to the study's factors (:func:`tolsim.study.sensitivity.study_factors`: every random source,
+and the gaps): a source of one value per assembly gives its value at u*; a source with one
+value per ball (``ball`` sources, rail fields), per track or per gap gives the value of the
+element (ball, track or pair) whose column has the largest |u*| (u* is zero, to the
+solver's tolerance, in the columns that do not matter; its largest entries are the elements
+that fail), with that element's index. The importance factor of a factor is the sum of
+alpha_k^2 over its columns (of the independent xi for correlated sources, Cholesky order, as
+in the sensitivity analysis).
+
+References
+----------
+.. [Lin2018] B. Lin, C. E. Okwudire, M. Duan, J. S. Wou, "Ball-to-ball contact in linear ball
+   bearings", IMECE2018-88033.
+.. [Melchers1989] R. E. Melchers, "Importance sampling in structural systems", Structural
+   Safety 6 (1989) 3-10, doi:10.1016/0167-4730(89)90003-9.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import log_ndtr, logsumexp, ndtr
+
+from tolsim.study.rare_events import (
+    ESTIMATOR_TITLES,
+    INTERVAL_NORMAL,
+    STATUS_FORM_FAILED,
+    STATUS_NO_FAILURE,
+    RareEventResult,
+    _check_confidence,
+    _child,
+    _cv,
+    _evaluate,
+    _flagged,
+    _normal_blocks,
+    _seed_sequence,
+    _weighted_mean,
+    find_design_point,
+    subset_simulation,
+)
+from tolsim.study.sampling import (
+    Block,
+    RailField,
+    _ar1,
+    _draw_widths,
+    _field_grid,
+    error_values,
+    per_assembly_sources,
+)
+from tolsim.study.spec import ESTIMATORS, SOURCES
+
+#: First spawn-key entry of the rare-event streams under the study's seed (module docstring).
+RARE_EVENT_SPAWN_KEY = 4
+#: Second entry, per event: fixed, so adding an event never changes another's draws.
+EVENT_KEYS = {"contact": 0, "velocity_deviation_exceedance": 1, "friction_exceedance": 2}
+#: The events, in the order they are estimated and reported.
+EVENTS = tuple(EVENT_KEYS)
+#: The probability variables of each event in the result file (prefix of ``_ci_lower`` ...).
+EVENT_PROBABILITY = {"contact": "contact_probability",
+                     "velocity_deviation_exceedance": "velocity_deviation_exceedance_probability",
+                     "friction_exceedance": "friction_exceedance_probability"}
+#: How the summary names an event's probability.
+EVENT_TITLES = {"contact": "P(contact)", "velocity_deviation_exceedance": "P(an assembly has "
+                "|epsilon| > limit)", "friction_exceedance": "P(friction increase > limit)"}
+#: Units of each event's g.
+EVENT_UNITS = {"contact": "m", "velocity_deviation_exceedance": "1", "friction_exceedance": "1"}
+#: Name of the gap factor (as :data:`tolsim.study.sensitivity.INITIAL_GAP`).
+INITIAL_GAP = "initial_gap"
+
+
+# ---------------------------------------------------------------------------------------------
+# the standard-normal space
+# ---------------------------------------------------------------------------------------------
+
+def column_layout(config) -> dict:
+    """Draw name -> slice of its columns in a row of U, in the documented order.
+
+    Names as :func:`tolsim.study.sampling.sample_block` draws them: ``factors``, each ball
+    source, ``gap``, each rail field, and with a carriage and ``along_track`` propagation
+    ``entering_gap`` and ``entering_<source>``.
+    """
+    out, start = {}, 0
+    for name, width in _draw_widths(config, _field_grid(config)).items():
+        out[name] = slice(start, start + width)
+        start += width
+    return out
+
+
+def dimension(config) -> int:
+    """d: the independent standard normals of one assembly."""
+    layout = column_layout(config)
+    return max((s.stop for s in layout.values()), default=0)
+
+
+def block_from_normals(config, normals, index: int = 0, start: int = 0) -> Block:
+    """The :class:`~tolsim.study.sampling.Block` of the assemblies whose standard normals are
+    the rows of ``normals`` (the inverse of the draw layout, module docstring).
+
+    The transformation is that of :func:`tolsim.study.sampling.sample_block`, step by step,
+    on the rows given instead of a block's draws.
+
+    Parameters
+    ----------
+    config : StudyConfig
+    normals : ndarray, shape (m, d)
+        One row per assembly [-].
+    index, start : int
+        Recorded in the Block (block number, first assembly); no effect on the values.
+
+    Returns
+    -------
+    Block
+        Of ``m`` assemblies.
+    """
+    u = np.asarray(normals, dtype=np.float64)
+    d = dimension(config)
+    if u.ndim != 2 or u.shape[1] != d:
+        raise ValueError(f"normals of shape {u.shape}: expected (rows, {d})")
+    size = u.shape[0]
+    layout = column_layout(config)
+    raw = {name: u[:, sl] for name, sl in layout.items()}
+    st = config.study
+    grid = _field_grid(config)
+    tracks, balls = config.n_tracks, config.train.balls
+    if tracks == 1:
+        draws = {t.source: raw["factors"][:, j : j + 1]
+                 for j, t in enumerate(per_assembly_sources(config))}
+    else:
+        draws = {t.source: np.repeat(raw["factors"][:, j * tracks : (j + 1) * tracks], balls,
+                                     axis=1)
+                 for j, t in enumerate(per_assembly_sources(config))}
+    draws.update({t.source: raw[t.source] for t in config.tolerances if t.scope == "ball"})
+    gaps = np.maximum(config.train.initial_gap.from_normal(raw["gap"]), 0.0)
+    pitch = (2.0 * config.bearing.ball_radius + gaps).reshape(size * tracks, balls - 1)
+    position = np.concatenate([np.zeros((size * tracks, 1)), np.cumsum(pitch, axis=1)], axis=1)
+    position -= position.mean(axis=1, keepdims=True)
+    position = position.reshape(size, tracks * balls)
+    fields = {}
+    for t in config.tolerances:
+        if t.source not in grid:
+            continue
+        innovations = np.ascontiguousarray(raw[t.source])
+        ell = t.correlation_length
+        if st.propagation == "constant":
+            along = position.reshape(size * tracks, balls)
+            phi = np.exp(-np.diff(along, axis=1) / ell)
+            draws[t.source] = _ar1(phi, np.sqrt(1.0 - phi * phi),
+                                   innovations.reshape(size * tracks, balls)).reshape(
+                size, tracks * balls)
+            continue
+        origin, spacing, points = grid[t.source]
+        phi = np.full((1, points - 1), np.exp(-spacing / ell))
+        values = _ar1(phi, np.sqrt(1.0 - phi * phi), innovations.reshape(size * tracks, points))
+        fields[t.source] = RailField(origin, spacing, values, tracks)
+    entering_gap, entering = None, {}
+    if "entering_gap" in raw:
+        entering_gap = np.maximum(config.train.initial_gap.from_normal(raw["entering_gap"]),
+                                  0.0)
+        entering = {t.source: raw[f"entering_{t.source}"] for t in config.tolerances
+                    if t.scope == "ball"}
+    return Block(index, start, size, draws, fields, gaps, position, entering_gap, entering)
+
+
+# ---------------------------------------------------------------------------------------------
+# events and limit states
+# ---------------------------------------------------------------------------------------------
+
+def study_events(config) -> tuple:
+    """The events a study defines, in :data:`EVENTS` order (module docstring)."""
+    out = []
+    if config.train.balls > 1:
+        out.append("contact")
+    if config.study.velocity_deviation_limit > 0:
+        out.append("velocity_deviation_exceedance")
+    if config.contact is not None and config.contact.friction_increase_limit > 0:
+        out.append("friction_exceedance")
+    return tuple(out)
+
+
+def check_supported(config) -> None:
+    """Raise ValueError (one line) when a study cannot use a rare-event estimator."""
+    estimator = config.study.estimator
+    if estimator == "monte_carlo":
+        return
+    if config.carriage is not None and config.study.propagation == "along_track":
+        raise ValueError(f"estimator = {estimator!r} is not available for a carriage with "
+                         "along_track propagation (balls enter and leave its loaded zone); "
+                         "use propagation = 'constant' or estimator = 'monte_carlo'")
+    if not study_events(config):
+        raise ValueError(f"estimator = {estimator!r}: the study defines no event to estimate "
+                         "(one ball per track, no velocity_deviation_limit, no friction limit)")
+
+
+def is_smooth(config, event) -> bool:
+    """Whether FORM may be tried on the event's limit state (module docstring)."""
+    return event in ("contact", "velocity_deviation_exceedance") and \
+        config.study.propagation == "constant"
+
+
+def outside_model_range(config, values) -> np.ndarray:
+    """Assemblies (rows) with an error value beyond what the static model accepts.
+
+    The static model takes rotations within +/-pi/8 and lengths within a quarter of the
+    ball-groove centre distance (:func:`tolsim.physics.static.error_items`; the config
+    checks that the distributions stay inside, :func:`tolsim.io.config._check_range`). The
+    estimators' points can lie further out (a FORM step, a far tail): such an assembly is
+    unresolved (g NaN), not an error.
+    """
+    bearing = config.bearing
+    limits = {"angle": np.pi / 8, "length": 0.25 * (bearing.groove_radius - bearing.ball_radius)}
+    bad = np.zeros(next(iter(values.values())).shape[0], dtype=bool)
+    for source, x in values.items():
+        bad |= ~np.all(np.abs(x) <= limits[SOURCES[source][0]], axis=1)
+    return bad
+
+
+def _balls(config, block):
+    """BallState of a block's assemblies at the start of the stroke (as ``run_chunk``), with
+    the assemblies :func:`outside_model_range` evaluated at the nominal errors and then
+    marked unresolved (epsilon NaN, not valid)."""
+    from tolsim.study.carriage import evaluate_carriage
+    from tolsim.study.evaluate import evaluate_balls, loads_at, loads_per_ball
+
+    values = error_values(config, block)
+    bad = outside_model_range(config, values) if values else np.zeros(block.size, bool)
+    if bad.any():
+        values = {k: np.where(bad[:, None], 0.0, v) for k, v in values.items()}
+    if config.carriage is not None:
+        state = evaluate_carriage(config, values)[0]
+    else:
+        if config.study.propagation == "constant":
+            nx, ny = loads_per_ball(config, (block.size, config.balls))
+        else:  # loads at the carriage positions, as during the integration
+            nx, ny = loads_at(config, block.initial_position)
+        state = evaluate_balls(config, values, nx, ny)
+    if bad.any():
+        state.velocity_deviation[bad] = np.nan
+        state.valid[bad] = False
+    return state
+
+
+def _row_min(x):
+    """Smallest value per row ignoring NaN, +inf for an empty or all-NaN row."""
+    if x.shape[1] == 0:
+        return np.full(x.shape[0], np.inf)
+    return np.min(np.where(np.isnan(x), np.inf, x), axis=1)
+
+
+def contact_margins(config, block, state) -> np.ndarray:
+    """Contact margin of every adjacent pair, (size, tracks * (balls - 1)) [m], track by track.
+
+    g_j = g0_j - (eps_j - eps_{j+1}) v T / 2 (``constant`` propagation; NaN where a ball of
+    the pair is unresolved); a pair touches within the horizon iff g_j <= 0, as
+    :func:`tolsim.study.propagation.first_contact_tracks` decides (module docstring).
+    """
+    tracks, balls = config.n_tracks, config.train.balls
+    m = block.size
+    eps = state.velocity_deviation.reshape(m * tracks, balls)
+    half_speed = 0.5 * config.motion.groove_velocity
+    rate = (eps[:, :-1] - eps[:, 1:]) * half_speed       # as constant_contact_kernel
+    gap = block.initial_gap.reshape(m * tracks, balls - 1)
+    margin = gap - rate * config.motion.duration
+    # the kernel needs a closing rate > 0: a gap of 0 that does not close is no contact
+    margin = np.where((margin == 0) & ~(rate > 0), np.finfo(float).tiny, margin)
+    return margin.reshape(m, tracks * (balls - 1))
+
+
+def exceedance_margins(config, state) -> np.ndarray:
+    """|epsilon| limit margins L - eps_b and L + eps_b of every ball, (size, 2 balls) [-]:
+    ball by ball, the upper then the lower side; NaN for an unresolved ball."""
+    limit = config.study.velocity_deviation_limit
+    eps = state.velocity_deviation
+    return np.stack([limit - eps, limit + eps], axis=2).reshape(eps.shape[0], -1)
+
+
+def component_names(config, event) -> tuple:
+    """Names of the components of a series event (:func:`component_values` columns)."""
+    tracks, balls = config.n_tracks, config.train.balls
+    where = (lambda t: f"track {t} ") if tracks > 1 else (lambda t: "")
+    if event == "contact":
+        return tuple(f"{where(t)}pair {j}" for t in range(tracks) for j in range(balls - 1))
+    if event == "velocity_deviation_exceedance":
+        return tuple(f"{where(t)}ball {b} epsilon {side}" for t in range(tracks)
+                     for b in range(balls) for side in ("> +L", "< -L"))
+    raise ValueError(f"event {event!r} has no components")
+
+
+def component_values(config, block, event) -> np.ndarray:
+    """The components of a series event, (size, k): the event is their union, its g their
+    minimum (:func:`series`). ``contact`` (``constant`` propagation): the pairs
+    (:func:`contact_margins`); ``velocity_deviation_exceedance``: each ball beyond +L or
+    below -L (:func:`exceedance_margins`)."""
+    state = _balls(config, block)
+    if event == "contact":
+        return contact_margins(config, block, state)
+    if event == "velocity_deviation_exceedance":
+        return exceedance_margins(config, state)
+    raise ValueError(f"event {event!r} has no components")
+
+
+def series(components) -> np.ndarray:
+    """g of the union of components (size, k): their minimum where it fails (<= 0) or where
+    every component is known, NaN otherwise (a certain failure counts even with an
+    unresolved component, as the plain run counts a certain contact)."""
+    g = _row_min(components)
+    known = ~np.isnan(components).any(axis=1) | (g <= 0)
+    return np.where(known, g, np.nan)
+
+
+def contact_margin_along_track(config, block, state):
+    """(g [m], hit, resolved) of the contact event with ``along_track`` propagation.
+
+    The midpoint integration of :func:`tolsim.study.propagation.first_contact_along_track`
+    (the same arithmetic, step by step), recording the smallest gap of a resolved pair at the
+    end of each step and its contact decision (module docstring).
+    """
+    from tolsim.study.evaluate import evaluate_balls, loads_at
+
+    v = config.motion.groove_velocity
+    horizon = config.motion.duration
+    steps = config.study.time_steps
+    dt = horizon / steps
+    diameter = 2.0 * config.bearing.ball_radius
+    size = block.size
+
+    def velocity(position, t):
+        values = error_values(config, block, rail_position=position)
+        nx, ny = loads_at(config, position - v * t)
+        s = evaluate_balls(config, values, nx, ny)
+        return s.velocity_deviation, s.valid
+
+    position = block.initial_position.copy()
+    ball_ok = np.ones(position.shape, dtype=bool)
+    hit = np.zeros(size, dtype=bool)
+    smallest = np.full(size, np.inf)
+    t = 0.0
+    for k in range(steps):
+        if k == 0:
+            eps1, ok1 = state.velocity_deviation, state.valid
+        else:
+            eps1, ok1 = velocity(position, t)
+        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(eps1)) * 0.5 * v
+        eps2, ok2 = velocity(mid, t + 0.5 * dt)
+        ball_ok &= ok1 & ok2
+        new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
+        gap_old = np.diff(position, axis=1) - diameter
+        gap_new = np.diff(new, axis=1) - diameter
+        pair_ok = ball_ok[:, :-1] & ball_ok[:, 1:]
+        hit |= np.any((gap_new <= 0.0) & (gap_old > gap_new) & pair_ok, axis=1)
+        smallest = np.minimum(smallest, _row_min(np.where(pair_ok, gap_new, np.inf)))
+        position = new
+        t = (k + 1) * dt
+    # a gap at exactly 0 that never closed further is no contact (as the plain run)
+    g = np.where(~hit & (smallest <= 0), np.finfo(float).tiny, smallest)
+    resolved = state.valid.all(axis=1) & ball_ok.all(axis=1)
+    return g, hit, resolved
+
+
+def event_values(config, block, events=None) -> dict:
+    """g of each event (module docstring) for the assemblies of ``block``.
+
+    Parameters
+    ----------
+    config : StudyConfig
+    block : Block
+    events : sequence of str, optional
+        Default :func:`study_events`.
+
+    Returns
+    -------
+    dict
+        event -> ndarray (size,): g, failure where g <= 0, NaN unresolved.
+    """
+    events = study_events(config) if events is None else tuple(events)
+    state = _balls(config, block)
+    out = {}
+    touched = margin = None
+    if "contact" in events or "friction_exceedance" in events:
+        if config.study.propagation == "constant":
+            margin = _row_min(contact_margins(config, block, state))
+            resolved = state.valid.all(axis=1)
+        else:
+            margin, _, resolved = contact_margin_along_track(config, block, state)
+        touched = margin <= 0
+        out["contact"] = np.where(touched | resolved, margin, np.nan)
+    if "velocity_deviation_exceedance" in events:
+        out["velocity_deviation_exceedance"] = series(exceedance_margins(config, state))
+    if "friction_exceedance" in events:
+        from tolsim.study.friction import evaluate_friction
+
+        limit = config.contact.friction_increase_limit
+        figures = evaluate_friction(config, block.initial_gap, state)
+        scale = 0.5 * config.motion.groove_velocity * config.motion.duration
+        g = np.where(touched, (limit - figures.increase_max) / limit, 1.0 + margin / scale)
+        out["friction_exceedance"] = np.where(
+            figures.resolved, g, np.where(figures.exceeds, 0.0, np.nan))
+    return {event: out[event] for event in events}
+
+
+class LimitState:
+    """g(U) of one event of a study: a callable on (rows, d) arrays (module docstring).
+
+    Attributes
+    ----------
+    config : StudyConfig
+    event : str
+        A name of :data:`EVENTS`.
+    dimension : int
+        d.
+    smooth : bool
+        Whether FORM may be tried (:func:`is_smooth`); then the event is a union of smooth
+        components (:meth:`components`, :attr:`component_names`).
+    units : str
+        Of g.
+    """
+
+    def __init__(self, config, event):
+        if event not in EVENTS:
+            raise ValueError(f"event {event!r} is not one of {', '.join(EVENTS)}")
+        if event not in study_events(config):
+            raise ValueError(f"the study does not define the event {event!r}")
+        self.config = config
+        self.event = event
+        self.dimension = dimension(config)
+        self.smooth = is_smooth(config, event)
+        self.units = EVENT_UNITS[event]
+        self.component_names = component_names(config, event) if self.smooth else ()
+
+    def _block(self, u):
+        u = np.asarray(u, dtype=np.float64)
+        return block_from_normals(self.config, u)
+
+    def __call__(self, u):
+        """g (rows,) [:attr:`units`]; failure where g <= 0, NaN unresolved."""
+        if np.shape(u)[0] == 0:
+            return np.empty(0)
+        if self.smooth:  # the same numbers, without evaluating the other events
+            return series(self.components(u))
+        return event_values(self.config, self._block(u), (self.event,))[self.event]
+
+    def components(self, u):
+        """The components' g (rows, k) of a smooth event (:func:`component_values`)."""
+        if not self.smooth:
+            raise ValueError(f"the {self.event} limit state has no smooth components")
+        if np.shape(u)[0] == 0:
+            return np.empty((0, len(self.component_names)))
+        return component_values(self.config, self._block(u), self.event)
+
+    def component(self, k):
+        """g of component k alone: a limit state for :func:`~tolsim.study.rare_events.
+        find_design_point`."""
+        return lambda u: self.components(u)[:, k]
+
+
+# ---------------------------------------------------------------------------------------------
+# running the estimators
+# ---------------------------------------------------------------------------------------------
+
+def event_seed(config, event) -> np.random.SeedSequence:
+    """The SeedSequence of an event's estimator (module docstring)."""
+    return np.random.SeedSequence(config.study.seed,
+                                  spawn_key=(RARE_EVENT_SPAWN_KEY, EVENT_KEYS[event]))
+
+
+@dataclass(frozen=True, eq=False)
+class DesignPointSummary:
+    """The design point of importance sampling in the study's factors (module docstring).
+
+    Attributes
+    ----------
+    factors : tuple of str
+        :func:`tolsim.study.sensitivity.study_factors`.
+    kinds : tuple of str
+        ``length`` [m] or ``angle`` [rad] per factor.
+    value : ndarray (k,)
+        The factor's value at u* [m or rad].
+    standard_normal : ndarray (k,)
+        u* of the column reported [-].
+    element : ndarray of int (k,)
+        The ball (track * n + ball), pair (track * (n - 1) + pair) or track of the value.
+    importance_factor : ndarray (k,)
+        Sum of alpha^2 over the factor's columns [-].
+    component : str
+        The component of the series event whose design point this is (``pair 3``).
+    element_kinds : tuple of str
+        What ``element`` counts per factor: ``ball``, ``pair`` or ``track``.
+    """
+
+    factors: tuple
+    kinds: tuple
+    value: np.ndarray
+    standard_normal: np.ndarray
+    element: np.ndarray
+    importance_factor: np.ndarray
+    component: str = ""
+    element_kinds: tuple = ()
+
+    def top(self, count=3) -> list:
+        """(factor, value, kind, element, importance factor) of the ``count`` largest
+        importance factors, largest first."""
+        order = np.argsort(-self.importance_factor, kind="stable")[:count]
+        return [(self.factors[i], float(self.value[i]), self.kinds[i], int(self.element[i]),
+                 float(self.importance_factor[i])) for i in order]
+
+    def describe(self, count=3, tracks=1) -> str:
+        """The ``count`` largest contributors in words: ``arc_centre_offset_tangential_BL
+        +0.575 um at ball 1 (57 %)`` (lengths in um, angles in deg)."""
+        parts = []
+        for i in np.argsort(-self.importance_factor, kind="stable")[:count]:
+            value = self.value[i]
+            text = (f"{1e6 * value:+.3g} um" if self.kinds[i] == "length"
+                    else f"{np.degrees(value):+.3g} deg")
+            where = self.element_kinds[i] if i < len(self.element_kinds) else ""
+            if where and (where != "track" or tracks > 1):
+                text += f" at {where} {int(self.element[i])}"
+            parts.append(f"{self.factors[i]} {text} ({100 * self.importance_factor[i]:.0f} %)")
+        return ", ".join(parts)
+
+
+def _factor_columns(config) -> dict:
+    """factor -> list of (column, element, what) over the columns of U (module docstring);
+    ``what``: ``assembly`` (per-assembly source, element = track), ``ball`` or ``gap``."""
+    layout = column_layout(config)
+    tracks = config.n_tracks
+    out = {}
+    for j, t in enumerate(per_assembly_sources(config)):
+        first = layout["factors"].start + j * tracks
+        out[t.source] = [(first + k, k, "assembly") for k in range(tracks)]
+    for name, sl in layout.items():
+        if name == "factors":
+            continue
+        factor = INITIAL_GAP if name in ("gap", "entering_gap") else name.removeprefix(
+            "entering_")
+        what = "gap" if factor == INITIAL_GAP else "ball"
+        entering = name.startswith("entering_")
+        out.setdefault(factor, []).extend(
+            (c, -1 if entering else c - sl.start, what) for c in range(sl.start, sl.stop))
+    return out
+
+
+def design_point_summary(config, point, component="") -> DesignPointSummary:
+    """Map a design point u* (d,) to the study's factors (module docstring)."""
+    from tolsim.study.sensitivity import study_factors
+
+    u = np.asarray(point, dtype=float)
+    block = block_from_normals(config, u[None])
+    values = error_values(config, block)
+    columns = _factor_columns(config)
+    alpha2 = (u / np.linalg.norm(u)) ** 2 if np.any(u) else np.zeros_like(u)
+    balls = config.train.balls
+    names = study_factors(config)
+    value, normal, element, share, kinds, where = [], [], [], [], [], []
+    for factor in names:
+        cols = [c for c in columns[factor] if c[1] >= 0]
+        index = np.array([c[0] for c in cols])
+        best = cols[int(np.argmax(np.abs(u[index])))]
+        column, at, what = best
+        if what == "gap":
+            value.append(float(block.initial_gap[0, at]))
+            kinds.append("length")
+        else:
+            ball = at * balls if what == "assembly" else at
+            value.append(float(values[factor][0, ball]))
+            kinds.append(SOURCES[factor][0])
+        normal.append(float(u[column]))
+        element.append(at)
+        where.append({"gap": "pair", "assembly": "track"}.get(what, "ball"))
+        share.append(float(np.sum(alpha2[[c[0] for c in columns[factor]]])))
+    return DesignPointSummary(tuple(names), tuple(kinds), np.array(value, dtype=float),
+                              np.array(normal, dtype=float), np.array(element, dtype=np.int64),
+                              np.array(share, dtype=float), component, tuple(where))
+
+
+@dataclass(frozen=True, eq=False)
+class SeriesDesignPoints:
+    """FORM on each component of a series event (:func:`series_importance_sampling`).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The components (:func:`component_names`).
+    points : ndarray (k, d)
+        Their design points u*_k [-].
+    betas : ndarray (k,)
+        |u*_k| [-].
+    evaluations : int
+        Rows evaluated by the k searches.
+    """
+
+    names: tuple
+    points: np.ndarray
+    betas: np.ndarray
+    evaluations: int
+
+    @property
+    def most_probable(self) -> int:
+        """The component with the smallest beta."""
+        return int(np.argmin(self.betas))
+
+
+def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=None,
+                               confidence_level=0.95):
+    """FORM on every component, then importance sampling from the mixture of N(u*_k, I).
+
+    A series event (the union of its components: any pair touches, any ball beyond the
+    limit) has a design point per component, often several of similar beta (the pairs of a
+    train). Importance sampling around one of them misses the others' failure domains and
+    is low by a factor of up to their number, with a standard error that does not show it
+    (module docstring of :mod:`tolsim.study.rare_events`). Here each component's design
+    point u*_k is found (:func:`~tolsim.study.rare_events.find_design_point` on the
+    component alone), and the samples are drawn from the mixture
+    q(v) = sum_k pi_k phi(v - u*_k), pi_k proportional to Phi(-beta_k), with the weight
+    phi(v) / q(v) = 1 / sum_k pi_k exp(v . u*_k - beta_k^2 / 2) ([Melchers1989]'s
+    multi-modal sampling density for systems). The estimate is unbiased whatever the
+    mixture (it has full support); the mixture only makes it efficient. Standard error,
+    interval and unresolved bounds as :func:`~tolsim.study.rare_events.importance_sampling`.
+
+    Randomness: the normals in blocks from the children (RARE_EVENT_STREAM, 0, b) of
+    ``seed`` (as the estimators of :mod:`tolsim.study.rare_events`), the mixture components
+    from the child (RARE_EVENT_STREAM, 1).
+
+    Parameters
+    ----------
+    limit_state : LimitState
+        A smooth (series) event.
+    seed : numpy.random.SeedSequence or int
+    samples : int
+        n importance samples.
+    batch_size : int, optional
+        Most rows per model call; no effect on the result.
+    confidence_level : float
+
+    Returns
+    -------
+    (RareEventResult, SeriesDesignPoints or None)
+        The result's ``design_point``, ``beta`` and ``importance_factors`` are those of the
+        most probable component; ``form_probability`` is the first-order series bound
+        min(1, sum_k Phi(-beta_k)) (each component's FORM estimate, added). Flagged
+        ``form_failed`` when FORM gives no design point for some component (its message
+        names it), ``no_failure`` when no sample fails.
+    """
+    d = limit_state.dimension
+    n = int(samples)
+    if n < 2:
+        raise ValueError(f"samples = {samples!r} must be >= 2")
+    z = _check_confidence(confidence_level)
+    root = _seed_sequence(seed)
+    names = limit_state.component_names
+    common = dict(estimator="importance", confidence_level=confidence_level, dimension=d,
+                  samples_per_level=n)
+    points, betas, evaluations = [], [], 0
+    for k, name in enumerate(names):
+        found = find_design_point(limit_state.component(k), d, batch_size=batch_size)
+        evaluations += found.evaluations
+        if not found.converged:
+            return _flagged(STATUS_FORM_FAILED, f"FORM found no design point for {name}: "
+                                                f"{found.message}", evaluations, 0,
+                            common), None
+        points.append(found.point)
+        betas.append(found.beta)
+    design = SeriesDesignPoints(tuple(names), np.array(points), np.array(betas), evaluations)
+    best = design.most_probable
+    shifts, beta = design.points, design.betas
+    log_weight = log_ndtr(-beta)
+    log_weight = log_weight - logsumexp(log_weight)
+    star = shifts[best]
+    common.update(design_point=star, beta=float(beta[best]),
+                  form_probability=float(min(1.0, np.sum(ndtr(-beta)))),
+                  importance_factors=(star / beta[best]) ** 2)
+    labels = np.random.default_rng(_child(root, 1)).choice(len(names), size=n,
+                                                           p=np.exp(log_weight))
+    v = np.concatenate(list(_normal_blocks(root, (0,), n, d))) + shifts[labels]
+    # log q(v) / phi(v), row by row
+    log_ratio = logsumexp(log_weight + v @ shifts.T - 0.5 * beta * beta, axis=1)
+    w = np.exp(-log_ratio)
+    g = _evaluate(limit_state, v, batch_size)
+    evaluations += n
+    failed, unevaluable = g <= 0, np.isnan(g)
+    unresolved = int(np.count_nonzero(unevaluable))
+    if not np.any(failed | unevaluable):
+        return _flagged(STATUS_NO_FAILURE, f"no failure among the {n} samples around the "
+                                           f"{len(names)} design points: no probability "
+                                           "estimated", evaluations, unresolved,
+                        common), design
+    lower, se_lower = _weighted_mean(np.where(failed, w, 0.0))
+    upper, se_upper = _weighted_mean(np.where(failed | unevaluable, w, 0.0))
+    resolved = 1.0 - (upper - lower)
+    p = lower / resolved
+    se = se_lower / resolved
+    return RareEventResult(
+        probability=p, standard_error=se, coefficient_of_variation=_cv(p, se),
+        ci_lower=max(p - z * se, 0.0), ci_upper=p + z * se, interval=INTERVAL_NORMAL,
+        evaluations=evaluations, unresolved=unresolved,
+        failures=int(np.count_nonzero(failed)), bound_lower=lower, bound_upper=upper,
+        bounds_ci_lower=max(lower - z * se_lower, 0.0), bounds_ci_upper=upper + z * se_upper,
+        **common), design
+
+
+@dataclass(frozen=True, eq=False)
+class EventEstimate:
+    """What a rare-event estimator gave for one event of a study.
+
+    Attributes
+    ----------
+    event : str
+    requested : str
+        The config's estimator.
+    result : tolsim.study.rare_events.RareEventResult
+        The estimate reported (flagged, without a number, when no estimator could back one).
+    note : str
+        One line when another estimator than the requested one gave ``result`` (importance
+        sampling falling back to subset simulation), else "".
+    design_point : DesignPointSummary or None
+        Importance sampling's design point (of its most probable component) in the study's
+        factors, when ``result`` is its.
+    components : SeriesDesignPoints or None
+        Importance sampling: every component's design point and beta.
+    seconds : float
+        Wall time [s].
+    """
+
+    event: str
+    requested: str
+    result: object
+    note: str = ""
+    design_point: DesignPointSummary | None = None
+    components: SeriesDesignPoints | None = None
+    seconds: float = 0.0
+
+    def describe(self) -> str:
+        """One line: the event, the estimator and its number (or why there is none)."""
+        line = f"{EVENT_TITLES[self.event]} by {self.result.describe()}"
+        if self.note:
+            line += f" [{self.note}]"
+        return line
+
+
+def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
+    """Run the config's estimator on one event (module docstring).
+
+    ``importance`` tries FORM on a smooth limit state and falls back to subset simulation
+    (same settings) when the limit state is not smooth or importance sampling gives no
+    number, saying why in ``note``.
+    """
+    import time
+
+    st = config.study
+    started = time.perf_counter()
+    g = LimitState(config, event)
+    seed = event_seed(config, event)
+
+    def subset():
+        return subset_simulation(g, g.dimension, seed, samples_per_level=st.samples_per_level,
+                                 p0=st.p0, max_levels=st.max_levels, batch_size=batch_size)
+
+    note, design, components = "", None, None
+    if st.estimator == "subset":
+        result = subset()
+    elif st.estimator == "importance":
+        if not g.smooth:
+            why = ("along_track propagation gives a limit state that is not smooth (the "
+                   "smallest gap over the time steps)" if config.study.propagation
+                   != "constant" else "the friction limit state jumps where the balls "
+                   "start to touch")
+            result = subset()
+            note = f"importance sampling not attempted: {why}; subset simulation used"
+        else:
+            result, components = series_importance_sampling(
+                g, seed, samples=st.importance_samples, batch_size=batch_size)
+            if result.ok:
+                design = design_point_summary(config, result.design_point,
+                                              components.names[components.most_probable])
+            else:
+                note = f"importance sampling: {result.message}; subset simulation used"
+                result, components = subset(), None
+    else:
+        raise ValueError(f"estimator = {st.estimator!r}: choose one of "
+                         f"{', '.join(ESTIMATORS[1:])} (monte_carlo is the plain run)")
+    return EventEstimate(event, st.estimator, result, note, design, components,
+                         time.perf_counter() - started)
+
+
+def estimate_events(config, *, batch_size=None, notify=None) -> dict:
+    """:func:`estimate_event` for every event of the study (:func:`study_events`).
+
+    Returns
+    -------
+    dict
+        event -> EventEstimate, in :data:`EVENTS` order.
+    """
+    check_supported(config)
+    out = {}
+    for event in study_events(config):
+        if notify is not None:
+            notify(f"{ESTIMATOR_TITLES.get(config.study.estimator, config.study.estimator)} "
+                   f"of {EVENT_TITLES[event]}")
+        out[event] = estimate_event(config, event, batch_size=batch_size)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# result-file variables
+# ---------------------------------------------------------------------------------------------
+
+def _probability_declarations(prefix, what):
+    """The probability, interval and bounds of an event (name -> (dims, units, long_name,
+    kind)), worded for any estimator (its method in the ``interval`` attribute)."""
+    return {
+        f"{prefix}_ci_lower": ((), "1", f"lower end of the 95 % interval of the {what} "
+                                        "(its method in the interval attribute)", "f"),
+        f"{prefix}_ci_upper": ((), "1", f"upper end of the 95 % interval of the {what} "
+                                        "(its method in the interval attribute)", "f"),
+        f"{prefix}_bounds_ci_lower": ((), "1", f"lower end of the 95 % interval of the lower "
+                                               f"bound of the {what}", "f"),
+        f"{prefix}_bounds_ci_upper": ((), "1", f"upper end of the 95 % interval of the upper "
+                                               f"bound of the {what}", "f"),
+    }
+
+
+#: The interval variables of the contact and friction probabilities, worded for any estimator
+#: (:mod:`tolsim.io.schema` declares them so, and accepts the former "Clopper-Pearson" wording
+#: in files written before issue 15).
+INTERVAL_VARIABLES = {
+    **_probability_declarations("contact_probability", "contact probability"),
+    **{name: decl for name, decl in _probability_declarations(
+        "friction_exceedance_probability", "friction exceedance probability").items()
+       if "bounds" not in name},
+}
+
+_FACTOR = ("factor",)
+#: name -> (dims, units, long_name, dtype kind): the variables of a rare-event estimator
+#: (:mod:`tolsim.io.schema` declares them, optional), for each event of :data:`EVENTS`.
+RARE_EVENT_VARIABLES = {
+    "velocity_deviation_exceedance_probability": (
+        (), "1", "probability that an assembly has a ball with |epsilon| above its limit, over "
+                 "the assemblies whose outcome is known", "f"),
+    "velocity_deviation_exceedance_probability_bound_lower": (
+        (), "1", "lower partial-identification bound of the velocity deviation exceedance "
+                 "probability: unresolved assemblies within the limit", "f"),
+    "velocity_deviation_exceedance_probability_bound_upper": (
+        (), "1", "upper partial-identification bound of the velocity deviation exceedance "
+                 "probability: unresolved assemblies beyond the limit", "f"),
+    **_probability_declarations("velocity_deviation_exceedance_probability",
+                                "velocity deviation exceedance probability"),
+    **{name: decl for name, decl in _probability_declarations(
+        "friction_exceedance_probability", "friction exceedance probability").items()
+       if "bounds" in name},
+}
+for _event, _prefix in EVENT_PROBABILITY.items():
+    _what = _prefix.replace("_", " ")
+    RARE_EVENT_VARIABLES.update({
+        f"{_prefix}_coefficient_of_variation": ((), "1", f"coefficient of variation of the "
+                                                         f"{_what} estimate", "f"),
+        f"{_prefix}_evaluations": ((), "1", f"assemblies evaluated by the estimator of the "
+                                            f"{_what}", "i"),
+        f"{_prefix}_unresolved_evaluations": ((), "1", f"assemblies evaluated by the estimator "
+                                                       f"of the {_what} that no model could "
+                                                       "resolve", "i"),
+        f"{_event}_reliability_index": ((), "1", f"reliability index beta of the {_what}: "
+                                                 "distance of the most probable design point "
+                                                 "from the origin of the standard-normal "
+                                                 "space", "f"),
+        f"{_event}_form_probability": ((), "1", f"first-order (FORM) estimate of the {_what}: "
+                                                "sum over the components of Phi(-beta)", "f"),
+        f"{_event}_design_point_length": (_FACTOR, "m", f"value of a length tolerance source "
+                                                        f"at the design point of the {_what} "
+                                                        "(NaN for angles)", "f"),
+        f"{_event}_design_point_angle": (_FACTOR, "rad", f"value of an angle tolerance source "
+                                                         f"at the design point of the {_what} "
+                                                         "(NaN for lengths)", "f"),
+        f"{_event}_design_point_standard_normal": (_FACTOR, "1", f"standard-normal coordinate "
+                                                                 f"of the source's value at "
+                                                                 f"the design point of the "
+                                                                 f"{_what}", "f"),
+        f"{_event}_design_point_element": (_FACTOR, "1", "ball, pair or track whose value is "
+                                                         f"given at the design point of the "
+                                                         f"{_what}", "i"),
+        f"{_event}_importance_factor": (_FACTOR, "1", f"FORM importance factor (sum of alpha "
+                                                      f"squared over the source's columns) at "
+                                                      f"the design point of the {_what}", "f"),
+    })
+
+#: Where the seeds of the estimators come from, for the result file.
+SEED_STREAMS = ("SeedSequence(seed, spawn_key=(4, k)), k: "
+                + ", ".join(f"{event} {key}" for event, key in EVENT_KEYS.items()))
+
+
+def estimator_settings(config) -> str:
+    """The estimator's settings in one line (result-file attribute)."""
+    st = config.study
+    text = (f"samples_per_level {st.samples_per_level}, p0 {st.p0:g}, max_levels "
+            f"{st.max_levels}")
+    if st.estimator == "importance":
+        text = f"importance_samples {st.importance_samples}; fallback subset: {text}"
+    return text
+
+
+def rare_event_variables(result) -> tuple:
+    """(factor names or None, data variables, variable attributes, global attributes) of a
+    study run with a rare-event estimator (``result.rare_events``).
+
+    The events' probability variables (``contact_probability`` ...) are the estimator's, with
+    the attributes ``estimator``, ``estimator_status``, ``interval``, ``estimator_seconds``
+    (wall time) and, when it has something to say, ``estimator_note`` (a fallback) or
+    ``estimator_message`` (no number); the plain run's
+    counts (``n_contact`` ...) stay. Importance sampling adds the design point along
+    ``factor`` (names: :func:`tolsim.study.sensitivity.study_factors`).
+    """
+    config = result.config
+    data, attrs, factors = {}, {}, None
+    for event, estimate in result.rare_events.items():
+        r = estimate.result
+        prefix = EVENT_PROBABILITY[event]
+        values = {
+            prefix: r.probability, f"{prefix}_ci_lower": r.ci_lower,
+            f"{prefix}_ci_upper": r.ci_upper, f"{prefix}_bound_lower": r.bound_lower,
+            f"{prefix}_bound_upper": r.bound_upper, f"{prefix}_bounds_ci_lower":
+            r.bounds_ci_lower, f"{prefix}_bounds_ci_upper": r.bounds_ci_upper,
+            f"{prefix}_coefficient_of_variation": r.coefficient_of_variation,
+        }
+        data.update({name: float(value) for name, value in values.items()})
+        data[f"{prefix}_evaluations"] = np.int64(r.evaluations)
+        data[f"{prefix}_unresolved_evaluations"] = np.int64(r.unresolved)
+        tag = {"estimator": r.estimator, "estimator_status": r.status}
+        for name in values:
+            attrs[name] = dict(tag)
+        attrs[prefix].update(interval=r.interval, estimator_seconds=float(estimate.seconds))
+        attrs[f"{prefix}_ci_lower"].update(interval=r.interval)
+        attrs[f"{prefix}_ci_upper"].update(interval=r.interval)
+        if estimate.note:
+            attrs[prefix]["estimator_note"] = estimate.note
+        if not r.ok:
+            attrs[prefix]["estimator_message"] = r.message
+        if r.estimator == "importance" and r.ok:
+            design = estimate.design_point
+            factors = design.factors
+            length = np.array([k == "length" for k in design.kinds], dtype=bool)
+            data.update({
+                f"{event}_reliability_index": float(r.beta),
+                f"{event}_form_probability": float(r.form_probability),
+                f"{event}_design_point_length": (_FACTOR, np.where(length, design.value,
+                                                                   np.nan)),
+                f"{event}_design_point_angle": (_FACTOR, np.where(length, np.nan,
+                                                                  design.value)),
+                f"{event}_design_point_standard_normal": (_FACTOR, design.standard_normal),
+                f"{event}_design_point_element": (_FACTOR, design.element),
+                f"{event}_importance_factor": (_FACTOR, design.importance_factor),
+            })
+            attrs[f"{event}_reliability_index"] = {
+                "design_point_component": design.component,
+                "design_point_description": design.describe(tracks=config.n_tracks)}
+    contact = result.rare_events.get("contact")
+    glob = {"estimator": config.study.estimator,
+            "estimator_settings": estimator_settings(config),
+            "rare_event_seed_streams": SEED_STREAMS}
+    if contact is not None:
+        glob["contact_probability_interval"] = (
+            f"{ESTIMATOR_TITLES[contact.result.estimator]}: {contact.result.interval}, 95 %, "
+            "over the assemblies whose outcome is known; bounds with the unresolved ones "
+            "counted as no contact / contact, and the interval covering them")
+    return factors, data, attrs, glob
