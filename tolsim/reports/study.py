@@ -70,6 +70,7 @@ from tolsim.reports.style import (
     styled,
 )
 from tolsim.reports.verdict import (
+    ESTIMATOR_NAMES,
     FAIL,
     PASS,
     STATUS_LABELS,
@@ -77,6 +78,7 @@ from tolsim.reports.verdict import (
     any_train,
     contact_unit,
     counted,
+    estimator_label,
     has_friction,
     study_verdict,
     tracks_of,
@@ -415,7 +417,11 @@ def plot_contact(ds):
     ax_p.set_xlim(-0.8, 0.8)
     ax_p.set_xlabel("contact within the horizon")
     ax_p.set_ylabel(f"P(contact within the horizon) per {one} [-]")
-    ax_p.set_title("(b) contact probability\n(95 % Clopper-Pearson)", fontsize=10)
+    label = estimator_label(ds)
+    ax_p.set_title("(b) contact probability\n(95 % " + (
+        label if label == "Clopper-Pearson" else
+        ESTIMATOR_NAMES.get(ds["contact_probability"].attrs.get("estimator"), "estimator"))
+        + ")", fontsize=10)
 
     if "contact_pair_count" in ds.variables and ds.sizes.get("pair", 0) > 0:
         pairs = np.asarray(ds["pair"])
@@ -1346,7 +1352,8 @@ def friction_content(ds, sens=None) -> dict:
     if has_limit:
         rows.append((f"P(increase > {limit:.4g} N) per {one}",
                      f"{format_fraction(p, lo, hi)} ({exceed:,} of {n_asm - unresolved:,} "
-                     f"{many} whose outcome is known; Clopper-Pearson)",
+                     f"{many} whose outcome is known; "
+                     f"{estimator_label(ds, 'friction_exceedance_probability')})",
                      "friction_exceedance_probability, _ci_lower, _ci_upper"))
         if unresolved:
             bounds = (format_fraction(_f(ds, f"friction_exceedance_probability_bound_{end}"))
@@ -1753,8 +1760,11 @@ def _html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None,
         "<h2>2. Results at a glance</h2><table>",
         _row("P(ball-to-ball contact within the stroke)" + (
                 f" per assembly (contact in {any_train(tracks)})" if tracks else ""),
-             f"{format_fraction(p, lo, hi)}  ({_i(ds, 'n_contact'):,} of "
-             f"{n_asm - n_unres:,} {many} whose outcome is known; Clopper-Pearson)"),
+             f"{format_fraction(p, lo, hi)}  " + (
+                 f"({_i(ds, 'n_contact'):,} of {n_asm - n_unres:,} {many} whose outcome is "
+                 "known; Clopper-Pearson)" if estimator_label(ds) == "Clopper-Pearson" else
+                 f"({estimator_label(ds)}; the plain run: {_i(ds, 'n_contact'):,} of "
+                 f"{n_asm - n_unres:,} {many})")),
         *([_row(f"bounds over all {n_asm:,} {many} ({n_unres:,} unresolved counted as no "
                 "contact / contact)",
                 f"{format_fraction(bounds[0])} to {format_fraction(bounds[1])} (95 % interval "

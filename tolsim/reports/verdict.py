@@ -91,6 +91,32 @@ class Verdict:
         return self.status.upper()
 
 
+
+ESTIMATOR_NAMES = {"subset": "subset simulation", "importance": "importance sampling"}
+
+
+def estimator_label(ds, name="contact_probability"):
+    """How a probability variable's interval was made, in words: "Clopper-Pearson" for the
+    plain Monte Carlo, else the rare-event estimator with its interval, CV and model
+    evaluations (the variable's ``estimator`` and ``interval`` attributes, issue 15)."""
+    attrs = ds[name].attrs if name in ds.variables else {}
+    estimator = str(attrs.get("estimator", "monte_carlo"))
+    if estimator == "monte_carlo":
+        return "Clopper-Pearson"
+    label = ESTIMATOR_NAMES.get(estimator, estimator)
+    parts = [f"{label}: {attrs.get('interval', 'interval of the estimator')}"]
+    cv, evals = f"{name}_coefficient_of_variation", f"{name}_evaluations"
+    if cv in ds.variables:
+        parts.append(f"CV {float(ds[cv]):.2g}")
+    if evals in ds.variables:
+        parts.append(f"{int(ds[evals]):,} model evaluations")
+    return ", ".join(parts)
+
+
+def _interval_kind(label):
+    return "Clopper-Pearson interval" if label == "Clopper-Pearson" else f"interval, {label}"
+
+
 def judge_upper_limit(lower, upper, limit) -> str:
     """Status of "quantity <= limit" from an interval [lower, upper] of the quantity."""
     if not (limit is not None and np.isfinite(limit)):
@@ -182,7 +208,7 @@ def contact_check(ds) -> SpecCheck:
     status = judge_upper_limit(lo, hi, limit)
     one, many = contact_unit(ds)
     kind = (f"interval covering the bounds over all {many}" if covering and _f(
-        ds, "n_assemblies_unresolved") > 0 else "Clopper-Pearson interval")
+        ds, "n_assemblies_unresolved") > 0 else _interval_kind(estimator_label(ds)))
     estimate = (f"{format_fraction(p)} ({100 * CONFIDENCE:.0f} % {kind}: "
                 f"{format_fraction(lo)} to {format_fraction(hi)})")
     req = f"P(contact) ≤ {format_fraction(limit)}" if limit else NO_LIMIT
@@ -272,7 +298,7 @@ def friction_check(ds, friction_exceedance_limit=None):
     quantity = (f"P(friction increase > {limit_n:.4g} N) per {one}{worst}: the rise of the "
                 "carriage friction force over its free-rolling baseline")
     kind = (f"interval covering the bounds over all {many}" if covering
-            else "Clopper-Pearson interval")
+            else _interval_kind(estimator_label(ds, "friction_exceedance_probability")))
     estimate = (f"{format_fraction(p)} ({100 * CONFIDENCE:.0f} % {kind}: "
                 f"{format_fraction(lo)} to {format_fraction(hi)})")
     if allowed:
