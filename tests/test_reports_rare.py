@@ -48,3 +48,32 @@ def test_the_report_page_names_the_estimator(subset_file, tmp_path):
     page = Path(out.html).read_text(encoding="utf-8")
     assert "subset simulation: lognormal" in page
     assert "the plain run:" in page
+
+
+def test_an_importance_report_lists_the_design_point(tmp_path):
+    # importance sampling: the rare-events table and the design point, most important first
+    from tolsim.reports.study import rare_events_html
+
+    text = re.sub(r"^(samples_per_level|p0|max_levels) = .*$", "", CONFIG.read_text(),
+                  flags=re.M)
+    text = re.sub(r'^estimator = "subset"', 'estimator = "importance"\nimportance_samples = 500',
+                  text, flags=re.M)
+    ds = result_to_dataset(run_study(parse_config(text, str(CONFIG)).with_overrides(
+        samples=1000)))
+    page = "".join(rare_events_html(ds))
+    assert "importance sampling" in page and "The most likely way to fail" in page
+    beta = float(ds.contact_reliability_index)
+    assert f"β = {beta:.3f}" in page
+    alpha = ds.contact_importance_factor.values
+    first = str(ds.factor_name.values[int(alpha.argmax())])
+    table = page[page.index("The most likely way to fail"):]
+    assert table.index(first) < min(table.index(str(n)) for n in ds.factor_name.values
+                                    if str(n) != first)
+
+
+def test_a_plain_file_has_no_rare_events_section():
+    from tolsim.io.config import load_config
+    from tolsim.reports.study import rare_events_html
+
+    c = load_config(CONFIG.parent / "yaw_moment_tolerances.toml").with_overrides(samples=256)
+    assert rare_events_html(result_to_dataset(run_study(c))) == []

@@ -1510,6 +1510,72 @@ SIGN_OFF_FIELDS = ("name", "function", "date", "signature")
 SIGN_OFF_DECISIONS = ("accepted", "accepted with conditions", "rejected")
 
 
+#: The events a rare-event estimator can estimate (issue 15), with their names on the page.
+RARE_EVENTS = (("contact_probability", "ball-to-ball contact within the stroke"),
+               ("velocity_deviation_exceedance_probability",
+                "|ε| over its limit (any ball of an assembly)"),
+               ("friction_exceedance_probability", "friction increase over its limit"))
+
+
+def rare_events_html(ds) -> list:
+    """The rare-event estimates of a file (``[study] estimator``), as HTML parts: per event
+    the estimator, P, CV, interval and model evaluations, and for importance sampling the
+    design point ("the most likely way to fail") per tolerance source. Empty for a plain
+    Monte Carlo file."""
+    rows, points = [], []
+    for name, what in RARE_EVENTS:
+        if name not in ds.variables or f"{name}_evaluations" not in ds.variables:
+            continue
+        attrs = ds[name].attrs
+        if attrs.get("estimator", "monte_carlo") == "monte_carlo":
+            continue
+        p = _f(ds, name)
+        lo, hi = _f(ds, f"{name}_ci_lower"), _f(ds, f"{name}_ci_upper")
+        rows.append(
+            f"<tr><td>{html.escape(what)}</td>"
+            f"<td>{html.escape(ESTIMATOR_NAMES.get(attrs['estimator'], attrs['estimator']))}"
+            f"</td><td class='num'>{html.escape(format_fraction(p, lo, hi))}</td>"
+            f"<td class='num'>{_f(ds, f'{name}_coefficient_of_variation'):.3g}</td>"
+            f"<td class='num'>{_i(ds, f'{name}_evaluations'):,}</td>"
+            f"<td>{html.escape(str(attrs.get('interval', '')))}"
+            f"{html.escape(' ' + str(attrs['note'])) if attrs.get('note') else ''}</td></tr>")
+        prefix = name.removesuffix("_probability")  # contact_, ..._exceedance_
+        if f"{prefix}_reliability_index" in ds.variables and "factor_name" in ds.variables:
+            points.append(_design_point_table(ds, prefix, what))
+    if not rows:
+        return []
+    return ["<h3>Rare events</h3><p>Estimated after the plain run by the estimator named, "
+            "in the study's standard-normal input space (README \"Rare events\"); each "
+            "interval is the estimator's own.</p><table><tr><th>event</th><th>estimator</th>"
+            "<th>P (95 % interval)</th><th>CV</th><th>model evaluations</th>"
+            "<th>interval</th></tr>", *rows, "</table>", *points]
+
+
+def _design_point_table(ds, name, what) -> str:
+    """The design point of an importance-sampling estimate, most important source first
+    (``name``: the event's variable prefix, e.g. ``contact``)."""
+    names = [str(n) for n in np.asarray(ds["factor_name"])]
+    alpha = np.asarray(ds[f"{name}_importance_factor"], dtype=float)
+    u = np.asarray(ds[f"{name}_design_point_standard_normal"], dtype=float)
+    length = np.asarray(ds[f"{name}_design_point_length"], dtype=float)
+    angle = np.asarray(ds[f"{name}_design_point_angle"], dtype=float)
+    element = np.asarray(ds[f"{name}_design_point_element"])
+    out = [f"<p>The most likely way to fail ({html.escape(what)}): reliability index β = "
+           f"{_f(ds, f'{name}_reliability_index'):.3f}, FORM estimate "
+           f"{html.escape(format_fraction(_f(ds, f'{name}_form_probability')))}.</p>"
+           "<table><tr><th>tolerance source</th><th>value at the design point</th>"
+           "<th>standard normal u</th><th>importance factor α²</th><th>ball / pair / track"
+           "</th></tr>"]
+    for i in np.argsort(-np.nan_to_num(alpha), kind="stable"):
+        value = (f"{1e6 * length[i]:+.3g} µm" if np.isfinite(length[i]) else
+                 f"{np.rad2deg(angle[i]):+.3g}°" if np.isfinite(angle[i]) else "n/a")
+        out.append(f"<tr><td>{html.escape(names[i])}</td><td class='num'>{value}</td>"
+                   f"<td class='num'>{u[i]:+.3f}</td><td class='num'>{alpha[i]:.3f}</td>"
+                   f"<td class='num'>{html.escape(str(element[i]))}</td></tr>")
+    out.append("</table>")
+    return "".join(out)
+
+
 def _row(label, value, num=True):
     cls = ' class="num"' if num else ""
     return f"<tr><th>{html.escape(label)}</th><td{cls}>{html.escape(str(value))}</td></tr>"
@@ -1790,6 +1856,7 @@ def _html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None,
         "</table>",
         *([f"<p class='verdict'>{html.escape(a['propagation_caveat'])}</p>"]
           if a.get("propagation_caveat") else []),
+        *rare_events_html(ds),
     ]
 
     caption_of = captions(ds)
