@@ -108,12 +108,8 @@ def study_benchmark(args):
     from pathlib import Path
 
     from tolsim.io.config import load_config
-    from tolsim.study.limit_state import (
-        EVENT_TITLES,
-        LimitState,
-        series_importance_sampling,
-        study_events,
-    )
+    from tolsim.study.limit_state import EVENT_TITLES, LimitState, study_events
+    from tolsim.study.rare_events import series_importance_sampling
 
     repeats = args.repeats if args.repeats_given else 20
     config = load_config(Path(__file__).resolve().parent.parent / "configs" /

@@ -96,12 +96,13 @@ Estimators
 ``importance``: on a smooth series event (``contact`` with ``constant`` propagation,
 ``velocity_deviation_exceedance``), FORM on *every component* and importance sampling from
 the mixture of the shifted normals around their design points
-(:func:`series_importance_sampling`). Around the one design point that FORM finds on g
-itself, the samples miss the other pairs' failure domains: on ``configs/rare_contact.toml``
-that gave P(contact) = 1.8e-4 (95 % interval 1.6e-4 to 2.0e-4) for a true 1.18e-3, the pairs of
-the train having betas of 3.44 to 3.58. On the other events (``along_track``, friction) it is
-not attempted, and where FORM fails on a component, or no sample fails, subset simulation
-runs instead: each time :attr:`EventEstimate.note` says so in one line.
+(:func:`tolsim.study.rare_events.series_importance_sampling`). Around the one design point
+that FORM finds on g itself, the samples miss the other pairs' failure domains: on
+``configs/rare_contact.toml`` that gave P(contact) = 1.8e-4 (95 % interval 1.6e-4 to 2.0e-4)
+for a true 1.18e-3, the pairs of the train having betas of 3.44 to 3.58. On the other events
+(``along_track``, friction) it is not attempted, and where FORM fails on a component, or no
+sample fails, subset simulation runs instead: each time :attr:`EventEstimate.note` says so
+in one line.
 
 Seeds
 -----
@@ -133,31 +134,18 @@ References
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import log_ndtr, logsumexp, ndtr
 
 from tolsim.study.rare_events import (
     ESTIMATOR_TITLES,
-    INTERVAL_NORMAL,
-    STATUS_FORM_FAILED,
-    STATUS_NO_FAILURE,
-    RareEventResult,
-    _check_confidence,
-    _child,
-    _cv,
-    _evaluate,
-    _flagged,
-    _normal_blocks,
-    _seed_sequence,
-    _weighted_mean,
-    find_design_point,
+    SeriesDesignPoints,
+    series_importance_sampling,
     subset_simulation,
 )
 from tolsim.study.sampling import (
     Block,
-    RailField,
-    _ar1,
     _draw_widths,
     _field_grid,
+    block_from_draws,
     error_values,
     per_assembly_sources,
 )
@@ -210,8 +198,9 @@ def block_from_normals(config, normals, index: int = 0, start: int = 0) -> Block
     """The :class:`~tolsim.study.sampling.Block` of the assemblies whose standard normals are
     the rows of ``normals`` (the inverse of the draw layout, module docstring).
 
-    The transformation is that of :func:`tolsim.study.sampling.sample_block`, step by step,
-    on the rows given instead of a block's draws.
+    The transformation is that of :func:`tolsim.study.sampling.sample_block`
+    (:func:`tolsim.study.sampling.block_from_draws`), on the rows given instead of a block's
+    draws.
 
     Parameters
     ----------
@@ -230,49 +219,9 @@ def block_from_normals(config, normals, index: int = 0, start: int = 0) -> Block
     d = dimension(config)
     if u.ndim != 2 or u.shape[1] != d:
         raise ValueError(f"normals of shape {u.shape}: expected (rows, {d})")
-    size = u.shape[0]
     layout = column_layout(config)
     raw = {name: u[:, sl] for name, sl in layout.items()}
-    st = config.study
-    grid = _field_grid(config)
-    tracks, balls = config.n_tracks, config.train.balls
-    if tracks == 1:
-        draws = {t.source: raw["factors"][:, j : j + 1]
-                 for j, t in enumerate(per_assembly_sources(config))}
-    else:
-        draws = {t.source: np.repeat(raw["factors"][:, j * tracks : (j + 1) * tracks], balls,
-                                     axis=1)
-                 for j, t in enumerate(per_assembly_sources(config))}
-    draws.update({t.source: raw[t.source] for t in config.tolerances if t.scope == "ball"})
-    gaps = np.maximum(config.train.initial_gap.from_normal(raw["gap"]), 0.0)
-    pitch = (2.0 * config.bearing.ball_radius + gaps).reshape(size * tracks, balls - 1)
-    position = np.concatenate([np.zeros((size * tracks, 1)), np.cumsum(pitch, axis=1)], axis=1)
-    position -= position.mean(axis=1, keepdims=True)
-    position = position.reshape(size, tracks * balls)
-    fields = {}
-    for t in config.tolerances:
-        if t.source not in grid:
-            continue
-        innovations = np.ascontiguousarray(raw[t.source])
-        ell = t.correlation_length
-        if st.propagation == "constant":
-            along = position.reshape(size * tracks, balls)
-            phi = np.exp(-np.diff(along, axis=1) / ell)
-            draws[t.source] = _ar1(phi, np.sqrt(1.0 - phi * phi),
-                                   innovations.reshape(size * tracks, balls)).reshape(
-                size, tracks * balls)
-            continue
-        origin, spacing, points = grid[t.source]
-        phi = np.full((1, points - 1), np.exp(-spacing / ell))
-        values = _ar1(phi, np.sqrt(1.0 - phi * phi), innovations.reshape(size * tracks, points))
-        fields[t.source] = RailField(origin, spacing, values, tracks)
-    entering_gap, entering = None, {}
-    if "entering_gap" in raw:
-        entering_gap = np.maximum(config.train.initial_gap.from_normal(raw["entering_gap"]),
-                                  0.0)
-        entering = {t.source: raw[f"entering_{t.source}"] for t in config.tolerances
-                    if t.scope == "ball"}
-    return Block(index, start, size, draws, fields, gaps, position, entering_gap, entering)
+    return block_from_draws(config, index, start, raw)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -683,131 +632,6 @@ def design_point_summary(config, point, component="") -> DesignPointSummary:
     return DesignPointSummary(tuple(names), tuple(kinds), np.array(value, dtype=float),
                               np.array(normal, dtype=float), np.array(element, dtype=np.int64),
                               np.array(share, dtype=float), component, tuple(where))
-
-
-@dataclass(frozen=True, eq=False)
-class SeriesDesignPoints:
-    """FORM on each component of a series event (:func:`series_importance_sampling`).
-
-    Attributes
-    ----------
-    names : tuple of str
-        The components (:func:`component_names`).
-    points : ndarray (k, d)
-        Their design points u*_k [-].
-    betas : ndarray (k,)
-        |u*_k| [-].
-    evaluations : int
-        Rows evaluated by the k searches.
-    """
-
-    names: tuple
-    points: np.ndarray
-    betas: np.ndarray
-    evaluations: int
-
-    @property
-    def most_probable(self) -> int:
-        """The component with the smallest beta."""
-        return int(np.argmin(self.betas))
-
-
-def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=None,
-                               confidence_level=0.95):
-    """FORM on every component, then importance sampling from the mixture of N(u*_k, I).
-
-    A series event (the union of its components: any pair touches, any ball beyond the
-    limit) has a design point per component, often several of similar beta (the pairs of a
-    train). Importance sampling around one of them misses the others' failure domains and
-    is low by a factor of up to their number, with a standard error that does not show it
-    (module docstring of :mod:`tolsim.study.rare_events`). Here each component's design
-    point u*_k is found (:func:`~tolsim.study.rare_events.find_design_point` on the
-    component alone), and the samples are drawn from the mixture
-    q(v) = sum_k pi_k phi(v - u*_k), pi_k proportional to Phi(-beta_k), with the weight
-    phi(v) / q(v) = 1 / sum_k pi_k exp(v . u*_k - beta_k^2 / 2) ([Melchers1989]'s
-    multi-modal sampling density for systems). The estimate is unbiased whatever the
-    mixture (it has full support); the mixture only makes it efficient. Standard error,
-    interval and unresolved bounds as :func:`~tolsim.study.rare_events.importance_sampling`.
-
-    Randomness: the normals in blocks from the children (RARE_EVENT_STREAM, 0, b) of
-    ``seed`` (as the estimators of :mod:`tolsim.study.rare_events`), the mixture components
-    from the child (RARE_EVENT_STREAM, 1).
-
-    Parameters
-    ----------
-    limit_state : LimitState
-        A smooth (series) event.
-    seed : numpy.random.SeedSequence or int
-    samples : int
-        n importance samples.
-    batch_size : int, optional
-        Most rows per model call; no effect on the result.
-    confidence_level : float
-
-    Returns
-    -------
-    (RareEventResult, SeriesDesignPoints or None)
-        The result's ``design_point``, ``beta`` and ``importance_factors`` are those of the
-        most probable component; ``form_probability`` is the first-order series bound
-        min(1, sum_k Phi(-beta_k)) (each component's FORM estimate, added). Flagged
-        ``form_failed`` when FORM gives no design point for some component (its message
-        names it), ``no_failure`` when no sample fails.
-    """
-    d = limit_state.dimension
-    n = int(samples)
-    if n < 2:
-        raise ValueError(f"samples = {samples!r} must be >= 2")
-    z = _check_confidence(confidence_level)
-    root = _seed_sequence(seed)
-    names = limit_state.component_names
-    common = dict(estimator="importance", confidence_level=confidence_level, dimension=d,
-                  samples_per_level=n)
-    points, betas, evaluations = [], [], 0
-    for k, name in enumerate(names):
-        found = find_design_point(limit_state.component(k), d, batch_size=batch_size)
-        evaluations += found.evaluations
-        if not found.converged:
-            return _flagged(STATUS_FORM_FAILED, f"FORM found no design point for {name}: "
-                                                f"{found.message}", evaluations, 0,
-                            common), None
-        points.append(found.point)
-        betas.append(found.beta)
-    design = SeriesDesignPoints(tuple(names), np.array(points), np.array(betas), evaluations)
-    best = design.most_probable
-    shifts, beta = design.points, design.betas
-    log_weight = log_ndtr(-beta)
-    log_weight = log_weight - logsumexp(log_weight)
-    star = shifts[best]
-    common.update(design_point=star, beta=float(beta[best]),
-                  form_probability=float(min(1.0, np.sum(ndtr(-beta)))),
-                  importance_factors=(star / beta[best]) ** 2)
-    labels = np.random.default_rng(_child(root, 1)).choice(len(names), size=n,
-                                                           p=np.exp(log_weight))
-    v = np.concatenate(list(_normal_blocks(root, (0,), n, d))) + shifts[labels]
-    # log q(v) / phi(v), row by row
-    log_ratio = logsumexp(log_weight + v @ shifts.T - 0.5 * beta * beta, axis=1)
-    w = np.exp(-log_ratio)
-    g = _evaluate(limit_state, v, batch_size)
-    evaluations += n
-    failed, unevaluable = g <= 0, np.isnan(g)
-    unresolved = int(np.count_nonzero(unevaluable))
-    if not np.any(failed | unevaluable):
-        return _flagged(STATUS_NO_FAILURE, f"no failure among the {n} samples around the "
-                                           f"{len(names)} design points: no probability "
-                                           "estimated", evaluations, unresolved,
-                        common), design
-    lower, se_lower = _weighted_mean(np.where(failed, w, 0.0))
-    upper, se_upper = _weighted_mean(np.where(failed | unevaluable, w, 0.0))
-    resolved = 1.0 - (upper - lower)
-    p = lower / resolved
-    se = se_lower / resolved
-    return RareEventResult(
-        probability=p, standard_error=se, coefficient_of_variation=_cv(p, se),
-        ci_lower=max(p - z * se, 0.0), ci_upper=p + z * se, interval=INTERVAL_NORMAL,
-        evaluations=evaluations, unresolved=unresolved,
-        failures=int(np.count_nonzero(failed)), bound_lower=lower, bound_upper=upper,
-        bounds_ci_lower=max(lower - z * se_lower, 0.0), bounds_ci_upper=upper + z * se_upper,
-        **common), design
 
 
 @dataclass(frozen=True, eq=False)

@@ -324,6 +324,17 @@ def sample_block(config, index: int, count: int = 1) -> Block:
     row = 0
     for k in range(index, index + count):
         row += _draw(config, k, widths, raw, row)
+    return block_from_draws(config, index, index * st.block_size, raw)
+
+
+def block_from_draws(config, index: int, start: int, raw: dict) -> Block:
+    """The :class:`Block` of drawn independent standard normals ``raw`` (name -> (size,
+    width), the columns of :func:`_draw_widths`): per-track factors, gaps and ball positions,
+    rail fields by their AR(1) recursion, the entering balls. The one transform behind
+    :func:`sample_block` and :func:`tolsim.study.limit_state.block_from_normals`."""
+    st = config.study
+    grid = _field_grid(config)
+    size = len(raw["gap"])
     tracks, balls = config.n_tracks, config.train.balls
     if tracks == 1:
         draws = {t.source: raw["factors"][:, j : j + 1]
@@ -342,7 +353,7 @@ def sample_block(config, index: int, count: int = 1) -> Block:
     for t in config.tolerances:
         if t.source not in grid:
             continue
-        innovations = raw[t.source]
+        innovations = np.ascontiguousarray(raw[t.source])  # no copy when already
         ell = t.correlation_length
         if st.propagation == "constant":
             # Exact: the Ornstein-Uhlenbeck process sampled at the ball centres themselves
@@ -364,8 +375,7 @@ def sample_block(config, index: int, count: int = 1) -> Block:
                                   0.0)
         entering = {t.source: raw[f"entering_{t.source}"] for t in config.tolerances
                     if t.scope == "ball"}
-    return Block(index, index * st.block_size, size, draws, fields, gaps, position,
-                 entering_gap, entering)
+    return Block(index, start, size, draws, fields, gaps, position, entering_gap, entering)
 
 
 def error_values(config, block: Block, rail_position=None):
