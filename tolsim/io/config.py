@@ -627,6 +627,12 @@ def _tolerances(t: _Table | None, bearing: Bearing) -> tuple:
         sub = t.table(source)
         kind, side = SOURCES[source]
         dist = _distribution(sub, kind)
+        scale = sub.quantity("scale", "dimensionless", default=1.0, positive=True)
+        if scale != 1.0:  # "this tolerance times scale" (sweeps, allocated configs)
+            if not dist.is_random:
+                raise sub.error("scale", f"= {scale!r}: a {dist.kind} value has no spread "
+                                         "to scale")
+            dist = dist.scaled(scale)
         _check_range(sub, source, kind, dist, bearing)
         scope = sub.string("scope", SCOPES, default=side)
         if side != "ball" and scope == "rail" and side == "carriage":

@@ -133,6 +133,49 @@ class Distribution:
         phi = lambda x: np.exp(-0.5 * x * x) / np.sqrt(2 * np.pi)  # noqa: E731
         return float(self.mean + self.std * (phi(a) - phi(b)) / z)
 
+    @property
+    def centre(self) -> float:
+        """The point a tolerance's spread is scaled about (:meth:`scaled`) [SI]: ``value``
+        (fixed), ``mean`` (normal, truncated normal, cpk), the band centre (uniform), the
+        mean of the measured values (empirical)."""
+        if self.kind == "fixed":
+            return self.value
+        if self.kind == "uniform":
+            return 0.5 * (self.low + self.high)
+        if self.kind == "empirical":
+            return float(np.mean(self.data))
+        return self.mean
+
+    def scaled(self, factor: float) -> "Distribution":
+        """This distribution with its spread scaled by ``factor`` about :attr:`centre`.
+
+        Every value x becomes centre + factor (x - centre): a normal's std, a uniform's or
+        truncated normal's band, a cpk band (so its std, at the same cpk) and measured values
+        all scale by ``factor``; the centre stays. This is "the tolerance times ``factor``" of
+        a what-if sweep (``[sweep]``) and of tolerance allocation (``tolsim allocate``). A
+        ``fixed`` value has no spread and is returned unchanged.
+
+        Raises
+        ------
+        ValueError
+            For a factor that is not finite and > 0.
+        """
+        f = float(factor)
+        if not (np.isfinite(f) and f > 0):
+            raise ValueError(f"scale factor {factor!r} must be finite and > 0")
+        if self.kind == "fixed" or f == 1.0:
+            return self
+        c = self.centre
+
+        def about(x):
+            return c + f * (x - c)
+
+        if self.kind == "empirical":
+            return replace(self, data=tuple(float(about(x)) for x in self.data))
+        if self.kind == "normal":
+            return replace(self, std=f * self.std)
+        return replace(self, std=f * self.std, low=about(self.low), high=about(self.high))
+
     def from_normal(self, z):
         """Map standard normal variates z to values of this distribution [SI]."""
         z = np.asarray(z, dtype=np.float64)
@@ -534,6 +577,28 @@ class StudyConfig:
             t.distribution for t in self.tolerances]
         return {d.data_file: d.data_sha256 for d in dists if d.kind == "empirical"
                 and d.data_file}
+
+    def with_scales(self, scales: dict) -> "StudyConfig":
+        """A copy whose tolerance sources have their spread scaled (``{source: factor}``,
+        :meth:`Distribution.scaled`); sources not named keep theirs.
+
+        ``text`` is kept as it is: a scaled config is a point of a sweep or an allocation,
+        which records its factors beside the text (the result file's sweep coordinates, the
+        allocation's optimum config).
+
+        Raises
+        ------
+        ValueError
+            For a source that the config does not draw, or a bad factor.
+        """
+        known = {t.source for t in self.tolerances}
+        for source in scales:
+            if source not in known:
+                raise ValueError(f"tolerance source {source!r} is not in the config "
+                                 f"(it has {', '.join(sorted(known)) or 'none'})")
+        tolerances = tuple(replace(t, distribution=t.distribution.scaled(scales[t.source]))
+                           if t.source in scales else t for t in self.tolerances)
+        return replace(self, tolerances=tolerances)
 
     def with_overrides(self, *, samples=None, seed=None):
         """A copy with run-level settings replaced (the CLI flags, or the samples actually
