@@ -66,7 +66,7 @@ def check(path, tmp_path):
 
 
 def small(path):
-    config = load_config(path)
+    config = replace(load_config(path), sweep=None)  # a sweep's base study (its file: below)
     st = config.study
     study = replace(st, samples=SAMPLES[st.propagation],
                     spot_checks=min(st.spot_checks, SPOT_CHECKS),
@@ -142,3 +142,18 @@ def test_result_file_with_saved_samples_passes_cf_checker(tmp_path, capsys):
     errors, failed = check(out, tmp_path)
     assert not errors, capsys.readouterr().err
     assert failed[3] == [] and failed[2] == [], failed
+
+
+def test_sweep_file(tmp_path):
+    """A sweep's file (issue 14; tolsim.io.sweep): every variable with the sweep dimension
+    in front, the swept key as a coordinate with UDUNITS units, padded spot checks."""
+    from tolsim.io.config import parse_config
+    from tolsim.io.sweep import run_sweep
+
+    text = (ROOT / "configs" / "known_answer.toml").read_text().replace(
+        "samples = 20000", "samples = 256").replace("spot_checks = 10", "spot_checks = 2")
+    text += '\n[sweep]\n"tolerances.bottom_rotation.std_deg" = [1.0, 2.0]\n'
+    run_sweep(parse_config(text), tmp_path / "sweep.nc")
+    errors, failed = check(tmp_path / "sweep.nc", tmp_path)
+    assert not errors
+    assert not failed[3] and not failed[2], failed

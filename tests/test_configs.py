@@ -26,6 +26,8 @@ SAMPLES = {
 #: tests/test_carriage_study.py (and tests/test_cf_compliance.py runs them); here their
 #: `tolsim carriage` load distribution.
 CARRIAGE_CONFIGS = ("carriage_preload.toml",)
+#: What-if sweeps (issue 14): run, seeded, in tests/test_sweep.py.
+SWEEP_CONFIGS = ("sweep_rail_roll.toml", "sweep_yaw_moment.toml")
 
 
 def run(name, samples="default"):
@@ -35,10 +37,12 @@ def run(name, samples="default"):
 
 
 def test_every_config_is_covered():
-    assert sorted(p.name for p in CONFIGS.glob("*.toml")) == sorted([*SAMPLES,
-                                                                      *CARRIAGE_CONFIGS])
+    assert sorted(p.name for p in CONFIGS.glob("*.toml")) == sorted(
+        [*SAMPLES, *CARRIAGE_CONFIGS, *SWEEP_CONFIGS])
     for name in CARRIAGE_CONFIGS:
         assert load_config(CONFIGS / name).carriage is not None
+    for name in SWEEP_CONFIGS:
+        assert load_config(CONFIGS / name).sweep is not None
 
 
 def test_paper_case_study_contact_time():

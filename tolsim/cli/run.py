@@ -459,6 +459,9 @@ def run(args) -> int:
         except (distributed.MissingExtraError, ValueError) as exc:
             raise UsageError(str(exc)) from None
 
+    if config.sweep is not None:  # a what-if sweep: its points into one file
+        return _run_sweep(args, config, output)
+
     import tqdm
 
     from tolsim.io.netcdf import write_result
@@ -507,4 +510,84 @@ def run(args) -> int:
         os.unlink(checkpoint)
     if not args.quiet:
         print(summary(ds, output, result.elapsed))
+    return 0
+
+
+def sweep_summary(ds, output, elapsed) -> str:
+    """Short plain-text summary of a sweep's result: one line per point."""
+    import numpy as np
+
+    keys = ds.attrs["sweep_keys"].split()
+    names = ds.attrs["sweep_coordinates"].split()
+    dims = ds.attrs["sweep_dimensions"].split()
+    shape = tuple(ds.sizes[d] for d in dims)
+    n = int(np.prod(shape))
+    lines = [f"sweep: {ds.attrs['title'].split(': ', 1)[-1]}  ({ds.attrs['sweep_mode']}; "
+             "every point with the same seed: common random numbers)"]
+    head = [f"{key}" for key in keys] + ["P(contact)", "95 % CI", "eps std %"]
+    has_friction = "friction_increase_quantile" in ds
+    if has_friction:
+        head.append("friction +99% N")
+    rows = []
+    for index in np.ndindex(*shape):
+        pt = ds.isel(dict(zip(dims, index, strict=True)))
+        row = [f"{float(pt[name]):g}" for name in names]
+        row += [f"{float(pt.contact_probability):.4f}",
+                f"[{float(pt.contact_probability_ci_lower):.4f}, "
+                f"{float(pt.contact_probability_ci_upper):.4f}]",
+                f"{100 * float(pt.velocity_deviation_std):.3f}"]
+        if has_friction:
+            q99 = pt.friction_increase_quantile.sel(quantile=0.99, method="nearest")
+            row.append(f"{float(q99):.3g}")
+        rows.append(row)
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
+    lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
+    lines.extend("  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in rows)
+    n_balls = int(np.sum(ds.n_balls))
+    rate = n_balls / elapsed if elapsed > 0 else float("nan")
+    lines.append(f"wrote {output} ({n} points, {elapsed:.1f} s, {rate:,.0f} balls/s)")
+    return "\n".join(lines)
+
+
+def _run_sweep(args, config, output) -> int:
+    """``tolsim run`` on a config with ``[sweep]``: every point, one file (tolsim.io.sweep)."""
+    import tqdm
+
+    from tolsim.io.sweep import parts_folder, run_sweep
+
+    sweep = config.sweep
+    folder = parts_folder(output)
+    if folder.exists() and not folder.is_dir():
+        raise UsageError(f"{folder} exists and is not a folder; delete it or choose another -o")
+    if args.resume and not any(folder.glob("point-*")):
+        raise UsageError(f"--resume: no finished or started sweep point in {folder}")
+    total = sweep.size * config.study.samples
+    bar = tqdm.tqdm(total=total, unit="asm", unit_scale=True, file=sys.stderr,
+                    desc="tolsim run", disable=True if args.quiet else None, smoothing=0.1)
+
+    def on_point(k, sweep):
+        bar.set_description(f"point {k + 1}/{sweep.size}")
+
+    def notify(message):
+        if not args.quiet:
+            tqdm.tqdm.write(f"tolsim run: {message}", file=sys.stderr)
+
+    try:
+        ds, elapsed = run_sweep(
+            config, output, history=_command_line(args, output), progress=bar.update,
+            on_point=on_point, notify=notify, fresh=args.fresh, workers=args.workers,
+            chunk_blocks=args.chunk_blocks, checkpoint_interval=args.checkpoint_interval,
+            target=args.target_ci_width, save_samples=args.save_samples,
+            scheduler=args.scheduler)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    except KeyboardInterrupt:
+        bar.close()
+        print(f"tolsim run: interrupted; the finished points and the progress of the running "
+              f"one are in {folder}, run the same command again to resume", file=sys.stderr)
+        return 130
+    finally:
+        bar.close()
+    if not args.quiet:
+        print(sweep_summary(ds, output, elapsed))
     return 0

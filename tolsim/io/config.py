@@ -869,6 +869,20 @@ def parse_config(text: str, path: str = "<string>") -> StudyConfig:
             message = f"{message[: at.start()]} (column {at.group(2)})"
             path = f"{path}:{at.group(1)}"
         raise ConfigError(f"{path}: invalid TOML: {message}") from None
+    if "sweep" not in data:
+        return _build(data, source, text, path)
+    # a what-if sweep (issue 14): the base study, then one complete config per point
+    from tolsim.io.sweep import parse_sweep
+
+    base = {key: value for key, value in data.items() if key != "sweep"}
+    config = _build(base, source, text, path)
+    sweep = parse_sweep(_Table(data["sweep"], "sweep", source), base,
+                        lambda point: _build(point, source, text, path))
+    return replace(config, sweep=sweep)
+
+
+def _build(data: dict, source: "_Source", text: str, path: str) -> StudyConfig:
+    """The StudyConfig of a parsed TOML document (``data``); errors name ``source``'s lines."""
     root = _Table(data, "", source)
     bearing = _bearing(root.table("bearing"))
     motion = _motion(root.table("motion"))
@@ -910,20 +924,21 @@ def parse_config(text: str, path: str = "<string>") -> StudyConfig:
     contact = None
     if root.has("contact"):  # after contact: trains and friction (issue 13)
         contact = _contact(root.table("contact"))
-        if study.propagation != "constant":
-            raise study_table.error("propagation", f"= {study.propagation!r}: a study with "
-                                    "[contact] supports 'constant' propagation only "
-                                    "(along_track is not supported yet)")
         if not bearing.friction_coefficient > 0:
             raise source.error("bearing", "friction_coefficient", "= 0: a study with [contact] "
                                "needs raceway friction (> 0) to carry the balls' pushes")
+    allocation = None
+    if root.has("allocate"):  # read by `tolsim allocate` (issue 14); `tolsim run` ignores it
+        from tolsim.io.allocation import parse_allocation
+
+        allocation = parse_allocation(root.table("allocate"), tolerances)
     for key in data:
         if key not in root.used:
             raise source.error(key, None, "is not a known section (bearing, motion, train, "
                                           "loads, carriage, tolerances, correlation, study, "
-                                          "contact)")
+                                          "contact, sweep, allocate)")
     config = StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
-                         correlations, carriage, contact)
+                         correlations, carriage, contact, allocation)
     if study.estimator != "monte_carlo":  # a rare-event estimator needs a limit state
         from tolsim.study.limit_state import check_supported
 

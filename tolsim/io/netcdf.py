@@ -60,6 +60,14 @@ def provenance_attributes(config) -> dict:
     return out
 
 
+def history_line(history: str | None = None) -> str:
+    """The ``history`` attribute: a UTC time stamp and the command (default: this process's
+    argv)."""
+    if history is None:
+        history = " ".join(shlex.quote(a) for a in [os.path.basename(sys.argv[0])] + sys.argv[1:])
+    return f"{datetime.now(UTC).strftime('%Y-%m-%dT%H:%M:%SZ')} {history}"
+
+
 def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
     """The Dataset of a :class:`tolsim.study.runner.StudyResult` (validated).
 
@@ -200,14 +208,11 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         coords.update(more_coords)
         data.update(more_data)
     ds = xr.Dataset(data, coords=coords)
-    if history is None:
-        history = " ".join(shlex.quote(a) for a in [os.path.basename(sys.argv[0])] + sys.argv[1:])
-    now = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     ds.attrs = {
         "Conventions": schema.CONVENTIONS,
         "title": f"tolsim Monte Carlo tolerance study: {os.path.basename(cfg.path)}",
         "source": f"tolsim {__version__}",
-        "history": f"{now} {history}",
+        "history": history_line(history),
         "seed": int(st.seed),
         "config": cfg.text,
         "tolsim_schema": schema.SCHEMA_VERSION,

@@ -278,17 +278,36 @@ def apply_attributes(ds):
     return ds
 
 
+#: Global attributes of a sweep's result file (issue 14, :mod:`tolsim.io.sweep`): its sweep
+#: dimensions and the coordinates of the swept keys (space-separated names).
+SWEEP_DIMENSIONS, SWEEP_COORDINATES = "sweep_dimensions", "sweep_coordinates"
+#: Variables of a sweep's result file besides the declared ones: the zip dimension's index
+#: and each point's count of spot checks.
+SWEEP_VARIABLES = ("sweep_point", "spot_check_count")
+
+
 def validate(ds):
-    """Check a Dataset against the schema; raise :class:`SchemaError` naming the problem."""
+    """Check a Dataset against the schema; raise :class:`SchemaError` naming the problem.
+
+    A sweep's file (global attribute ``sweep_dimensions``) holds every declared variable
+    with those dimensions in front (a coordinate that is the same at every point without
+    them), the swept keys' coordinates (``sweep_coordinates``) and :data:`SWEEP_VARIABLES`,
+    each with ``units`` and ``long_name``.
+    """
+    swept = tuple(ds.attrs.get(SWEEP_DIMENSIONS, "").split())
+    extra = set(ds.attrs.get(SWEEP_COORDINATES, "").split()) | (
+        set(SWEEP_VARIABLES) if swept else set())
     for name, decl in VARIABLES.items():
         if name not in ds.variables:
             if decl.required:
                 raise SchemaError(f"variable {name!r} is missing")
             continue
         var = ds.variables[name]
-        if tuple(var.dims) != decl.dims_in(ds):
+        expected = decl.dims_in(ds)
+        if tuple(var.dims) != expected and not (
+                swept and tuple(var.dims) == swept + expected):
             raise SchemaError(f"variable {name!r} has dims {tuple(var.dims)}, "
-                              f"expected {decl.dims_in(ds)}")
+                              f"expected {(swept + expected) if swept else expected}")
         kind = var.dtype.kind
         ok = kind in ("U", "O", "S") if decl.kind == "U" else kind == decl.kind or (
             decl.kind == "i" and kind == "u")
@@ -302,7 +321,11 @@ def validate(ds):
                 raise SchemaError(f"variable {name!r} attribute {attr!r} is "
                                   f"{var.attrs.get(attr)!r}, expected {getattr(decl, attr)!r}")
     for name in ds.variables:
-        if name not in VARIABLES:
+        if name in extra:
+            for attr in ("units", "long_name"):
+                if not ds.variables[name].attrs.get(attr):
+                    raise SchemaError(f"sweep variable {name!r} has no {attr!r}")
+        elif name not in VARIABLES:
             raise SchemaError(f"variable {name!r} is not declared in tolsim.io.schema")
     for attr in GLOBAL_ATTRIBUTES:
         if attr not in ds.attrs:

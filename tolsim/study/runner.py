@@ -582,6 +582,10 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     """
     if not (isinstance(workers, int) and workers >= 1):
         raise ValueError(f"workers = {workers!r} must be a positive integer")
+    if config.sweep is not None:
+        raise ValueError(f"{config.path} has a [sweep] of {config.sweep.size} points: run them "
+                         "with tolsim.io.sweep.run_sweep (tolsim run does), or one of "
+                         "config.sweep.points")
     if scheduler is not None and workers != 1:
         raise ValueError(f"workers = {workers} and a scheduler: the scheduler's workers do the "
                          "work (local:N starts N of them); leave workers at 1")

@@ -545,6 +545,11 @@ class StudyConfig:
     balls with the fixed gap ``ball_pitch - D``. An assembly then holds ``n_tracks`` trains
     (:attr:`balls` balls, track by track). ``contact`` holds the :class:`ContactSettings` of
     a config with ``[contact]`` (issue 13), None without (the study stops at first contact).
+    ``allocation`` holds the settings of ``[allocate]`` for ``tolsim allocate`` (issue 14),
+    None without. ``sweep``
+    (a :class:`tolsim.study.sweep.Sweep`) holds the points of a config with ``[sweep]``:
+    the config itself is then the base the points start from, and ``tolsim run`` runs the
+    points.
     """
 
     bearing: Bearing
@@ -558,6 +563,8 @@ class StudyConfig:
     correlations: tuple = ()
     carriage: Carriage | None = None
     contact: ContactSettings | None = None
+    allocation: object = None  # tolsim.study.allocate.AllocationSettings ([allocate])
+    sweep: object = None  # tolsim.study.sweep.Sweep ([sweep]): the points to run
 
     @property
     def n_tracks(self) -> int:
@@ -621,7 +628,11 @@ class StudyConfig:
         for key, value in changes.items():
             if text:
                 text = set_study_value(text, key, value)
-        return replace(self, study=replace(self.study, **changes), text=text)
+        sweep = self.sweep
+        if sweep is not None and changes:  # every point runs with them
+            sweep = sweep.with_points(
+                replace(p, study=replace(p.study, **changes), text=text) for p in sweep.points)
+        return replace(self, study=replace(self.study, **changes), text=text, sweep=sweep)
 
 
 # --------------------------------------------------------------------------------------------
