@@ -38,6 +38,14 @@ its scheduler file), or local:N for N worker processes on this machine. The resu
 bit-identical to the run in this process; a worker lost mid-run costs only the tasks dask
 reruns, and stopping and resuming work as above. The dashboard's address is printed.
 
+What-if sweeps: a config with a [sweep] section (configs/sweep_yaw_moment.toml) runs the
+study at every point, all with the same seed (common random numbers: the same assemblies at
+every point, so curves are smooth and differences between points carry little noise), and
+writes one file whose variables gain a dimension per swept key:
+ds.contact_probability.plot() draws the curve. Stopping and resuming work per point: finished
+points are kept in OUT.sweep/ until the file is written. --samples and --seed apply to every
+point.
+
 examples:
   tolsim run                                   # the packaged default study
   tolsim run configs/paper_case_study.toml -o case.nc
@@ -45,6 +53,7 @@ examples:
   tolsim run study.toml --samples 10000000 --target-ci-width 0.002   # P(contact) +- 0.001
   tolsim run study.toml --samples 10000000 --target-ci-width 10%     # width 10 % of P
   tolsim run study.toml --samples 100000000 --scheduler tcp://head-node:8786
+  tolsim run configs/sweep_yaw_moment.toml -o yaw.nc          # 7 yaw moments, one file
 """
 
 
