@@ -78,7 +78,8 @@ def test_dotted_keys_read_like_quoted_ones():
 
 
 @pytest.mark.parametrize("sweep, words", [
-    ('"loads.nope_N" = [1, 2]', "sweep.loads.nope_N is not a key of the config"),
+    ('"loads.nope_N" = [1, 2]', "loads.nope_N is not a known key (sweep point 1 of 2"),
+    ('"loads.nope" = [1, 2]', "sweep.loads.nope is not a key of the config"),
     ('"bearing.nope.x_mm" = [1, 2]', "bearing.nope is not in it"),
     ('"loads.normal_load_N" = []', "is an empty list"),
     ('"study.velocity_model" = [1, 2]', "is not numeric"),
@@ -117,7 +118,7 @@ def test_cli_refuses_a_bad_sweep_with_exit_code_2(tmp_path):
                           capture_output=True, text=True, cwd=tmp_path)
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
-    assert "sweep.loads.nope_N is not a key of the config" in proc.stderr
+    assert "loads.nope_N is not a known key" in proc.stderr
     assert not out.exists() and not parts_folder(out).exists()
 
 
@@ -243,3 +244,19 @@ def test_packaged_sweeps_run(name, tmp_path):
     std = ds.velocity_deviation_std.values
     assert std[-1] > std[0]
     assert p[-1] >= p[0]
+
+
+def test_carriage_keys_sweep_and_preload_lowers_the_risk(tmp_path):
+    # carriage loads and the preload oversize (issue 12) are keys like any other; a load the
+    # config leaves at its default can be swept by its name with the unit suffix
+    text = re.sub(r"(?m)^samples = .*$", "samples = 1024",
+                  (CONFIGS / "carriage_preload.toml").read_text())
+    yaw = parse_config(text + '\n[sweep]\n"carriage.load.yaw_moment_N_m" = [0.0, 5.0]\n')
+    assert [p.carriage.load.yaw_moment for p in yaw.sweep.points] == [0.0, 5.0]
+    c = parse_config(text + '\n[sweep]\n"carriage.preload_oversize_um" = [2.0, 4.0]\n')
+    ds, _ = run_sweep(c, tmp_path / "preload.nc")
+    assert ds.contact_probability.dims == ("carriage_preload_oversize",)
+    # configs/carriage_preload.toml's table: light (2 um) 0.364, medium (4 um) 0.143 at 20 000
+    # assemblies; the same 1 024 assemblies at both points (paired), so the order is certain
+    p = ds.contact_probability.values
+    assert p[1] < p[0] - 0.1, p

@@ -147,8 +147,11 @@ def _resolve(t, key, given_unit, base):
     present = [k for k in parent if k.startswith(f"{quantity}_") and _split_unit(
         k, parent)[0] == quantity]
     if not present:
+        if unit and given_unit is None:  # a key the config leaves at its default
+            return parts[:-1], name, None, unit  # (each point's validation checks it)
         raise t.error(key, "is not a key of the config: sweep a key the config sets (with "
-                           "its base value), or tolerances.<source>.scale")
+                           "its base value), a key with its unit suffix, or "
+                           "tolerances.<source>.scale")
     old = present[0]
     _, old_unit, old_kind = _split_unit(old, parent)
     if old_kind is None or not isinstance(parent[old], (int, float)) or isinstance(
