@@ -332,3 +332,18 @@ def test_tasks_group_chunks_but_keep_every_thread_busy():
     # small ones: at least TASKS_PER_THREAD tasks per thread, one chunk per task at least
     assert chunks_per_task(chunks, 1 << 10, threads=100) == 1000 // (4 * 100)
     assert chunks_per_task(chunks[:3], 1 << 10, threads=2) == 1
+
+
+def test_a_sweep_on_the_cluster_is_bit_identical(two_workers, tmp_path):
+    # issue 14: every point of a sweep runs its chunks as tasks (one cluster for all points)
+    from tolsim.io.config import parse_config
+    from tolsim.io.sweep import run_sweep
+
+    text = (Path(__file__).resolve().parent.parent / "configs" / "known_answer.toml"
+            ).read_text().replace("samples = 20000", "samples = 2048").replace(
+        "spot_checks = 10", "spot_checks = 2")
+    config = parse_config(text + '\n[sweep]\n"loads.normal_load_N" = [150, 250]\n')
+    here, _ = run_sweep(config, tmp_path / "here.nc")
+    there, _ = run_sweep(config, tmp_path / "there.nc", scheduler=two_workers, chunk_blocks=1)
+    for name in here.data_vars:
+        np.testing.assert_array_equal(there[name].values, here[name].values, err_msg=name)

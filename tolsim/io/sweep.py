@@ -404,14 +404,42 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
     -------
     (xr.Dataset, elapsed seconds of the studies run here)
     """
-    from tolsim.io.netcdf import history_line, read_result, result_to_dataset, write_dataset
-    from tolsim.study.runner import fingerprint, run_study
+    from tolsim.io.netcdf import history_line, write_dataset
 
     sweep = config.sweep
     folder = parts_folder(output)
     if fresh and folder.exists():
         shutil.rmtree(folder)
     folder.mkdir(exist_ok=True)
+    scheduler = run_options.get("scheduler")
+    cluster = None
+    if isinstance(scheduler, str):  # one cluster for all points (a LocalCluster starts once)
+        from tolsim.study.distributed import connect
+
+        run_options["scheduler"], cluster, _ = connect(scheduler)
+    try:
+        datasets, elapsed = _run_points(config, folder, history, progress, on_point, notify,
+                                        run_options)
+    finally:
+        if cluster is not None or isinstance(scheduler, str):
+            run_options["scheduler"].close()
+            if cluster is not None:
+                cluster.close()
+    combined = combine_points(datasets, sweep)
+    combined.attrs.pop("sweep_point_fingerprint", None)
+    # the sweep's command once (each part has its own time stamp)
+    combined.attrs["history"] = history_line(history)
+    write_dataset(combined, output)
+    shutil.rmtree(folder, ignore_errors=True)
+    return combined, elapsed
+
+
+def _run_points(config, folder, history, progress, on_point, notify, run_options):
+    """Run or take from their part files every point of a sweep: (datasets, elapsed)."""
+    from tolsim.io.netcdf import read_result, result_to_dataset, write_dataset
+    from tolsim.study.runner import fingerprint, run_study
+
+    sweep = config.sweep
     datasets, elapsed = [], 0.0
     for k, point in enumerate(sweep.points):
         if on_point is not None:
@@ -442,10 +470,4 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
         if checkpoint.exists():
             os.unlink(checkpoint)
         datasets.append(ds)
-    combined = combine_points(datasets, sweep)
-    combined.attrs.pop("sweep_point_fingerprint", None)
-    # the sweep's command once (each part has its own time stamp)
-    combined.attrs["history"] = history_line(history)
-    write_dataset(combined, output)
-    shutil.rmtree(folder, ignore_errors=True)
-    return combined, elapsed
+    return datasets, elapsed
