@@ -21,6 +21,7 @@ SAMPLES = {
     "known_answer.toml": 4096,  # the closed-form checks are in tests/test_known_answer.py
     "friction_yaw.toml": 1024,  # its checks are in tests/test_friction_study.py
     "rare_contact.toml": 1024,  # subset simulation after; its checks: tests/test_rare_study.py
+    "allocate_example.toml": 1024,  # its allocation (tolsim allocate): tests/test_allocate.py
 }
 #: Configs with a [carriage] (issue 12): their studies are checked in
 #: tests/test_carriage_study.py (and tests/test_cf_compliance.py runs them); here their

@@ -17,6 +17,7 @@ SUBCOMMANDS = {
     "report": "tolsim.cli.report",
     "carriage": "tolsim.cli.carriage",
     "compare": "tolsim.cli.compare",
+    "allocate": "tolsim.cli.allocate",
 }
 
 SUMMARIES = {
@@ -26,6 +27,7 @@ SUMMARIES = {
     "report": "HTML report of a study result file",
     "carriage": "load distribution of one carriage on its ball tracks, with preload",
     "compare": "studies side by side: statistics, differences with intervals, config changes",
+    "allocate": "least-cost tolerances that meet a probabilistic target (P, quantile)",
 }
 
 

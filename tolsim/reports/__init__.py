@@ -8,6 +8,8 @@
   same report as PDF with a sign-off block (:mod:`tolsim.reports.pdf`).
 * :mod:`tolsim.reports.compare`: studies side by side with the differences and their
   intervals (``tolsim compare``).
+* :mod:`tolsim.reports.allocate`: the least-cost tolerances against a probabilistic target,
+  with the trade-off curve and the allocated config (``tolsim allocate``).
 
 Figures are built on :class:`matplotlib.figure.Figure` objects directly, never through
 ``pyplot``: no global state, no GUI backend, nothing to close, and the caller's backend is

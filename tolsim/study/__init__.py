@@ -8,6 +8,7 @@ event-driven with constant epsilon), :mod:`~tolsim.study.friction` (what contact
 carriage friction of the trains over the stroke, its streamed statistics and result-file
 variables), :mod:`~tolsim.study.statistics` (mergeable accumulators),
 :mod:`~tolsim.study.estimators` (binomial and cluster intervals, pure NumPy/SciPy) and
-:mod:`~tolsim.study.runner` (:func:`~tolsim.study.runner.run_study`). Never imports tomllib,
-xarray or matplotlib.
+:mod:`~tolsim.study.runner` (:func:`~tolsim.study.runner.run_study`) and
+:mod:`~tolsim.study.allocate` (least-cost tolerance allocation against a probabilistic
+target, on common random numbers). Never imports tomllib, xarray or matplotlib.
 """
