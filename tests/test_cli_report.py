@@ -4,14 +4,23 @@ import base64
 import glob
 import os
 import re
+import tomllib
 
 import numpy as np
 import pytest
 
 from tolsim.cli import main
 
-#: every config, those with a [carriage] (issue 12) included
-CONFIGS = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "configs", "*.toml")))
+
+def _is_sweep(path) -> bool:
+    with open(path, "rb") as fh:
+        return "sweep" in tomllib.load(fh)
+
+
+#: every config, those with a [carriage] (issue 12) included; the what-if sweeps (issue 14)
+#: have a report of their own, run on every one of them in tests/test_reports_sweep.py
+CONFIGS = sorted(p for p in glob.glob(os.path.join(os.path.dirname(__file__), "..", "configs",
+                                                   "*.toml")) if not _is_sweep(p))
 #: small sample counts keep the test fast (along-track propagation is ~100x dearer)
 SAMPLES = {"constant": 64, "along_track": 8}
 

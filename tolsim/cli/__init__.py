@@ -24,7 +24,7 @@ SUMMARIES = {
     "ball": "velocity deviation of one ball from its contact angles and forces",
     "run": "Monte Carlo tolerance study from a TOML config to a netCDF result",
     "paper": "reproduce the source paper's figures and Table 2",
-    "report": "HTML report of a study result file",
+    "report": "HTML report of a study result file or a sweep",
     "carriage": "load distribution of one carriage on its ball tracks, with preload",
     "compare": "studies side by side: statistics, differences with intervals, config changes",
     "allocate": "least-cost tolerances that meet a probabilistic target (P, quantile)",

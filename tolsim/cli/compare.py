@@ -36,6 +36,9 @@ Welch's for means and standard deviations, the MOVER of Zou & Donner for quantil
 fraction out of spec and Cpk. Runs with the reference's seed, block size and sampling share
 its random numbers; for them the unpaired interval is conservative, and the report says so.
 
+The file of a what-if sweep (a config with [sweep]) is refused: 'tolsim report SWEEP.nc'
+puts its points side by side (a table, and curves against the swept key).
+
 examples:
   tolsim run configs/yaw_moment_tolerances.toml -o yaw.nc
   tolsim run configs/whatif_no_yaw_moment.toml -o no_yaw.nc

@@ -1,6 +1,8 @@
-"""``tolsim report``: a self-contained HTML report of a study result file, and its PDF.
+"""``tolsim report``: a self-contained HTML report of a study result file, and its PDF; or
+of a sweep file, the sweep report.
 
-A thin layer over :func:`tolsim.reports.study.make_report`.
+A thin layer over :func:`tolsim.reports.study.make_report` and, for a file of a what-if sweep
+(issue 14), :func:`tolsim.reports.sweep.make_sweep_report`.
 """
 
 import argparse
@@ -33,11 +35,23 @@ per track, and P(contact) is per assembly: contact in any of its trains.
 When the file holds no sensitivity indices they are computed from the config stored in the
 file (same seed); --sensitivity-samples sets the cost, --no-sensitivity skips it.
 
+For the file of a what-if sweep (a config with [sweep]) the report is a sweep report:
+report.html with what was swept (keys, values, units, outer or zip, and the common random
+numbers every point shares), P(contact) with its 95 % interval band against the swept key
+(contact_probability.png; two or more outer keys: one curve per value of the others; zip:
+against the point number), the std and quantiles of epsilon against the key
+(velocity_deviation.png), the friction increase and P(friction exceedance) of a study with
+[contact] (friction.png), a table per point (also as points.csv) and the verdict of every
+point against the config's spec limits. A sweep has no PDF and no Sobol' analysis
+(--sensitivity-samples, --no-sensitivity and --no-pdf do not apply).
+
 examples:
   tolsim run configs/yaw_moment_tolerances.toml -o yaw.nc
   tolsim report yaw.nc -o yaw-report
   tolsim run configs/carriage_preload.toml -o carriage.nc
   tolsim report carriage.nc
+  tolsim run configs/sweep_yaw_moment.toml -o sweep_yaw.nc
+  tolsim report sweep_yaw.nc -o sweep_yaw-report
 """
 
 
@@ -45,9 +59,11 @@ _sample_count = integer_at_least(2, "an integer >= 2")
 
 
 def add_parser(subparsers, formatter_class=None):
-    p = subparsers.add_parser("report", help="HTML and PDF report of a study result file",
+    p = subparsers.add_parser("report", help="HTML and PDF report of a study result file "
+                                             "(HTML of a sweep)",
                               description=DESCRIPTION, formatter_class=formatter_class)
-    p.add_argument("result", metavar="RESULTS.nc", help="result file of 'tolsim run'")
+    p.add_argument("result", metavar="RESULTS.nc",
+                   help="result file of 'tolsim run' (a study or a sweep)")
     p.add_argument("-o", "--out", metavar="DIR", default=argparse.SUPPRESS,
                    help="output folder (default: RESULTS-report next to the file)")
     p.add_argument("--sensitivity-samples", type=_sample_count, metavar="N",
@@ -73,6 +89,10 @@ def run(args) -> int:
         if not args.quiet:
             print(f"[{time.perf_counter() - started:5.1f} s] {msg}", file=sys.stderr)
 
+    from tolsim.reports.sweep import is_sweep_file
+
+    if is_sweep_file(args.result):
+        return _sweep_report(args, out, say, started)
     try:
         result = make_report(args.result, out, sensitivity=not args.no_sensitivity,
                              sensitivity_samples=getattr(args, "sensitivity_samples", None),
@@ -84,4 +104,24 @@ def run(args) -> int:
     if not args.quiet:
         print(f"wrote {result.html}{f', {result.pdf}' if result.pdf else ''} and "
               f"{len(result.figures)} figures ({time.perf_counter() - started:.1f} s)")
+    return 0
+
+
+def _sweep_report(args, out, say, started) -> int:
+    """``tolsim report`` on a sweep file (:func:`tolsim.reports.sweep.make_sweep_report`)."""
+    from tolsim.reports.study import NotAResult
+    from tolsim.reports.sweep import NotASweep, make_sweep_report
+
+    try:
+        result = make_sweep_report(args.result, out, progress=say)
+    except (NotAResult, NotASweep) as exc:
+        raise UsageError(f"{args.result}: {exc}" if isinstance(exc, NotASweep)
+                         else str(exc)) from None
+    except OSError as exc:
+        raise UsageError(f"cannot write to {out}: {exc}") from None
+    if not args.quiet:
+        figures = ", ".join(result.figures.values())
+        print(f"wrote {result.html}, {result.csv} and {len(result.figures)} figures "
+              f"({figures}): the sweep report of {result.layout.size} points "
+              f"({time.perf_counter() - started:.1f} s)")
     return 0

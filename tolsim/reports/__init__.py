@@ -8,6 +8,8 @@
   same report as PDF with a sign-off block (:mod:`tolsim.reports.pdf`).
 * :mod:`tolsim.reports.compare`: studies side by side with the differences and their
   intervals (``tolsim compare``).
+* :mod:`tolsim.reports.sweep`: the report of a what-if sweep's file (``tolsim report`` on
+  it): the curves against the swept keys and a verdict per point.
 * :mod:`tolsim.reports.allocate`: the least-cost tolerances against a probabilistic target,
   with the trade-off curve and the allocated config (``tolsim allocate``).
 

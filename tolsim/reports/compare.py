@@ -1425,8 +1425,11 @@ class CompareOutputs:
 
 def read_runs(paths) -> list:
     """Read result files (:func:`tolsim.io.netcdf.read_result`), or raise
-    :class:`NotAResult` with a one-line reason naming the first bad file."""
+    :class:`NotAResult` with a one-line reason naming the first bad file. The file of a
+    what-if sweep (:func:`tolsim.io.sweep.is_sweep`) is refused: its points are compared
+    by its own report (:mod:`tolsim.reports.sweep`)."""
     from tolsim.io.netcdf import read_result
+    from tolsim.io.sweep import is_sweep
 
     out = []
     for path in paths:
@@ -1436,9 +1439,17 @@ def read_runs(paths) -> list:
         if os.path.isdir(path):
             raise NotAResult(f"{path}: is a folder, not a result file")
         try:
-            out.append(read_result(path))
+            ds = read_result(path)
         except ValueError as exc:
             raise NotAResult(" ".join(str(exc).split())) from None
+        if is_sweep(ds):  # several studies along sweep dimensions (issue 14)
+            dims = str(ds.attrs.get("sweep_dimensions", "")).split()
+            points = int(np.prod([ds.sizes[d] for d in dims if d in ds.sizes]))
+            raise NotAResult(f"{path} is a sweep of {points} points "
+                             f"({ds.attrs.get('sweep_keys', '?')}): tolsim compare puts "
+                             "single studies side by side; use 'tolsim report "
+                             f"{path}' for a sweep (its points in one table and curve)")
+        out.append(ds)
     return out
 
 
@@ -1490,7 +1501,7 @@ def compare_runs(paths, folder, *, progress=None,
     Raises
     ------
     NotAResult
-        If a file is missing or not a tolsim result.
+        If a file is missing, not a tolsim result, or the file of a sweep.
     ValueError
         If fewer than two files are given.
     """
