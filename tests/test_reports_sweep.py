@@ -106,7 +106,7 @@ def test_series_of_two_outer_keys_and_a_zip(sweeps):
     assert z.dimensions == ("sweep_point",)
     (only,) = series_of(z)
     np.testing.assert_array_equal(only.x, [1.0, 2.0])
-    assert z.values_at(1) == (250.0, 1.25)
+    assert tuple(z.values_at(1).values()) == (250.0, 1.25)
 
 
 def test_point_dataset_is_the_study_of_its_point(sweeps):

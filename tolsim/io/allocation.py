@@ -45,7 +45,7 @@ from tolsim.study.allocate import (
     SourceCost,
     parse_target,
 )
-from tolsim.study.spec import SOURCES, set_study_value
+from tolsim.study.spec import SOURCES, set_study_value, toml_lines
 
 #: Keys of an ``[allocate.sources.<source>]`` table and their defaults (``max_scale``:
 #: :data:`~tolsim.study.allocate.DEFAULT_MAX_SCALE`, lowered to the static model's range).
@@ -121,8 +121,7 @@ def _after_target(exc) -> str:
 # --------------------------------------------------------------------------------------------
 # The allocated config
 # --------------------------------------------------------------------------------------------
-#: A table header ``[a.b]`` or ``[[a]]`` (not an array value: no commas).
-_HEADER = re.compile(r"""^\s*\[(\[?)\s*([A-Za-z0-9_\-."'\s]+?)\s*\]\]?\s*(#.*)?$""")
+#: A ``scale = ...`` line of a tolerance table.
 _SCALE_LINE = re.compile(r"""^(\s*(?:scale|"scale"|'scale')\s*=\s*)([^\s#]+)([ \t]*)(#.*)?"""
                          r"(\r?\n)?$")
 
@@ -130,20 +129,7 @@ _SCALE_LINE = re.compile(r"""^(\s*(?:scale|"scale"|'scale')\s*=\s*)([^\s#]+)([ \
 def _headers(lines) -> list:
     """(line number, table name, is array) of every table header, outside multi-line
     strings."""
-    out, in_string = [], None
-    for number, line in enumerate(lines):
-        if in_string is not None:
-            if line.count(in_string) % 2:
-                in_string = None
-            continue
-        for quote in ('"""', "'''"):
-            if line.count(quote) % 2:
-                in_string = quote
-        m = _HEADER.match(line)
-        if m and in_string is None:
-            name = ".".join(p.strip().strip("\"'") for p in m.group(2).split("."))
-            out.append((number, name, bool(m.group(1))))
-    return out
+    return [(n, name, array) for n, _, name, array, header in toml_lines(lines) if header]
 
 
 def format_scale(value: float) -> str:

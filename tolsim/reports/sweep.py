@@ -70,6 +70,7 @@ from tolsim.reports.verdict import (
     study_verdict,
 )
 from tolsim.study.estimators import clopper_pearson_interval, format_fraction
+from tolsim.study.sweep import Sweep, SweepAxis
 
 #: Files of the report.
 HTML_NAME, CSV_NAME = "report.html", "points.csv"
@@ -95,72 +96,6 @@ class NotASweep(ValueError):
 # --------------------------------------------------------------------------------------------
 # Reading: the sweep's layout and each point as a single study
 # --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SweptKey:
-    """One swept config key as the result file stores it.
-
-    Attributes
-    ----------
-    key : str
-        The config key with its unit suffix (``loads.yaw_moment_N_m``).
-    name : str
-        Its coordinate variable (``loads_yaw_moment``).
-    units : str
-        UDUNITS of the values (``N m``; ``1`` for a factor).
-    values : tuple of float
-        Along its dimension (outer) or per point (zip).
-    """
-
-    key: str
-    name: str
-    units: str
-    values: tuple
-
-    @property
-    def label(self) -> str:
-        """``key [units]`` for axes and table headers."""
-        return f"{self.key} [{self.units}]" if self.units not in ("", "1") else self.key
-
-
-@dataclass(frozen=True)
-class SweepLayout:
-    """The sweep dimensions of a result file and its points in order.
-
-    Attributes
-    ----------
-    mode : str
-        ``outer`` or ``zip``.
-    dimensions : tuple of str
-    shape : tuple of int
-    keys : tuple of SweptKey
-        In the config's order (outer: one per dimension, the first slowest).
-    """
-
-    mode: str
-    dimensions: tuple
-    shape: tuple
-    keys: tuple
-
-    @property
-    def size(self) -> int:
-        return int(np.prod(self.shape))
-
-    def index(self, k: int) -> tuple:
-        """Position of point ``k`` (0-based, the file's order) along :attr:`dimensions`."""
-        return tuple(int(i) for i in np.unravel_index(k, self.shape))
-
-    def values_at(self, k: int) -> tuple:
-        """The keys' values at point ``k``."""
-        if self.mode == "zip":
-            return tuple(key.values[k] for key in self.keys)
-        return tuple(key.values[i] for key, i in zip(self.keys, self.index(k), strict=True))
-
-    def describe(self, k: int) -> str:
-        """``key = value units, ...`` of point ``k``."""
-        return ", ".join(f"{key.key} = {_value_text(v)}{_unit_text(key.units)}"
-                         for key, v in zip(self.keys, self.values_at(k), strict=True))
-
-
 def _value_text(value) -> str:
     return f"{float(value):g}"
 
@@ -186,8 +121,8 @@ def is_sweep_file(path) -> bool:
         return False
 
 
-def sweep_layout(ds) -> SweepLayout:
-    """The :class:`SweepLayout` of a sweep file, or :class:`NotASweep`."""
+def sweep_layout(ds) -> Sweep:
+    """The :class:`Sweep` of a sweep file, or :class:`NotASweep`."""
     if not is_sweep_dataset(ds):
         raise NotASweep("the result file holds a single study, not a sweep")
     a = ds.attrs
@@ -200,10 +135,13 @@ def sweep_layout(ds) -> SweepLayout:
                         f"(sweep_coordinates {names}, sweep_keys {keys}"
                         + (f"; missing {', '.join(missing)}" if missing else "") + ")")
     mode = str(a.get("sweep_mode", "zip" if dims == ("sweep_point",) else "outer"))
-    swept = tuple(SweptKey(key, name, str(ds[name].attrs.get("units", "1")),
-                           tuple(float(v) for v in np.asarray(ds[name], dtype=float)))
+    swept = tuple(SweepAxis(key, name, tuple(float(v) for v in np.asarray(ds[name], dtype=float)),
+                            units=str(ds[name].attrs.get("units", "1")))
                   for key, name in zip(keys, names, strict=True))
-    return SweepLayout(mode, dims, tuple(int(ds.sizes[d]) for d in dims), swept)
+    layout = Sweep(swept, mode)
+    if layout.dimensions != dims:
+        raise NotASweep(f"the sweep's dimensions {dims} do not match its mode {mode!r} and keys")
+    return layout
 
 
 def _point_value(value, k: int, size: int):
@@ -223,7 +161,7 @@ def _point_value(value, k: int, size: int):
     return value[spans[k][1]:end]
 
 
-def point_dataset(ds, k: int, layout: SweepLayout | None = None):
+def point_dataset(ds, k: int, layout: Sweep | None = None):
     """Point ``k`` (0-based, the file's order) of a sweep file as the single study it is.
 
     The sweep dimensions are selected away (``ds.isel``; the swept keys stay as scalar
@@ -244,7 +182,7 @@ def point_dataset(ds, k: int, layout: SweepLayout | None = None):
     attrs = {n: _point_value(v, k, layout.size) for n, v in ds.attrs.items()
              if n not in SWEEP_ATTRIBUTES}
     attrs["title"] = f"{ds.attrs.get('title', 'tolsim sweep')}, point {k + 1}: " \
-                     f"{layout.describe(k)}"
+                     f"{layout.describe(k, units=True)}"
     point.attrs = attrs
     return point
 
@@ -282,7 +220,7 @@ class Point:
     number : int
         1-based, the file's order (outer: the first key slowest).
     values : tuple of float
-        The swept keys' values (:attr:`SweepLayout.keys`).
+        The swept keys' values (:attr:`tolsim.study.sweep.Sweep.axes`).
     ds : xarray.Dataset
         The point as a single study (:func:`point_dataset`).
     statistics : dict
@@ -328,15 +266,15 @@ def _friction_numbers(ds) -> dict | None:
                 mean=_f(ds, "friction_increase_mean"))
 
 
-def sweep_points(ds, layout: SweepLayout | None = None) -> list:
+def sweep_points(ds, layout: Sweep | None = None) -> list:
     """Every point of a sweep file as a :class:`Point`, in the file's order."""
     layout = layout or sweep_layout(ds)
     points = []
     for k in range(layout.size):
         pt = point_dataset(ds, k, layout)
         stats = {s.name: s for s in run_statistics(pt, bounds=True)}
-        points.append(Point(k + 1, layout.values_at(k), pt, stats, study_verdict(pt),
-                            _friction_numbers(pt)))
+        values = tuple(layout.values_at(k).values())
+        points.append(Point(k + 1, values, pt, stats, study_verdict(pt), _friction_numbers(pt)))
     return points
 
 
@@ -380,14 +318,14 @@ def _number(x) -> str:
     return repr(x) if np.isfinite(x) else ""
 
 
-def csv_rows(layout: SweepLayout, points) -> list:
+def csv_rows(layout: Sweep, points) -> list:
     """One dict per point (keys: ``point``, the swept keys, :data:`CSV_COLUMNS` and, with
     ``[contact]``, :data:`FRICTION_CSV_COLUMNS`)."""
     rows = []
     for p in points:
         ds = p.ds
         row = {"point": str(p.number)}
-        row.update({key.key: _number(v) for key, v in zip(layout.keys, p.values, strict=True)})
+        row.update({key.key: _number(v) for key, v in zip(layout.axes, p.values, strict=True)})
         for name in ("contact_probability", "contact_probability_ci_lower",
                      "contact_probability_ci_upper", "contact_probability_bound_lower",
                      "contact_probability_bound_upper", "contact_probability_bounds_ci_lower",
@@ -433,9 +371,9 @@ def csv_rows(layout: SweepLayout, points) -> list:
     return rows
 
 
-def csv_text(layout: SweepLayout, points) -> str:
+def csv_text(layout: Sweep, points) -> str:
     """``points.csv`` as text."""
-    columns = ["point", *(key.key for key in layout.keys), *CSV_COLUMNS]
+    columns = ["point", *(key.key for key in layout.axes), *CSV_COLUMNS]
     if any(p.friction is not None for p in points):
         columns += FRICTION_CSV_COLUMNS
     buffer = io.StringIO()
@@ -467,15 +405,15 @@ class Series:
     points: tuple
 
 
-def series_of(layout: SweepLayout) -> list:
+def series_of(layout: Sweep) -> list:
     """The curves of the sweep's figures (:class:`Series`): an outer sweep has the first
     key on the x axis and one curve per combination of the other keys' values; a zip sweep
     one curve over the point numbers."""
     if layout.mode == "zip":
         return [Series("", np.arange(1, layout.size + 1, dtype=float),
                        tuple(range(layout.size)))]
-    first = layout.keys[0]
-    others = layout.keys[1:]
+    first = layout.axes[0]
+    others = layout.axes[1:]
     out = []
     for rest in np.ndindex(*layout.shape[1:]):
         points = tuple(int(np.ravel_multi_index((i, *rest), layout.shape))
@@ -500,21 +438,21 @@ def _log_axis(x) -> bool:
     return bool(np.std(log) / np.mean(log) < np.std(lin) / np.mean(lin))
 
 
-def _x_axis(ax, layout: SweepLayout, series):
+def _x_axis(ax, layout: Sweep, series):
     """Label and scale the x axis: the first key (outer) or the point number (zip)."""
     if layout.mode == "zip":
         x = series[0].x
-        if x.size <= 12 and len(layout.keys) <= 3:  # the keys' values under the numbers
+        if x.size <= 12 and len(layout.axes) <= 3:  # the keys' values under the numbers
             ax.set_xticks(x, [f"{int(v)}\n" + "\n".join(_value_text(w) for w in
-                                                       layout.values_at(int(v) - 1))
+                                                       layout.values_at(int(v) - 1).values())
                               for v in x], fontsize=8)
-            names = "\n".join(k.label for k in layout.keys)
+            names = "\n".join(k.label for k in layout.axes)
             ax.set_xlabel(f"sweep point (zip), with the values of\n{names}", fontsize=9)
         else:
             ax.set_xticks(x if x.size <= 25 else ax.get_xticks())
             ax.set_xlabel("sweep point (zip; the keys' values in the table)")
         return
-    first = layout.keys[0]
+    first = layout.axes[0]
     x = np.asarray(first.values, dtype=float)
     if _log_axis(x):
         ax.set_xscale("log")
@@ -544,7 +482,7 @@ def _legend(ax, layout, series, **kwargs):
         return
     title = None
     if len(series) > 1:
-        title = "other keys" if len(layout.keys) > 2 else layout.keys[1].label
+        title = "other keys" if len(layout.axes) > 2 else layout.axes[1].label
     ax.legend(title=title, fontsize=8, title_fontsize=8, framealpha=0.9, **kwargs)
 
 
@@ -556,7 +494,7 @@ def _probability_scale(values) -> tuple:
 
 
 @styled
-def plot_contact_probability(layout: SweepLayout, points):
+def plot_contact_probability(layout: Sweep, points):
     """P(contact) with its 95 % interval band against the swept key (module docstring)."""
     fig, ax = new_figure(7.6, 4.6)
     series = series_of(layout)
@@ -597,7 +535,7 @@ def plot_contact_probability(layout: SweepLayout, points):
 
 
 @styled
-def plot_velocity_deviation(layout: SweepLayout, points):
+def plot_velocity_deviation(layout: Sweep, points):
     """(a) std of epsilon with its 95 % interval, (b) its 0.1 %, 50 % and 99.9 % quantiles
     with their 95 % intervals and the spec limit on |epsilon|, against the swept key."""
     fig, (ax_s, ax_q) = new_figure(12.0, 4.4, ncols=2)
@@ -644,7 +582,7 @@ def plot_velocity_deviation(layout: SweepLayout, points):
 
 
 @styled
-def plot_friction(layout: SweepLayout, points):
+def plot_friction(layout: Sweep, points):
     """(a) quantiles of the friction increase with its limit, (b) P(increase > limit) with
     its 95 % interval band, against the swept key (a study with ``[contact]``)."""
     fig, (ax_q, ax_p) = new_figure(12.0, 4.4, ncols=2)
@@ -804,7 +742,7 @@ def _status_counts(pairs) -> str:
     return "; ".join(parts)
 
 
-def headline(layout: SweepLayout, points) -> list:
+def headline(layout: Sweep, points) -> list:
     """The key sentences at the top: how far P(contact) moves over the sweep."""
     one, _ = contact_unit(points[0].ds)
     p = _column(points, lambda q: _f(q.ds, "contact_probability"))
@@ -816,12 +754,12 @@ def headline(layout: SweepLayout, points) -> list:
             ds = points[k].ds
             text = format_fraction(p[k], _f(ds, "contact_probability_ci_lower"),
                                    _f(ds, "contact_probability_ci_upper"))
-            return f"{text} at point {points[k].number} ({layout.describe(k)})"
+            return f"{text} at point {points[k].number} ({layout.describe(k, units=True)})"
 
         out.append(f"Over the {layout.size} points, P(ball-to-ball contact within the stroke) "
                    f"per {one} ranges from {at(lo)} to {at(hi)}.")
-        if layout.mode == "outer" and len(layout.keys) == 1 and layout.size > 1:
-            out.append(f"At the first value of {layout.keys[0].key} it is "
+        if layout.mode == "outer" and len(layout.axes) == 1 and layout.size > 1:
+            out.append(f"At the first value of {layout.axes[0].key} it is "
                        f"{format_fraction(p[0])}, at the last {format_fraction(p[-1])}.")
     if _any_unresolved(points):
         numbers = [q.number for q in points if _i(q.ds, "n_assemblies_unresolved") > 0]
@@ -830,9 +768,9 @@ def headline(layout: SweepLayout, points) -> list:
     return out
 
 
-def _keys_table(layout: SweepLayout) -> ReportTable:
+def _keys_table(layout: Sweep) -> ReportTable:
     rows = tuple((key.key, key.name, key.units, ", ".join(_value_text(v) for v in key.values),
-                  str(len(key.values))) for key in layout.keys)
+                  str(len(key.values))) for key in layout.axes)
     return ReportTable("Swept keys", ("config key", "coordinate in the file", "units",
                                       "values", "count"), rows, (0.3, 0.25, 0.1, 0.25, 0.1),
                        numeric=(4,))
@@ -867,13 +805,13 @@ def _tolerance_rows(ds):
     return tolerance_table(config, ds)
 
 
-def _points_table(layout: SweepLayout, points) -> list:
+def _points_table(layout: Sweep, points) -> list:
     """HTML of the table per point."""
     one, many = contact_unit(points[0].ds)
     unresolved = _any_unresolved(points)
     friction = any(p.friction is not None for p in points)
     judged = bool(_judged(points))
-    header = ["point", *(k.label for k in layout.keys), f"P(contact) per {one} (95 % CI)",
+    header = ["point", *(k.label for k in layout.axes), f"P(contact) per {one} (95 % CI)",
               f"contacts / {many} with a known outcome"]
     if unresolved:
         header.append(f"unresolved {many}: bounds over all (95 %)")
@@ -941,10 +879,10 @@ def _sig(x, digits=4) -> str:
     return f"{x:.{digits}g}" if np.isfinite(x) else "n/a"
 
 
-def _verdict_table(layout: SweepLayout, points) -> list:
+def _verdict_table(layout: Sweep, points) -> list:
     """HTML of the verdict per point: each judged check and the overall status."""
     judged = _judged(points)
-    header = ["point", *(k.label for k in layout.keys)]
+    header = ["point", *(k.label for k in layout.axes)]
     header += [_check_title(c, points) for c in judged]
     header.append("all limits")
     parts = ["<table><tr>" + "".join(f"<th>{_esc(h)}</th>" for h in header) + "</tr>"]
@@ -990,7 +928,7 @@ def _point_attr(ds, name):
     return ds.attrs.get(name, "?")
 
 
-def _html(ds, path, layout: SweepLayout, points, pngs: dict) -> str:
+def _html(ds, path, layout: Sweep, points, pngs: dict) -> str:
     a = ds.attrs
     one, many = contact_unit(points[0].ds)
     title = str(a.get("title", "tolsim sweep"))
@@ -1048,7 +986,7 @@ def _html(ds, path, layout: SweepLayout, points, pngs: dict) -> str:
                          f"<figcaption class='muted'>{_esc(caption)}</figcaption></figure>")
 
     parts.append(f"<h2 id='contact'>{next(section)}. Ball-to-ball contact against the swept "
-                 "key" + ("s" if len(layout.keys) > 1 else "") + "</h2>")
+                 "key" + ("s" if len(layout.axes) > 1 else "") + "</h2>")
     fig("contact_probability")
     parts.append("<h3 id='points'>Per point</h3>")
     parts += _points_table(layout, points)
@@ -1097,7 +1035,7 @@ def _checks_table(layout, points, number) -> list:
     model = str(points[0].ds.attrs.get("velocity_model", "?"))
     table = ReportTable(
         f"{number}. Model checks per point", (
-            "point", *(k.label for k in layout.keys),
+            "point", *(k.label for k in layout.axes),
             f"balls outside the {model} model's validity, re-solved with the full model",
             "unresolved balls (not converged / loss of contact / full model failed)",
             "spot checks valid in both models", "RMS ε difference", "largest |ε difference|"),
@@ -1121,7 +1059,7 @@ class SweepReportOutputs:
     html: str = ""
     csv: str = ""
     figures: dict = field(default_factory=dict)
-    layout: SweepLayout | None = None
+    layout: Sweep | None = None
     points: list = field(default_factory=list)
 
 

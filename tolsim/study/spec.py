@@ -642,6 +642,32 @@ class StudyConfig:
 _HEADER = re.compile(r"""^\s*\[(\[?)\s*([A-Za-z0-9_\-."'\s]+?)\s*\]\]?\s*(#.*)?$""")
 
 
+def toml_lines(lines):
+    """The lines of a TOML text outside multi-line strings, with their table.
+
+    Yields (line number from 0, line, table, is_array, is_header): ``table`` is the dotted name
+    of the table the line belongs to ("" before the first header), or of the header itself;
+    ``is_array`` tells an array of tables (``[[name]]``). Plain text processing: no TOML parser
+    below the I/O layer.
+    """
+    table, array, in_string = "", False, None
+    for number, line in enumerate(lines):
+        if in_string is not None:  # inside a multi-line string: not TOML structure
+            if line.count(in_string) % 2:
+                in_string = None
+            continue
+        for quote in ('"""', "'''"):
+            if line.count(quote) % 2:
+                in_string = quote
+        m = _HEADER.match(line)
+        if m and in_string is None:
+            table = ".".join(p.strip().strip("\"'") for p in m.group(2).split("."))
+            array = bool(m.group(1))
+            yield number, line, table, array, True
+        else:
+            yield number, line, table, array, False
+
+
 def _key(name):
     """Regex of a TOML key name, bare or quoted."""
     return rf"""(?:{name}|"{name}"|'{name}')"""
@@ -662,26 +688,17 @@ def set_study_value(text: str, key: str, value: int) -> str:
         If the key is not found exactly once.
     """
     lines = text.splitlines(keepends=True)
-    table, in_string, hits = "", None, []
+    hits = []
     value_re = r"([^\s,}#]+)"
     in_table = re.compile(rf"^(\s*{_key(key)}\s*=\s*){value_re}([ \t]*)(#.*)?(\r?\n)?$")
     dotted = re.compile(rf"^(\s*{_key('study')}\s*\.\s*{_key(key)}\s*=\s*){value_re}"
                         r"([ \t]*)(#.*)?(\r?\n)?$")
     inline = re.compile(rf"^\s*{_key('study')}\s*=\s*{{")
     inline_value = re.compile(rf"([{{,]\s*{_key(key)}\s*=\s*){value_re}")
-    for number, line in enumerate(lines):
-        if in_string is not None:  # inside a multi-line string: not TOML structure
-            if line.count(in_string) % 2:
-                in_string = None
+    for number, line, name, array, header in toml_lines(lines):
+        if header:
             continue
-        for quote in ('"""', "'''"):
-            if line.count(quote) % 2:
-                in_string = quote
-        m = _HEADER.match(line)
-        if m and in_string is None:
-            table = ".".join(p.strip().strip("\"'") for p in m.group(2).split("."))
-            table = "[]" if m.group(1) else table  # an array of tables: never [study]
-            continue
+        table = "[]" if array else name  # an array of tables: never [study]
         pattern = in_table if table == "study" else dotted if table == "" else None
         if pattern is not None and (m := pattern.match(line)):
             hits.append((number, m))

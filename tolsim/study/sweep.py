@@ -118,9 +118,12 @@ class Sweep:
             return {a.key: a.values[k] for a in self.axes}
         return {a.key: a.values[i] for a, i in zip(self.axes, self.index(k), strict=True)}
 
-    def describe(self, k: int) -> str:
-        """``key = value, ...`` of point ``k``, for messages."""
-        return ", ".join(f"{key} = {value:g}" for key, value in self.values_at(k).items())
+    def describe(self, k: int, units: bool = False) -> str:
+        """``key = value, ...`` of point ``k``, for messages (``units``: with the values'
+        units, ``key = value N m``)."""
+        return ", ".join(
+            f"{a.key} = {v:g}" + (f" {a.units}" if units and a.units not in ("", "1") else "")
+            for a, v in zip(self.axes, self.values_at(k).values(), strict=True))
 
     def with_points(self, points) -> "Sweep":
         return Sweep(self.axes, self.mode, tuple(points))
