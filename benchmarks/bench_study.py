@@ -32,8 +32,17 @@ stroke, each ball's creep coefficients, the carriage friction and its statistics
 same study without ``[contact]`` in the same run, at each size (target: >= 1.5 M balls/s on 2
 cores, peak memory flat from 1e6 to 1e7 balls).
 
+With ``--along-track`` it times the study after contact with ``along_track`` propagation
+(the trains followed at every time step, :class:`tolsim.study.friction.TrackFriction`):
+``configs/friction_yaw.toml`` (free balls, 10 per train) and ``configs/carriage_preload.toml``
+(a carriage, 2 x 12 balls, balls entering and leaving its loaded zone), both switched to
+``along_track`` with their ``time_steps`` (200), each with and without ``[contact]`` in the
+same run, one worker. Without ``[contact]`` a carriage assembly is followed only up to its
+first contact, with it over the whole stroke, which is most of the difference there. Sizes
+default to 2e4 and 1e5 balls (along_track costs two evaluations of every ball per step).
+
 Run: ``python benchmarks/bench_study.py [--sizes 1e6 1e7] [--workers 1 2]
-[--static solved paired] [--friction]``
+[--static solved paired] [--friction] [--along-track]``
 """
 
 import argparse
@@ -55,13 +64,20 @@ RESOLVE_STUDIES = {"default": ROOT / "tolsim" / "data" / "default.toml",
                    "known_answer": ROOT / "configs" / "known_answer.toml"}
 
 
-def study(balls_total, static_model="solved", config=CONFIG):
-    from tolsim.io.config import load_config
+def study(balls_total, static_model="solved", config=CONFIG, along_track=None):
+    """The benchmark's study; ``along_track``: None (as the config), or "contact" /
+    "free" for along_track propagation with or without [contact]."""
+    from tolsim.io.config import load_config, parse_config
 
     c = load_config(config)
+    if along_track == "contact" and c.contact is None:
+        c = parse_config(c.text + "\n[contact]\n", str(config))
     c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0,
                                  static_model=static_model))
-    return c.with_overrides(samples=max(1, int(balls_total) // c.train.balls))
+    if along_track is not None:
+        c = replace(c, study=replace(c.study, propagation="along_track"),
+                    contact=c.contact if along_track == "contact" else None)
+    return c.with_overrides(samples=max(1, int(balls_total) // c.balls))
 
 
 def numpy_analytic(dbeta, force, bearing):
@@ -114,11 +130,12 @@ def numpy_pipeline(config):
     return total
 
 
-def child(balls_total, workers, baseline, static_model, config=CONFIG):
+def child(balls_total, workers, baseline, static_model, config=CONFIG, along_track=None):
     from tolsim.study.runner import run_study
 
-    c = study(balls_total, static_model, config)
-    run_study(c.with_overrides(samples=2048), workers=workers)  # load / compile kernels
+    c = study(balls_total, static_model, config, along_track)
+    warm = 2048 if along_track is None else min(c.study.block_size, c.study.samples)
+    run_study(c.with_overrides(samples=warm), workers=workers)  # load / compile kernels
     start = time.perf_counter()
     if baseline:
         numpy_pipeline(c)
@@ -127,7 +144,7 @@ def child(balls_total, workers, baseline, static_model, config=CONFIG):
     elapsed = time.perf_counter() - start
     peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    balls = c.study.samples * c.train.balls
+    balls = c.study.samples * c.balls
     print(json.dumps({"balls": balls, "seconds": elapsed, "peak_mib": peak_kib / 1024,
                       "child_peak_mib": children / 1024}))
 
@@ -153,7 +170,7 @@ def resolve_child(name, balls_total):
 
 
 def measure(balls, workers=1, baseline=False, static_model="solved", resolve=None,
-            config=None):
+            config=None, along_track=None):
     cmd = [sys.executable, __file__, "--child", str(balls), str(workers), static_model]
     if baseline:
         cmd.append("--baseline")
@@ -161,6 +178,8 @@ def measure(balls, workers=1, baseline=False, static_model="solved", resolve=Non
         cmd += ["--resolve", resolve]
     if config is not None:
         cmd += ["--config", str(config)]
+    if along_track is not None:
+        cmd += ["--along-track-child", along_track]
     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -180,17 +199,24 @@ def main():
     p.add_argument("--friction", action="store_true",
                    help="time the study after contact (configs/friction_yaw.toml) against "
                         "the same study without [contact], at --sizes with one worker")
+    p.add_argument("--along-track", action="store_true",
+                   help="time along_track studies (configs/friction_yaw.toml, "
+                        "configs/carriage_preload.toml) with and without [contact]")
     p.add_argument("--config", help=argparse.SUPPRESS)
+    p.add_argument("--along-track-child", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
         if args.resolve:
             resolve_child(args.resolve, float(args.child[0]))
         else:
             child(float(args.child[0]), int(args.child[1]), args.baseline, args.child[2],
-                  Path(args.config) if args.config else CONFIG)
+                  Path(args.config) if args.config else CONFIG, args.along_track_child)
         return
     if args.friction:
         friction(args.sizes)
+        return
+    if args.along_track:
+        along_track(args.sizes if "--sizes" in sys.argv else [2e4, 1e5])
         return
     print(f"tolsim study pipeline: {CONFIG.name} (solved static, analytic epsilon, "
           f"propagation a), {os.cpu_count()} cores")
@@ -235,6 +261,22 @@ def friction(sizes):
         ratio = base["seconds"] / with_contact["seconds"]
         print(f"  throughput with [contact]: {ratio:.2f}x the study without it "
               "(target: >= 1.5 M balls/s)")
+
+
+def along_track(sizes):
+    """Print along_track studies with [contact] against the same without it."""
+    print(f"tolsim along_track study after contact, with and without [contact]; one worker, "
+          f"{os.cpu_count()} cores")
+    for config in (FRICTION_CONFIG, ROOT / "configs" / "carriage_preload.toml"):
+        for size in sizes:
+            free = measure(size, config=config, along_track="free")
+            contact = measure(size, config=config, along_track="contact")
+            for label, r in (("without [contact]", free), ("with [contact]   ", contact)):
+                print(f"  {config.name}: {r['balls']:.2e} balls {label}: {r['seconds']:7.2f} s "
+                      f" {r['balls'] / r['seconds']:9.0f} balls/s  peak RSS "
+                      f"{max(r['peak_mib'], r['child_peak_mib']):.0f} MiB")
+            print(f"  throughput with [contact]: {free['seconds'] / contact['seconds']:.2f}x "
+                  "the study without it")
 
 
 if __name__ == "__main__":

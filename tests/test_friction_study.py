@@ -732,8 +732,9 @@ def test_bad_contact_keys_exit_2_one_line(tmp_path, capsys, line, key):
     assert not out.exists()
 
 
-def test_contact_settings_validate_and_along_track_is_refused():
+def test_contact_settings_validate():
     # The Python API refuses what the config reader refuses (one line naming the field).
+    # Both propagations are accepted (along_track: tests/test_friction_along_track.py).
     from tolsim.study.spec import ContactSettings
 
     for field, value in (("ball_friction_coefficient", -0.1), ("creep_model", "exact"),
@@ -742,16 +743,14 @@ def test_contact_settings_validate_and_along_track_is_refused():
             ContactSettings(**{field: value})
     c = two_balls()
     c = replace(c, study=replace(c.study, propagation="along_track"))
-    with pytest.raises(ValueError, match="along_track is not supported yet"):
-        run_study(c)
+    assert isinstance(fr.study_accumulator(c), fr.FrictionAccumulator)
 
 
 @pytest.mark.parametrize(("old", "new", "key"), [
-    ('propagation = "constant"', 'propagation = "along_track"', "study.propagation"),
     ("friction_coefficient = 0.1", "friction_coefficient = 0.0",
      "bearing.friction_coefficient"),
 ])
-def test_contact_needs_constant_propagation_and_raceway_friction(old, new, key):
+def test_contact_needs_raceway_friction(old, new, key):
     text = (CONFIGS / "friction_yaw.toml").read_text().replace(old, new, 1)
     assert text != (CONFIGS / "friction_yaw.toml").read_text()
     with pytest.raises(ValueError, match=key) as info:

@@ -439,16 +439,25 @@ def friction_assumptions(ds, config, data) -> list:
     tracks = tracks_of(ds)
     mu_bb = _f(ds, "ball_friction_coefficient")
     model = str(ds.attrs.get("contact_creep_model", "analytic"))
+    along = ds.attrs.get("propagation") == "along_track"
+    solved = ("with along_track the same rule at every time step, with each ball's ε and K "
+              "at its position (a gap closing within a step is projected onto no overlap; "
+              "the figures carry an O(dt) error), contacts ending where the ε change "
+              "separates the balls" + ("; balls enter and leave the carriage's loaded zone "
+                                       "and join or leave its train"
+                                       if tracks else "") if along else
+              "with constant ε solved event-driven and exact, no time step")
+    ends = ("" if along and tracks else
+            ", and no ball enters or leaves the loaded zone during the stroke")
     add("trains of balls after contact (quasi-static)",
         "balls that touch move together as a cluster at the K-weighted mean of their ε, "
         "and the ball-to-ball forces follow from the cluster's balance (a cluster splits "
-        "only where a force would turn negative); with constant ε solved event-driven and "
-        "exact, no time step. No inertia (time constant m / (2K/v) ≈ 6e-7 s for the paper's "
-        "ball at 0.2 m/s, against a stroke of 0.5 s and more), no bounce (damping ratio "
-        "≈ 12); the balls beyond the ends of the loaded zone carry no force, and no ball "
-        "enters or leaves the loaded zone during the stroke",
+        f"only where a force would turn negative); {solved}. No inertia (time constant "
+        "m / (2K/v) ≈ 6e-7 s for the paper's ball at 0.2 m/s, against a stroke of 0.5 s and "
+        "more), no bounce (damping ratio ≈ 12); the balls beyond the ends of the loaded zone "
+        f"carry no force{ends}",
         "tolsim.study.trains (module docstring: quasi-static assumption, ends of the loaded "
-        "zone)")
+        "zone, varying epsilon)")
     add("ball-to-ball friction μ_bb",
         (f"{mu_bb:.4g}: Coulomb friction at each ball-to-ball contact (both balls spin the "
          "same way, so their surfaces slide there); it brakes both balls of a pair, and "

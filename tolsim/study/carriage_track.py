@@ -90,9 +90,26 @@ the end balls gradually while they stay in four-point contact. An assembly is in
 if it needs more entering balls than were drawn (:func:`tolsim.study.sampling.
 entering_capacity`) or more balls in its zone than it has slots (:func:`slot_capacity`).
 
+After contact
+-------------
+With ``[contact]`` (a :class:`tolsim.study.friction.TrackFriction` passed as ``friction``)
+every assembly is followed over the whole stroke, and the loaded balls of each track move as
+a train (:mod:`tolsim.study.trains`, "Varying epsilon"): at every step the cluster rule on
+the closed pairs with each ball's epsilon and creep coefficients from its own loaded state
+(the carriage solved at the balls' positions), then the projection of the closing gaps. A
+ball belongs to its track's train for a step when it is in the zone at the step's start,
+midpoint and (free motion) end, so a ball leaving at the trailing end drops its contacts in
+the step in which it leaves, and an entering ball joins from the next step with its drawn
+gap open; the pair flags follow the balls through the exits and entries
+(:func:`carry_pairs_kernel`). Unloaded balls are in no train and pass through as above. The
+first contact, its pair and ``train_valid`` are located on the free motion of each step and
+counted only up to the first contact, so they are those of the run without ``[contact]``,
+bit for bit. The friction figures: :mod:`tolsim.study.friction`, "With along_track".
+
 Cost: two batched carriage solves per step (each about 10 us of CPU per assembly of
 ``configs/carriage_preload.toml``, 2 x 13 ball slots) plus the velocity model of the loaded
-balls and the bookkeeping; an assembly is followed until its first contact.
+balls and the bookkeeping; an assembly is followed until its first contact (with
+``[contact]``: over the whole stroke, plus the creep coefficients of its loaded balls).
 ``benchmarks/bench_carriage.py --along-track`` measures the study path.
 
 The balls at t = 0 are the block's trains at their sampled positions (each train's centroid
@@ -248,6 +265,24 @@ def advance_kernel(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_
             count[a, tr] = c
 
 
+@jit
+def carry_pairs_kernel(old_id, old_flag, new_id, out_flag):
+    """Flags of adjacent slot pairs (rows, S - 1) moved with their balls: the pair of new
+    slots j, j + 1 keeps the flag of the old slots of the same two balls when they were
+    adjacent there, False otherwise (a ball that entered, an empty slot)."""
+    rows, slots = new_id.shape
+    for r in range(rows):
+        for j in range(slots - 1):
+            out_flag[r, j] = False
+            a, b = new_id[r, j], new_id[r, j + 1]
+            if a < 0 or b < 0:
+                continue
+            for p in range(slots - 1):
+                if old_id[r, p] == a:
+                    out_flag[r, j] = old_flag[r, p] and old_id[r, p + 1] == b
+                    break
+
+
 class _Evaluation:
     """The loaded balls of a block's assemblies at given positions: carriage, then epsilon."""
 
@@ -341,7 +376,8 @@ def _initial_state(config, ball_z, loaded, batch, state):
     return balls, carriage
 
 
-def first_contact_carriage_track(config, block, trace: TrackTrace | None = None):
+def first_contact_carriage_track(config, block, trace: TrackTrace | None = None, *,
+                                 friction=None):
     """First contact of a block's carriage assemblies, balls rolling through the carriage.
 
     Parameters
@@ -352,6 +388,11 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None)
         With the entering balls' draws (:func:`tolsim.study.sampling.sample_block`).
     trace : TrackTrace, optional
         Filled with the positions, epsilon and events of every step.
+    friction : tolsim.study.friction.TrackFriction, optional
+        With it (a study with ``[contact]``) every assembly is followed over the whole stroke
+        and its loaded balls move as trains after they touch (module docstring, "After
+        contact"); the friction figures are accumulated in ``friction``. The first contact
+        and ``train_valid`` are the same as without it.
 
     Returns
     -------
@@ -402,6 +443,11 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None)
     active = np.ones(m, dtype=bool)
     state0 = carriage0 = None
     resolve_seconds = 0.0
+    if friction is not None:  # trains after contact: the closed pairs at t = 0
+        closed = np.zeros((m, tracks, max(slots - 1, 0)), dtype=bool)
+        closed[:, :, :n - 1] = block.initial_gap.reshape(m, tracks, n - 1) <= 0.0
+        friction.begin(m, closed.reshape(m * tracks, -1), carriage_frame=True)
+    trains = (m * tracks, slots)
     for k in range(steps):
         t0 = k * dt
         rows = np.flatnonzero(active)
@@ -422,13 +468,20 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None)
             normal = np.where(loaded1, batch.normal_load, np.nan)
             trace.normal_load.append(normal)
         e1 = np.nan_to_num(eps1)
-        mid = z0 - 0.5 * dt * (1.0 - e1) * 0.5 * v
+        w1 = e1
+        if friction is not None:  # touching balls move together (predictor)
+            loaded = loaded1.reshape(trains)
+            load = friction.coefficients(state, loaded, friction.touching())
+            w1 = np.nan_to_num(friction.predict(eps1.reshape(trains), load, loaded,
+                                                loaded)).reshape(z0.shape)
+        mid = z0 - 0.5 * dt * (1.0 - w1) * 0.5 * v
         eps2, ok2, loaded2, _, state = evaluate(mid, ids, t0 + 0.5 * dt, rows)
         resolve_seconds += state.resolve_seconds
         e2 = np.where(loaded2, np.nan_to_num(eps2), e1)  # outside at the midpoint: epsilon_1
         z1 = z0 - dt * (1.0 - e2) * 0.5 * v
         ok = ball_ok[rows] & ok1 & ok2
-        valid[rows] &= (ok1 & ok2).all(axis=(1, 2))
+        searching = ~np.isfinite(time[rows])  # no first contact yet
+        valid[rows[searching]] &= (ok1 & ok2).all(axis=(1, 2))[searching]
         # contacts between adjacent loaded balls, both resolved so far
         with np.errstate(invalid="ignore", divide="ignore"):
             gap0 = z0[..., 1:] - z0[..., :-1] - diameter
@@ -442,11 +495,24 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None)
         if tc.shape[1]:  # (a zone that holds one ball has no pairs)
             first = np.argmin(tc, axis=1)  # the first track, then the trailing pair, on ties
             tmin = tc[np.arange(len(rows)), first]
-            hit = np.isfinite(tmin)
+            hit = np.isfinite(tmin) & searching
             time[rows[hit]] = tmin[hit]
             track, slot = np.divmod(first[hit], slots - 1)
             pair[rows[hit]] = track * (n - 1) + np.minimum(slot, max(n - 2, 0))
-            active[rows[hit]] = False
+            if friction is None:  # an assembly is followed up to its first contact
+                active[rows[hit]] = False
+        if friction is not None:  # the step of the trains: cluster rule, then projection
+            # the trains: balls loaded through the step (a ball leaving or entering the zone
+            # in it is in none, and drops its contacts)
+            with np.errstate(invalid="ignore"):
+                member = (loaded1 & loaded2 & (np.abs(z1) <= half)).reshape(trains)
+            free = np.where(loaded2, eps2, e1).reshape(trains)  # NaN: unresolved
+            w2 = np.nan_to_num(friction.velocity(free, friction.coefficients(
+                state, loaded2.reshape(trains)), loaded2.reshape(trains), member))
+            z1 = friction.advance(z0.reshape(trains),
+                                  (z0 - dt * (1.0 - w2.reshape(z0.shape)) * 0.5 * v
+                                   ).reshape(trains), ids.reshape(trains)).reshape(z0.shape)
+            before = ids.copy()
         # exits at the trailing end, entries at the leading end
         overflow = np.zeros(len(rows), dtype=bool)
         sub_count, sub_entered = count[rows], entered[rows]
@@ -456,7 +522,10 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None)
                        diameter, n, t0, dt, overflow, *events)
         ball_z[rows], ball_id[rows], ball_ok[rows] = z1, ids, ok
         count[rows], entered[rows] = sub_count, sub_entered
-        valid[rows] &= ~overflow
+        valid[rows[searching]] &= ~overflow[searching]
+        if friction is not None:
+            friction.carry(before, ids)
+            friction.stop(np.repeat(overflow, tracks))
         if trace is not None:
             for ident, when, out in ((events[0], events[1], trace.exits),
                                      (events[2], events[3], trace.entries)):
@@ -465,4 +534,5 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None)
     return time, pair, valid, resolve_seconds, state0, carriage0
 
 
-__all__ = ["TrackTrace", "advance_kernel", "first_contact_carriage_track", "slot_capacity"]
+__all__ = ["TrackTrace", "advance_kernel", "carry_pairs_kernel",
+           "first_contact_carriage_track", "slot_capacity"]

@@ -46,6 +46,79 @@ and every figure over the stroke is exact (no time step): the time mean of the i
 (max - min over the stroke; the baseline is constant), the largest ball-to-ball force, the
 fraction of the stroke with any contact, and the multi-ball clusters formed.
 
+With ``along_track`` propagation
+--------------------------------
+Epsilon, K and the other creep coefficients of a ball change as it rolls past the rail errors
+and through the carriage's load distribution, and with a carriage balls leave and enter its
+loaded zone. The trains are then followed step by step, inside the propagation's midpoint
+integration (:class:`TrackFriction`, driven by :func:`tolsim.study.propagation.
+first_contact_along_track` and :func:`tolsim.study.carriage_track.
+first_contact_carriage_track`). At every step of dt = T / ``study.time_steps`` each ball's
+epsilon and creep coefficients come from its loaded state at its position, at the start of
+the step (predictor, only for trains with a closed pair) and at its midpoint; the cluster rule
+(:func:`tolsim.study.trains.cluster_velocities`, touching = the closed pairs) gives the loaded
+velocities w_i, the balls advance at (1 + w_i) v / 2, and a gap that closes inside the step
+is closed by the kappa-weighted projection of the end positions, whose multipliers give the
+step-mean forces Qbar_j (eqs. 7, 8 of :mod:`tolsim.study.trains`, "Varying epsilon", with the
+derivation). A contact ends when the cluster rule leaves its balls apart: its force returns to
+zero and the gap opens. Per step k, with the coefficients at the midpoint,
+
+    F_track,k = B_k + I_k,   B_k = sum_i F_0,i,   I_k = sum_j k_j Qbar_j  (eq. 1 per step)
+
+(i over the loaded balls, j over the pairs of the train). The figures of a train:
+
+* **baseline**: the time mean of B_k over the stroke (it varies now: loads, rail errors,
+  which balls are in the zone);
+* **increase**: I_k = F_track,k - B_k, the friction over the step's own baseline, i.e. what
+  the contacts add; ``increase_max`` its maximum over the steps, ``increase_mean`` its time
+  mean;
+* **ripple**: max_k F_track,k - min_k F_track,k, the ripple of the friction force itself
+  (with the variation of the baseline, e.g. balls passing through the load zone);
+* ``contact_force_max``: the largest Qbar_j; ``contact_fraction``: the time with a contact
+  force (a step counts whole when a cluster pushes through it, else from its earliest
+  closing, interpolated as the first contact is, to its end); ``clusters_formed``: clusters
+  at the end of a step that hold a pair not in contact at its start (a cluster that splits
+  and forms again counts again);
+* sliding is checked at every step with the step's forces against the capacities at zero
+  neighbour force, as for constant epsilon. A train is unresolved from the step at which a
+  ball slides, at which one of its loaded balls has no epsilon or no usable creep
+  coefficients, or (a carriage) at which its assembly runs out of entering balls or slots;
+  its balls then move freely, as without ``[contact]``, and its largest increase before that
+  step is a lower bound of its maximum (certain exceedance, below).
+
+*Error of the step.* For constant epsilon and K the step is exact whatever dt (derivation in
+:mod:`tolsim.study.trains`): the positions at step ends and the step-mean forces are the
+event-driven ones, so the baseline, ``increase_mean`` and ``contact_fraction`` agree with
+the exact figures above to rounding (1e-8 relative, tests/test_friction_along_track.py).
+Maxima and minima are taken over step means, so a contact that forms inside the last step
+(for the minimum of the ripple, the first) is averaged away: O(1) in a fraction O(dt / T)
+of the assemblies; two merges of one cluster inside one step count once. With varying
+epsilon the midpoint rule adds O(dt) over the stroke, mostly from the steps in which a
+contact starts or ends; a force that peaks at contact is underestimated by the step mean
+(the paper's pair with a 20 um gap: the largest force 4.35 N at 100 steps, 4.44 N at 400).
+
+*First contact.* It is located on the free motion of each step, as without ``[contact]``:
+up to the first contact the balls are free and the trajectories are the same to the last
+bit, so P(contact) and the time to contact do not change when ``[contact]`` is added. (With
+free balls the train's validity also counts the evaluations after its first contact,
+which are now those of the trajectory with trains: an assembly whose ball is unresolved
+only on one of the two after contact is valid in one run and not in the other. Its contact
+is counted either way.)
+
+*With a carriage* the train of a track is its loaded balls. A ball is in its train for a
+step when it is in the loaded zone at the step's start, midpoint and end: a ball leaving at
+the trailing end drops its contacts in the step in which it leaves, a ball entering at the
+leading end joins from the step after, with an open gap. Beyond the ends of the train no
+force acts (Q = 0, :mod:`tolsim.study.trains`, "Ends of the loaded zone"). Unloaded balls
+(in the return path, or of a train longer than the zone at t = 0) are in no train and are
+passed through as by the first-contact propagation. K comes from each ball's own loaded
+state in the carriage solved at its position. Every assembly is followed over the whole
+stroke (without ``[contact]``: up to its first contact).
+
+*Cost.* Per step the creep coefficients of every loaded ball at the midpoint and, for the
+trains with a closed pair, at the start; two O(n) passes per train. The propagation's two
+evaluations per step still dominate (benchmarks/bench_study.py ``--along-track``).
+
 One row per assembly: the worst track
 -------------------------------------
 An assembly with a carriage has several tracks (trains). Its row is that of its **worst
@@ -99,7 +172,12 @@ the worst track, its ball positions and contact forces on a grid of ``travel_poi
 carriage positions. They are taken from the first random block of the study (so they depend
 on the seed only, not on the chunking or the number of samples): the first assemblies, in
 order, whose worst track has a ball-to-ball contact, then, if there are too few, the first
-resolved ones without.
+resolved ones without. With ``along_track`` they come from the integration of those
+assemblies with :class:`TrackFriction` recording its steps: at a travel point the forces and
+the friction force of the step that holds it, the positions interpolated linearly within
+the step. With a carriage the ``ball`` columns are the track's initial balls while they are
+in the loaded zone (NaN once they have left it); the balls that entered since are in the
+friction force, not in the positions and pair forces.
 """
 
 from contextlib import contextmanager
@@ -116,7 +194,11 @@ from tolsim.physics.geometry import K_F_PAPER
 from tolsim.physics.hertz import hertz_constants
 from tolsim.study.estimators import histogram_quantiles
 from tolsim.study.statistics import QUANTILES, Accumulator, _merge_moments, clopper_pearson
-from tolsim.study.trains import train_contact_constant
+from tolsim.study.trains import (
+    step_clusters_kernel,
+    step_project_kernel,
+    train_contact_constant,
+)
 
 #: Columns of the per-ball creep coefficients (:data:`tolsim.physics.analytic.LOAD_COLUMNS`).
 _K = LOAD_COLUMNS.index("creep_stiffness")
@@ -362,6 +444,48 @@ class _Trains:
     braking: np.ndarray  # (trains, n)
 
 
+def _worst_tracks(config, m, *, track_ok, baseline, increase_max, increase_mean, ripple,
+                  contact_force_max, contact_fraction, clusters_formed, bounded, rolling,
+                  sliding) -> FrictionState:
+    """One row per assembly from per-train figures (m * tracks trains): its worst track
+    (module docstring). ``track_ok``: the train was followed over the whole stroke;
+    ``bounded``: it was not, and ``rolling`` is its largest increase before the onset (a
+    lower bound of its maximum, for the certain exceedances); ``sliding``: it slid."""
+    tracks = config.n_tracks
+    limit = config.contact.friction_increase_limit
+    if limit > 0:
+        certain = (track_ok & (increase_max > limit)) | (bounded & (rolling > limit))
+    else:
+        certain = np.zeros(len(track_ok), dtype=bool)
+
+    def per_assembly(x):
+        return x.reshape(m, tracks)
+
+    ok = per_assembly(track_ok)
+    resolved = ok.all(axis=1)
+    increase = np.where(ok, per_assembly(increase_max), -np.inf)
+    ties = increase == increase.max(axis=1, keepdims=True)
+    worst = np.argmax(np.where(ties, per_assembly(baseline), -np.inf), axis=1)
+    rows = np.arange(m)
+
+    def pick(x, fill=np.nan):
+        return np.where(resolved, per_assembly(x)[rows, worst], fill)
+
+    return FrictionState(
+        baseline=pick(baseline),
+        increase_max=pick(increase_max),
+        increase_mean=pick(increase_mean),
+        ripple=pick(ripple),
+        contact_force_max=pick(contact_force_max),
+        contact_fraction=pick(contact_fraction),
+        clusters_formed=pick(clusters_formed),
+        worst_track=np.where(resolved, worst, -1).astype(np.int64),
+        resolved=resolved,
+        exceeds=per_assembly(certain).any(axis=1),
+        sliding=per_assembly(sliding).any(axis=1),
+    )
+
+
 def _follow_trains(config, initial_gap, state):
     """(FrictionState of the assemblies, _Trains): the trains of ``state`` over the stroke."""
     tracks, n = config.n_tracks, config.train.balls
@@ -381,59 +505,332 @@ def _follow_trains(config, initial_gap, state):
     stroke_friction_kernel(result.segment_start, result.segment_contact_force, result.valid,
                            load, horizon, baseline, mean, high, low, sliding, rolling)
     track_ok = result.valid & ~sliding & np.isfinite(baseline)
-    limit = config.contact.friction_increase_limit
-    if limit > 0:
-        certain = ((track_ok & (high > limit))
-                   | (result.valid & sliding & (rolling > limit)))
-    else:
-        certain = np.zeros(trains, dtype=bool)
-
-    def per_assembly(x):
-        return x.reshape(m, tracks)
-
-    ok = per_assembly(track_ok)
-    resolved = ok.all(axis=1)
-    increase = np.where(ok, per_assembly(high), -np.inf)
-    ties = increase == increase.max(axis=1, keepdims=True)
-    worst = np.argmax(np.where(ties, per_assembly(baseline), -np.inf), axis=1)
-    rows = np.arange(m)
-
-    def pick(x, fill=np.nan):
-        return np.where(resolved, per_assembly(x)[rows, worst], fill)
-
-    figures = FrictionState(
-        baseline=pick(baseline),
-        increase_max=pick(high),
-        increase_mean=pick(mean),
-        ripple=pick(high - low),
-        contact_force_max=pick(result.contact_force_max),
-        contact_fraction=pick(result.contact_fraction),
-        clusters_formed=pick(result.clusters_formed.astype(float)),
-        worst_track=np.where(resolved, worst, -1).astype(np.int64),
-        resolved=resolved,
-        exceeds=per_assembly(certain).any(axis=1),
-        sliding=per_assembly(result.valid & sliding).any(axis=1),
-    )
+    figures = _worst_tracks(config, m, track_ok=track_ok, baseline=baseline, increase_max=high,
+                            increase_mean=mean, ripple=high - low,
+                            contact_force_max=result.contact_force_max,
+                            contact_fraction=result.contact_fraction,
+                            clusters_formed=result.clusters_formed.astype(float),
+                            bounded=result.valid & sliding, rolling=rolling,
+                            sliding=result.valid & sliding)
     return figures, _Trains(load, result.valid, eps, stiffness, braking)
 
 
-def evaluate_friction(config, initial_gap, state) -> FrictionState:
+def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
     """Friction figures of assemblies over the stroke (module docstring).
 
     Parameters
     ----------
     config : tolsim.study.spec.StudyConfig
-        With ``contact`` settings and ``constant`` propagation.
+        With ``contact`` settings.
     initial_gap : ndarray, shape (m, tracks * (balls - 1))
         Gaps at the start of the stroke [m], track by track.
     state : tolsim.study.evaluate.BallState
-        The evaluated balls, shape (m, tracks * balls).
+        The evaluated balls at the start of the stroke, shape (m, tracks * balls).
+    block : tolsim.study.sampling.Block, optional
+        The block of the assemblies; needed with ``along_track`` propagation, whose trains
+        are followed by integrating the block again (:func:`follow_along_track`; ``state``
+        serves as its balls at t = 0 without a carriage).
 
     Returns
     -------
     FrictionState
+
+    Raises
+    ------
+    ValueError
+        With ``along_track`` propagation and no ``block``.
     """
+    if config.study.propagation == "along_track":
+        if block is None:
+            raise ValueError("evaluate_friction with propagation = 'along_track' needs the "
+                             "block (block=...): the trains are followed along the track")
+        initial = None if config.carriage is not None else state
+        return follow_along_track(config, block, initial)[-1].figures()
     return _follow_trains(config, initial_gap, state)[0]
+
+
+# --------------------------------------------------------------------------------------------
+# along_track: the trains followed step by step (module docstring, "along_track")
+# --------------------------------------------------------------------------------------------
+#: Overlap below which the step rule leaves a pair alone, as a fraction of the ball diameter
+#: (1e-14 m for a 10 mm ball, some 700 ulps of a position of 0.1 m: rounding, not contact).
+STEP_TOLERANCE = 1e-12
+
+
+@pjit
+def step_friction_kernel(loaded, member, load, force, ok, contact, formed, weight, alive,
+                         sliding, baseline_sum, increase_sum, increase_high, friction_high,
+                         friction_low, force_high, contact_sum, formed_sum, rolling,
+                         out_baseline, out_increase):
+    """One step of the carriage friction of trains (``along_track``); unchecked.
+
+    ``loaded`` (R, S) the balls that carry load (their F_0 is the baseline), ``member``
+    (R, S) the balls of the train, ``load`` (R, S, len(LOAD_COLUMNS)) their creep
+    coefficients, ``force`` (R, S - 1) the step-mean contact forces [N], ``ok`` (R,) the row
+    was followed in this step, ``contact`` (R,) the fraction of the step with a force,
+    ``formed`` (R,) the clusters formed in it, ``weight`` dt / T. Updates, for the rows still
+    ``alive``: the running time means (baseline, increase, contact fraction), maxima and
+    minima, the clusters, and the largest increase before an onset (``rolling``); a row that
+    is not ``ok`` or in which a ball slides (capacities at zero neighbour force, as
+    :func:`stroke_friction_kernel`) is no longer alive from this step on (``sliding`` set
+    for the latter). Writes the step's baseline and increase [N] (NaN when not alive).
+    """
+    rows, slots = loaded.shape
+    for r in prange(rows):
+        out_baseline[r] = np.nan
+        out_increase[r] = np.nan
+        if not alive[r]:
+            continue
+        if not ok[r]:
+            alive[r] = False
+            continue
+        base = 0.0
+        for i in range(slots):
+            if loaded[r, i]:
+                base += load[r, i, _F0]
+        increase = 0.0
+        high = 0.0
+        for j in range(slots - 1):
+            if member[r, j] and member[r, j + 1]:
+                k = ((load[r, j + 1, _A] - load[r, j, _A])
+                     + (load[r, j, _B] + load[r, j + 1, _B]))
+                increase += k * force[r, j]
+                if force[r, j] > high:
+                    high = force[r, j]
+        slid = False
+        for i in range(slots):
+            if not member[r, i]:
+                continue
+            back = force[r, i - 1] if i > 0 and member[r, i - 1] else 0.0
+            front = force[r, i] if i < slots - 1 and member[r, i + 1] else 0.0
+            if abs(back - front) >= load[r, i, _PCAP] or back + front >= load[r, i, _BCAP]:
+                slid = True
+        if slid:
+            alive[r] = False
+            sliding[r] = True
+            continue
+        out_baseline[r] = base
+        out_increase[r] = increase
+        if increase > rolling[r]:
+            rolling[r] = increase
+        baseline_sum[r] += base * weight
+        increase_sum[r] += increase * weight
+        if increase > increase_high[r]:
+            increase_high[r] = increase
+        total = base + increase
+        if total > friction_high[r]:
+            friction_high[r] = total
+        if total < friction_low[r]:
+            friction_low[r] = total
+        if high > force_high[r]:
+            force_high[r] = high
+        contact_sum[r] += contact[r] * weight
+        formed_sum[r] += formed[r]
+
+
+def _flat_balls(state, index):
+    """The balls ``index`` (into the flattened balls) of a BallState, as a flat BallState."""
+    from tolsim.study.evaluate import BallState
+
+    def flat(x, tail=()):
+        return np.asarray(x).reshape((-1,) + tail)[index]
+
+    return BallState(flat(state.velocity_deviation), flat(state.valid),
+                     flat(state.converged), flat(state.loss_of_contact),
+                     flat(state.contact_angle_deviation, (4,)), flat(state.normal_force, (4,)),
+                     flat(state.model))
+
+
+class TrackFriction:
+    """The trains of a block followed after contact, step by step (``along_track``).
+
+    The integrators (:func:`tolsim.study.propagation.first_contact_along_track`,
+    :func:`tolsim.study.carriage_track.first_contact_carriage_track`) call it at every
+    midpoint step when they are given one: :meth:`begin` with the closed pairs at t = 0,
+    then per step :meth:`predict` (the velocities of the predictor), :meth:`velocity` (those
+    of the step, at the midpoint) and :meth:`advance` (the projection and the step's
+    friction), and with a carriage :meth:`carry` after balls left or entered the loaded
+    zone. :meth:`figures` gives the per-assembly rows. Rows are trains, R = assemblies *
+    tracks, over S ball slots (the train's balls, or a carriage track's slots).
+
+    Parameters
+    ----------
+    config : tolsim.study.spec.StudyConfig
+        With ``contact`` settings and ``along_track`` propagation.
+    record : bool
+        Keep every step's positions, forces and friction for :func:`friction_examples`.
+    """
+
+    def __init__(self, config, record=False):
+        motion = config.motion
+        self.config = config
+        self.record = record
+        self.steps = config.study.time_steps
+        self.half_step = 0.5 * motion.duration / self.steps * motion.groove_velocity
+        self.diameter = 2.0 * config.bearing.ball_radius
+        self.tolerance = STEP_TOLERANCE * self.diameter
+        self.weight = 1.0 / self.steps
+        self.assemblies = 0
+        self._step = None
+
+    def begin(self, assemblies, closed, carriage_frame=False):
+        """Start: ``closed`` (R, S - 1) the pairs closed at t = 0 (zero initial gaps);
+        ``carriage_frame``: positions are in the carriage's frame (else the rail's)."""
+        self.assemblies = int(assemblies)
+        self.closed = np.ascontiguousarray(closed, dtype=np.bool_)
+        rows = self.closed.shape[0]
+        self.before = np.zeros_like(self.closed)  # in contact in the previous step
+        self.alive = np.ones(rows, dtype=np.bool_)
+        self.sliding = np.zeros(rows, dtype=np.bool_)
+        self.rolling = np.full(rows, -np.inf)
+        for name in ("baseline_sum", "increase_sum", "contact_sum", "formed_sum"):
+            setattr(self, name, np.zeros(rows))
+        self.increase_high = np.full(rows, -np.inf)
+        self.friction_high = np.full(rows, -np.inf)
+        self.friction_low = np.full(rows, np.inf)
+        self.force_high = np.zeros(rows)
+        self.carriage_frame = carriage_frame
+        self.trace = {k: [] for k in ("ids", "start", "end", "force", "friction")}
+
+    def touching(self) -> np.ndarray:
+        """Rows still followed that have a closed pair (R,)."""
+        return self.alive & self.closed.any(axis=1)
+
+    def stop(self, rows):
+        """Rows (a boolean mask) that can no longer be followed (unresolved from now on)."""
+        self.alive &= ~np.asarray(rows, dtype=bool)
+
+    def coefficients(self, state, mask, rows=None) -> np.ndarray:
+        """(R, S, len(LOAD_COLUMNS)) creep coefficients of the balls ``mask`` (R, S), NaN
+        elsewhere. ``state``: the BallState of those balls (of shape ``mask.shape``, or
+        flattened in ``mask`` order); only the rows ``rows`` (R,) when given."""
+        mask = np.asarray(mask, dtype=bool)
+        load = np.full(mask.shape + (len(LOAD_COLUMNS),), np.nan)
+        select = mask if rows is None else mask & np.asarray(rows)[:, None]
+        if select.any():
+            flat_select = select[mask] if np.size(state.valid) != mask.size else \
+                select.reshape(-1)
+            if flat_select.all():
+                sub = state
+            else:
+                sub = _flat_balls(state, np.flatnonzero(flat_select))
+            load[select] = ball_creep_coefficients(self.config, sub)
+        return load
+
+    def _clusters(self, eps, load, loaded, member):
+        eps = np.ascontiguousarray(eps, dtype=float)
+        load = np.ascontiguousarray(load)
+        rows, slots = eps.shape
+        stiffness, braking = np.empty((rows, slots)), np.empty((rows, slots))
+        train_inputs_kernel(eps, load, stiffness, braking)
+        velocity = np.empty((rows, slots))
+        force = np.empty((rows, max(slots - 1, 0)))
+        label = np.empty((rows, slots), dtype=np.int64)
+        ok = np.empty(rows, dtype=np.bool_)
+        loaded = np.ascontiguousarray(loaded, dtype=np.bool_)
+        member = np.ascontiguousarray(member, dtype=np.bool_)
+        step_clusters_kernel(eps, stiffness, braking, loaded, member, self.closed, self.alive,
+                             velocity, force, label, ok)
+        return velocity, force, label, ok, stiffness, braking, load, loaded, member
+
+    def predict(self, eps, load, loaded, member) -> np.ndarray:
+        """Loaded epsilon w (R, S) at the start of the step (the predictor's): the cluster
+        rule on the closed pairs; the free epsilon (NaN kept) where nothing is pooled."""
+        return self._clusters(eps, load, loaded, member)[0]
+
+    def velocity(self, eps, load, loaded, member) -> np.ndarray:
+        """Loaded epsilon w (R, S) of the step (at its midpoint), kept for :meth:`advance`.
+
+        ``eps`` the free epsilon (NaN: unresolved), ``load`` the creep coefficients,
+        ``loaded`` the balls that carry load, ``member`` the balls of the trains.
+        """
+        self._step = self._clusters(eps, load, loaded, member)
+        return self._step[0]
+
+    def advance(self, start, end, ids=None) -> np.ndarray:
+        """Close the step: the positions at its end (R, S) [m], from those at its start and
+        at its end with the velocities of :meth:`velocity`; its friction into the figures.
+        ``ids`` (R, S): the balls in the slots (a carriage), for the examples."""
+        _, force, label, ok, stiffness, braking, load, loaded, member = self._step
+        self._step = None
+        start = np.ascontiguousarray(start, dtype=float)
+        end = np.ascontiguousarray(end, dtype=float)
+        rows = len(ok)
+        position = np.empty_like(end)
+        closed = np.empty_like(self.closed)
+        formed = np.empty(rows, dtype=np.int64)
+        contact = np.empty(rows)
+        step_project_kernel(start, end, stiffness, braking, loaded, member, ok, label,
+                            self.before, self.diameter, self.tolerance, self.half_step,
+                            position, force, closed, formed, contact)
+        baseline, increase = np.empty(rows), np.empty(rows)
+        step_friction_kernel(loaded, member, load, force, ok, contact, formed.astype(float),
+                             self.weight, self.alive, self.sliding, self.baseline_sum,
+                             self.increase_sum, self.increase_high, self.friction_high,
+                             self.friction_low, self.force_high, self.contact_sum,
+                             self.formed_sum, self.rolling, baseline, increase)
+        self.closed = closed & self.alive[:, None]
+        self.before = self.closed.copy()
+        if self.record:
+            self.trace["ids"].append(None if ids is None else np.array(ids))
+            self.trace["start"].append(start.copy())
+            self.trace["end"].append(position.copy())
+            self.trace["force"].append(np.where(self.alive[:, None], force, np.nan))
+            self.trace["friction"].append(baseline + increase)
+        return position
+
+    def carry(self, old_id, new_id):
+        """Follow the pair flags to the balls' new slots (after exits and entries)."""
+        from tolsim.study.carriage_track import carry_pairs_kernel
+
+        old_id = np.ascontiguousarray(old_id).reshape(len(self.closed), -1)
+        new_id = np.ascontiguousarray(new_id).reshape(len(self.closed), -1)
+        for name in ("closed", "before"):
+            out = np.empty_like(self.closed)
+            carry_pairs_kernel(old_id, getattr(self, name), new_id, out)
+            setattr(self, name, out)
+
+    def figures(self) -> FrictionState:
+        """The per-assembly rows (module docstring: the worst track)."""
+        alive = self.alive.copy()
+        nan = np.nan
+
+        def live(x):
+            return np.where(alive, x, nan)
+
+        return _worst_tracks(
+            self.config, self.assemblies, track_ok=alive, baseline=live(self.baseline_sum),
+            increase_max=live(self.increase_high), increase_mean=live(self.increase_sum),
+            ripple=live(self.friction_high - self.friction_low),
+            contact_force_max=live(self.force_high), contact_fraction=live(self.contact_sum),
+            clusters_formed=live(self.formed_sum), bounded=~alive, rolling=self.rolling,
+            sliding=self.sliding)
+
+
+def follow_along_track(config, block, initial_state=None, record=False):
+    """Integrate a block with ``along_track`` propagation and its trains after contact.
+
+    Returns (time, pair, train_valid, resolve_seconds, state, carriage, friction): the
+    outputs of :func:`tolsim.study.propagation.first_contact_along_track` (free balls; state
+    the balls at t = 0, carriage None) or of :func:`tolsim.study.carriage_track.
+    first_contact_carriage_track`, and the :class:`TrackFriction` that followed the trains.
+    """
+    friction = TrackFriction(config, record=record)
+    if config.carriage is not None:
+        from tolsim.study.carriage_track import first_contact_carriage_track
+
+        *out, state, carriage = first_contact_carriage_track(config, block, friction=friction)
+        return (*out, state, carriage, friction)
+    from tolsim.study.evaluate import evaluate_balls, loads_at
+    from tolsim.study.propagation import first_contact_along_track
+    from tolsim.study.sampling import error_values
+
+    state = initial_state
+    if state is None:  # loads at the carriage positions, as during the integration
+        nx, ny = loads_at(config, block.initial_position)
+        state = evaluate_balls(config, error_values(config, block), nx, ny)
+    out = first_contact_along_track(config, block, state, friction=friction)
+    return (*out, state, None, friction)
 
 
 # --------------------------------------------------------------------------------------------
@@ -612,19 +1009,10 @@ class FrictionAccumulator(Accumulator):
 
 
 def study_accumulator(config) -> Accumulator:
-    """An empty accumulator for a study: with friction statistics when it has ``[contact]``.
-
-    Raises
-    ------
-    ValueError
-        For ``[contact]`` with ``along_track`` propagation (not supported yet).
-    """
+    """An empty accumulator for a study: with friction statistics when it has ``[contact]``
+    (either propagation)."""
     if config.contact is None:
         return Accumulator.for_config(config)
-    if config.study.propagation != "constant":
-        raise ValueError(f"propagation = {config.study.propagation!r}: a study with [contact] "
-                         "supports 'constant' propagation only (along_track is not supported "
-                         "yet)")
     return FrictionAccumulator.for_config(config)
 
 
@@ -698,10 +1086,15 @@ def _one_thread():
 
 
 def _first_assemblies(block, count):
-    """The first ``count`` assemblies of a block (``constant`` propagation)."""
+    """The first ``count`` assemblies of a block (with its rail fields and entering balls)."""
+    fields = {k: replace(f, values=f.values[:count * f.tracks])
+              for k, f in block.fields.items()}
+    entering_gap = None if block.entering_gap is None else block.entering_gap[:count]
     return replace(block, size=count, normals={k: v[:count] for k, v in block.normals.items()},
-                   initial_gap=block.initial_gap[:count],
-                   initial_position=block.initial_position[:count])
+                   fields=fields, initial_gap=block.initial_gap[:count],
+                   initial_position=block.initial_position[:count],
+                   entering_gap=entering_gap,
+                   entering={k: v[:count] for k, v in block.entering.items()})
 
 
 def choose_examples(figures: FrictionState, count: int) -> np.ndarray:
@@ -725,17 +1118,77 @@ def friction_examples(config) -> FrictionExamples | None:
     if count == 0:
         return None
     whole = sample_block(config, 0)
+    along = config.study.propagation == "along_track"
     with _one_thread():
         # the first assemblies of the block, then all of it if too few of them touch: the
         # examples are the same either way (choose_examples takes them in order)
         for size in sorted({min(EXAMPLE_WINDOW, whole.size), whole.size}):
             block = _first_assemblies(whole, size)
-            state = _evaluate_assemblies(config, block)
-            figures, trains = _follow_trains(config, block.initial_gap, state)
+            if along:
+                trains = follow_along_track(config, block, record=True)[-1]
+                figures = trains.figures()
+            else:
+                state = _evaluate_assemblies(config, block)
+                figures, trains = _follow_trains(config, block.initial_gap, state)
             chosen = choose_examples(figures, count)
             if np.count_nonzero(figures.contact_fraction[chosen] > 0) == count:
                 break
+        if along:
+            return _track_examples(config, block, figures, trains, chosen)
         return _example_trajectories(config, block, figures, trains, chosen)
+
+
+def _track_examples(config, block, figures, friction, chosen):
+    """:class:`FrictionExamples` of the assemblies ``chosen`` of ``block`` from the steps
+    of their along-track integration (``friction``, a recording :class:`TrackFriction`):
+    the forces of the step holding each travel point, the positions interpolated linearly
+    within it. With a carriage the balls are the track's initial balls (ids 0 to n - 1) while
+    they are in its loaded zone (NaN after they left it; the balls that entered since count
+    in the friction force, not in the positions and pair forces)."""
+    tracks, n = config.n_tracks, config.train.balls
+    rows = chosen * tracks + figures.worst_track[chosen]
+    motion, trace, steps = config.motion, friction.trace, friction.steps
+    points = config.contact.travel_points
+    time = motion.duration * np.arange(points) / (points - 1)
+    time[-1] = motion.duration
+    dt = motion.duration / steps
+    step = np.minimum(np.floor(time / dt).astype(np.int64), steps - 1)
+    theta = np.clip(time / dt - step, 0.0, 1.0)[None, :, None]
+
+    def along(name):
+        return np.stack([trace[name][k][rows] for k in step], axis=1)
+
+    position = (1.0 - theta) * along("start") + theta * along("end")
+    shift = (0.5 if friction.carriage_frame else -0.5) * motion.groove_velocity * time
+    force = along("force")
+    if trace["ids"] and trace["ids"][0] is not None:  # slots of a carriage track: by ball id
+        ids = along("ids")
+        slots = ids.shape[2]
+        ball_position = np.full(ids.shape[:2] + (n,), np.nan)
+        contact_force = np.full(ids.shape[:2] + (max(n - 1, 0),), np.nan)
+        for j in range(n):
+            here = ids == j
+            has = here.any(axis=2)
+            slot = np.argmax(here, axis=2)[..., None]
+            ball_position[..., j] = np.where(
+                has, np.take_along_axis(position, slot, 2)[..., 0] + shift, np.nan)
+            if j < n - 1:
+                ahead = np.take_along_axis(ids, np.minimum(slot + 1, slots - 1), 2)[..., 0]
+                pair = has & (slot[..., 0] < slots - 1) & (ahead == j + 1)
+                q = np.take_along_axis(force, np.minimum(slot, slots - 2), 2)[..., 0]
+                contact_force[..., j] = np.where(pair, q, np.nan)
+    else:
+        ball_position = position + shift[None, :, None]
+        contact_force = force
+    return FrictionExamples(
+        assembly=(block.start + chosen).astype(np.int64),
+        track=figures.worst_track[chosen].astype(np.int64),
+        travel=motion.groove_velocity * time,
+        baseline=figures.baseline[chosen],
+        friction_force=along("friction").reshape(len(rows), points),
+        contact_force=contact_force,
+        ball_position=ball_position,
+    )
 
 
 def _example_trajectories(config, block, figures, trains, chosen):
@@ -867,13 +1320,22 @@ for _index, _label in (("first_order", "first-order"), ("total", "total-effect")
             ("factor",), "1", f"{_label} variance-based index of the friction increase"
             + (f", {_end} end of the 95 % bootstrap interval" if _end else ""), "f")
 
-#: A sentence for the result file on what the friction figures are.
+#: A sentence for the result file on what the friction figures are (constant propagation).
 FRICTION_ASSUMPTIONS = (
     "per assembly the worst track (largest increase of its carriage friction force over its "
     "free-rolling baseline); constant epsilon, event-driven trains, the linear creep model of "
     "the loaded analytic model (K, braking, carriage-force slopes per ball); a train with a "
     "sliding ball is unresolved from the onset of sliding; statistics over the resolved "
     "assemblies, the exceedance probability bounded over all")
+#: The same for ``along_track`` propagation.
+FRICTION_ASSUMPTIONS_ALONG_TRACK = (
+    "per assembly the worst track (largest increase of its carriage friction force over its "
+    "free-rolling baseline at the same instant); epsilon and the creep coefficients of each "
+    "ball re-evaluated along the track, the cluster rule applied at every midpoint step with "
+    "the closing gaps projected (exact for constant epsilon), figures from the step-mean "
+    "forces, baseline the time mean of the free-rolling friction; a train with a sliding or "
+    "unresolved ball is unresolved from that step; statistics over the resolved assemblies, "
+    "the exceedance probability bounded over all")
 
 
 def friction_variables(result) -> tuple:
@@ -937,14 +1399,17 @@ def friction_variables(result) -> tuple:
             "example_ball_position": (("example", "travel", "ball"), examples.ball_position),
             "example_contact_force": (("example", "travel", "pair"), examples.contact_force),
         })
-    attrs = {"friction_assumptions": FRICTION_ASSUMPTIONS,
+    attrs = {"friction_assumptions": (FRICTION_ASSUMPTIONS_ALONG_TRACK
+                                      if config.study.propagation == "along_track"
+                                      else FRICTION_ASSUMPTIONS),
              "contact_creep_model": config.contact.creep_model}
     return coords, data, attrs
 
 
 __all__ = ["COLUMNS", "CREEP_MODELS", "FORCE_EDGES", "FRICTION_ASSUMPTIONS",
-           "FRICTION_COORDINATES", "FRICTION_VARIABLES", "HISTOGRAM_COLUMNS",
-           "FrictionAccumulator", "FrictionExamples", "FrictionState", "FrictionStatistics",
-           "accumulator_from_state", "ball_creep_coefficients", "choose_examples",
-           "evaluate_friction", "friction_examples", "friction_variables",
-           "stroke_friction_kernel", "study_accumulator"]
+           "FRICTION_ASSUMPTIONS_ALONG_TRACK", "FRICTION_COORDINATES", "FRICTION_VARIABLES",
+           "HISTOGRAM_COLUMNS", "STEP_TOLERANCE", "FrictionAccumulator", "FrictionExamples",
+           "FrictionState", "FrictionStatistics", "TrackFriction", "accumulator_from_state",
+           "ball_creep_coefficients", "choose_examples", "evaluate_friction",
+           "follow_along_track", "friction_examples", "friction_variables",
+           "step_friction_kernel", "stroke_friction_kernel", "study_accumulator"]

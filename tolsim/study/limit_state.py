@@ -452,7 +452,7 @@ def event_values(config, block, events=None) -> dict:
         from tolsim.study.friction import evaluate_friction
 
         limit = config.contact.friction_increase_limit
-        figures = evaluate_friction(config, block.initial_gap, state)
+        figures = evaluate_friction(config, block.initial_gap, state, block=block)
         scale = 0.5 * config.motion.groove_velocity * config.motion.duration
         g = np.where(touched, (limit - figures.increase_max) / limit, 1.0 + margin / scale)
         out["friction_exceedance"] = np.where(

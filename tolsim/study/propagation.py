@@ -23,6 +23,12 @@ known, or whether it touches at all when no resolved pair does, is for the stati
 bound (:mod:`tolsim.study.statistics`).
 
 Travel to contact is the carriage travel v t [m].
+
+After contact (a study with ``[contact]``, issue 13): mode (a) leaves the trains to the
+event-driven solution of :mod:`tolsim.study.trains`; mode (b) follows them inside its own
+integration when it is given a :class:`tolsim.study.friction.TrackFriction` (the step rule
+of :mod:`tolsim.study.trains`, "Varying epsilon"). The first contact is still located on
+each step's free motion, so it is the same with and without ``[contact]``.
 """
 
 import numpy as np
@@ -171,7 +177,7 @@ def first_contact_tracks(initial_gap, velocity_deviation, groove_velocity, horiz
     return t, np.where(np.isfinite(t), first * (balls - 1) + pair[rows, first], -1)
 
 
-def first_contact_along_track(config, block, initial_state=None):
+def first_contact_along_track(config, block, initial_state=None, *, friction=None):
     """First contact of the trains of a block with epsilon re-evaluated along the track (b).
 
     Parameters
@@ -180,6 +186,13 @@ def first_contact_along_track(config, block, initial_state=None):
     block : tolsim.study.sampling.Block
     initial_state : BallState, optional
         The balls at t = 0 (evaluated here if not given).
+    friction : tolsim.study.friction.TrackFriction, optional
+        With it (a study with ``[contact]``) the balls move as trains after they touch: the
+        step rule of :mod:`tolsim.study.trains` at every step, each ball's creep
+        coefficients from its loaded state at its position, and the friction figures
+        accumulated in ``friction`` (module docstring of :mod:`tolsim.study.friction`). The
+        first contact is the same as without it (it is located on the free motion of the
+        step, which is the motion up to it).
 
     Returns
     -------
@@ -187,7 +200,9 @@ def first_contact_along_track(config, block, initial_state=None):
         [s], inf if no contact within the horizon.
     pair : ndarray of int (size,)
     valid : ndarray of bool (size,)
-        False for a train in which some ball was unresolved at some evaluation.
+        False for a train in which some ball was unresolved at some evaluation (with
+        ``friction``: of the trajectory with the trains, which after the first contact is
+        not the free one).
     resolve_seconds : float
         Time spent re-solving balls with the full model during the integration [s].
     """
@@ -200,26 +215,35 @@ def first_contact_along_track(config, block, initial_state=None):
 
     resolve_seconds = 0.0
 
-    def velocity(position, t):
+    def evaluate(position, t):
         nonlocal resolve_seconds
         values = error_values(config, block, rail_position=position)
         nx, ny = loads_at(config, position - v * t)
         state = evaluate_balls(config, values, nx, ny)
         resolve_seconds += state.resolve_seconds
-        return state.velocity_deviation, state.valid
+        return state
 
     position = block.initial_position.copy()
     time = np.full(size, np.inf)
     pair = np.full(size, -1, dtype=np.int64)
     ball_ok = np.ones(position.shape, dtype=bool)  # resolved at every evaluation so far
+    if friction is not None:
+        everyone = np.ones(position.shape, dtype=bool)
+        friction.begin(size, np.asarray(block.initial_gap) <= 0.0)
     t = 0.0
     for k in range(steps):
         if k == 0 and initial_state is not None:
-            eps1, ok1 = initial_state.velocity_deviation, initial_state.valid
+            state1 = initial_state
         else:
-            eps1, ok1 = velocity(position, t)
-        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(eps1)) * 0.5 * v
-        eps2, ok2 = velocity(mid, t + 0.5 * dt)
+            state1 = evaluate(position, t)
+        eps1, ok1 = state1.velocity_deviation, state1.valid
+        w1 = eps1
+        if friction is not None:  # touching balls move together (predictor)
+            load = friction.coefficients(state1, everyone, friction.touching())
+            w1 = friction.predict(eps1, load, everyone, everyone)
+        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(w1)) * 0.5 * v
+        state2 = evaluate(mid, t + 0.5 * dt)
+        eps2, ok2 = state2.velocity_deviation, state2.valid
         ball_ok &= ok1 & ok2
         new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
         gap_old = np.diff(position, axis=1) - diameter
@@ -233,6 +257,11 @@ def first_contact_along_track(config, block, initial_state=None):
         hit = np.isfinite(tmin) & ~np.isfinite(time)
         time[hit] = tmin[hit]
         pair[hit] = first[hit]
+        if friction is not None:  # the step of the trains: cluster rule, then projection
+            w2 = friction.velocity(eps2, friction.coefficients(state2, everyone), everyone,
+                                   everyone)
+            new = friction.advance(position,
+                                   position + dt * (1.0 + np.nan_to_num(w2)) * 0.5 * v)
         position = new
         t = (k + 1) * dt
     return time, pair, ball_ok.all(axis=1), resolve_seconds

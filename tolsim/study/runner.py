@@ -58,6 +58,7 @@ from tolsim.study.evaluate import (
     loads_per_ball,
 )
 from tolsim.study.friction import (
+    TrackFriction,
     accumulator_from_state,
     evaluate_friction,
     friction_examples,
@@ -340,17 +341,23 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
             b = sample_block(config, k)
             values = error_values(config, b)
             carriage = None
+            # with [contact] the trains are followed after contact, step by step
+            trains = None if config.contact is None else TrackFriction(config)
             if config.carriage is not None:  # balls rolling through the carriage
-                t, pair, ok, seconds, state, carriage = first_contact_carriage_track(config, b)
+                t, pair, ok, seconds, state, carriage = first_contact_carriage_track(
+                    config, b, friction=trains)
             else:
                 # loads at the carriage positions, as during the integration
                 nx, ny = loads_at(config, b.initial_position)
                 state = evaluate_balls(config, values, nx, ny)
-                t, pair, ok, seconds = first_contact_along_track(config, b, state)
-            acc = Accumulator.for_config(config)
+                t, pair, ok, seconds = first_contact_along_track(config, b, state,
+                                                                 friction=trains)
+            acc = study_accumulator(config)
             acc.add(state, t, pair, ok)
             if carriage is not None:  # the carriages at the start of the stroke
                 acc.add_carriage(carriage)
+            if trains is not None:
+                acc.add_friction(trains.figures())
             acc.resolve_seconds += seconds
             rows = _spot_rows(state, b.start * balls, spot_indices)
             rows.update(saved_samples.sample_rows(config, save_samples, b.start, values,

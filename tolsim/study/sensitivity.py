@@ -403,12 +403,14 @@ def _evaluate_block(config, block):
     elif config.carriage is not None:  # balls rolling through the carriage (issue 12)
         from tolsim.study.carriage_track import first_contact_carriage_track
 
-        t, _, ok, _, state, _ = first_contact_carriage_track(config, block)
+        trains = _track_friction(config)
+        t, _, ok, _, state, _ = first_contact_carriage_track(config, block, friction=trains)
         ok = ok & state.valid.all(axis=1)
     else:
         nx, ny = loads_at(config, block.initial_position)
         state = evaluate_balls(config, values, nx, ny)
-        t, _, ok, _ = first_contact_along_track(config, block, state)
+        trains = _track_friction(config)
+        t, _, ok, _ = first_contact_along_track(config, block, state, friction=trains)
         ok = ok & state.valid.all(axis=1)
     # a reported contact is certain even in a train with an unresolved ball; no contact is
     # known only when every ball was resolved (NaN otherwise)
@@ -417,9 +419,20 @@ def _evaluate_block(config, block):
     if config.contact is not None:  # after contact (issue 13): the friction increase
         from tolsim.study.friction import evaluate_friction
 
-        friction = evaluate_friction(config, block.initial_gap, state)
+        friction = (trains.figures() if config.study.propagation == "along_track"
+                    else evaluate_friction(config, block.initial_gap, state))
         return state.velocity_deviation, contact, friction.increase_max
     return state.velocity_deviation, contact
+
+
+def _track_friction(config):
+    """The step-by-step trains of an along_track block with ``[contact]`` (issue 13), else
+    None (:class:`tolsim.study.friction.TrackFriction`)."""
+    if config.contact is None:
+        return None
+    from tolsim.study.friction import TrackFriction
+
+    return TrackFriction(config)
 
 
 def study_sensitivity(config, samples: int = 2048, *, confidence_level=0.95,

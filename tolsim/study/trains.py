@@ -140,6 +140,55 @@ with eps_j <= eps_{j+1} can be pooled only together with such a pair. So the fir
 time agrees bit for bit, and at t = 0 the reported pair is the smallest such j, as in
 propagation.
 
+Varying epsilon: the step rule of ``along_track``
+-------------------------------------------------
+With ``along_track`` propagation epsilon and K of every ball change as it rolls, and the
+trains are followed with the integrator's steps of dt (:class:`tolsim.study.friction.
+TrackFriction` drives the two kernels below from :mod:`tolsim.study.propagation` and
+:mod:`tolsim.study.carriage_track`). A pair is *closed* at the start of a step when the
+previous step ended with it in contact (at t = 0: a zero initial gap). Per step:
+
+1. *Cluster rule* (:func:`step_clusters_kernel`, the rule of :func:`cluster_velocities`):
+   PAV of eq. (4) on the closed pairs, with epsilon_i, K_i and c_i of each ball at the
+   step's midpoint, gives the velocities w_i and the forces Q_j^(1). The free end positions
+   are y_i = z_i + dt (1 + w_i) v / 2 (the predictor of the midpoint rule uses the same rule
+   with the values at the start of the step). Balls of one cluster move together; a closed
+   pair that PAV leaves in two blocks separates (its leading ball is faster): this is how a
+   cluster splits, and its forces return to zero, when epsilon changes along the track.
+2. *Projection* (:func:`step_project_kernel`): a gap that closes inside the step leaves y
+   overlapping. The end positions are the kappa-weighted projection of y onto
+   non-overlapping balls,
+
+       minimise  sum_i kappa_i (z'_i - y_i)^2 / 2   subject to  z'_{j+1} - z'_j >= D,      (7)
+
+   the weighted isotonic regression of s_i = y_i - i D, solved by PAV in O(n) (the
+   clusters of step 1 pooled unconditionally; a pair whose overlap is below
+   ``tolerance``, 1e-12 D, is rounding and left alone). A pair pooled in (7) ends the step
+   closed. The multipliers of (7), R_j^(2) = sum_{i<=j in its block} kappa_i (s_i - s'_i)
+   [N m], give the step-mean contact force
+
+       Qbar_j = Q_j^(1) + lambda_j R_j^(2) / (dt v / 2).                                  (8)
+
+*The step is exact for constant epsilon and K*, whatever dt. Over a step the event-driven
+motion of the section above ends with its balls grouped in final clusters. Summing (2) over
+a final cluster, its internal forces cancel and no force acts across the boundary to the
+next final cluster (those balls never touched during the step), so the cluster's
+kappa-weighted centroid moves exactly as the free balls' would: it ends at the centroid of
+the free end positions y^free = z + dt (1 + epsilon) v / 2, with zero gaps inside. Its
+multipliers, the time integrals (v / 2) int R_j(t) dt, are >= 0 inside the clusters and 0
+between them, and the gaps between clusters are >= 0: these are the KKT conditions of (7)
+with y^free, whose solution is unique. Projecting y instead of y^free changes nothing:
+within a chain of closed pairs s is constant, so step 1 only pools adjacent violators of
+(7), and PAV's result does not depend on the order in which adjacent violators are pooled
+(Barlow et al. 1972). Hence the positions at the end of every step are the event-driven
+ones, and by (8) so is the time integral of every contact force over the step (a gap that
+closes at a fraction f of the step contributes (1 - f) of its new force). What a step
+cannot resolve is *when* inside it a force changed: a maximum taken over the step means
+misses an event inside the last step, a minimum one inside the first, and two merges of one
+cluster in one step count as one formation. With epsilon varying along the track the
+midpoint rule adds its own error, O(dt^2) per step between contacts and O(dt) over the
+stroke from the steps in which a contact starts or ends (tests/test_friction_along_track.py).
+
 Quasi-static assumption (numbers)
 ---------------------------------
 Take a 10 mm steel ball: m = 7850 kg/m^3 x (4/3) pi (5 mm)^3 = 4.11 g. The creep stiffness
@@ -189,9 +238,11 @@ Q_{-1} = Q_{n-1} = 0. Consequences, which the tests check:
 * a leading ball faster than the ball behind it runs away at its own epsilon, and a trailing
   ball slower than the ball in front falls behind. Neither ever carries a force.
 
-Not modelled: balls entering or leaving the loaded zone during the stroke (the set of
-balls is fixed over the horizon), and an end seal or retainer that would press on the end
-balls.
+Not modelled: an end seal or retainer that would press on the end balls; with the
+event-driven solution, balls entering or leaving the loaded zone during the stroke (the set
+of balls is fixed over the horizon). With a carriage and ``along_track`` propagation balls
+do enter and leave (:mod:`tolsim.study.carriage_track`, "After contact"): a ball leaving
+the zone drops its contacts, one entering it joins its train with an open gap.
 
 Outputs
 -------
@@ -328,6 +379,174 @@ def cluster_velocities_kernel(eps, creep_stiffness, braking_sensitivity, touchin
                 link[j] = _TOUCHING if touching[t, j] else _OPEN
             _pool(eps[t], weight, scale, link, out_velocity[t], out_force[t], label,
                   block_start, block_weight, block_sum, block_mean)
+
+
+# ------------------------------------------------------------- the step rule of along_track
+
+
+@jit
+def _step_weights(stiffness, braking, loaded, usable, work_k, work_c, weight, scale):
+    """kappa and lambda of one row: K and c of its loaded balls when ``usable``, the
+    placeholders K = 1, c = 0 elsewhere (such balls are never pooled: their links are open)."""
+    for i in range(stiffness.shape[0]):
+        if usable and loaded[i]:
+            work_k[i] = stiffness[i]
+            work_c[i] = braking[i]
+        else:
+            work_k[i] = 1.0
+            work_c[i] = 0.0
+    _effective_stiffness(work_k, work_c, weight, scale)
+
+
+@pjit
+def step_clusters_kernel(eps, stiffness, braking, loaded, member, closed, active,
+                         out_velocity, out_force, out_label, out_ok):
+    """Stage 1 of the ``along_track`` step (module docstring): the cluster rule on rows of
+    ball slots; unchecked.
+
+    ``eps`` (R, S) the balls' free epsilon (NaN allowed), ``stiffness``/``braking`` (R, S)
+    K and c (NaN K: a ball that leaves its train unresolved), ``loaded`` (R, S) the balls
+    that must be usable, ``member`` (R, S) the balls of the train, ``closed`` (R, S - 1)
+    the closed pairs, ``active`` (R,) the rows still followed. A row is ``out_ok`` when it is
+    active and its loaded balls have finite epsilon, K and c; then its member pairs that are
+    closed are pooled by PAV (eq. 4). Otherwise no pair is: w = eps, Q = 0 (free motion).
+    Writes w (R, S), Q (R, S - 1), the block label (R, S) and ``out_ok``.
+    """
+    rows, slots = eps.shape
+    for chunk in prange((rows + CHUNK - 1) // CHUNK):
+        npair = max(slots - 1, 1)
+        work_k = np.empty(slots)
+        work_c = np.empty(slots)
+        weight = np.empty(slots)
+        scale = np.empty(npair)
+        link = np.empty(npair, dtype=np.int8)
+        block_start = np.empty(slots, dtype=np.int64)
+        block_weight = np.empty(slots)
+        block_sum = np.empty(slots)
+        block_mean = np.empty(slots)
+        for r in range(chunk * CHUNK, min(rows, (chunk + 1) * CHUNK)):
+            ok = active[r]
+            if ok:
+                for i in range(slots):
+                    if loaded[r, i] and not (np.isfinite(eps[r, i])
+                                             and np.isfinite(stiffness[r, i])
+                                             and np.isfinite(braking[r, i])):
+                        ok = False
+            out_ok[r] = ok
+            _step_weights(stiffness[r], braking[r], loaded[r], ok, work_k, work_c, weight,
+                          scale)
+            for j in range(slots - 1):
+                pooled = ok and closed[r, j] and member[r, j] and member[r, j + 1]
+                link[j] = _TOUCHING if pooled else _OPEN
+            _pool(eps[r], weight, scale, link, out_velocity[r], out_force[r], out_label[r],
+                  block_start, block_weight, block_sum, block_mean)
+
+
+@pjit
+def step_project_kernel(start, end, stiffness, braking, loaded, member, ok, label,
+                        contact_before, diameter, tolerance, half_step, out_position,
+                        out_force, out_closed, out_formed, out_contact):
+    """Stage 2 of the ``along_track`` step (module docstring): the kappa-weighted projection
+    of the end positions onto non-overlapping balls; unchecked.
+
+    ``start``/``end`` (R, S) the ball centres at the start of the step and at its end with
+    the stage-1 velocities [m], ``stiffness``, ``braking``, ``loaded``, ``member`` as
+    :func:`step_clusters_kernel`, ``ok`` (R,) and ``label`` (R, S) its outputs,
+    ``contact_before`` (R, S - 1) the pairs in contact in the previous step, ``diameter``
+    D [m], ``tolerance`` the overlap [m] below which a pair is left alone (rounding),
+    ``half_step`` dt v / 2 [m]. ``out_force`` holds the stage-1 forces Q on entry and the
+    step-mean forces on exit [N]. Writes the positions at the end of the step, the pairs in
+    contact at its end (``out_closed``), the multi-ball clusters formed in the step (R,) and
+    the fraction of the step with a contact force (R,). Rows that are not ``ok`` keep
+    ``end``, get no force, no contact.
+    """
+    rows, slots = end.shape
+    for chunk in prange((rows + CHUNK - 1) // CHUNK):
+        npair = max(slots - 1, 1)
+        work_k = np.empty(slots)
+        work_c = np.empty(slots)
+        weight = np.empty(slots)
+        scale = np.empty(npair)
+        link = np.empty(npair, dtype=np.int8)
+        s = np.empty(slots)
+        block_start = np.empty(slots, dtype=np.int64)
+        block_weight = np.empty(slots)
+        block_sum = np.empty(slots)
+        block_mean = np.empty(slots)
+        for r in range(chunk * CHUNK, min(rows, (chunk + 1) * CHUNK)):
+            for i in range(slots):
+                out_position[r, i] = end[r, i]
+            out_formed[r] = 0
+            out_contact[r] = 0.0
+            if not ok[r]:
+                for j in range(slots - 1):
+                    out_force[r, j] = 0.0
+                    out_closed[r, j] = False
+                continue
+            _step_weights(stiffness[r], braking[r], loaded[r], True, work_k, work_c, weight,
+                          scale)
+            held = False  # a stage-1 cluster pushes through the step
+            for j in range(slots - 1):
+                if not (member[r, j] and member[r, j + 1]):
+                    link[j] = _OPEN
+                elif label[r, j] == label[r, j + 1]:
+                    link[j] = _BONDED
+                    if out_force[r, j] > 0.0:
+                        held = True
+                else:
+                    link[j] = _TOUCHING
+            for i in range(slots):
+                s[i] = end[r, i] - i * diameter
+            # PAV of s (weights kappa) under s_j <= s_{j+1}: pool a bonded pair always, a
+            # constrained one when the overlap exceeds the tolerance
+            top = -1
+            for i in range(slots):
+                top += 1
+                block_start[top] = i
+                block_weight[top] = weight[i]
+                block_sum[top] = weight[i] * s[i]
+                block_mean[top] = s[i]
+                while top > 0:
+                    j = block_start[top] - 1
+                    if link[j] == _BONDED or (link[j] == _TOUCHING and
+                                              block_mean[top - 1] - block_mean[top] > tolerance):
+                        block_weight[top - 1] += block_weight[top]
+                        block_sum[top - 1] += block_sum[top]
+                        block_mean[top - 1] = block_sum[top - 1] / block_weight[top - 1]
+                        top -= 1
+                    else:
+                        break
+            first_new = 1.0  # earliest closing in the step, as a fraction of it
+            for b in range(top + 1):
+                first = block_start[b]
+                last = block_start[b + 1] - 1 if b < top else slots - 1
+                if last < slots - 1:
+                    out_force[r, last] = 0.0
+                    out_closed[r, last] = False
+                if last == first:
+                    continue
+                mean = block_mean[b]
+                impulse = 0.0
+                formed = False
+                for i in range(first, last + 1):
+                    out_position[r, i] = mean + i * diameter
+                    if i < last:
+                        impulse += weight[i] * (s[i] - mean)
+                        q = scale[i] * impulse / half_step
+                        out_force[r, i] += q if q > 0.0 else 0.0
+                        out_closed[r, i] = True
+                        if not contact_before[r, i]:
+                            formed = True
+                        if label[r, i] != label[r, i + 1]:  # closed in this step
+                            g1 = end[r, i + 1] - end[r, i] - diameter
+                            if g1 < 0.0:
+                                g0 = start[r, i + 1] - start[r, i] - diameter
+                                f = g0 / (g0 - g1) if g0 > 0.0 else 0.0
+                                if f < first_new:
+                                    first_new = f
+                if formed:
+                    out_formed[r] += 1
+            out_contact[r] = 1.0 if held else 1.0 - first_new
 
 
 @jit
