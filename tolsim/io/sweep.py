@@ -297,9 +297,7 @@ def _merge_attrs(all_attrs):
     merged = {}
     for key in all_attrs[0]:
         values = [a.get(key, "") for a in all_attrs]
-        if all(isinstance(v, str) for v in values) and len(set(values)) > 1:
-            merged[key] = "\n".join(f"point {k + 1}: {v}" for k, v in enumerate(values))
-        elif len({repr(v) for v in values}) > 1:
+        if len({repr(v) for v in values}) > 1:
             merged[key] = "\n".join(f"point {k + 1}: {v}" for k, v in enumerate(values))
         else:
             merged[key] = all_attrs[0][key]
