@@ -45,10 +45,11 @@ def _runs():
     for path in sorted(CONFIGS.glob("*.toml")):
         text = path.read_text()
         if re.search(r"^\[allocate\]", text, re.M):
-            out.append((path.stem + ".allocate.txt", ["allocate", str(path)]))
-        out.append((path.stem + ".nc", ["run", str(path)]))
+            out.append((path.stem + ".allocate.txt", ["allocate", str(path.relative_to(ROOT))]))
+        out.append((path.stem + ".nc", ["run", str(path.relative_to(ROOT))]))
         if re.search(r"^\[carriage\]", text, re.M):
-            out.append((path.stem + ".carriage.json", ["carriage", str(path), "--json"]))
+            out.append((path.stem + ".carriage.json",
+                        ["carriage", str(path.relative_to(ROOT)), "--json"]))
     return out
 
 
