@@ -13,7 +13,6 @@ import time
 import numba
 import numpy as np
 
-from tolsim.physics import analytic as A
 from tolsim.physics.geometry import (
     CONSTRAINT_SIGN,
     FRICTION_SIGN,
@@ -23,6 +22,7 @@ from tolsim.physics.geometry import (
     contact_frames,
 )
 from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity import analytic as A
 
 
 def draw(n, seed):

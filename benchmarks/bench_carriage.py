@@ -11,12 +11,13 @@ assembly by assembly, with every ball solved by the public per-ball solver
 single-assembly :func:`tolsim.physics.carriage.solve_carriage` (a Python Newton over the same
 kernels) is timed on the same subset.
 
-Like ``tolsim run`` (:func:`tolsim.study.runner.retain_freed_memory`), the benchmark lets
+Like ``tolsim run`` (:func:`tolsim.study.execution.runner.retain_freed_memory`), the benchmark lets
 glibc keep freed memory. Wall-clock figures depend on what else the machine runs; the CPU
 time per assembly less so.
 
 ``--along-track N`` (default 200; 0 skips it) times the study path with ``along_track``
-propagation (:mod:`tolsim.study.carriage_track`: the balls rolling through the carriage, the
+propagation (:mod:`tolsim.study.pipeline.carriage_track`: the balls rolling through the carriage,
+the
 carriage re-solved twice per time step) on N assemblies of the same config, as ``tolsim run``
 runs them (sampling, integration, statistics; one block), and the same assemblies with
 ``constant`` propagation as the baseline of the same run. ``--skip-batch`` runs only that.
@@ -39,7 +40,7 @@ from scipy.optimize import root
 from tolsim.io.config import load_config, parse_config
 from tolsim.physics.carriage import BATCH_STATUS, solve_carriage, solve_carriage_batch
 from tolsim.physics.static import GrooveErrors, solve_static_displacement
-from tolsim.study.runner import retain_freed_memory, run_study
+from tolsim.study.execution.runner import retain_freed_memory, run_study
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "carriage_preload.toml"
 #: Standard deviations of the sampled errors (normal, independent per ball): arc-centre

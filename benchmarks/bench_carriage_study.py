@@ -3,7 +3,7 @@
 The study is ``configs/carriage_preload.toml`` (two tracks of 12 balls, light preload, 300 N
 vertical load and a 2 N m pitch moment, groove and ball tolerances per track), constant
 propagation, spot checks and the Sobol' analysis off, run as ``tolsim run`` runs it
-(:func:`tolsim.study.runner.run_study`, one process, Numba threads on every core). Per
+(:func:`tolsim.study.execution.runner.run_study`, one process, Numba threads on every core). Per
 assembly: sampling per track, the batched carriage solve
 (:func:`tolsim.physics.carriage.solve_carriage_batch`), the analytic epsilon kernel with the
 full-model re-solves, first contact per track and the streamed statistics.
@@ -48,7 +48,7 @@ def study(path, assemblies, preload_um=None):
 
 
 def child(path, assemblies, preload_um):
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
 
     run_study(study(path, 256, preload_um))  # warm-up: kernels loaded or compiled
     c = study(path, assemblies, preload_um)

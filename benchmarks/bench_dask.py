@@ -4,7 +4,8 @@ The study is that of ``benchmarks/bench_study.py`` (``configs/yaw_moment_toleran
 10 balls per track, solved static model, analytic epsilon, spot checks and sensitivity off),
 run three ways on the same balls, each in a fresh process:
 
-* in-process: :func:`tolsim.study.runner.run_study` as ``tolsim run`` runs it by default (the
+* in-process: :func:`tolsim.study.execution.runner.run_study` as ``tolsim run`` runs it by default
+(the
   Numba kernels on every core, the next chunk drawn in a thread meanwhile): the baseline;
 * ``--scheduler local:1`` and ``local:2``: a LocalCluster of 1 and 2 single-threaded worker
   processes (Numba threads = cores / workers), the tasks merged in block order by the client.
@@ -74,7 +75,7 @@ def _cluster_cpu_seconds(session):
 
 def child(balls_total, mode, state_file):
     """One mode in this process; prints a JSON line and saves the result's state arrays."""
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
 
     config = study(balls_total)
     out = {"mode": mode}
@@ -82,7 +83,7 @@ def child(balls_total, mode, state_file):
     if mode == "in-process":
         run = dict()
     else:
-        from tolsim.study.distributed import DaskSession
+        from tolsim.study.execution.distributed import DaskSession
 
         t0 = time.perf_counter()
         session = DaskSession(mode)
@@ -124,9 +125,9 @@ def child(balls_total, mode, state_file):
 
 def client_cost_per_block(balls_total):
     """[s] to unpickle and merge one block's result on the client (the serial part)."""
-    from tolsim.study import runner
+    from tolsim.study.execution import runner
     from tolsim.study.sampling import spot_check_plan
-    from tolsim.study.statistics import Accumulator
+    from tolsim.study.statistics.accumulator import Accumulator
 
     config = study(balls_total)
     plan = spot_check_plan(config)

@@ -1,4 +1,4 @@
-"""Throughput of the full friction model (tolsim.physics.friction.full).
+"""Throughput of the full friction model (tolsim.physics.velocity.full.full).
 
 Prints, measured in this run:
 
@@ -21,8 +21,8 @@ import time
 import numba
 import numpy as np
 
-from tolsim.physics.friction import full
 from tolsim.physics.geometry import paired_forces
+from tolsim.physics.velocity.full import full
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 from test_friction import reference_solve  # noqa: E402  (the SciPy twin lives with the tests)

@@ -1,4 +1,4 @@
-"""Coverage and cost of the rare-event estimators (tolsim.study.rare_events), issue 15.
+"""Coverage and cost of the rare-event estimators (tolsim.study.analyses.rare_events), issue 15.
 
 The closed-form case of the issue: two balls with constant epsilon, linear in six independent
 normal tolerance errors, and a fixed gap (``tests/test_rare_events.py``): the limit state is
@@ -19,7 +19,7 @@ Monte Carlo is also run at 1e-3 (n = 100 / P per repeat) as the measured baselin
 For subset simulation the table also shows the coverage with Au & Beck's CV (independent
 chains and levels, normal quantile; rebuilt from the reported per-level gamma), to compare
 with tolsim's chain-family CV and Student-t quantile (module docstring of
-:mod:`tolsim.study.rare_events`).
+:mod:`tolsim.study.analyses.rare_events`).
 
 A nonlinear case closes the run: failure inside a ball of radius 1 around (4, 0, ..., 0) in
 d = 6 (exact P from the noncentral chi-square, 1.3e-5), where FORM overestimates P ~100x.
@@ -27,7 +27,8 @@ d = 6 (exact P from the noncentral chi-square, 1.3e-5), where FORM overestimates
 Run: ``python benchmarks/bench_rare_events.py [--repeats 50]`` (about 30 s on one core).
 
 ``--study``: the estimators on a tolsim study instead, ``configs/rare_contact.toml`` (the
-packaged yaw study with 80-180 um gaps, P(contact) ~ 1e-3; :mod:`tolsim.study.limit_state`),
+packaged yaw study with 80-180 um gaps, P(contact) ~ 1e-3;
+:mod:`tolsim.study.analyses.limit_state`),
 for each of its events (contact within the stroke, an assembly with |epsilon| beyond the
 limit): a reference P from plain Monte Carlo over ``--reference`` assemblies (default 3e6),
 then ``--repeats`` seeded runs (default 20) of plain Monte Carlo over 2e4 assemblies (the
@@ -46,7 +47,7 @@ import numpy as np
 from scipy.special import ndtr, ndtri
 from scipy.stats import ncx2
 
-from tolsim.study.rare_events import (
+from tolsim.study.analyses.rare_events import (
     find_design_point,
     importance_sampling,
     monte_carlo,
@@ -108,8 +109,8 @@ def study_benchmark(args):
     from pathlib import Path
 
     from tolsim.io.config import load_config
-    from tolsim.study.limit_state import EVENT_TITLES, LimitState, study_events
-    from tolsim.study.rare_events import series_importance_sampling
+    from tolsim.study.analyses.limit_state import EVENT_TITLES, LimitState, study_events
+    from tolsim.study.analyses.rare_events import series_importance_sampling
 
     repeats = args.repeats if args.repeats_given else 20
     config = load_config(Path(__file__).resolve().parent.parent / "configs" /

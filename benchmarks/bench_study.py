@@ -8,7 +8,8 @@ steps with their own cost) off. Each size runs in a fresh process (after a small
 that loads or compiles the Numba kernels), which reports its wall time and its peak resident
 memory (``ru_maxrss``), so the memory of one size does not hide in another's.
 
-The pipeline is timed as ``tolsim run`` runs it (:func:`tolsim.study.runner.run_study`): with
+The pipeline is timed as ``tolsim run`` runs it (:func:`tolsim.study.execution.runner.run_study`):
+with
 one worker the Numba kernels use every core and the next chunk is drawn in a thread
 meanwhile; the process keeps freed memory for reuse (``retain_freed_memory``). With two
 workers each process starts in 1-2 s, which the 1e6 figure includes.
@@ -33,7 +34,8 @@ same study without ``[contact]`` in the same run, at each size (target: >= 1.5 M
 cores, peak memory flat from 1e6 to 1e7 balls).
 
 With ``--along-track`` it times the study after contact with ``along_track`` propagation
-(the trains followed at every time step, :class:`tolsim.study.friction.TrackFriction`):
+(the trains followed at every time step,
+:class:`tolsim.study.pipeline.track_friction.TrackFriction`):
 ``configs/friction_yaw.toml`` (free balls, 10 per train) and ``configs/carriage_preload.toml``
 (a carriage, 2 x 12 balls, balls entering and leaving its loaded zone), both switched to
 ``along_track`` with their ``time_steps`` (200), each with and without ``[contact]`` in the
@@ -110,7 +112,7 @@ def numpy_analytic(dbeta, force, bearing):
 
 def numpy_pipeline(config):
     """Baseline: same sampling and static solver, NumPy velocity model and propagation."""
-    from tolsim.study.evaluate import STATIC_MODELS, groove_error_fields, loads_per_ball
+    from tolsim.study.pipeline.evaluate import STATIC_MODELS, groove_error_fields, loads_per_ball
     from tolsim.study.sampling import error_values, n_blocks, sample_block
 
     total = 0
@@ -131,7 +133,7 @@ def numpy_pipeline(config):
 
 
 def child(balls_total, workers, baseline, static_model, config=CONFIG, along_track=None):
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
 
     c = study(balls_total, static_model, config, along_track)
     warm = 2048 if along_track is None else min(c.study.block_size, c.study.samples)
@@ -152,7 +154,7 @@ def child(balls_total, workers, baseline, static_model, config=CONFIG, along_tra
 def resolve_child(name, balls_total):
     """One run of a re-solve study; prints balls, seconds, re-solved balls and their time."""
     from tolsim.io.config import load_config
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
 
     c = load_config(RESOLVE_STUDIES[name])
     c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0))

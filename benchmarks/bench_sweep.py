@@ -7,7 +7,8 @@ run_sweep`: every point a study, its part file written, then one combined file).
 the same process, after a warm-up that loads the compiled kernels:
 
 * ``sweep``: the wall time of the whole sweep, files included;
-* ``separate``: the same points as separate :func:`tolsim.study.runner.run_study` calls, each
+* ``separate``: the same points as separate :func:`tolsim.study.execution.runner.run_study` calls,
+each
   written to its own file (what a user would do by hand);
 * ``sampling``: the time to draw the points' random blocks alone
   (:func:`tolsim.study.sampling.sample_block` and ``error_values``), which common random
@@ -50,7 +51,7 @@ def main():
     from tolsim.io.config import parse_config
     from tolsim.io.netcdf import write_result
     from tolsim.io.sweep import run_sweep
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
     from tolsim.study.sampling import block_size_of, error_values, n_blocks, sample_block
 
     config = parse_config(sweep_text(args.points, args.samples), str(CONFIG))

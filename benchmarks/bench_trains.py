@@ -1,4 +1,4 @@
-"""Throughput of the event-driven trains (tolsim.study.trains) against plain NumPy and Python.
+"""Throughput of the event-driven trains (tolsim.physics.trains) against plain NumPy and Python.
 
     python benchmarks/bench_trains.py [--trains 200000] [--balls 10 12] [--repeat 3]
 
@@ -25,7 +25,7 @@ import time
 import numba
 import numpy as np
 
-from tolsim.study.trains import cluster_velocities, train_contact_constant
+from tolsim.physics.trains import cluster_velocities, train_contact_constant
 
 V = 0.2
 HORIZON = 2.0

@@ -9,11 +9,12 @@ For each case, R seeded repeats (default 400, the full count of the requirement;
 keeps 150) of A assemblies, and the share of repeats whose 95 % interval covers the truth,
 with its binomial sd sqrt(c (1 - c) / R), for
 
-* proportion: the cluster interval (:func:`tolsim.study.estimators.cluster_proportion`:
+* proportion: the cluster interval (:func:`tolsim.study.statistics.intervals.cluster_proportion`:
   ratio estimator, delta method, Korn-Graubard effective n, Wilson, effective df), the same
   with Clopper-Pearson, the same with K&G's design df (A - 1), and the old independent-ball
   Wilson interval of k of N;
-* Cpk: the delta method over assemblies (:func:`~tolsim.study.estimators.cluster_capability`)
+* Cpk: the delta method over assemblies
+(:func:`~tolsim.study.statistics.intervals.cluster_capability`)
   and the old Bissell interval (independent balls), plus the cluster Cp interval.
 
 Also printed: the mean width of each proportion interval relative to p, the mean estimated
@@ -32,7 +33,7 @@ from scipy.integrate import quad
 from scipy.special import ndtr, ndtri
 from scipy.stats import norm
 
-from tolsim.study.estimators import (
+from tolsim.study.statistics.intervals import (
     ClusterMoments,
     assembly_totals,
     cluster_capability,
@@ -40,7 +41,7 @@ from tolsim.study.estimators import (
     ratio_variance,
     wilson_interval,
 )
-from tolsim.study.quality import capability
+from tolsim.study.statistics.quality import capability
 
 BALLS = 10
 RHO = 0.9

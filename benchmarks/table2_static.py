@@ -16,10 +16,10 @@ Run: ``python benchmarks/table2_static.py``
 
 import numpy as np
 
-from tolsim.physics.analytic import analytic
 from tolsim.physics.geometry import CONTACTS, TABLE1, TABLE1_NORMAL_LOAD, paired_forces
-from tolsim.physics.models import MODELS
 from tolsim.physics.static import GrooveErrors, solve_static
+from tolsim.physics.velocity.analytic import analytic
+from tolsim.physics.velocity.models import MODELS
 
 THETA = np.deg2rad(2.0)
 RHO = np.array([-0.6, 0.6])

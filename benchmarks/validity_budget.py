@@ -2,9 +2,10 @@
 
     python benchmarks/validity_budget.py [--budget 2e-4] [--save grid.npz | --load grid.npz]
 
-``eq24`` and ``analytic`` (:mod:`tolsim.physics.analytic`) flag each ball ``valid`` or not; in
+``eq24`` and ``analytic`` (:mod:`tolsim.physics.velocity.analytic`) flag each ball ``valid`` or
+not; in
 a study an invalid ball is re-solved with the comprehensive model
-:func:`tolsim.physics.friction.full`. The thresholds therefore trade speed (the share of balls
+:func:`tolsim.physics.velocity.full.full`. The thresholds therefore trade speed (the share of balls
 the fast model keeps) against accuracy (its error on those balls), not truth against bias.
 This script measures the error of both fast models against ``full`` on a grid and derives
 the thresholds that keep it inside a budget (default ``VALIDITY_ERROR_BUDGET`` = 2e-4, i.e.
@@ -67,11 +68,11 @@ import time
 
 import numpy as np
 
-from tolsim.physics import analytic as A
-from tolsim.physics.friction import full
 from tolsim.physics.geometry import TABLE1, paired_forces
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.static import GrooveErrors, solve_static
+from tolsim.physics.velocity import analytic as A
+from tolsim.physics.velocity.full import full
 
 RHO = np.round(np.arange(-0.95, 0.951, 0.05), 10)
 THETA_DEG = np.arange(-4.0, 4.01, 0.5)

@@ -1,4 +1,4 @@
-"""Tolerance allocation (``tolsim allocate``, issue 14; :mod:`tolsim.study.allocate`).
+"""Tolerance allocation (``tolsim allocate``, issue 14; :mod:`tolsim.study.design.allocate`).
 
 The known answer: two sources and a linear limit state g = c . (s * z) - b with z ~ N(0, I),
 so P(g > 0) = Phi(-b / sqrt(sum (c_i s_i)^2)) (the sum of independent normals is normal),
@@ -23,7 +23,7 @@ from scipy.stats import beta, norm
 from tolsim.cli import main
 from tolsim.io.allocation import allocated_config_text, given_scales, tolerance_lines
 from tolsim.io.config import ConfigError, load_config, parse_config
-from tolsim.study.allocate import (
+from tolsim.study.design.allocate import (
     AllocationSettings,
     SourceCost,
     allocate_scales,
@@ -36,8 +36,8 @@ from tolsim.study.allocate import (
     tolerance_cost,
     verification_seed,
 )
-from tolsim.study.estimators import clopper_pearson_interval
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
+from tolsim.study.statistics.intervals import clopper_pearson_interval
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 EXAMPLE = CONFIGS / "allocate_example.toml"
@@ -137,7 +137,7 @@ def test_allocation_loosens_what_does_not_matter():
 
 
 def test_allocation_errors():
-    from tolsim.study.allocate import AllocationInfeasible
+    from tolsim.study.design.allocate import AllocationInfeasible
 
     # not even every source at min_scale meets it: 0 of N gives an upper bound of
     # 1 - 0.05^(1/N) = 1.5e-4 > 1e-4

@@ -7,9 +7,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from numpy.testing import assert_allclose
 
-from tolsim.physics import analytic as A
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing, paired_forces
 from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity import analytic as A
 
 THETA = np.deg2rad(2.0)  # Lin2018 Sec. 3.2 / Table 2
 NY = 200.0  # Lin2018 Table 1
@@ -278,7 +278,7 @@ def test_matched_top_bottom_deviations_give_zero(model, bottom, pair):
 @given(angles, arrays(np.float64, (8, 2), elements=st.floats(5.0, 800.0)))
 def test_analytic_reduces_to_eq24_when_paired(dbeta, pair):
     # The requirement: with F_BL = F_TR and F_BR = F_TL the 4x4 solution gives Eq. (24)
-    # exactly (module docstring of tolsim.physics.analytic); round-off tolerance 1e-13.
+    # exactly (module docstring of tolsim.physics.velocity.analytic); round-off tolerance 1e-13.
     force = np.column_stack([pair[:, 0], pair[:, 1], pair[:, 0], pair[:, 1]])
     assert_allclose(A.analytic(dbeta, force).velocity_deviation,
                     A.eq24(dbeta, force).velocity_deviation, atol=1e-13)
@@ -383,7 +383,8 @@ def test_errata9_eq23_is_the_linearisation_of_eq22(beta0_deg):
 # ------------------------------------------------------------------ point model
 def test_point_model_case_a_is_gross():
     # Linearising the point model with BR (or TL) sliding gives eps = theta/2 = 1.745 % for
-    # Table 2 case (a), ball 1 (derivation in tolsim.physics.analytic.point); Eq. (22) is exact,
+    # Table 2 case (a), ball 1 (derivation in tolsim.physics.velocity.analytic.point); Eq. (22) is
+    # exact,
     # so the nonlinear value is within 5 % of that. It is "grossly inaccurate" (Fig. 7(b)):
     # more than twice the Table 2 formula value.
     res = A.point(*case_a(-0.6))

@@ -1,6 +1,6 @@
 """One ball under external loads (issue 13, part 1): pushes, ball-to-ball friction, creep.
 
-The physics is derived in :mod:`tolsim.physics.ball_loads`. Here: the kinematics of a
+The physics is derived in :mod:`tolsim.physics.velocity.ball_loads`. Here: the kinematics of a
 ball-ball contact, the power balance of the full model, the unloaded models reproduced bit for
 bit, the creep stiffness of the linear model against finite differences of the full one on the
 paper's ball, the symmetries (mirror, case (b) = rotation about the rail), the signs, gross
@@ -31,11 +31,11 @@ from test_analytic import (
 from test_friction import reference_contact_loads
 
 from tolsim.cli import main
-from tolsim.physics import ball_loads as BL
-from tolsim.physics.analytic import LOAD_COLUMNS, analytic, analytic_loaded_kernel
-from tolsim.physics.friction import LoadedFullResult, friction_loads, full
 from tolsim.physics.geometry import TABLE1, paired_forces
 from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity import ball_loads as BL
+from tolsim.physics.velocity.analytic import LOAD_COLUMNS, analytic, analytic_loaded_kernel
+from tolsim.physics.velocity.full import LoadedFullResult, friction_loads, full
 
 THETA = np.deg2rad(2.0)  # Lin2018 Table 2
 NY = 200.0  # Lin2018 Table 1; also normal_load_N of configs/yaw_moment_tolerances.toml

@@ -2,7 +2,7 @@
 
 Balls roll through the carriage's loaded zone at -(1 - epsilon) v / 2, leave at its trailing
 end, new ones enter at its leading end, the carriage is re-solved at every evaluation
-(:mod:`tolsim.study.carriage_track`), with the carriage solve taking each ball at its own z
+(:mod:`tolsim.study.pipeline.carriage_track`), with the carriage solve taking each ball at its own z
 (:func:`tolsim.physics.carriage.solve_carriage_batch` with ``ball_z`` and ``loaded``) and an
 optional end relief of the carriage grooves. Each test names its reference and tolerance.
 """
@@ -26,14 +26,14 @@ from tolsim.physics.carriage import (
 from tolsim.physics.geometry import TABLE1
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.static import GrooveErrors
-from tolsim.study.carriage_track import (
+from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.carriage_track import (
     TrackTrace,
     advance_kernel,
     first_contact_carriage_track,
     slot_capacity,
 )
-from tolsim.study.propagation import first_contact_tracks
-from tolsim.study.runner import run_study
+from tolsim.study.pipeline.propagation import first_contact_tracks
 from tolsim.study.sampling import (
     _ar1,
     _field_grid,
@@ -354,7 +354,7 @@ def test_along_track_agrees_with_constant_propagation_before_any_ball_moves_on()
     # its own, ~ e_t / (2 d)); no rail fields; a stroke of 8 mm, so that the balls drift 4 mm
     # and none leaves or enters (the train fills the zone with about 5 mm to spare at each
     # end). Then epsilon is constant along the track and the contact time is the constant
-    # propagation's closed form with the t = 0 epsilon (tolsim.study.propagation, mode a).
+    # propagation's closed form with the t = 0 epsilon (tolsim.study.pipeline.propagation, mode a).
     # Measured agreement 5.9e-7 relative (the small changes of epsilon as the train moves
     # under the carriage's yaw and pitch from the balls' own errors); tolerance 5e-6. With the
     # drift of a ball of the wrong sign, -(1 + epsilon) v / 2, the other pairs would close.
@@ -494,7 +494,8 @@ def test_moving_ball_values_at_the_start_are_the_study_values():
 
 
 def advance_twin(z0, z1, ids, ok, count, entered, gap, half, d, balls, t0, dt):
-    """Plain-Python twin of advance_kernel (module docstring of tolsim.study.carriage_track):
+    """Plain-Python twin of advance_kernel
+    (module docstring of tolsim.study.pipeline.carriage_track):
     returns the new slots, the exits and entries [(a, track, id, time)] and the overflow."""
     m, tracks, slots = z1.shape
     out_z, out_id = np.full(z1.shape, np.nan), np.full(z1.shape, -1)
@@ -634,7 +635,7 @@ def test_sobol_indices_of_an_along_track_carriage_study():
     # random ball source, that source is the only factor: AB = B, so its total index is 1 up
     # to the sampling noise of the estimator (16 base samples: measured 0.92), and the run is
     # seeded (bit-identical when repeated).
-    from tolsim.study.sensitivity import study_sensitivity
+    from tolsim.study.analyses.sensitivity import study_sensitivity
 
     tolerances = ('[tolerances.arc_centre_offset_tangential_BL]\ndistribution = "normal"\n'
                   'std_um = 2.0\nscope = "ball"\n')

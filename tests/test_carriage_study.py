@@ -19,17 +19,17 @@ from tolsim.io.config import ConfigError, load_config, parse_config
 from tolsim.io.netcdf import result_to_dataset
 from tolsim.physics.carriage import solve_carriage
 from tolsim.physics.static import GrooveErrors
-from tolsim.study.carriage import (
+from tolsim.study.analyses.sensitivity import study_sensitivity
+from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.carriage import (
     CARRIAGE_SOLVED,
     carriage_groove_errors,
     evaluate_carriage,
     solve_config_carriage,
 )
-from tolsim.study.propagation import first_contact_constant, first_contact_tracks
-from tolsim.study.runner import run_study
+from tolsim.study.pipeline.propagation import first_contact_constant, first_contact_tracks
 from tolsim.study.sampling import error_values, sample_block
-from tolsim.study.sensitivity import study_sensitivity
-from tolsim.study.statistics import Accumulator
+from tolsim.study.statistics.accumulator import Accumulator
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "carriage_preload.toml"
 
@@ -133,7 +133,7 @@ def test_first_contact_of_an_assembly_is_the_earliest_of_its_tracks():
 # --------------------------------------------------------------------------------------------
 def test_carriage_moments_merge_to_the_direct_values():
     # Chan et al.'s merge of per-block moments equals the moments of all values (1e-12).
-    from tolsim.study.carriage import CarriageState
+    from tolsim.study.pipeline.carriage import CarriageState
 
     rng = np.random.default_rng(2)
     q = rng.normal(size=(90, 5)) * [1e-6, 1e-6, 1e-5, 1e-5, 1e-5]

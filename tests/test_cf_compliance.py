@@ -23,7 +23,7 @@ from compliance_checker.runner import CheckSuite, ComplianceChecker  # noqa: E40
 
 from tolsim.io.config import load_config  # noqa: E402
 from tolsim.io.netcdf import result_to_dataset, write_result  # noqa: E402
-from tolsim.study.runner import run_study  # noqa: E402
+from tolsim.study.execution.runner import run_study  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 #: (configs with a [carriage] included: their files add the ``track`` and carriage variables)

@@ -28,7 +28,8 @@ def test_default_is_the_paper_case(capsys):
     assert out["contact_angle_deg"] == pytest.approx([43.0, 47.0, 45.0, 45.0])
     assert len(out["zero_velocity_offset_deg"]) == 4
     # The paper case lies outside the analytic model's error-budget thresholds (its error
-    # against the full model is 3.5e-4 > 2e-4, tolsim.physics.analytic "Validity"): flagged,
+    # against the full model is 3.5e-4 > 2e-4, tolsim.physics.velocity.analytic "Validity"):
+    # flagged,
     # with exactly one warning, the validity note.
     assert out["valid"] is False
     assert len(out["warnings"]) == 1

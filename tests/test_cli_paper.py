@@ -104,15 +104,16 @@ def test_tolsim_paper_writes_every_file(tmp_path, capsys):
 def test_after_contact_panel_matches_the_study_path():
     # Beyond the paper (tolsim's extension): the panel's two balls of Sec. 3.2 case (a) after
     # they touch must give the numbers of a study of configs/paper_case_study.toml with
-    # [contact] (tolsim.study.friction): contact at 6.34 s, then Q = 5.31 N and the track's
+    # [contact] (tolsim.study.pipeline.track_friction): contact at 6.34 s, then Q = 5.31 N and the
+    # track's
     # friction +0.79 N over its 2.82 N baseline (K = 673 N each). Tolerance 1e-9 relative:
     # the same full-model epsilon and analytic coefficients on both paths (the study's creep
     # kernel agrees with analytic() to round-off, tests/test_friction_study.py).
     from pathlib import Path
 
     from tolsim.io.config import load_config, parse_config
-    from tolsim.study import friction as fr
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
+    from tolsim.study.pipeline import track_friction as fr
 
     data = paper.after_contact_data()
     full = data["full"]

@@ -27,7 +27,8 @@ SAMPLES = {"constant": 64, "along_track": 8}
 
 def _run_config(path, out):
     config_mod = pytest.importorskip("tolsim.io.config", reason="issue 5 config not installed")
-    runner = pytest.importorskip("tolsim.study.runner", reason="issue 5 runner not installed")
+    runner = pytest.importorskip("tolsim.study.execution.runner",
+                                 reason="issue 5 runner not installed")
     netcdf = pytest.importorskip("tolsim.io.netcdf", reason="issue 5 writer not installed")
     config = config_mod.load_config(path)
     config = config.with_overrides(samples=SAMPLES[config.study.propagation])
@@ -78,7 +79,7 @@ def test_report_every_config(results, name, tmp_path, capsys):
         p = float(ds.contact_probability)
         lo, hi = float(ds.contact_probability_ci_lower), float(ds.contact_probability_ci_upper)
         limit = float(ds.velocity_deviation_limit)
-    from tolsim.study.quality import format_fraction
+    from tolsim.study.statistics.quality import format_fraction
 
     assert format_fraction(p, lo, hi) in page
     random_factors = [t for t in config.tolerances if t.distribution.is_random]

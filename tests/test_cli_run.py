@@ -88,7 +88,7 @@ def test_rerun_resumes_from_checkpoint(tmp_path, capsys):
     # Interrupt a run after 3 blocks (through the Python API, as a crash would leave it), then
     # the same command picks the checkpoint up and gives the same data as a fresh run.
     from tolsim.io.config import load_config
-    from tolsim.study.runner import StudyInterrupted, run_study
+    from tolsim.study.execution.runner import StudyInterrupted, run_study
 
     cfg = tmp_path / "s.toml"
     cfg.write_text(MINIMAL.replace("samples = 100", "samples = 1000\nblock_size = 100"))
@@ -125,12 +125,12 @@ def test_console_script_process(tmp_path):
 # --- issue 17: output checked first, what a long run says, precision target -------------------
 def _no_sampling(monkeypatch):
     """Make any study fail: the checks below must come before the work."""
-    import tolsim.study.runner
+    import tolsim.study.execution.runner
 
     def refuse(*args, **kwargs):
         raise AssertionError("the study ran")
 
-    monkeypatch.setattr(tolsim.study.runner, "run_study", refuse)
+    monkeypatch.setattr(tolsim.study.execution.runner, "run_study", refuse)
 
 
 def _as_root():
@@ -187,7 +187,7 @@ def test_unwritable_output_fails_before_any_work(tmp_path, capsys, monkeypatch, 
 
 def test_checkpoint_interval_flag(tmp_path, capsys, monkeypatch):
     from tolsim.cli import build_parser
-    from tolsim.study import runner
+    from tolsim.study.execution import runner
 
     args = build_parser(["run"]).parse_args(["run"])
     assert args.checkpoint_interval == 30.0
@@ -215,7 +215,7 @@ def test_checkpoint_interval_flag(tmp_path, capsys, monkeypatch):
 
 def test_resume_says_what_was_resumed(tmp_path, capsys):
     from tolsim.io.config import load_config
-    from tolsim.study.runner import StudyInterrupted, run_study
+    from tolsim.study.execution.runner import StudyInterrupted, run_study
 
     cfg = tmp_path / "s.toml"
     cfg.write_text(MINIMAL.replace("samples = 100", "samples = 1000\nblock_size = 100"))
@@ -232,7 +232,7 @@ def _compiling_once(monkeypatch):
     """Make the next study compile a new kernel, as with a cold Numba cache."""
     import numba
 
-    from tolsim.study import runner
+    from tolsim.study.execution import runner
 
     run_chunk = runner.run_chunk
     pending = [True]
@@ -247,7 +247,7 @@ def _compiling_once(monkeypatch):
 
 
 def test_compiling_is_said_once_and_only_when_it_happens(tmp_path, capsys, monkeypatch):
-    from tolsim.study.runner import COMPILING_MESSAGE
+    from tolsim.study.execution.runner import COMPILING_MESSAGE
 
     cfg = tmp_path / "s.toml"
     cfg.write_text(MINIMAL)

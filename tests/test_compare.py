@@ -33,7 +33,7 @@ from tolsim.reports.compare import (
     shares_random_numbers,
     welch_difference,
 )
-from tolsim.study.estimators import ClusterMoments, assembly_totals, wilson_interval
+from tolsim.study.statistics.intervals import ClusterMoments, assembly_totals, wilson_interval
 
 CONFIGS = os.path.join(os.path.dirname(__file__), "..", "configs")
 
@@ -218,7 +218,7 @@ def test_shares_random_numbers_and_labels():
 def _run(text, samples, seed, out, path):
     from tolsim.io.config import parse_config
     from tolsim.io.netcdf import write_result
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
 
     config = parse_config(text, path).with_overrides(samples=samples, seed=seed)
     write_result(run_study(config), out, history="test_compare")

@@ -7,7 +7,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from tolsim.io.config import load_config
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -57,11 +57,11 @@ def test_paper_case_study_contact_time():
     assert_allclose(eps1, 0.00754, atol=5e-6)  # Table 2, "derived formula" 0.75 %
     assert_allclose(0.5e-3 / (2 * eps1 * 0.01 / 2), 6.63, atol=0.01)
     # Those balls lie outside Eq. (24)'s error budget (0.02 pp against the full model,
-    # tolsim.physics.analytic): the study re-solves them with the full model, whose epsilon
+    # tolsim.physics.velocity.analytic): the study re-solves them with the full model, whose epsilon
     # for the same paired forces and angles is +-0.7889 % (tests/test_paper_data.py,
     # Table 2 case (a), paired forces), so contact comes earlier, at 6.34 s.
-    from tolsim.physics.friction import full
     from tolsim.physics.geometry import paired_forces
+    from tolsim.physics.velocity.full import full
 
     eps_full = float(full([-theta, theta, 0, 0], paired_forces(-0.6 * 200, 200))
                      .velocity_deviation)
@@ -105,7 +105,7 @@ def test_yaw_moment_tolerances():
     # Measured RMS 2.9e-5 and max 7.7e-5 (of epsilon, i.e. < 0.01 percentage points);
     # tolerance 2e-4 max, a tenth of the paper's Table 2 gap (0.85 % vs 0.75 %, Leblanc vs
     # formula) at much larger angles and side forces.
-    pytest.importorskip("tolsim.physics.friction")
+    pytest.importorskip("tolsim.physics.velocity.full")
     sc = res.spot_checks
     both = sc.valid_analytic & sc.valid_full
     assert len(sc.ball_index) == 50 and both.sum() >= 45

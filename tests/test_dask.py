@@ -26,14 +26,14 @@ from test_interrupt import assert_same_result, tiny
 from test_study import make
 
 from tolsim.cli import main
-from tolsim.study import distributed as tolsim_distributed
-from tolsim.study.distributed import (
+from tolsim.study.execution import distributed as tolsim_distributed
+from tolsim.study.execution.distributed import (
     INSTALL_HINT,
     SchedulerError,
     chunks_per_task,
     parse_scheduler,
 )
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
 
 #: Seconds a test may wait for the cluster (workers restarting, tasks finishing).
 WAIT = 60
@@ -62,7 +62,7 @@ def two_workers(client):
 
 
 def slowed_task(config, chunks, *args):
-    """The task of ``tolsim.study.distributed``, slowed so that earlier blocks finish later:
+    """The task of ``tolsim.study.execution.distributed``, slowed so that earlier blocks finish later:
     the tasks end out of order, and a worker killed early is still busy. (Runs on the
     workers, which import it from this module.)"""
     time.sleep(0.25 if chunks[0][0] == 0 else 0.05)
@@ -100,7 +100,7 @@ def test_bit_identical_along_the_track_with_lhs(two_workers):
 def test_bit_identical_with_a_precision_target(two_workers):
     # the run stops at a block inside a task, the look-ahead's tasks are cancelled, and the
     # result is that of the in-process run with the same target
-    from tolsim.study.runner import PrecisionTarget
+    from tolsim.study.execution.runner import PrecisionTarget
 
     config = make(samples=3000)
     target = PrecisionTarget(0.05)
@@ -179,7 +179,7 @@ def test_resume_after_the_client_is_killed(two_workers, tmp_path):
     client_process = textwrap.dedent(f"""\
         import os, signal
         from tolsim.io.config import load_config
-        from tolsim.study.runner import run_study
+        from tolsim.study.execution.runner import run_study
 
         merged = []
 

@@ -1,4 +1,4 @@
-"""Interval estimators with the assembly as the sampling unit (tolsim.study.estimators).
+"""Interval estimators with the assembly as the sampling unit (tolsim.study.statistics.intervals).
 
 The synthetic train: equicorrelated standard normals x_ab = sqrt(rho) z_a + sqrt(1 - rho) e_ab
 (assembly a, ball b; z, e iid N(0, 1)), so every ball is N(0, 1), two balls of one assembly
@@ -20,7 +20,7 @@ from scipy.integrate import quad
 from scipy.special import ndtr, ndtri
 from scipy.stats import norm
 
-from tolsim.study.estimators import (
+from tolsim.study.statistics.intervals import (
     CLUSTER_COLUMNS,
     ClusterMoments,
     assembly_totals,
@@ -29,7 +29,7 @@ from tolsim.study.estimators import (
     ratio_variance,
     wilson_interval,
 )
-from tolsim.study.quality import Capability, Proportion, capability
+from tolsim.study.statistics.quality import Capability, Proportion, capability
 
 BALLS = 10
 RHO = 0.9

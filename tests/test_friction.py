@@ -1,4 +1,4 @@
-"""The comprehensive friction model (tolsim.physics.friction) against first principles.
+"""The comprehensive friction model (tolsim.physics.velocity.full) against first principles.
 
 The NumPy/SciPy twin below integrates Coulomb friction over each Hertz ellipse with
 scipy.integrate.cubature, building every vector from scratch in 3-D (Eqs. 1-11 of [Lin2018]:
@@ -16,8 +16,10 @@ from scipy.integrate import cubature
 from scipy.optimize import root
 from scipy.special import ellipe
 
-from tolsim.physics.analytic import analytic
-from tolsim.physics.friction import (
+from tolsim.physics.geometry import TABLE1, Bearing, paired_forces
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity.analytic import analytic
+from tolsim.physics.velocity.full import (
     DEFAULT_ANGULAR_NODES,
     DEFAULT_RADIAL_NODES,
     FullResult,
@@ -26,8 +28,6 @@ from tolsim.physics.friction import (
     friction_loads,
     full,
 )
-from tolsim.physics.geometry import TABLE1, Bearing, paired_forces
-from tolsim.physics.hertz import hertz_constants
 
 SIDE_X = np.array([-1.0, 1.0, 1.0, -1.0])
 SIDE_Y = np.array([-1.0, -1.0, 1.0, 1.0])
@@ -428,7 +428,7 @@ def test_validation_inputs():
 
 
 def test_registered_model():
-    from tolsim.physics.models import MODELS
+    from tolsim.physics.velocity.models import MODELS
 
     assert MODELS["full"] is full
 
@@ -478,7 +478,7 @@ def test_cli_ball_full_non_convergence_warns(capsys, monkeypatch):
     import json
 
     from tolsim.cli import main
-    from tolsim.physics import models
+    from tolsim.physics.velocity import models
 
     # force non-convergence: one Newton step only
     monkeypatch.setitem(models.MODELS, "full", lambda *a, **k: full(*a, **k, max_iter=1))

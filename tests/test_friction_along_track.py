@@ -1,12 +1,13 @@
 """Trains after contact with ``along_track`` propagation (issue 13: "With along_track, apply
-the same rule at every step"): tolsim.study.friction.TrackFriction and the step kernels of
-tolsim.study.trains.
+the same rule at every step"): tolsim.study.pipeline.track_friction.TrackFriction and the step
+kernels of
+tolsim.physics.trains.
 
-References, each with its tolerance: the event-driven trains of tolsim.study.trains (exact
+References, each with its tolerance: the event-driven trains of tolsim.physics.trains (exact
 for constant epsilon; the step rule reproduces them at every step end, derivation in its
 docstring, "Varying epsilon"), the two-ball closed form Q = (eps_0 - eps_1) / (1/K_0 + 1/K_1
 - c_0 + c_1), = K_0 K_1 (eps_0 - eps_1) / (K_0 + K_1) without ball-to-ball friction
-([Lin2018] Sec. 3.2 case (a); tolsim.study.trains docstring), the weighted isotonic
+([Lin2018] Sec. 3.2 case (a); tolsim.physics.trains docstring), the weighted isotonic
 regression of scipy.optimize.isotonic_regression (twin of the projection), NumPy twins of
 the other kernels. Invariants: the first contact and P(contact) do not change when
 [contact] is added, bit-identical results whatever the chunking and the workers, the
@@ -22,19 +23,19 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy.optimize import isotonic_regression
 
 from tolsim.io.config import load_config, parse_config
-from tolsim.physics.analytic import LOAD_COLUMNS
-from tolsim.study import friction as fr
-from tolsim.study.carriage_track import carry_pairs_kernel, first_contact_carriage_track
-from tolsim.study.evaluate import evaluate_balls, loads_at
-from tolsim.study.propagation import first_contact_along_track
-from tolsim.study.runner import run_study
-from tolsim.study.sampling import error_values, sample_block
-from tolsim.study.trains import (
+from tolsim.physics.trains import (
     cluster_velocities,
     step_clusters_kernel,
     step_project_kernel,
     train_contact_constant,
 )
+from tolsim.physics.velocity.analytic import LOAD_COLUMNS
+from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline import track_friction as fr
+from tolsim.study.pipeline.carriage_track import carry_pairs_kernel, first_contact_carriage_track
+from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
+from tolsim.study.pipeline.propagation import first_contact_along_track
+from tolsim.study.sampling import error_values, sample_block
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -109,7 +110,7 @@ def stage_one(eps, stiffness, braking, member, closed, active=None):
 
 
 def test_step_clusters_kernel_matches_cluster_velocities(rng):
-    # Stage 1 is the cluster rule (tolsim.study.trains.cluster_velocities) on each row's run
+    # Stage 1 is the cluster rule (tolsim.physics.trains.cluster_velocities) on each row's run
     # of member balls; outside it, and in rows that are not followed or have a ball without
     # K, the balls are free (w = epsilon, Q = 0). Tolerance 1e-12 relative (the weights of a
     # run carry a global factor from the balls before it: rounding only).
@@ -132,7 +133,7 @@ def test_step_clusters_kernel_matches_cluster_velocities(rng):
 
 
 def effective_stiffness(stiffness, braking):
-    """NumPy twin of kappa_i and lambda_j (eq. 2 of tolsim.study.trains)."""
+    """NumPy twin of kappa_i and lambda_j (eq. 2 of tolsim.physics.trains)."""
     ck = braking * stiffness
     ratio = np.cumprod((1.0 + ck) / (1.0 - ck), axis=1)
     before = np.concatenate([np.ones((len(ck), 1)), ratio[:, :-1]], axis=1)
@@ -140,7 +141,7 @@ def effective_stiffness(stiffness, braking):
 
 
 def project_twin(start, end, stiffness, braking, member, label, q1, before, diameter, h):
-    """Twin of tolsim.study.trains.step_project_kernel (eqs. 7, 8) for rows whose members
+    """Twin of tolsim.physics.trains.step_project_kernel (eqs. 7, 8) for rows whose members
     form one run: the stage-1 clusters merged into single points, then
     scipy.optimize.isotonic_regression of s = y - i D with the weights kappa."""
     rows, slots = end.shape
@@ -220,7 +221,7 @@ def test_step_project_kernel_matches_isotonic_twin(rng):
 def test_step_rule_mirrors_along_the_rail(rng):
     # Mirror z -> -z: the train reversed (ball i -> n - 1 - i), epsilon -> -epsilon, and the
     # braking sensitivity changes sign (a push from behind becomes one from the front, eq. 1
-    # of tolsim.study.trains). The step gives the mirrored result: the same forces reversed,
+    # of tolsim.physics.trains). The step gives the mirrored result: the same forces reversed,
     # velocities -w reversed, and end positions mirrored (up to the common travel 2 dt v / 2,
     # to which the projection is blind). Tolerances 1e-12 relative (velocities), 1e-15 m
     # (positions), forces 1e-8 relative or 2e-8 N: an impulse (8) divides the rounding of
@@ -255,7 +256,7 @@ def test_step_rule_mirrors_along_the_rail(rng):
 
 
 def step_friction_twin(loaded, member, load, force, ok, contact, formed, weight, acc):
-    """NumPy twin of tolsim.study.friction.step_friction_kernel (one step, eq. 1)."""
+    """NumPy twin of tolsim.study.pipeline.track_friction.step_friction_kernel (one step, eq. 1)."""
     a, b = load[..., fr._A], load[..., fr._B]
     pair = member[:, 1:] & member[:, :-1]
     k = np.where(pair, (a[:, 1:] - a[:, :-1]) + (b[:, :-1] + b[:, 1:]), 0.0)
@@ -382,8 +383,8 @@ time_steps = {steps}
 def test_constant_epsilon_reproduces_the_event_driven_trains():
     # No rail field, equal loads on every ball: epsilon and K do not change along the track,
     # so the along_track trains must reproduce the exact event-driven ones
-    # (tolsim.study.trains.train_contact_constant). The step rule is exact in that case
-    # (tolsim.study.trains, "Varying epsilon"): at every time_steps the ball positions at the
+    # (tolsim.physics.trains.train_contact_constant). The step rule is exact in that case
+    # (tolsim.physics.trains, "Varying epsilon"): at every time_steps the ball positions at the
     # end of the stroke (1e-14 m), the baseline, the time-mean increase and the contact
     # fraction (1e-8 relative) agree. The maxima are taken over step means: they differ only
     # for assemblies with an event inside the first or last step (an event averaged away),
@@ -481,8 +482,9 @@ def test_lin2018_case_a_contact_force_along_track(mu_bb):
     # converge. At every step in which they touch throughout, the force is the two-ball
     # closed form with the step's own (midpoint) epsilon, K and c: Q = (eps_0 - eps_1) /
     # (1/K_0 + 1/K_1 - c_0 + c_1), for mu_bb = 0 (c = 0) the issue's K_0 K_1 (eps_0 - eps_1)
-    # / (K_0 + K_1) (tolsim.study.trains docstring), to 1e-9 N; the friction increase is
-    # k Q (eq. 1 of tolsim.study.friction) at every step, its maximum to 1e-12. The largest
+    # / (K_0 + K_1) (tolsim.physics.trains docstring), to 1e-9 N; the friction increase is
+    # k Q (eq. 1 of tolsim.study.pipeline.track_friction) at every step, its maximum to 1e-12. The
+    # largest
     # force is the closed form at the first step in contact throughout, O(dt) after the
     # touch: within 2 dt |dQ/dt| of its value at the touch Q(t_c) (extrapolated from the
     # 1600-step run), which it approaches as the steps are refined.
@@ -822,12 +824,13 @@ def test_carriage_sliding_is_counted_and_bounded(monkeypatch):
 
 
 def test_sobol_indices_of_the_friction_increase_along_track():
-    # the Sobol' step follows the trains step by step too (tolsim.study.sensitivity): a study
+    # the Sobol' step follows the trains step by step too (tolsim.study.analyses.sensitivity): a
+    # study
     # with [contact], along_track and sensitivity_samples gives finite indices of the increase
     import re
 
     from tolsim.io.config import parse_config
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
 
     text = (CONFIGS / "friction_yaw.toml").read_text()
     text = re.sub(r"(?m)^samples = .*$", "samples = 64", text)

@@ -1,9 +1,10 @@
-"""What a study reports after contact (issue 13, part 3): tolsim.study.friction.
+"""What a study reports after contact (issue 13, part 3): tolsim.study.pipeline.track_friction.
 
 Each reference value names its source and tolerance. Closed forms: the nominal ball's creep
-coefficients (tolsim.physics.ball_loads docstring), two balls with constant epsilon (the
-K-weighted cluster, tolsim.study.trains docstring) and the friction increase of a track
-(eq. 1 of tolsim.study.friction), a binomial exceedance (Clopper-Pearson, scipy). Invariants:
+coefficients (tolsim.physics.velocity.ball_loads docstring), two balls with constant epsilon (the
+K-weighted cluster, tolsim.physics.trains docstring) and the friction increase of a track
+(eq. 1 of tolsim.study.pipeline.track_friction), a binomial exceedance (Clopper-Pearson, scipy).
+Invariants:
 bit-identical across chunking and resuming, no [contact] changes nothing, matched deviations
 (paper case b) give nothing, the x-mirrored assembly gives the same figures.
 """
@@ -20,15 +21,15 @@ from scipy.stats import binomtest
 from tolsim.cli import main
 from tolsim.io.config import load_config, parse_config
 from tolsim.io.netcdf import read_result, result_to_dataset, write_result
-from tolsim.physics.analytic import LOAD_COLUMNS, analytic
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, paired_forces
 from tolsim.physics.hertz import hertz_constants
-from tolsim.study import friction as fr
-from tolsim.study.evaluate import BallState
-from tolsim.study.runner import StudyInterrupted, run_study
+from tolsim.physics.trains import train_contact_constant
+from tolsim.physics.velocity.analytic import LOAD_COLUMNS, analytic
+from tolsim.study.execution.runner import StudyInterrupted, run_study
+from tolsim.study.pipeline import track_friction as fr
+from tolsim.study.pipeline.evaluate import BallState
 from tolsim.study.sampling import sample_block
-from tolsim.study.statistics import Accumulator
-from tolsim.study.trains import train_contact_constant
+from tolsim.study.statistics.accumulator import Accumulator
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -80,7 +81,7 @@ def two_ball_reference(mu_bb, creep="analytic"):
     r = analytic(dbeta, force, TABLE1, push=0.0, ball_friction=mu_bb)
     k, c, f0 = r.creep_stiffness, r.braking_sensitivity, r.free_rolling_carriage_force
     if creep == "full":
-        from tolsim.physics.friction import full
+        from tolsim.physics.velocity.full import full
 
         rf = full(dbeta, force, TABLE1, push=0.0, ball_friction=mu_bb)
         k, c, f0 = rf.creep_stiffness, rf.braking_sensitivity, rf.free_rolling_carriage_force
@@ -91,7 +92,7 @@ def two_ball_reference(mu_bb, creep="analytic"):
 # Kernel against its NumPy twin
 # --------------------------------------------------------------------------------------------
 def stroke_friction_numpy(segment_start, segment_force, valid, load, horizon):
-    """NumPy twin of :func:`tolsim.study.friction.stroke_friction_kernel` (eq. 1)."""
+    """NumPy twin of :func:`tolsim.study.pipeline.track_friction.stroke_friction_kernel` (eq. 1)."""
     m, s = segment_start.shape
     a, b = load[:, :, fr._A], load[:, :, fr._B]
     k = (a[:, 1:] - a[:, :-1]) + (b[:, :-1] + b[:, 1:])
@@ -121,7 +122,7 @@ def stroke_friction_numpy(segment_start, segment_force, valid, load, horizon):
 
 
 def test_stroke_kernel_matches_numpy_twin(rng):
-    # Random trains (tolsim.study.trains, exact segments) and random creep coefficients,
+    # Random trains (tolsim.physics.trains, exact segments) and random creep coefficients,
     # some capacities small enough to slide. Tolerance 1e-12 relative (summation order).
     m, n, horizon = 400, 7, 0.5
     eps = rng.normal(0.0, 3e-3, (m, n))
@@ -150,14 +151,14 @@ def test_stroke_kernel_matches_numpy_twin(rng):
 
 
 def test_creep_kernel_matches_the_loaded_analytic_kernel(rng):
-    # tolsim.study.friction.creep_coefficients_kernel is the study's fast path of
-    # tolsim.physics.analytic.analytic_loaded_kernel at zero load (its twin here): epsilon,
+    # tolsim.study.pipeline.track_friction.creep_coefficients_kernel is the study's fast path of
+    # tolsim.physics.velocity.analytic.analytic_loaded_kernel at zero load (its twin here): epsilon,
     # K, F_0 and dF_c/dP bit for bit (same arithmetic), the braking columns to round-off
     # (c K to 1e-12 absolute, b and the stall capacity to 1e-12 relative: the rolling axis
     # from sin_cos_near instead of np.sin). Its traction column is a lower bound of the
     # point-contact capacity: never above it (1e-12), equal for balls in equilibrium, and
     # (measured) equal on these random balls too (1e-9).
-    from tolsim.physics.analytic import (
+    from tolsim.physics.velocity.analytic import (
         MAX_ANGLE_SUM,
         MAX_VELOCITY_DEVIATION,
         MAX_ZERO_VELOCITY_RATIO,
@@ -198,7 +199,7 @@ def test_creep_kernel_matches_the_loaded_analytic_kernel(rng):
 # Closed forms
 # --------------------------------------------------------------------------------------------
 def test_nominal_ball_creep_coefficients_closed_form():
-    # tolsim.physics.ball_loads docstring, the nominal ball of Table 1 at N_y = 200 N
+    # tolsim.physics.velocity.ball_loads docstring, the nominal ball of Table 1 at N_y = 200 N
     # (F = 141.4 N per contact): K = -4 mu k_f R_B F / (a tan beta_0) = 704.6 N,
     # F_0 = 4 M_spin tan(beta_0) / (2 R_B) with M_spin = 3/8 mu F a E(e) (Eq. 14) = 1.227 N,
     # a = dF_c/dP = -1/2, b = mu_bb / (2 cos beta_0), P_cap = mu sum F_i. Tolerance 1e-12.
@@ -224,12 +225,13 @@ def test_nominal_ball_creep_coefficients_closed_form():
 
 @pytest.mark.parametrize("mu_bb", [0.0, 0.1])
 def test_two_balls_closed_form_through_the_study(mu_bb):
-    # tolsim.study.trains docstring: two balls with constant epsilon touch at
+    # tolsim.physics.trains docstring: two balls with constant epsilon touch at
     # t_c = g / ((eps_0 - eps_1) v / 2) and then move as one cluster with
     # Q = (eps_0 - eps_1) / (1/K_0 + 1/K_1 - c_0 + c_1) (for mu_bb = 0, c = 0:
     # Q = K_0 K_1 (eps_0 - eps_1) / (K_0 + K_1), the issue's closed form). The friction
-    # increase is k Q with k = (a_1 - a_0) + (b_0 + b_1) (eq. 1 of tolsim.study.friction),
-    # 0 before contact. K, c, a, b, F_0 from tolsim.physics.analytic.analytic on the same
+    # increase is k Q with k = (a_1 - a_0) + (b_0 + b_1) (eq. 1 of
+    # tolsim.study.pipeline.track_friction),
+    # 0 before contact. K, c, a, b, F_0 from tolsim.physics.velocity.analytic.analytic on the same
     # contact state. Tolerance 1e-12 relative (the study runs the same kernels).
     eps, k, c, f0, a, b = two_ball_reference(mu_bb)
     assert eps[0] > eps[1] > -0.0052  # inside the analytic model's validity, ball 0 faster
@@ -271,9 +273,9 @@ def test_paper_case_a_after_contact():
     # the full model (tests/test_configs.py), contact at 6.34 s. After it, Q =
     # K_0 K_1 (eps_0 - eps_1) / (K_0 + K_1) (c = 0 for these balls) with K from the analytic
     # model at their contact states (673.2 N), and the friction increase k Q (eq. 1). The
-    # figures quoted in tolsim.study.friction: Q = 5.31 N, increase 0.79 N on 2.82 N.
+    # figures quoted in tolsim.study.pipeline.track_friction: Q = 5.31 N, increase 0.79 N on 2.82 N.
     # Tolerance 1e-9 relative (epsilon from the full model's Newton solve, the same in both).
-    from tolsim.physics.friction import full
+    from tolsim.physics.velocity.full import full
 
     theta = np.radians(2.0)
     dbeta = np.array([[-theta, theta, 0.0, 0.0]] * 2)
@@ -296,11 +298,11 @@ def test_paper_case_a_after_contact():
 
 
 def test_two_balls_full_creep_model():
-    # creep_model = "full": K, c and F_0 from tolsim.physics.friction.full at zero load
+    # creep_model = "full": K, c and F_0 from tolsim.physics.velocity.full.full at zero load
     # (746.4 N for the nominal ball, ball_loads docstring: a few % above the analytic K),
     # the slopes a, b analytic. Same closed form as above; tolerance 1e-9 relative (full is
     # solved to its Newton tolerance, the same solve in both).
-    pytest.importorskip("tolsim.physics.friction")
+    pytest.importorskip("tolsim.physics.velocity.full")
     eps, k, c, f0, a, b = two_ball_reference(0.1, creep="full")
     k_analytic = two_ball_reference(0.1)[1]
     assert np.all((k > 1.01 * k_analytic) & (k < 1.1 * k_analytic))
@@ -351,7 +353,7 @@ def figures(resolved, exceeds, sliding=None, increase=None):
 
 
 def test_exceedance_with_unresolved_assemblies_is_bounded():
-    # Like P(contact) (tolsim.study.statistics): k certain exceedances (two of them in
+    # Like P(contact) (tolsim.study.statistics.accumulator): k certain exceedances (two of them in
     # unresolved assemblies, e.g. sliding after an exceedance), u unresolved without one, N
     # in all: estimate k / (N - u) with the exact interval, bounds [k/N, (k + u)/N] with the
     # CP lower end of k of N and upper end of k + u of N (scipy.stats.binomtest, 1e-9).
@@ -573,7 +575,7 @@ friction_increase_limit_N = 0.1
 # --------------------------------------------------------------------------------------------
 def test_train_inputs_kernel_matches_numpy_twin(rng):
     # NaN K (and c = 0) for a ball that leaves its train unresolved: epsilon, K, c, F_0, a or
-    # b not finite, K <= 0 or |c K| >= 1 (tolsim.study.trains refuses |c K| >= 1); exact.
+    # b not finite, K <= 0 or |c K| >= 1 (tolsim.physics.trains refuses |c K| >= 1); exact.
     m, n = 300, 6
     eps = rng.normal(0.0, 1e-3, (m, n))
     load = rng.normal(0.0, 1.0, (m, n, len(LOAD_COLUMNS)))
@@ -595,7 +597,7 @@ def test_train_inputs_kernel_matches_numpy_twin(rng):
 
 
 def test_unresolved_ball_makes_the_assembly_unresolved():
-    # A ball without epsilon (unresolved in tolsim.study.evaluate) leaves its train, and so
+    # A ball without epsilon (unresolved in tolsim.study.pipeline.evaluate) leaves its train, and so
     # its assembly, unresolved: NaN figures, counted, never dropped.
     c = two_balls(limit="friction_increase_limit_N = 0.01")
     block = sample_block(c, 0)

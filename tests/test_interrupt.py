@@ -18,8 +18,9 @@ from numpy.testing import assert_array_equal
 from test_study import make
 
 from tolsim.io.config import parse_config
-from tolsim.study import runner, statistics
-from tolsim.study.runner import run_study
+from tolsim.study.execution import runner
+from tolsim.study.execution.runner import run_study
+from tolsim.study.statistics import accumulator as statistics
 
 #: A tiny study: 12 blocks of 64 assemblies, a few spot checks, one block per chunk.
 SAMPLES, BLOCK = 768, 64

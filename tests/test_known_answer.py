@@ -21,11 +21,11 @@ from scipy.optimize import brentq
 from scipy.stats import norm
 
 from tolsim.io.config import load_config
-from tolsim.physics import analytic as A
-from tolsim.physics.friction import full
 from tolsim.physics.geometry import paired_forces
-from tolsim.study.estimators import clopper_pearson_interval
-from tolsim.study.runner import run_study
+from tolsim.physics.velocity import analytic as A
+from tolsim.physics.velocity.full import full
+from tolsim.study.execution.runner import run_study
+from tolsim.study.statistics.intervals import clopper_pearson_interval
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "known_answer.toml"
 GAP, SPEED, HORIZON = 0.5e-3, 0.01, 10.0  # configs/known_answer.toml
@@ -65,7 +65,8 @@ def test_threshold_of_the_issue():
     theta_formula = GAP / (SPEED / 2 * HORIZON) / slope
     assert_allclose(np.degrees(theta_formula), 1.327, atol=1e-3)
     # At that rotation the fast models are outside their error budget (|eps| ~ 0.5 %,
-    # tolsim.physics.analytic), so the ball is evaluated by the full model, whose threshold is
+    # tolsim.physics.velocity.analytic), so the ball is evaluated by the full model, whose
+    # threshold is
     # lower (full's eps is ~4.7 % larger, Table 2 case (a): 0.789 % against 0.754 %): measured
     # 1.2908 deg, and 1 - Phi(1.2908 / 2) = 0.2593 at sigma = 2 deg instead of 0.2535.
     for model in ("eq24", "analytic", "full"):

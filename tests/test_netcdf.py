@@ -11,7 +11,7 @@ from tolsim import __version__
 from tolsim.io import schema
 from tolsim.io.config import parse_config
 from tolsim.io.netcdf import read_result, result_to_dataset, write_dataset, write_result
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
 
 CONFIG = """\
 # a small study

@@ -1,4 +1,4 @@
-"""The paper's Fig. 4, Table 2 and Fig. 7 as data (tolsim.study.paper_data)."""
+"""The paper's Fig. 4, Table 2 and Fig. 7 as data (tolsim.study.analyses.paper_data)."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy.special import ellipe
 
 from tolsim.physics.geometry import K_F_PAPER
-from tolsim.study.paper_data import (
+from tolsim.study.analyses.paper_data import (
     FIG4_CONFORMITIES,
     fig4_data,
     fig7_data,

@@ -1,12 +1,12 @@
-"""Ball-to-ball contact propagation (tolsim.study.propagation), modes (a) and (b)."""
+"""Ball-to-ball contact propagation (tolsim.study.pipeline.propagation), modes (a) and (b)."""
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import parse_config
-from tolsim.study.evaluate import evaluate_balls, loads_at
-from tolsim.study.propagation import first_contact_along_track, first_contact_constant
+from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
+from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_constant
 from tolsim.study.sampling import error_values, sample_block
 
 

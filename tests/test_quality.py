@@ -1,4 +1,4 @@
-"""Quality-engineering figures (tolsim.study.quality)."""
+"""Quality-engineering figures (tolsim.study.statistics.quality)."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose
 from scipy.special import ndtr
 from scipy.stats import binomtest
 
-from tolsim.study.quality import (
+from tolsim.study.statistics.quality import (
     PERCENTILE_LEVELS,
     capability,
     clopper_pearson_interval,

@@ -1,4 +1,4 @@
-"""Rare-event estimators over a standard-normal space (tolsim.study.rare_events).
+"""Rare-event estimators over a standard-normal space (tolsim.study.analyses.rare_events).
 
 References used below, each with its tolerance at the test:
 
@@ -23,7 +23,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy.special import ndtr, ndtri
 from scipy.stats import chi2, ncx2
 
-from tolsim.study.rare_events import (
+from tolsim.study.analyses.rare_events import (
     BLOCK_ROWS,
     ESTIMATORS,
     RARE_EVENT_STREAM,

@@ -1,4 +1,5 @@
-"""Rare-event estimators wired into studies (issue 15): tolsim.study.limit_state and the runner.
+"""Rare-event estimators wired into studies (issue 15): tolsim.study.analyses.limit_state and
+the runner.
 
 Where the numbers come from:
 
@@ -25,11 +26,11 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import ConfigError, load_config, parse_config
 from tolsim.io.netcdf import read_result, result_to_dataset, write_result
-from tolsim.study import limit_state
-from tolsim.study.friction import evaluate_friction
-from tolsim.study.propagation import first_contact_along_track, first_contact_tracks
-from tolsim.study.rare_events import RARE_EVENT_STREAM, STATUS_NO_FAILURE
-from tolsim.study.runner import PrecisionTarget, run_study
+from tolsim.study.analyses import limit_state
+from tolsim.study.analyses.rare_events import RARE_EVENT_STREAM, STATUS_NO_FAILURE
+from tolsim.study.execution.runner import PrecisionTarget, run_study
+from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
+from tolsim.study.pipeline.track_friction import evaluate_friction
 from tolsim.study.sampling import (
     _draw_widths,
     _field_grid,

@@ -49,7 +49,7 @@ def test_unknown_attribute_is_an_attribute_error():
 def test_import_tolsim_is_light():
     # the API is imported on first use: no Numba compilation or xarray on `import tolsim`
     code = ("import sys, tolsim; heavy = [m for m in ('numba', 'xarray', 'matplotlib', "
-            "'tolsim.study.runner') if m in sys.modules]; print(heavy)")
+            "'tolsim.study.execution.runner') if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"

@@ -15,11 +15,11 @@ import xarray as xr
 
 from tolsim.io.config import load_config
 from tolsim.io.netcdf import write_result
-from tolsim.physics.analytic import VALIDITY_ERROR_BUDGET
+from tolsim.physics.velocity.analytic import VALIDITY_ERROR_BUDGET
 from tolsim.reports import assumptions as A
 from tolsim.reports import study as study_report
 from tolsim.reports import verdict as V
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
 
 
 @pytest.fixture(scope="module")

@@ -95,7 +95,7 @@ def check_figure(fig, *, units=True):
 # --------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def paper_data_small():
-    from tolsim.study import paper_data
+    from tolsim.study.analyses import paper_data
 
     table = paper.table2_table()
     curves, slopes = paper_data.fig4_data(offset_ratio=np.linspace(-3, 3, 61))
@@ -208,7 +208,7 @@ def test_study_figures_labels_and_layout(rng):
 def test_sensitivity_figure(rng):
     from scipy import stats
 
-    from tolsim.study.sensitivity import sobol_sensitivity
+    from tolsim.study.analyses.sensitivity import sobol_sensitivity
 
     res = sobol_sensitivity(lambda x: {"velocity_deviation": x @ [1.0, 0.5, 0.1],
                                        "contact": (x @ [1.0, 0.5, 0.1] > 1).astype(float)},
@@ -248,8 +248,8 @@ def test_no_global_matplotlib_state():
 
 
 def test_layers_physics_and_study_do_not_import_plotting():
-    # tolsim.study.sensitivity and .quality are NumPy/SciPy only (team layering rule).
-    code = ("import sys, tolsim.study.sensitivity, tolsim.study.quality; "
+    # tolsim.study.analyses.sensitivity and .quality are NumPy/SciPy only (team layering rule).
+    code = ("import sys, tolsim.study.analyses.sensitivity, tolsim.study.statistics.quality; "
             "bad = [m for m in ('matplotlib', 'xarray', 'tomllib') if m in sys.modules]; "
             "print(bad); sys.exit(1 if bad else 0)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -23,7 +23,7 @@ from tolsim.reports import assumptions as A
 from tolsim.reports import study as study_report
 from tolsim.reports import style
 from tolsim.reports import verdict as V
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
 
 CONFIG = os.path.join(os.path.dirname(__file__), "..", "configs", "carriage_preload.toml")
 

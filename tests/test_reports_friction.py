@@ -25,9 +25,9 @@ from tolsim.io.netcdf import write_result
 from tolsim.reports import assumptions as A
 from tolsim.reports import study as study_report
 from tolsim.reports import verdict as V
-from tolsim.study.estimators import format_fraction
-from tolsim.study.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.track_friction import FRICTION_COORDINATES, FRICTION_VARIABLES
+from tolsim.study.statistics.intervals import format_fraction
 
 CONFIGS = os.path.join(os.path.dirname(__file__), "..", "configs")
 FRICTION_HEADING = "5. What contact costs: carriage friction after the balls touch"
@@ -212,7 +212,7 @@ def test_assumptions_have_the_contact_model(friction_result):
         "trains of balls after contact (quasi-static)", "ball-to-ball friction μ_bb",
         "creep stiffness K = dP/dε and carriage-force slopes",
         "carriage friction force of a track", "worst track per assembly", "sliding balls"]
-    assert "tolsim.study.trains" in contact["trains of balls after contact (quasi-static)"].source
+    assert "tolsim.physics.trains" in contact["trains of balls after contact (quasi-static)"].source
     assert contact["ball-to-ball friction μ_bb"].value.startswith("0.1:")
     assert contact["ball-to-ball friction μ_bb"].source == (
         "[contact] ball_friction_coefficient = 0.1")

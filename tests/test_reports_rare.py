@@ -9,7 +9,7 @@ import pytest
 from tolsim.io.config import parse_config
 from tolsim.io.netcdf import result_to_dataset
 from tolsim.reports.verdict import estimator_label
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "rare_contact.toml"
 

@@ -28,8 +28,8 @@ from tolsim.reports.sweep import (
     sweep_layout,
 )
 from tolsim.reports.verdict import study_verdict
-from tolsim.study.estimators import format_fraction
-from tolsim.study.runner import run_study
+from tolsim.study.execution.runner import run_study
+from tolsim.study.statistics.intervals import format_fraction
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIGS = ROOT / "configs"

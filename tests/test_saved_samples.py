@@ -10,9 +10,9 @@ from numpy.testing import assert_array_equal
 from tolsim.cli import main
 from tolsim.io.config import load_config
 from tolsim.io.netcdf import read_result, write_result
-from tolsim.study.evaluate import evaluate_balls, loads_per_ball
-from tolsim.study.propagation import first_contact_constant
-from tolsim.study.runner import StudyInterrupted, run_study
+from tolsim.study.execution.runner import StudyInterrupted, run_study
+from tolsim.study.pipeline.evaluate import evaluate_balls, loads_per_ball
+from tolsim.study.pipeline.propagation import first_contact_constant
 from tolsim.study.sampling import error_values, sample_block
 
 ROOT = Path(__file__).resolve().parent.parent

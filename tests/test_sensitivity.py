@@ -1,4 +1,4 @@
-"""Sobol' sensitivity indices (tolsim.study.sensitivity) on cases with known answers."""
+"""Sobol' sensitivity indices (tolsim.study.analyses.sensitivity) on cases with known answers."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose
 from scipy import stats
 from scipy.stats import sobol_indices
 
-from tolsim.study.sensitivity import (
+from tolsim.study.analyses.sensitivity import (
     CONTACT,
     VELOCITY_DEVIATION,
     indices_from_evaluations,
@@ -331,7 +331,7 @@ def test_threshold_indices_closed_form_limits():
 
 
 def test_sensitivity_variables_for_the_result_file():
-    from tolsim.study.sensitivity import SENSITIVITY_VARIABLES, sensitivity_variables
+    from tolsim.study.analyses.sensitivity import SENSITIVITY_VARIABLES, sensitivity_variables
 
     config = _config(CONFIG_SIDE)
     res = study_sensitivity(config, samples=64, n_resamples=50)

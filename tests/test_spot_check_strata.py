@@ -10,8 +10,8 @@ from numpy.testing import assert_array_equal
 
 from tolsim.io.config import parse_config
 from tolsim.study import sampling
-from tolsim.study.evaluate import MODEL_FAST, evaluate_balls, loads_per_ball
-from tolsim.study.runner import StudyInterrupted, run_study
+from tolsim.study.execution.runner import StudyInterrupted, run_study
+from tolsim.study.pipeline.evaluate import MODEL_FAST, evaluate_balls, loads_per_ball
 
 STUDY = """\
 [bearing]

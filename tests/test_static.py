@@ -11,7 +11,6 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 from scipy.optimize import root
 
-from tolsim.physics.analytic import analytic
 from tolsim.physics.geometry import TABLE1, Bearing, paired_forces
 from tolsim.physics.hertz import contact_ellipse, hertz_constants
 from tolsim.physics.static import (
@@ -23,6 +22,7 @@ from tolsim.physics.static import (
     solve_static_displacement,
     static_sensitivity,
 )
+from tolsim.physics.velocity.analytic import analytic
 
 B0 = TABLE1.nominal_contact_angle
 R_B = TABLE1.ball_radius

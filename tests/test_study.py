@@ -9,10 +9,10 @@ from scipy.special import ndtr
 from scipy.stats import binomtest
 
 from tolsim.io.config import parse_config
-from tolsim.study.estimators import histogram_quantiles
-from tolsim.study.evaluate import evaluate_balls, rigid_angle_deviation
-from tolsim.study.runner import StudyInterrupted, run_study
-from tolsim.study.statistics import Accumulator, clopper_pearson
+from tolsim.study.execution.runner import StudyInterrupted, run_study
+from tolsim.study.pipeline.evaluate import evaluate_balls, rigid_angle_deviation
+from tolsim.study.statistics.accumulator import Accumulator, clopper_pearson
+from tolsim.study.statistics.intervals import histogram_quantiles
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 STUDY = """\
@@ -115,8 +115,8 @@ def test_statistics_match_direct_numpy():
     # The streamed accumulator against NumPy on all balls at once.
     c = make(samples=700)
     res = run_study(c, chunk_blocks=2).statistics
-    from tolsim.study.evaluate import loads_per_ball
-    from tolsim.study.propagation import first_contact_constant
+    from tolsim.study.pipeline.evaluate import loads_per_ball
+    from tolsim.study.pipeline.propagation import first_contact_constant
     from tolsim.study.sampling import error_values, sample_block
 
     eps, times = [], []
@@ -165,7 +165,7 @@ def test_histogram_quantiles_uniform_exact():
 def test_equal_width_histogram_counts_like_the_edge_array(rng):
     # The accumulator bins with NumPy's equal-width path; the counts must be those of the
     # edge array, including values exactly on an edge or one ulp either side.
-    from tolsim.study.statistics import _uniform_histogram
+    from tolsim.study.statistics.accumulator import _uniform_histogram
 
     for lo, hi, bins in ((-0.02, 0.02, 400), (0.0, 7.3, 1000), (-1e-3, 3e-3, 37)):
         edges = np.linspace(lo, hi, bins + 1)
@@ -175,7 +175,7 @@ def test_equal_width_histogram_counts_like_the_edge_array(rng):
 
 
 def test_static_result_four_point_from_forces():
-    from tolsim.study.evaluate import StaticResult
+    from tolsim.study.pipeline.evaluate import StaticResult
 
     force = np.array([[1.0, 2.0, 3.0, 4.0], [1.0, 0.0, 3.0, 4.0], [1.0, 2.0, 3.0, -1e-9]])
     r = StaticResult(np.zeros((3, 4)), force, np.ones(3, bool))
@@ -231,9 +231,10 @@ static_model = "paired"
 
 
 def test_balls_outside_validity_are_resolved_with_the_full_model():
-    # Side force ratio 0.8 on one ball puts it outside eq24's validity (tolsim.physics.analytic
+    # Side force ratio 0.8 on one ball puts it outside eq24's validity
+    # (tolsim.physics.velocity.analytic
     # error budget): it is re-solved with the full model, counted, and its train counts.
-    from tolsim.physics.friction import full
+    from tolsim.physics.velocity.full import full
 
     text = make().text.replace("yaw_moment_N_m = 6.0",
                                "side_force_ratio = [0, 0, 0, 0, 0, 0.8]")
@@ -248,8 +249,8 @@ def test_balls_outside_validity_are_resolved_with_the_full_model():
     assert np.all(res.ball_count == 300)
     # the re-solved balls carry the full model's epsilon for their loaded state, the others
     # the fast model's (round-off: the same kernels on the same inputs)
-    from tolsim.physics.analytic import eq24
-    from tolsim.study.evaluate import MODEL_FAST, MODEL_FULL
+    from tolsim.physics.velocity.analytic import eq24
+    from tolsim.study.pipeline.evaluate import MODEL_FAST, MODEL_FULL
 
     side = np.array([[0, 0, 0, 0, 0, 0.8]]) * 200.0 * np.ones((4, 1))
     state = evaluate_balls(c, {"arc_centre_offset_tangential_BL": np.full((4, 6), 1e-6)},
@@ -273,7 +274,7 @@ def test_unresolved_trains_are_bounded_not_dropped():
     # then [k/N, 1], and k/N estimates 0.2535.
     from scipy.stats import norm
 
-    from tolsim.study.estimators import clopper_pearson_interval
+    from tolsim.study.statistics.intervals import clopper_pearson_interval
 
     text = (CONFIGS / "known_answer.toml").read_text()
     text = text.replace("balls = 2", "balls = 3").replace(
@@ -326,7 +327,7 @@ def test_accumulator_state_round_trip():
 
 
 def test_spot_checks_with_full_model():
-    friction = pytest.importorskip("tolsim.physics.friction")
+    friction = pytest.importorskip("tolsim.physics.velocity.full")
     assert hasattr(friction, "full")
     text = make().text.replace("spot_checks = 0", "spot_checks = 4")
     r = run_study(parse_config(text).with_overrides(samples=200))
@@ -364,7 +365,7 @@ def test_ctrl_c_keeps_a_checkpoint(tmp_path):
 def test_retain_freed_memory_only_on_glibc():
     import platform
 
-    from tolsim.study.runner import retain_freed_memory
+    from tolsim.study.execution.runner import retain_freed_memory
 
     glibc = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
     assert retain_freed_memory() is glibc
@@ -378,11 +379,11 @@ def test_default_study_headline_unchanged_where_no_ball_is_invalid():
     from dataclasses import replace
 
     from tolsim.io.config import load_config
-    from tolsim.physics.analytic import analytic
-    from tolsim.study.estimators import clopper_pearson_interval
-    from tolsim.study.evaluate import STATIC_MODELS, groove_error_fields, loads_per_ball
-    from tolsim.study.propagation import first_contact_constant
+    from tolsim.physics.velocity.analytic import analytic
+    from tolsim.study.pipeline.evaluate import STATIC_MODELS, groove_error_fields, loads_per_ball
+    from tolsim.study.pipeline.propagation import first_contact_constant
     from tolsim.study.sampling import error_values, sample_block
+    from tolsim.study.statistics.intervals import clopper_pearson_interval
 
     c = load_config().with_overrides(samples=1024, seed=1)
     c = replace(c, study=replace(c.study, sensitivity_samples=0, spot_checks=0))
@@ -440,7 +441,7 @@ def assert_same_spot_checks(a, b):
 def test_target_stop_is_bit_identical_to_a_fixed_run_of_that_size(width):
     # P(contact) is about 0.25 here: the 95 % interval is 0.054 wide after 1024 assemblies
     # and 0.031 after 3000, so the run stops part-way, at a whole block (128 assemblies).
-    from tolsim.study.runner import PrecisionTarget
+    from tolsim.study.execution.runner import PrecisionTarget
 
     target = PrecisionTarget.parse(width)
     c = spot_study()
@@ -461,7 +462,7 @@ def test_target_stop_is_bit_identical_to_a_fixed_run_of_that_size(width):
 
 
 def test_target_not_reached_runs_to_the_maximum():
-    from tolsim.study.runner import PrecisionTarget
+    from tolsim.study.execution.runner import PrecisionTarget
 
     c = make(samples=1000)
     r = run_study(c, chunk_blocks=2, target=PrecisionTarget(0.001))
@@ -472,7 +473,7 @@ def test_target_not_reached_runs_to_the_maximum():
 
 def test_target_run_resumes_to_the_same_stop(tmp_path):
     # Interrupted before the target, then resumed: the same stop as in one go.
-    from tolsim.study.runner import PrecisionTarget
+    from tolsim.study.execution.runner import PrecisionTarget
 
     c, target = make(), PrecisionTarget(0.05)
     ckpt = tmp_path / "out.nc.partial"
@@ -489,7 +490,7 @@ def test_target_run_resumes_to_the_same_stop(tmp_path):
     ("0.005", 0.005, False), (" 0.02 ", 0.02, False), ("10%", 0.1, True), ("150%", 1.5, True),
 ])
 def test_precision_target_syntax(text, width, relative):
-    from tolsim.study.runner import PrecisionTarget
+    from tolsim.study.execution.runner import PrecisionTarget
 
     t = PrecisionTarget.parse(text)
     assert (t.width, t.relative) == (pytest.approx(width, rel=1e-15), relative)
@@ -498,7 +499,7 @@ def test_precision_target_syntax(text, width, relative):
 
 @pytest.mark.parametrize("text", ["0", "1", "-0.01", "nan", "inf", "abc", "0%", "%", "5%%"])
 def test_precision_target_rejects(text):
-    from tolsim.study.runner import PrecisionTarget
+    from tolsim.study.execution.runner import PrecisionTarget
 
     with pytest.raises(ValueError, match="0.005"):
         PrecisionTarget.parse(text)

@@ -13,8 +13,8 @@ import xarray as xr
 from tolsim.io.config import ConfigError, load_config, parse_config
 from tolsim.io.netcdf import result_to_dataset
 from tolsim.io.sweep import combine_points, parts_folder, run_sweep
-from tolsim.study.runner import StudyInterrupted, run_study
-from tolsim.study.sweep import ZIP_DIMENSION
+from tolsim.study.design.sweep import ZIP_DIMENSION
+from tolsim.study.execution.runner import StudyInterrupted, run_study
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIGS = ROOT / "configs"

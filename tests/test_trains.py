@@ -1,7 +1,7 @@
-"""Trains of balls after contact (tolsim.study.trains): clusters, forces, events.
+"""Trains of balls after contact (tolsim.physics.trains): clusters, forces, events.
 
 References for the expected values:
-* "module" = the derivation in the docstring of tolsim.study.trains, eqs. (1)-(6);
+* "module" = the derivation in the docstring of tolsim.physics.trains, eqs. (1)-(6);
 * issue 13 ("After contact", Done means) for the two-ball result;
 * [Lin2018] Sec. 3.2 for the paper's pair.
 Each kernel has an independent twin here. ``cluster_velocities`` is checked against the
@@ -16,13 +16,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose, assert_array_equal
 
-from tolsim.study.propagation import first_contact_constant
-from tolsim.study.trains import (
+from tolsim.physics.trains import (
     TIE_TOLERANCE,
     cluster_velocities,
     net_push,
     train_contact_constant,
 )
+from tolsim.study.pipeline.propagation import first_contact_constant
 
 V = 0.2  # groove velocity [m/s] (the brief's 200 mm/s)
 HALF = V / 2
@@ -464,7 +464,7 @@ def test_event_driven_matches_projection_integration(rng):
 
 
 def test_first_contact_equals_propagation(rng):
-    # tolsim.study.propagation.first_contact_constant is today's answer; bit for bit,
+    # tolsim.study.pipeline.propagation.first_contact_constant is today's answer; bit for bit,
     # including zero gaps (contacts at t = 0), unresolved (NaN) balls and no contact.
     m, n = 20000, 11
     gap, eps, stiffness = random_trains(rng, m, n, zero_gap_fraction=0.05)

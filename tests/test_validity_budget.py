@@ -1,6 +1,6 @@
 """The validity thresholds of ``eq24`` and ``analytic`` hold their error budget against ``full``.
 
-The thresholds in :mod:`tolsim.physics.analytic` were derived on a grid by
+The thresholds in :mod:`tolsim.physics.velocity.analytic` were derived on a grid by
 ``benchmarks/validity_budget.py``. Here they are checked on balls the derivation never saw
 (seeded random values between its grid points), and on a realistic population for speed:
 a ball flagged invalid is re-solved with the full model in a study, so needlessly tight
@@ -10,10 +10,10 @@ thresholds cost time.
 import numpy as np
 import pytest
 
-from tolsim.physics import analytic as A
-from tolsim.physics.friction import full
 from tolsim.physics.geometry import TABLE1
 from tolsim.physics.static import GrooveErrors, solve_static
+from tolsim.physics.velocity import analytic as A
+from tolsim.physics.velocity.full import full
 
 MODELS = {"analytic": A.analytic, "eq24": A.eq24}
 

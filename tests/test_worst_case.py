@@ -1,4 +1,4 @@
-"""Worst case and RSS beside the Monte Carlo (issue 17): tolsim.study.worst_case."""
+"""Worst case and RSS beside the Monte Carlo (issue 17): tolsim.study.analyses.worst_case."""
 
 from dataclasses import replace
 from pathlib import Path
@@ -9,16 +9,16 @@ from numpy.testing import assert_allclose
 from scipy import stats
 
 from tolsim.io.config import load_config, parse_config
-from tolsim.study.evaluate import evaluate_balls, loads_per_ball
-from tolsim.study.runner import run_study
-from tolsim.study.sampling import error_values, sample_block
-from tolsim.study.spec import Distribution
-from tolsim.study.worst_case import (
+from tolsim.study.analyses.worst_case import (
     NORMAL_BAND_STDS,
     linear_stackup,
     standard_deviation,
     tolerance_band,
 )
+from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.evaluate import evaluate_balls, loads_per_ball
+from tolsim.study.sampling import error_values, sample_block
+from tolsim.study.spec import Distribution
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Assemblies of the Monte Carlo comparisons: the standard deviation of epsilon at one

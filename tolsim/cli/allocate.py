@@ -1,7 +1,7 @@
 """``tolsim allocate``: the loosest tolerances that meet a probabilistic target at the least
 cost.
 
-A thin layer over :func:`tolsim.study.allocate.run_allocation`,
+A thin layer over :func:`tolsim.study.design.allocate.run_allocation`,
 :func:`tolsim.io.allocation.allocated_config_text` and
 :func:`tolsim.reports.allocate.write_allocation`.
 """
@@ -171,7 +171,7 @@ def summary(result, tolerance_rows, files, elapsed) -> str:
 def run(args) -> int:
     from tolsim.io.allocation import allocated_config_text, given_scales, tolerance_lines
     from tolsim.io.config import ConfigError, load_config, parse_config
-    from tolsim.study.allocate import (
+    from tolsim.study.design.allocate import (
         AllocationInfeasible,
         AllocationSettings,
         check_allocation,
@@ -204,7 +204,7 @@ def run(args) -> int:
 
     import tqdm
 
-    from tolsim.study.allocate import run_allocation
+    from tolsim.study.design.allocate import run_allocation
 
     quiet = True if args.quiet else None
     bar = tqdm.tqdm(total=settings.max_evaluations, unit="eval", file=sys.stderr,

@@ -11,7 +11,6 @@ import sys
 import numpy as np
 
 from tolsim.cli import UsageError
-from tolsim.physics.ball_loads import DEFAULT_BALL_FRICTION
 from tolsim.physics.geometry import (
     CONTACTS,
     TABLE1,
@@ -19,7 +18,8 @@ from tolsim.physics.geometry import (
     TABLE1_NORMAL_LOAD,
     paired_forces,
 )
-from tolsim.physics.models import MODELS, VALIDITY_NOTES
+from tolsim.physics.velocity.ball_loads import DEFAULT_BALL_FRICTION
+from tolsim.physics.velocity.models import MODELS, VALIDITY_NOTES
 
 DESCRIPTION = """\
 Velocity deviation epsilon of one ball in a four-point-contact linear ball bearing:
@@ -291,7 +291,7 @@ def _bearing_and_velocity(args):
 
 def largest_force(bearing) -> float:
     """Contact force [N] at which the Hertz ellipse's semi-major axis reaches R_B / 2, the
-    edge of every velocity model (:func:`tolsim.physics.friction.full` refuses beyond)."""
+    edge of every velocity model (:func:`tolsim.physics.velocity.full.full` refuses beyond)."""
     from tolsim.physics.hertz import hertz_constants
 
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
@@ -366,7 +366,7 @@ def evaluate(args):
     dbeta_deg, forces, force_source, static_out, warnings = _angles_and_forces(args, bearing)
     dbeta = np.deg2rad(dbeta_deg)
     model = MODELS[args.model]
-    # options only the full friction model takes (tolsim.physics.friction.full)
+    # options only the full friction model takes (tolsim.physics.velocity.full.full)
     options = {}
     if args.model == "full":
         options = {"groove_velocity": velocity, "surface": args.surface or "planar"}
@@ -440,7 +440,7 @@ def _sliding_warning(result):
 
 
 def _load_output(model, loads, result):
-    """JSON fields of a loaded ball (tolsim.physics.ball_loads)."""
+    """JSON fields of a loaded ball (tolsim.physics.velocity.ball_loads)."""
     out = {"push_n": float(result.push)}
     if "neighbour_force" in loads:
         out["neighbour_forces_n"] = [float(q) for q in loads["neighbour_force"]]

@@ -71,7 +71,7 @@ def evaluate(config, seed=None) -> dict:
     UsageError
         A load the layout cannot carry, or lift-off.
     """
-    from tolsim.study.carriage import solve_config_carriage
+    from tolsim.study.pipeline.carriage import solve_config_carriage
 
     try:
         result = solve_config_carriage(config, seed)

@@ -1,6 +1,7 @@
 """``tolsim run``: a Monte Carlo tolerance study from a TOML config to a netCDF result.
 
-A thin layer over :func:`tolsim.io.config.load_config`, :func:`tolsim.study.runner.run_study`
+A thin layer over :func:`tolsim.io.config.load_config`,
+:func:`tolsim.study.execution.runner.run_study`
 and :func:`tolsim.io.netcdf.write_result`.
 """
 
@@ -73,9 +74,9 @@ def _seconds(text):
 
 
 def _target(text):
-    """An argparse ``type``: a :class:`tolsim.study.runner.PrecisionTarget` (``0.005`` or
+    """An argparse ``type``: a :class:`tolsim.study.execution.runner.PrecisionTarget` (``0.005`` or
     ``10%``); imported only when the flag is given."""
-    from tolsim.study.runner import PrecisionTarget
+    from tolsim.study.execution.runner import PrecisionTarget
 
     try:
         return PrecisionTarget.parse(text)
@@ -188,7 +189,7 @@ def _estimator_lines(ds, prefix, title) -> list:
     """Lines on a probability made by a rare-event estimator (issue 15): which estimator, P
     with its CV and interval, the evaluations; importance sampling's design point; a
     fallback; or why there is no number."""
-    from tolsim.study.rare_events import ESTIMATOR_TITLES
+    from tolsim.study.analyses.rare_events import ESTIMATOR_TITLES
 
     var = ds[prefix]
     a = var.attrs
@@ -358,7 +359,7 @@ def summary(ds, output, elapsed) -> str:
     else:
         lines.append(f"spot checks: {a['spot_check_status']}")
     if "velocity_deviation_out_of_spec_fraction" in ds:
-        from tolsim.study.quality import format_fraction
+        from tolsim.study.statistics.quality import format_fraction
 
         line = (f"|epsilon| > {_pct(float(ds.velocity_deviation_limit))}: " + format_fraction(
             float(ds.velocity_deviation_out_of_spec_fraction),
@@ -457,7 +458,7 @@ def run(args) -> int:
     checkpoint = Path(f"{output}.partial")
     _check_output(output, checkpoint)
     if args.scheduler is not None:  # before any work: the extra, the value, the flags
-        from tolsim.study import distributed
+        from tolsim.study.execution import distributed
 
         if args.workers != 1:
             raise UsageError("--workers and --scheduler: the scheduler's workers do the work; "
@@ -474,7 +475,7 @@ def run(args) -> int:
     import tqdm
 
     from tolsim.io.netcdf import write_result
-    from tolsim.study.runner import fingerprint, run_study
+    from tolsim.study.execution.runner import fingerprint, run_study
 
     if args.fresh and checkpoint.exists():
         checkpoint.unlink()

@@ -5,7 +5,7 @@ Typical use, without the command line::
 
     from tolsim.io.config import load_config
     from tolsim.io.netcdf import write_result
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
 
     result = run_study(load_config("configs/yaw_moment_tolerances.toml"))
     write_result(result, "yaw.nc")

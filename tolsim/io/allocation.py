@@ -1,7 +1,7 @@
 """``[allocate]``: the settings of ``tolsim allocate`` (issue 14), and the allocated config.
 
 :func:`parse_allocation` reads the section (called by :func:`tolsim.io.config.parse_config`)
-into a :class:`tolsim.study.allocate.AllocationSettings`::
+into a :class:`tolsim.study.design.allocate.AllocationSettings`::
 
     [allocate]
     target = "contact_probability <= 1%"   # optional; --target overrides it
@@ -19,7 +19,7 @@ into a :class:`tolsim.study.allocate.AllocationSettings`::
 
 Sources listed under ``[allocate.sources]`` are the decision variables and the config's other
 sources keep their tolerances; without ``[allocate.sources]`` every random source is one,
-with the defaults above (:mod:`tolsim.study.allocate`). Every bad key or value is a one-line
+with the defaults above (:mod:`tolsim.study.design.allocate`). Every bad key or value is a one-line
 :class:`~tolsim.io.config.ConfigError` naming it.
 
 :func:`allocated_config_text` writes the optimum as a config: the original text with
@@ -33,7 +33,7 @@ import math
 import re
 import tomllib
 
-from tolsim.study.allocate import (
+from tolsim.study.design.allocate import (
     DEFAULT_CONFIDENCE,
     DEFAULT_COST_EXPONENT,
     DEFAULT_COST_WEIGHT,
@@ -48,7 +48,7 @@ from tolsim.study.allocate import (
 from tolsim.study.spec import SOURCES, set_study_value, toml_lines
 
 #: Keys of an ``[allocate.sources.<source>]`` table and their defaults (``max_scale``:
-#: :data:`~tolsim.study.allocate.DEFAULT_MAX_SCALE`, lowered to the static model's range).
+#: :data:`~tolsim.study.design.allocate.DEFAULT_MAX_SCALE`, lowered to the static model's range).
 SOURCE_KEYS = {"min_scale": DEFAULT_MIN_SCALE, "max_scale": None,
                "cost_exponent": DEFAULT_COST_EXPONENT, "cost_weight": DEFAULT_COST_WEIGHT}
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from tolsim.physics.carriage import CarriageLayout, CarriageLoad
 from tolsim.physics.geometry import Bearing
-from tolsim.study.rare_events import MIN_CHAINS
+from tolsim.study.analyses.rare_events import MIN_CHAINS
 from tolsim.study.spec import (
     CREEP_MODELS,
     DISTRIBUTIONS,
@@ -740,7 +740,8 @@ ESTIMATOR_KEYS = {"monte_carlo": (), "subset": ("samples_per_level", "p0", "max_
 
 
 def _estimator(t: _Table, s: StudySettings) -> StudySettings:
-    """``[study] estimator`` and its settings (issue 15; :mod:`tolsim.study.limit_state`)."""
+    """``[study] estimator`` and its settings (issue 15;
+    :mod:`tolsim.study.analyses.limit_state`)."""
     estimator = t.string("estimator", ESTIMATORS, default="monte_carlo")
     for key in ("samples_per_level", "p0", "max_levels", "importance_samples"):
         if t.has(key) and key not in ESTIMATOR_KEYS[estimator]:
@@ -940,7 +941,7 @@ def _build(data: dict, source: "_Source", text: str, path: str) -> StudyConfig:
     config = StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
                          correlations, carriage, contact, allocation)
     if study.estimator != "monte_carlo":  # a rare-event estimator needs a limit state
-        from tolsim.study.limit_state import check_supported
+        from tolsim.study.analyses.limit_state import check_supported
 
         try:
             check_supported(config)

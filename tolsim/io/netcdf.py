@@ -18,16 +18,16 @@ import xarray as xr
 from tolsim import __version__
 from tolsim.io import schema
 from tolsim.physics.geometry import CONTACTS
-from tolsim.study import saved_samples
-from tolsim.study.carriage import carriage_variables
-from tolsim.study.friction import friction_variables
-from tolsim.study.limit_state import EVENT_PROBABILITY, rare_event_variables
-from tolsim.study.propagation import propagation_assumption, propagation_caveat
-from tolsim.study.quality import dataset_quality
+from tolsim.study.analyses.limit_state import EVENT_PROBABILITY, rare_event_variables
+from tolsim.study.analyses.sensitivity import sensitivity_variables
+from tolsim.study.analyses.worst_case import stackup_variables
+from tolsim.study.execution import saved_samples
+from tolsim.study.pipeline.carriage import carriage_variables
+from tolsim.study.pipeline.propagation import propagation_assumption, propagation_caveat
+from tolsim.study.pipeline.track_friction import friction_variables
 from tolsim.study.sampling import SPOT_CHECK_STRATA
-from tolsim.study.sensitivity import sensitivity_variables
-from tolsim.study.statistics import QUANTILES
-from tolsim.study.worst_case import stackup_variables
+from tolsim.study.statistics.accumulator import QUANTILES
+from tolsim.study.statistics.quality import dataset_quality
 
 #: The probability variables of the plain run (contact, friction exceedance): each carries the
 #: attribute ``estimator`` (``monte_carlo`` unless a rare-event estimator made it, issue 15).
@@ -69,7 +69,7 @@ def history_line(history: str | None = None) -> str:
 
 
 def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
-    """The Dataset of a :class:`tolsim.study.runner.StudyResult` (validated).
+    """The Dataset of a :class:`tolsim.study.execution.runner.StudyResult` (validated).
 
     Parameters
     ----------

@@ -21,7 +21,7 @@ adds ``force_bin`` (force histogram bins) and, with examples, ``example`` and ``
 A study run with a rare-event estimator (``[study] estimator``, issue 15) reports that
 estimator's numbers in the events' probability variables (``contact_probability`` ...,
 attribute ``estimator``; every file marks its plain Monte Carlo numbers ``monte_carlo``) and
-adds the variables declared in :mod:`tolsim.study.limit_state` (coefficient of variation,
+adds the variables declared in :mod:`tolsim.study.analyses.limit_state` (coefficient of variation,
 evaluations, the |epsilon| exceedance, and for importance sampling the design point along
 ``factor``). The interval variables of the contact and friction probabilities are therefore
 worded for any estimator (its method in their ``interval`` attribute); files written before
@@ -39,13 +39,13 @@ not ``time``: it is a duration in ``s``, not a CF time coordinate (``units`` "..
 
 from dataclasses import dataclass
 
-from tolsim.study.carriage import CARRIAGE_COORDINATES, CARRIAGE_VARIABLES
-from tolsim.study.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
-from tolsim.study.limit_state import INTERVAL_VARIABLES, RARE_EVENT_VARIABLES
-from tolsim.study.quality import QUALITY_VARIABLES
-from tolsim.study.saved_samples import SAMPLE_VARIABLES
-from tolsim.study.sensitivity import SENSITIVITY_VARIABLES
-from tolsim.study.worst_case import STACKUP_VARIABLES
+from tolsim.study.analyses.limit_state import INTERVAL_VARIABLES, RARE_EVENT_VARIABLES
+from tolsim.study.analyses.sensitivity import SENSITIVITY_VARIABLES
+from tolsim.study.analyses.worst_case import STACKUP_VARIABLES
+from tolsim.study.execution.saved_samples import SAMPLE_VARIABLES
+from tolsim.study.pipeline.carriage import CARRIAGE_COORDINATES, CARRIAGE_VARIABLES
+from tolsim.study.pipeline.track_friction import FRICTION_COORDINATES, FRICTION_VARIABLES
+from tolsim.study.statistics.quality import QUALITY_VARIABLES
 
 #: Value of the ``Conventions`` global attribute.
 CONVENTIONS = "CF-1.10"
@@ -115,10 +115,11 @@ COORDINATES = {
     "factor": V(("factor",), "1", "tolerance source index (names in factor_name)", "i",
                 required=False),
     "factor_name": V(("factor",), "1", "tolerance source", "U", required=False),
-    # a study with a carriage (issue 12): declared in tolsim.study.carriage, optional here
+    # a study with a carriage (issue 12): declared in tolsim.study.pipeline.carriage, optional here
     **{name: V(dims, units, long_name, kind, required=False)
        for name, (dims, units, long_name, kind) in CARRIAGE_COORDINATES.items()},
-    # a study with [contact] (issue 13): declared in tolsim.study.friction, optional here
+    # a study with [contact] (issue 13): declared in tolsim.study.pipeline.track_friction, optional
+    # here
     **{name: V(dims, units, long_name, kind, required=False)
        for name, (dims, units, long_name, kind) in FRICTION_COORDINATES.items()},
 }
@@ -192,7 +193,7 @@ DATA_VARIABLES = {
     "n_balls_resolved_full": V((), "1", "balls re-solved with the full friction model", "i"),
     "n_balls_full_failed": V((), "1", "balls outside the fast model's validity that the full "
                                       "model could not solve", "i"),
-    # per-assembly totals (tolsim.study.estimators.CLUSTER_COLUMNS): the assembly as the
+    # per-assembly totals (tolsim.study.statistics.intervals.CLUSTER_COLUMNS): the assembly as the
     # sampling unit of ball-level proportions and Cpk
     "assembly_count": V((), "1", "number of assemblies behind the per-assembly moments", "i"),
     "assembly_total_mean": V(("assembly_total",), "1",
@@ -251,7 +252,7 @@ DATA_VARIABLES = {
        for name, (dims, units, long_name, kind) in FRICTION_VARIABLES.items()},
 }
 
-# a rare-event estimator (issue 15): declared in tolsim.study.limit_state, optional here
+# a rare-event estimator (issue 15): declared in tolsim.study.analyses.limit_state, optional here
 DATA_VARIABLES.update({name: V(dims, units, long_name, kind, required=False)
                        for name, (dims, units, long_name, kind) in RARE_EVENT_VARIABLES.items()})
 # the intervals of the contact and friction probabilities come from the study's estimator

@@ -18,7 +18,7 @@ config sets it. Every point is validated when the config is read, like the confi
 a bad key or value is a one-line error naming it and, for a value, the point.
 
 Running (:func:`run_sweep`): the points run one after the other, each as a study of its
-own with the study's seed (common random numbers, :mod:`tolsim.study.sweep`), and are
+own with the study's seed (common random numbers, :mod:`tolsim.study.design.sweep`), and are
 combined into one Dataset (:func:`combine_points`) whose variables gain the sweep
 dimensions. Each finished point is kept in ``OUT.sweep/point-K.nc`` and the point being run
 checkpoints to ``OUT.sweep/point-K.partial``; a rerun resumes per point. The folder goes when
@@ -34,7 +34,7 @@ import numpy as np
 import xarray as xr
 
 from tolsim.io.schema import SWEEP_COORDINATES, SWEEP_DIMENSIONS, SWEEP_VARIABLES
-from tolsim.study.sweep import SWEEP_MODES, ZIP_DIMENSION, Sweep, SweepAxis
+from tolsim.study.design.sweep import SWEEP_MODES, ZIP_DIMENSION, Sweep, SweepAxis
 
 #: UDUNITS spelling of the config's unit suffixes (CF ``units`` of a sweep coordinate).
 UDUNITS = {"m": "m", "mm": "mm", "um": "um", "rad": "rad", "mrad": "mrad", "deg": "degree",
@@ -395,7 +395,7 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
     fresh : bool
         Delete the parts of an earlier run first.
     **run_options
-        For :func:`tolsim.study.runner.run_study` (workers, chunk_blocks, scheduler,
+        For :func:`tolsim.study.execution.runner.run_study` (workers, chunk_blocks, scheduler,
         checkpoint_interval, target, save_samples, max_blocks).
 
     Returns
@@ -412,7 +412,7 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
     scheduler = run_options.get("scheduler")
     cluster = None
     if isinstance(scheduler, str):  # one cluster for all points (a LocalCluster starts once)
-        from tolsim.study.distributed import connect
+        from tolsim.study.execution.distributed import connect
 
         run_options["scheduler"], cluster, _ = connect(scheduler)
     try:
@@ -435,7 +435,7 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
 def _run_points(config, folder, history, progress, on_point, notify, run_options):
     """Run or take from their part files every point of a sweep: (datasets, elapsed)."""
     from tolsim.io.netcdf import read_result, result_to_dataset, write_dataset
-    from tolsim.study.runner import fingerprint, run_study
+    from tolsim.study.execution.runner import fingerprint, run_study
 
     sweep = config.sweep
     datasets, elapsed = [], 0.0

@@ -1940,7 +1940,7 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
         else 0. Not used with ``start``.
     ball_z : array_like, optional
         Axial position z of every ball of every assembly [m], broadcast to (m, n_tracks, n)
-        (balls moving through the carriage, :mod:`tolsim.study.carriage_track`). Default:
+        (balls moving through the carriage, :mod:`tolsim.study.pipeline.carriage_track`). Default:
         the layout's nominal z_j (``layout.ball_z``). The layout's ``balls_per_track`` is
         then the number of ball slots per track, not all of them loaded.
     loaded : array_like of bool, optional

@@ -1,6 +1,6 @@
 """The report of a tolerance allocation (``tolsim allocate``, issue 14).
 
-:func:`write_allocation` takes an :class:`tolsim.study.allocate.AllocationResult` and writes,
+:func:`write_allocation` takes an :class:`tolsim.study.design.allocate.AllocationResult` and writes,
 into a folder (made whole in a temporary folder beside it, then renamed into place, so an
 error leaves no half-written output):
 
@@ -42,7 +42,7 @@ from tolsim.reports.style import (
     render_png,
     styled,
 )
-from tolsim.study.allocate import DEFAULT_COST_EXPONENT
+from tolsim.study.design.allocate import DEFAULT_COST_EXPONENT
 
 HTML_NAME = "allocate.html"
 JSON_NAME = "allocate.json"
@@ -472,7 +472,7 @@ def write_allocation(result, folder, *, optimum_text, tolerance_rows=None,
 
     Parameters
     ----------
-    result : tolsim.study.allocate.AllocationResult
+    result : tolsim.study.design.allocate.AllocationResult
     folder : str or path
         Created if missing; files of the same names in it are replaced.
     optimum_text : str

@@ -29,10 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tolsim.physics import analytic
 from tolsim.physics.geometry import TABLE1
+from tolsim.physics.velocity import analytic
 from tolsim.reports.verdict import any_train, contact_unit, counted, has_friction, tracks_of
-from tolsim.study.estimators import format_fraction
+from tolsim.study.statistics.intervals import format_fraction
 
 #: The paper.
 PAPER = "Lin, Okwudire, Duan & Wou, IMECE2018-88033"
@@ -40,11 +40,11 @@ PAPER = "Lin, Okwudire, Duan & Wou, IMECE2018-88033"
 #: Short descriptions of the models, by name.
 VELOCITY_MODEL_TEXT = {
     "analytic": "the paper's analytical model: Eqs. (17), (18), (21) solved for the four "
-                "Δγ with four distinct forces, ε from Eq. (23) (tolsim.physics.analytic)",
+                "Δγ with four distinct forces, ε from Eq. (23) (tolsim.physics.velocity.analytic)",
     "eq24": "the paper's closed form Eq. (24), paired diagonal forces "
-            "(tolsim.physics.analytic.eq24)",
+            "(tolsim.physics.velocity.analytic.eq24)",
     "full": "the full friction model on every ball: Coulomb friction over the four Hertz "
-            "ellipses, equilibrium solved (tolsim.physics.friction.full)",
+            "ellipses, equilibrium solved (tolsim.physics.velocity.full.full)",
 }
 STATIC_MODEL_TEXT = {
     "solved": "elastic, load-controlled: the ball between the two gothic-arch grooves with "
@@ -241,7 +241,8 @@ def _f(ds, name):
 
 
 def validity_text(velocity_model) -> str:
-    """The validity thresholds of a fast velocity model (:mod:`tolsim.physics.analytic`)."""
+    """The validity thresholds of a fast velocity model
+    (:mod:`tolsim.physics.velocity.analytic`)."""
     a = analytic
     if velocity_model == "analytic":
         return (f"|c/a| ≤ {a.MAX_ZERO_VELOCITY_RATIO:g}, |Δβ + Δγ| ≤ "
@@ -348,7 +349,7 @@ def carriage_assumptions(ds, config, data) -> list:
         "assembly with its own groove errors and ball sizes, whose balls then go through the "
         "velocity model",
         "[carriage]; tolsim.physics.carriage.solve_carriage, "
-        "tolsim.study.carriage.evaluate_carriage")
+        "tolsim.study.pipeline.carriage.evaluate_carriage")
     add("tracks (x, y, orientation φ)", _track_text(ds, config),
         "[[carriage.track]] x_mm, y_mm, orientation_deg; module up = (−sin φ, cos φ)")
     if carriage is not None:
@@ -407,18 +408,20 @@ def carriage_assumptions(ds, config, data) -> list:
         "a carriage whose Newton does not converge or that lifts off is kept: its balls "
         "count as not converged and its trains as unresolved (bounded in P(contact))"
         + (f"; {failed:,} of {n or 0:,} here" if failed is not None else ""),
-        "result file (n_assemblies_carriage_failed); tolsim.study.carriage.evaluate_carriage")
+        "result file (n_assemblies_carriage_failed); "
+        "tolsim.study.pipeline.carriage.evaluate_carriage")
     add("contact per assembly",
         f"an assembly is a carriage with {counted(tracks, 'train')} (one per track), each "
         "running on its own; P(contact) and the time to first contact are per assembly: contact in "
         f"{any_train(tracks)}, the first contact the earliest of its trains'",
-        "tolsim.study.propagation.first_contact_tracks")
+        "tolsim.study.pipeline.propagation.first_contact_tracks")
     return rows
 
 
 def friction_assumptions(ds, config, data) -> list:
     """The contact model of a study with ``[contact]`` (what happens after balls touch,
-    :mod:`tolsim.study.trains` and :mod:`tolsim.study.friction`), as :class:`Assumption`
+    :mod:`tolsim.physics.trains` and :mod:`tolsim.study.pipeline.track_friction`), as
+    :class:`Assumption`
     rows (topic "after contact").
 
     Parameters
@@ -456,7 +459,7 @@ def friction_assumptions(ds, config, data) -> list:
         "m / (2K/v) ≈ 6e-7 s for the paper's ball at 0.2 m/s, against a stroke of 0.5 s and "
         "more), no bounce (damping ratio ≈ 12); the balls beyond the ends of the loaded zone "
         f"carry no force{ends}",
-        "tolsim.study.trains (module docstring: quasi-static assumption, ends of the loaded "
+        "tolsim.physics.trains (module docstring: quasi-static assumption, ends of the loaded "
         "zone, varying epsilon)")
     add("ball-to-ball friction μ_bb",
         (f"{mu_bb:.4g}: Coulomb friction at each ball-to-ball contact (both balls spin the "
@@ -480,23 +483,23 @@ def friction_assumptions(ds, config, data) -> list:
         f"{model}: {creep_text}; a ball rolls at ε_i + P_i / K_i (+ the braking by its "
         "neighbours' forces), linear in the loads",
         (_key(data, "contact", "creep_model") or "default: analytic")
-        + " (tolsim.physics.ball_loads, tolsim.physics.analytic)")
+        + " (tolsim.physics.velocity.ball_loads, tolsim.physics.velocity.analytic)")
     add("carriage friction force of a track",
         "F = Σ F₀,i + Σ_j k_j Q_j over the balls i and the touching pairs j: F₀ the "
         "free-rolling drag of each ball (spin and differential slip, the baseline), Q_j the "
         f"ball-to-ball forces, k_j ≈ μ_bb / cos β₀ = {mu_bb / np.cos(beta):.3g} for the "
         "nominal ball (the push itself costs nothing on net); the increase is that of the "
         "track's largest friction force over its baseline",
-        "tolsim.study.friction, Eq. (1)")
+        "tolsim.study.pipeline.track_friction, Eq. (1)")
     if tracks:
         add("worst track per assembly",
             f"each of the {counted(tracks, 'track')} is followed on its own; an assembly's "
             "friction figures (baseline, increase, ripple, largest force, contact fraction) "
             "all belong to its track with the largest increase",
-            "tolsim.study.friction (one row per assembly: the worst track)")
+            "tolsim.study.pipeline.track_friction (one row per assembly: the worst track)")
     else:
         add("worst track per assembly", "one train per assembly: the assembly is its train",
-            "tolsim.study.friction (one row per assembly: the worst track)")
+            "tolsim.study.pipeline.track_friction (one row per assembly: the worst track)")
     sliding = _i(ds, "n_assemblies_sliding")
     unresolved = _i(ds, "n_assemblies_friction_unresolved")
     add("sliding balls",
@@ -506,7 +509,7 @@ def friction_assumptions(ds, config, data) -> list:
         "certain exceedance when above the limit, the rest is bounded in P(exceedance)"
         + (f"; {sliding:,} {contact_unit(ds)[1]} with a sliding ball and {unresolved:,} "
            "unresolved without a certain exceedance here" if sliding is not None else ""),
-        "tolsim.study.friction (unresolved and sliding trains); result file "
+        "tolsim.study.pipeline.track_friction (unresolved and sliding trains); result file "
         "(n_assemblies_sliding, n_assemblies_friction_unresolved)")
     return rows
 
@@ -636,24 +639,24 @@ def assumption_table(ds, config=None) -> list:
         if ignored:
             add("models", "error sources the static model ignores", ", ".join(ignored),
                 "the paired model maps only rotations and tangential arc-centre offsets "
-                "(tolsim.study.evaluate)")
+                "(tolsim.study.pipeline.evaluate)")
     vm = str(a.get("velocity_model", "?"))
     add("models", f"ball velocity: {vm}", VELOCITY_MODEL_TEXT.get(vm, vm),
         _source(data, "study", "velocity_model", f"{default} (analytic)") + f"; {PAPER}")
     pm = str(a.get("propagation", "?"))
     add("models", f"propagation: {pm}", a.get("propagation_assumption", pm),
         _source(data, "study", "propagation", f"{default} (constant)")
-        + " (tolsim.study.propagation)")
+        + " (tolsim.study.pipeline.propagation)")
     if a.get("propagation_caveat"):
         add("models", "caveat of the propagation", a["propagation_caveat"],
-            "tolsim.study.propagation.propagation_caveat")
+            "tolsim.study.pipeline.propagation.propagation_caveat")
     if has_friction(ds):
         rows.extend(friction_assumptions(ds, config, data))
 
     budget = analytic.VALIDITY_ERROR_BUDGET
     add("validity budget", "error budget of the fast model",
         f"|ε_{vm} − ε_full| ≤ {100 * budget:.2g} percentage points "
-        f"(VALIDITY_ERROR_BUDGET = {budget:g})", "tolsim.physics.analytic")
+        f"(VALIDITY_ERROR_BUDGET = {budget:g})", "tolsim.physics.velocity.analytic")
     table1 = config is None or all(_table1(getattr(config.bearing, f), getattr(TABLE1, f))
                                    for f in ("ball_radius", "conformity",
                                              "nominal_contact_angle"))

@@ -30,7 +30,7 @@ Statistics and their intervals (95 %)
 * **epsilon mean and standard deviation**: the file's estimates; their standard errors by the
   delta method over assemblies (the balls of an assembly are correlated, the assemblies are
   independent: ratio estimator, [Cochran1977] Sec. 6.3-6.4) from the per-assembly moments the
-  file stores (:mod:`tolsim.study.estimators`), interval estimate -+ t(A - 1) se.
+  file stores (:mod:`tolsim.study.statistics.intervals`), interval estimate -+ t(A - 1) se.
 * **epsilon quantiles** (:data:`VELOCITY_DEVIATION_LEVELS`): read off the histogram; interval
   by Woodruff's method ([Woodruff1952]): a Wilson interval for the level, turned into values
   through the histogram, at the effective sample size N^2 / sum n_a^2 (each assembly one
@@ -39,7 +39,7 @@ Statistics and their intervals (95 %)
   An end beyond the smallest or largest value is not bounded by the data: NaN ("n/a").
 * **fraction out of spec and Cpk** (with a limit on |epsilon|): the file's values and
   intervals (Korn-Graubard effective sample size; delta method over assemblies,
-  :mod:`tolsim.study.quality`).
+  :mod:`tolsim.study.statistics.quality`).
 * **time-to-contact quantiles** (:data:`TIME_TO_CONTACT_LEVELS`, given contact): Woodruff's
   interval on the histogram of the first-contact times, one per assembly with contact
   (independent, so n is their number).
@@ -115,7 +115,7 @@ from tolsim.reports.style import (
     styled,
 )
 from tolsim.reports.verdict import contact_unit, tracks_of
-from tolsim.study.estimators import (
+from tolsim.study.statistics.intervals import (
     ClusterMoments,
     clopper_pearson_interval,
     format_fraction,
@@ -247,9 +247,9 @@ def cluster_mean_and_std(moments: ClusterMoments):
     over assemblies.
 
     mu = Sbar / nbar and sigma^2 = Qbar / nbar - mu^2 from the means of the per-assembly
-    totals (n_a, k_a, S_a, Q_a) (:data:`tolsim.study.estimators.CLUSTER_COLUMNS`); their
+    totals (n_a, k_a, S_a, Q_a) (:data:`tolsim.study.statistics.intervals.CLUSTER_COLUMNS`); their
     variances by linearisation with the covariance of the means C / (A (A - 1)) ([Cochran1977]
-    Sec. 6.3-6.4; the gradients of :func:`tolsim.study.estimators.cluster_capability`)::
+    Sec. 6.3-6.4; the gradients of :func:`tolsim.study.statistics.intervals.cluster_capability`)::
 
         d mu      = (dSbar - mu dnbar) / nbar
         d sigma^2 = (dQbar - 2 mu dSbar + (2 mu^2 - m2) dnbar) / nbar,   m2 = Qbar / nbar
@@ -258,7 +258,7 @@ def cluster_mean_and_std(moments: ClusterMoments):
     Parameters
     ----------
     moments : ClusterMoments
-        Of the totals in :data:`~tolsim.study.estimators.CLUSTER_COLUMNS` order.
+        Of the totals in :data:`~tolsim.study.statistics.intervals.CLUSTER_COLUMNS` order.
 
     Returns
     -------
@@ -289,7 +289,8 @@ def histogram_quantile_interval(counts, edges, level, effective_trials, underflo
 
     The Wilson interval (p_L, p_U) of the proportion ``level`` at ``effective_trials`` is
     turned into values through the histogram's distribution function (linear in a bin,
-    :func:`tolsim.study.estimators.histogram_quantiles`); each end is then moved out to the
+    :func:`tolsim.study.statistics.intervals.histogram_quantiles`); each end is then moved out to
+    the
     edge of its bin, since the histogram places a value only within its bin.
 
     Parameters
@@ -1016,7 +1017,7 @@ def _unit(display) -> str:
 def format_value(stat: Statistic) -> tuple:
     """(estimate, '95 % CI lo to hi') of a statistic as the HTML shows them."""
     if stat.display == "probability":
-        # in ppm below 0.1 %, else in % (tolsim.study.estimators.format_fraction)
+        # in ppm below 0.1 %, else in % (tolsim.study.statistics.intervals.format_fraction)
         full = format_fraction(stat.estimate, stat.ci_lower, stat.ci_upper)
         est, _, ci = full.partition(" (")
         return est, ci.rstrip(")") or "95 % CI n/a"

@@ -1,7 +1,7 @@
 """The source paper reproduced: Fig. 4, Fig. 7, Fig. 9 and Table 2 of [Lin2018] (``tolsim paper``).
 
-:func:`make_paper` computes everything from the models (:mod:`tolsim.study.paper_data`,
-:mod:`tolsim.physics.analytic`, :mod:`tolsim.study.propagation`) and writes
+:func:`make_paper` computes everything from the models (:mod:`tolsim.study.analyses.paper_data`,
+:mod:`tolsim.physics.velocity.analytic`, :mod:`tolsim.study.pipeline.propagation`) and writes
 
 * ``fig4.png``: normalised friction force f_z/(mu F) and spin moment M_O/(mu F R_B) against
   c/a for four conformities, (a) full range, (b) zoom with the fitted k_f;
@@ -12,7 +12,8 @@
 * ``after_contact.png``: beyond the paper, labelled as tolsim's extension: the two balls of
   Sec. 3.2 case (a) after they touch (:func:`after_contact_data`), their positions, their
   contact force and the carriage friction force of their track against time, on the path of
-  a study with ``[contact]`` (:mod:`tolsim.study.trains`, :mod:`tolsim.study.friction`);
+  a study with ``[contact]`` (:mod:`tolsim.physics.trains`,
+  :mod:`tolsim.study.pipeline.track_friction`);
 * ``table2.csv`` and ``table2.md``: Table 2 with the paper's values beside ours;
 * ``README.md``: what matches, what does not, by how much and why; every number in it is
   computed at generation time.
@@ -31,8 +32,6 @@ import numpy as np
 import pandas as pd
 
 from tolsim import __version__
-from tolsim.physics.analytic import analytic, eq24
-from tolsim.physics.friction import full
 from tolsim.physics.geometry import (
     K_F_PAPER,
     TABLE1,
@@ -40,6 +39,9 @@ from tolsim.physics.geometry import (
     TABLE1_NORMAL_LOAD,
     paired_forces,
 )
+from tolsim.physics.trains import train_contact_constant
+from tolsim.physics.velocity.analytic import analytic, eq24
+from tolsim.physics.velocity.full import full
 from tolsim.reports.style import (
     LIMIT_COLOUR,
     SERIES_COLOURS,
@@ -47,9 +49,8 @@ from tolsim.reports.style import (
     save_png,
     styled,
 )
-from tolsim.study import paper_data
-from tolsim.study.propagation import first_contact_constant
-from tolsim.study.trains import train_contact_constant
+from tolsim.study.analyses import paper_data
+from tolsim.study.pipeline.propagation import first_contact_constant
 
 #: Sec. 3.2: initial gap between the two balls, 0.1 R_B [m].
 FIG9_GAP = 0.1 * TABLE1.ball_radius
@@ -103,7 +104,7 @@ def table2_table(data: pd.DataFrame | None = None) -> pd.DataFrame:
     Parameters
     ----------
     data : DataFrame, optional
-        :func:`tolsim.study.paper_data.table2_data` (computed if not given).
+        :func:`tolsim.study.analyses.paper_data.table2_data` (computed if not given).
 
     Returns
     -------
@@ -340,7 +341,8 @@ def fig9_data(table: pd.DataFrame, gap=FIG9_GAP, groove_velocity=TABLE1_GROOVE_V
               duration=FIG9_DURATION) -> pd.DataFrame:
     """Epsilon of the two balls and their first contact, per case and model (Sec. 3.2).
 
-    Contact times come from :func:`tolsim.study.propagation.first_contact_constant` (mode a:
+    Contact times come from :func:`tolsim.study.pipeline.propagation.first_contact_constant` (mode
+    a:
     constant epsilon, closed form t = gap / ((eps_1 - eps_2) v / 2)).
 
     Returns
@@ -427,14 +429,15 @@ def after_contact_data(bearing=TABLE1, gap=FIG9_GAP, groove_velocity=TABLE1_GROO
     """The two balls of [Lin2018] Sec. 3.2 case (a) after they touch (not in the paper).
 
     The path of a study of ``configs/paper_case_study.toml`` with ``[contact]``
-    (:mod:`tolsim.study.friction`): the paper's paired forces and rigid angles
+    (:mod:`tolsim.study.pipeline.track_friction`): the paper's paired forces and rigid angles
     (dbeta = (-theta, theta, 0, 0), rho = -/+0.6, N_y = 200 N); each ball's creep stiffness
     K, braking sensitivity c, free-rolling carriage force F_0 and carriage-force slopes a, b
-    from the loaded analytic model at zero load (:func:`tolsim.physics.analytic.analytic`
-    with ``push=0``); the train from :func:`tolsim.study.trains.train_contact_constant`
+    from the loaded analytic model at zero load (:func:`tolsim.physics.velocity.analytic.analytic`
+    with ``push=0``); the train from :func:`tolsim.physics.trains.train_contact_constant`
     (event-driven, exact); the track's carriage friction force
     F = F_0,1 + F_0,2 + k Q with k = (a_2 - a_1) + (b_1 + b_2) (Eq. 1 of
-    :mod:`tolsim.study.friction`). epsilon comes from the full model with the same forces
+    :mod:`tolsim.study.pipeline.track_friction`). epsilon comes from the full model with the same
+    forces
     (``"full"``, as the study re-solves these balls, outside Eq. 24's budget) or from the
     formula, Eq. (24) (``"formula"``).
 
@@ -653,7 +656,8 @@ def _after_contact_readme(after) -> list:
         "balls of case (a) then move as one cluster at the K-weighted mean of their ε and "
         "push each other with Q = K₁K₂(ε₁ − ε₂)/(K₁ + K₂); the Coulomb friction at their "
         f"contact (μ_bb = {after['ball_friction']:.2g}) brakes both balls, and the grooves pay "
-        "for it in carriage friction (`tolsim.study.trains`, `tolsim.study.friction`). From "
+        "for it in carriage friction (`tolsim.physics.trains`, "
+        "`tolsim.study.pipeline.track_friction`). From "
         "the loaded analytic model at each ball's paired forces: creep stiffness "
         f"K = {k[0]:.0f} N each, free-rolling carriage friction F₀ = {f0[0]:.2f} N each, and "
         f"a friction cost of k = {after['coupling']:.3f} N per newton of Q.",
@@ -777,7 +781,7 @@ def readme_text(table, checks, slopes, grid, fig9, grids, curves=None, after=Non
         " of the paper's −1.38, and they differ from each other by "
         f"{np.ptp(slopes['fitted_slope']):.3f}, which supports the paper's choice of one k_f. "
         "The conformities are not listed in the paper; we use 0.51 to 0.54 (see "
-        "`tolsim/study/paper_data.py`)." + ("" if curves is None else (
+        "`tolsim/study/analyses/paper_data.py`)." + ("" if curves is None else (
             " As the paper says, the force is almost linear for |c/a| < 0.5: it departs "
             "from the fitted line by at most {max_nonlinearity:.3f} (in units of μF) there. "
             "The normalised spin moment never exceeds {max_moment:.3f}, small next to the "

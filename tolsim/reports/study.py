@@ -12,16 +12,17 @@ writes, into a folder:
 * ``spot_checks.png``: the study's velocity model against the full model on the spot-checked
   balls (circles drawn uniformly, diamonds near the spec limit), with the counts beside it;
 * ``sensitivity.png``: the tolerance sources ranked by their Sobol' total-effect index on
-  epsilon and on the contact indicator (:mod:`tolsim.study.sensitivity`);
+  epsilon and on the contact indicator (:mod:`tolsim.study.analyses.sensitivity`);
 * ``quality.png`` (with a limit on |epsilon|): the tails of epsilon on a log scale against
-  the limit, the fraction out of spec and Cpk (:mod:`tolsim.study.quality`);
+  the limit, the fraction out of spec and Cpk (:mod:`tolsim.study.statistics.quality`);
 * ``report.html`` with all of them embedded as data URIs: at the top the verdict against the
   config's spec limits (:mod:`tolsim.reports.verdict`), then what was studied with the
   sampled inputs (the initial gap included) and the assumptions table
   (:mod:`tolsim.reports.assumptions`), the config and provenance, and a sign-off table;
 * ``report.pdf``: the same for review and sign-off (:mod:`tolsim.reports.pdf`).
 
-A study with ``[contact]`` (the friction variables of :mod:`tolsim.study.friction` in the
+A study with ``[contact]`` (the friction variables of :mod:`tolsim.study.pipeline.track_friction`
+in the
 file) gets a section "What contact costs" after the contact section (:func:`friction_content`,
 ``friction.png`` from :func:`plot_friction`): the distribution of the friction increase
 against its spec limit with P(increase > limit), example traces of the friction force and the
@@ -83,9 +84,9 @@ from tolsim.reports.verdict import (
     study_verdict,
     tracks_of,
 )
-from tolsim.study import quality
-from tolsim.study.estimators import wilson_interval
-from tolsim.study.quality import format_fraction
+from tolsim.study.statistics import quality
+from tolsim.study.statistics.intervals import wilson_interval
+from tolsim.study.statistics.quality import format_fraction
 
 #: Default base-sample size of the sensitivity analysis per propagation mode (the cost is
 #: samples x (factors + 2) assemblies; along-track propagation is ~100x dearer per assembly).
@@ -212,7 +213,8 @@ class _FileSensitivity:
 def sensitivity_from_file(ds):
     """The indices stored in the file (``factor`` dimension, names in ``factor_name``), or None.
 
-    Reads the variables of :data:`tolsim.study.sensitivity.SENSITIVITY_VARIABLES`: epsilon's
+    Reads the variables of :data:`tolsim.study.analyses.sensitivity.SENSITIVITY_VARIABLES`:
+    epsilon's
     ``sensitivity_first_order`` / ``sensitivity_total`` and, when present, the contact
     indicator's ``sensitivity_contact_*``, the friction increase's ``sensitivity_friction_*``
     (a study with ``[contact]``) and the ``*_ci_lower`` / ``*_ci_upper`` ends.
@@ -257,7 +259,7 @@ def _config_error(ds) -> str:
 
 def compute_sensitivity(ds, samples=None):
     """Sobol' indices from the config embedded in the file (see the module docstring)."""
-    from tolsim.study.sensitivity import study_sensitivity
+    from tolsim.study.analyses.sensitivity import study_sensitivity
 
     config = config_of(ds)
     if samples is None:
@@ -521,7 +523,7 @@ def plot_spot_checks(ds):
     """
     from matplotlib.ticker import MaxNLocator
 
-    from tolsim.physics.analytic import VALIDITY_ERROR_BUDGET
+    from tolsim.physics.velocity.analytic import VALIDITY_ERROR_BUDGET
 
     fig = new_canvas(11.5, 4.9)
     ax, ax2, ax_text = fig.subplots(1, 3, width_ratios=[1.0, 1.0, 0.62])
@@ -847,7 +849,7 @@ def carriage_content(ds, config=None) -> dict:
     ----------
     ds : xarray.Dataset
         A result file with a ``track`` dimension (the variables of
-        :data:`tolsim.study.carriage.CARRIAGE_VARIABLES`).
+        :data:`tolsim.study.pipeline.carriage.CARRIAGE_VARIABLES`).
     config : StudyConfig, optional
         The embedded config (ball positions, N_0, K, per-ball oversizes); without it the
         section shows what the file holds.
@@ -972,7 +974,7 @@ def carriage_content(ds, config=None) -> dict:
 # Friction after contact (a study with [contact]: HTML and PDF share this section)
 # --------------------------------------------------------------------------------------------
 #: Output name of the friction increase among the Sobol' outputs
-#: (:data:`tolsim.study.sensitivity.FRICTION_INCREASE`).
+#: (:data:`tolsim.study.analyses.sensitivity.FRICTION_INCREASE`).
 FRICTION_OUTPUT = "friction_increase"
 #: Quantile levels of the friction table.
 FRICTION_LEVELS = (0.5, 0.9, 0.95, 0.99, 0.999)
@@ -1080,7 +1082,7 @@ def plot_friction(ds, sens=None, ball_diameter=np.nan):
     Parameters
     ----------
     ds : xarray.Dataset
-        A result file with the friction variables (:data:`tolsim.study.friction.
+        A result file with the friction variables (:data:`tolsim.study.pipeline.track_friction.
         FRICTION_VARIABLES`).
     sens : optional
         Sensitivity indices with the output ``friction_increase`` (panel d).
@@ -1287,7 +1289,7 @@ def friction_content(ds, sens=None) -> dict:
     Parameters
     ----------
     ds : xarray.Dataset
-        A result file with the friction variables (:data:`tolsim.study.friction.
+        A result file with the friction variables (:data:`tolsim.study.pipeline.track_friction.
         FRICTION_VARIABLES`).
     sens : optional
         Sensitivity indices; those of the output ``friction_increase`` rank the drivers.
@@ -1743,7 +1745,8 @@ def _stackup_rows(ds):
         f"<td class='num'>±{1e6 * at('gap_closure_worst_case', pr):.3g} µm</td>"
         f"<td class='num'>{1e6 * at('gap_closure_rss', pr):.3g} µm</td><td>–</td></tr>",
         "</table><p class='muted'>Linearised sensitivities at the mean state (central "
-        "differences through the study's own models, <code>tolsim.study.worst_case</code>): "
+        "differences through the study's own models, "
+        "<code>tolsim.study.analyses.worst_case</code>): "
         "the worst case adds every source at the edge of its band, RSS adds them as "
         "independent standard deviations (with the rail fields' correlation). Where RSS and "
         "the Monte Carlo std agree, the model is near-linear over the tolerances; the "

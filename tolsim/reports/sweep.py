@@ -69,8 +69,8 @@ from tolsim.reports.verdict import (
     has_friction,
     study_verdict,
 )
-from tolsim.study.estimators import clopper_pearson_interval, format_fraction
-from tolsim.study.sweep import Sweep, SweepAxis
+from tolsim.study.design.sweep import Sweep, SweepAxis
+from tolsim.study.statistics.intervals import clopper_pearson_interval, format_fraction
 
 #: Files of the report.
 HTML_NAME, CSV_NAME = "report.html", "points.csv"
@@ -220,7 +220,7 @@ class Point:
     number : int
         1-based, the file's order (outer: the first key slowest).
     values : tuple of float
-        The swept keys' values (:attr:`tolsim.study.sweep.Sweep.axes`).
+        The swept keys' values (:attr:`tolsim.study.design.sweep.Sweep.axes`).
     ds : xarray.Dataset
         The point as a single study (:func:`point_dataset`).
     statistics : dict
@@ -910,7 +910,7 @@ def _crn_text(ds, points) -> str:
         crn = (f"Every point ran with the same seed ({next(iter(seeds))}), block size "
                f"({a.get('block_size', '?')}) and sampling ({a.get('sampling', '?')}): "
                "assembly i of one point has the random numbers of assembly i of every other "
-               "point (<b>common random numbers</b>, <code>tolsim.study.sweep</code>). Only "
+               "point (<b>common random numbers</b>, <code>tolsim.study.design.sweep</code>). Only "
                "the mapping of those numbers to values (a scaled spread, a shifted load) "
                "changes with the key, so the curves are smooth and a <i>difference</i> "
                "between two points carries far less noise than the two intervals suggest: "

@@ -11,7 +11,7 @@ statement below holds with at least 97.5 % confidence):
   the bounds use the Clopper-Pearson interval over the resolved trains. Pass when its upper
   end is at most P_max, fail when its lower end is above P_max, undecided otherwise.
 * **fraction of balls with |epsilon| > L <= p_max**: the fraction out of spec and its
-  interval with the assembly as the sampling unit (:func:`tolsim.study.quality.
+  interval with the assembly as the sampling unit (:func:`tolsim.study.statistics.quality.
   dataset_quality`) against an allowed fraction p_max (``study.out_of_spec_limit_percent``
   or ``_ppm``, stored as ``velocity_deviation_out_of_spec_limit``; or the
   ``out_of_spec_limit`` argument of :func:`study_verdict`).
@@ -21,7 +21,8 @@ statement below holds with at least 97.5 % confidence):
   upper end is below it.
 * **P(friction increase > L) <= p_max**, in a study with ``[contact]`` and a limit L on the
   increase of the carriage friction force (``contact.friction_increase_limit_N``, stored as
-  ``friction_increase_limit``; :mod:`tolsim.study.friction`): the row is there whenever L is
+  ``friction_increase_limit``; :mod:`tolsim.study.pipeline.track_friction`): the row is there
+  whenever L is
   set. The estimate is P(increase > L) per assembly (its worst track) with its
   Clopper-Pearson interval; with unresolved assemblies the interval that covers the
   partial-identification bounds (Clopper-Pearson lower end of k of N, upper end of k + u of
@@ -43,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tolsim.study.estimators import clopper_pearson_interval, format_fraction
+from tolsim.study.statistics.intervals import clopper_pearson_interval, format_fraction
 
 PASS, FAIL, UNDECIDED, NO_LIMIT = "pass", "fail", "undecided", "no spec limit given"
 #: How a status is shown in the table of checks.
@@ -335,7 +336,7 @@ def study_verdict(ds, q=None, *, out_of_spec_limit=None, cpk_minimum=None,
     ds : xarray.Dataset
         A result file of ``tolsim run``.
     q : dict, optional
-        :func:`tolsim.study.quality.dataset_quality` of ``ds`` (computed when not given).
+        :func:`tolsim.study.statistics.quality.dataset_quality` of ``ds`` (computed when not given).
     out_of_spec_limit : float, optional
         Allowed fraction of balls with |epsilon| above the limit [-] (none in the config).
     cpk_minimum : float, optional
@@ -350,7 +351,7 @@ def study_verdict(ds, q=None, *, out_of_spec_limit=None, cpk_minimum=None,
     Verdict
     """
     if q is None:
-        from tolsim.study.quality import dataset_quality
+        from tolsim.study.statistics.quality import dataset_quality
 
         q = dataset_quality(ds)
     checks = (contact_check(ds), out_of_spec_check(ds, q, out_of_spec_limit),

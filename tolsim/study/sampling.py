@@ -25,7 +25,7 @@ Within a block the draws are, in this order:
    points it is exact;
 4. the initial gaps, shape (assemblies, balls - 1);
 5. only with a ``[carriage]`` and ``along_track`` propagation, the balls that enter the
-   carriage's loaded zone during the stroke (:mod:`tolsim.study.carriage_track`), E =
+   carriage's loaded zone during the stroke (:mod:`tolsim.study.pipeline.carriage_track`), E =
    :func:`entering_capacity` per track: their gaps to the ball ahead (from the gap
    distribution), shape (assemblies, tracks * E), then each ``ball`` source in config order,
    the same shape. Drawn after everything else, so the draws 1-4 are those of any other
@@ -331,7 +331,7 @@ def block_from_draws(config, index: int, start: int, raw: dict) -> Block:
     """The :class:`Block` of drawn independent standard normals ``raw`` (name -> (size,
     width), the columns of :func:`_draw_widths`): per-track factors, gaps and ball positions,
     rail fields by their AR(1) recursion, the entering balls. The one transform behind
-    :func:`sample_block` and :func:`tolsim.study.limit_state.block_from_normals`."""
+    :func:`sample_block` and :func:`tolsim.study.analyses.limit_state.block_from_normals`."""
     st = config.study
     grid = _field_grid(config)
     size = len(raw["gap"])

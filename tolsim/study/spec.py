@@ -414,8 +414,8 @@ class ContactSettings:
     """What happens after balls touch (tolsim issue 13): trains, contact forces, friction.
 
     A study with ``[contact]`` follows every train over the stroke after its balls touch
-    (:mod:`tolsim.study.trains`) and reports the carriage friction force they cost
-    (:mod:`tolsim.study.friction`).
+    (:mod:`tolsim.physics.trains`) and reports the carriage friction force they cost
+    (:mod:`tolsim.study.pipeline.track_friction`).
 
     Attributes
     ----------
@@ -492,11 +492,11 @@ class StudySettings:
     sensitivity_samples : int
         Base sample size of the variance-based sensitivity analysis run after the study
         (0: none); it costs sensitivity_samples (d + 2) extra assemblies for d random
-        tolerance sources (:func:`tolsim.study.sensitivity.study_sensitivity`).
+        tolerance sources (:func:`tolsim.study.analyses.sensitivity.study_sensitivity`).
     estimator : str
         Estimator of the event probabilities, a name from :data:`ESTIMATORS`: ``monte_carlo``
         (the plain run alone), ``subset`` or ``importance`` (run after the plain run on every
-        event the study defines, :mod:`tolsim.study.limit_state`).
+        event the study defines, :mod:`tolsim.study.analyses.limit_state`).
     samples_per_level : int
         Subset simulation: samples per level n (n p0 chains of 1 / p0 states; also the
         fallback of ``importance``).
@@ -547,7 +547,7 @@ class StudyConfig:
     a config with ``[contact]`` (issue 13), None without (the study stops at first contact).
     ``allocation`` holds the settings of ``[allocate]`` for ``tolsim allocate`` (issue 14),
     None without. ``sweep``
-    (a :class:`tolsim.study.sweep.Sweep`) holds the points of a config with ``[sweep]``:
+    (a :class:`tolsim.study.design.sweep.Sweep`) holds the points of a config with ``[sweep]``:
     the config itself is then the base the points start from, and ``tolsim run`` runs the
     points.
     """
@@ -563,8 +563,8 @@ class StudyConfig:
     correlations: tuple = ()
     carriage: Carriage | None = None
     contact: ContactSettings | None = None
-    allocation: object = None  # tolsim.study.allocate.AllocationSettings ([allocate])
-    sweep: object = None  # tolsim.study.sweep.Sweep ([sweep]): the points to run
+    allocation: object = None  # tolsim.study.design.allocate.AllocationSettings ([allocate])
+    sweep: object = None  # tolsim.study.design.sweep.Sweep ([sweep]): the points to run
 
     @property
     def n_tracks(self) -> int:

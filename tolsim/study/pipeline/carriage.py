@@ -4,8 +4,9 @@ distribution and every ball's velocity deviation.
 The Python API behind ``tolsim carriage``: :func:`solve_config_carriage` solves the nominal
 assembly (the config's preload and per-ball oversize deviations, no sampled tolerances) with
 :func:`tolsim.physics.carriage.solve_carriage`, then takes epsilon of each ball from the
-improved analytical model (:func:`tolsim.physics.analytic.analytic`) and, where that model is
-outside its validity, from the full friction model (:func:`tolsim.study.evaluate.
+improved analytical model (:func:`tolsim.physics.velocity.analytic.analytic`) and, where that model
+is
+outside its validity, from the full friction model (:func:`tolsim.study.pipeline.evaluate.
 full_velocity`), as a study does for its spot checks.
 """
 
@@ -13,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tolsim.physics.analytic import analytic
 from tolsim.physics.carriage import (
     DOFS,
     CarriageSolution,
@@ -22,7 +22,8 @@ from tolsim.physics.carriage import (
 )
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.static import GrooveErrors
-from tolsim.study.evaluate import (
+from tolsim.physics.velocity.analytic import analytic
+from tolsim.study.pipeline.evaluate import (
     StaticResult,
     ball_velocities,
     full_velocity,
@@ -171,7 +172,8 @@ def evaluate_carriage(config, values: dict):
     Every assembly's carriage is solved with its own sampled groove errors and ball
     oversizes (the nominal preload and the config's per-ball deviations plus the sampled
     ``ball_oversize``); its balls' loaded contact states go through the study's velocity model
-    and the full-model re-solves as any ball's (:func:`tolsim.study.evaluate.ball_velocities`).
+    and the full-model re-solves as any ball's
+    (:func:`tolsim.study.pipeline.evaluate.ball_velocities`).
     An assembly whose carriage does not converge or lifts off is not dropped: its balls count
     as not converged, so its trains are unresolved (counted and bounded).
 
@@ -274,7 +276,8 @@ LOAD_NAMES = ("lateral_force", "vertical_force_upward", "pitch_moment", "yaw_mom
 def carriage_variables(config, statistics, nominal: "CarriageResult | None") -> tuple:
     """(coordinates, data variables) of a carriage study for its result file.
 
-    ``statistics``: the study's :class:`~tolsim.study.statistics.Accumulator`; ``nominal``:
+    ``statistics``: the study's :class:`~tolsim.study.statistics.accumulator.Accumulator`;
+    ``nominal``:
     the nominal assembly (:func:`solve_config_carriage`), or None when it could not be
     solved (its variables are then NaN).
     """

@@ -379,10 +379,10 @@ def _evaluate_block(config, block):
     """epsilon per ball (size, balls) (NaN unresolved) and contact indicator (size,) (NaN
     when the train has an unresolved ball and no certain contact); with ``[contact]`` also
     the friction increase (size,) [N] of the worst track (NaN when unresolved,
-    :mod:`tolsim.study.friction`)."""
-    from tolsim.study.carriage import evaluate_carriage
-    from tolsim.study.evaluate import evaluate_balls, loads_at, loads_per_ball
-    from tolsim.study.propagation import first_contact_along_track, first_contact_tracks
+    :mod:`tolsim.study.pipeline.track_friction`)."""
+    from tolsim.study.pipeline.carriage import evaluate_carriage
+    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at, loads_per_ball
+    from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
     from tolsim.study.sampling import error_values
 
     balls = config.balls
@@ -401,7 +401,7 @@ def _evaluate_block(config, block):
         else:
             t = np.full(block.size, np.inf)
     elif config.carriage is not None:  # balls rolling through the carriage (issue 12)
-        from tolsim.study.carriage_track import first_contact_carriage_track
+        from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
 
         trains = _track_friction(config)
         t, _, ok, _, state, _ = first_contact_carriage_track(config, block, friction=trains)
@@ -417,7 +417,7 @@ def _evaluate_block(config, block):
     hit = np.isfinite(t)
     contact = np.where(hit, 1.0, np.where(ok, 0.0, np.nan))
     if config.contact is not None:  # after contact (issue 13): the friction increase
-        from tolsim.study.friction import evaluate_friction
+        from tolsim.study.pipeline.track_friction import evaluate_friction
 
         friction = (trains.figures() if config.study.propagation == "along_track"
                     else evaluate_friction(config, block.initial_gap, state))
@@ -427,10 +427,10 @@ def _evaluate_block(config, block):
 
 def _track_friction(config):
     """The step-by-step trains of an along_track block with ``[contact]`` (issue 13), else
-    None (:class:`tolsim.study.friction.TrackFriction`)."""
+    None (:class:`tolsim.study.pipeline.track_friction.TrackFriction`)."""
     if config.contact is None:
         return None
-    from tolsim.study.friction import TrackFriction
+    from tolsim.study.pipeline.track_friction import TrackFriction
 
     return TrackFriction(config)
 
@@ -456,7 +456,7 @@ def study_sensitivity(config, samples: int = 2048, *, confidence_level=0.95,
         load variation along the train is not counted as a tolerance effect) and ``contact``
         (1 if a pair of the train touches within the horizon); with ``[contact]`` also
         ``friction_increase`` (the worst track's friction increase per assembly [N],
-        :mod:`tolsim.study.friction`; unresolved assemblies left out). Factors as
+        :mod:`tolsim.study.pipeline.track_friction`; unresolved assemblies left out). Factors as
         :func:`study_factors`; no factors gives an empty result (d = 0). With
         ``along_track`` propagation epsilon is taken at the start of the stroke (the balls'
         initial rail positions) while the contact indicator follows the whole stroke.
@@ -517,7 +517,8 @@ def sensitivity_variables(result: SensitivityResult) -> dict:
         ``"factor"`` -> ndarray of str (the source names, written as the ``factor_name``
         label along ``factor``) and every name of
         :data:`SENSITIVITY_VARIABLES` -> ndarray (d,) (with ``[contact]`` also
-        ``sensitivity_friction_*``, declared in :mod:`tolsim.study.friction`), ready for
+        ``sensitivity_friction_*``, declared in :mod:`tolsim.study.pipeline.track_friction`), ready
+        for
         ``xarray.Dataset.assign(**{k: (("factor",), v) ...})``.
     """
     out = {"factor": np.array(result.factors, dtype=str)}

@@ -29,7 +29,8 @@ limit *with stated confidence*: its one-sided upper confidence bound U(s) at ``c
 (not the point estimate) must satisfy U(s) <= limit. For P(contact) and P(friction increase
 > its limit) U is the Clopper-Pearson upper end of k + u of N, the unresolved trains u
 counted as events (the partial-identification bound that holds whatever they would have
-done, :meth:`tolsim.study.statistics.Accumulator.contact_probability_bounds`). The targets
+done, :meth:`tolsim.study.statistics.accumulator.Accumulator.contact_probability_bounds`). The
+targets
 (:data:`TARGETS`):
 
 * ``contact_probability <= p``;
@@ -37,7 +38,7 @@ done, :meth:`tolsim.study.statistics.Accumulator.contact_probability_bounds`). T
   ``friction_increase_limit_N``);
 * ``velocity_deviation_out_of_spec_fraction <= p``: the fraction of balls with |epsilon|
   above ``velocity_deviation_limit`` (the config's), its upper bound over assemblies as
-  sampling units (Korn-Graubard, :func:`tolsim.study.estimators.cluster_proportion`) with
+  sampling units (Korn-Graubard, :func:`tolsim.study.statistics.intervals.cluster_proportion`) with
   the unresolved balls counted as out of spec;
 * ``velocity_deviation_abs_quantile(q) <= L``: the q-quantile of |epsilon| at most L, which
   is the same statement as "the fraction of balls with |epsilon| > L is at most 1 - q", and
@@ -134,8 +135,8 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ndtri
 
-from tolsim.study.estimators import clopper_pearson_interval, cluster_proportion
 from tolsim.study.spec import SOURCES
+from tolsim.study.statistics.intervals import clopper_pearson_interval, cluster_proportion
 
 # --------------------------------------------------------------------------------------------
 # Defaults (module docstring)
@@ -917,7 +918,7 @@ def evaluate_study(config, target: Target, confidence: float, *, workers=1, prog
     -------
     (Evaluation, StudyResult)
     """
-    from tolsim.study.runner import run_study
+    from tolsim.study.execution.runner import run_study
 
     result = run_study(config, workers=workers, progress=progress)
     return TARGETS[target.variable].evaluate(result.statistics, target, confidence), result
@@ -1049,7 +1050,7 @@ def run_allocation(config, settings: AllocationSettings | None = None, *, worker
         Default: ``config.allocation`` (its ``[allocate]``), else the defaults; needs a
         target.
     workers : int
-        Processes of each study (:func:`tolsim.study.runner.run_study`).
+        Processes of each study (:func:`tolsim.study.execution.runner.run_study`).
     progress : callable, optional
         Called with every new :class:`Point` of the search.
     study_progress : callable, optional

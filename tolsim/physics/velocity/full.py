@@ -23,7 +23,7 @@ linearised:
 * **Equilibrium** (Eq. 18 in full nonlinear form): sum of z forces, x and y moments (and the
   z moment when omega_z is free) vanish. Normal forces pass through the ball centre.
 
-External loads (issue 13; :mod:`tolsim.physics.ball_loads`): the neighbours' push P adds to
+External loads (issue 13; :mod:`tolsim.physics.velocity.ball_loads`): the neighbours' push P adds to
 the z force and their ball-to-ball braking -mu_bb (Q_back + Q_front) R_B Omega_perp /
 |Omega_perp| to the moments; the equations stay the gradient of a convex potential (D plus
 the braking term minus P v_B), which the solver minimises as before
@@ -78,8 +78,16 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import jit, pjit
-from tolsim.physics.analytic import VelocityResult, _as_ball_arrays
-from tolsim.physics.ball_loads import (
+from tolsim.physics.geometry import (
+    SIDE_SIGN_X,
+    SIDE_SIGN_Y,
+    TABLE1,
+    ZERO_VELOCITY_SIGN,
+    Bearing,
+)
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity.analytic import VelocityResult, _as_ball_arrays
+from tolsim.physics.velocity.ball_loads import (
     DEFAULT_BALL_FRICTION,
     SIDE_SIGN_X_T,
     SIDE_SIGN_Y_T,
@@ -89,14 +97,6 @@ from tolsim.physics.ball_loads import (
     rolling_axis,
     stall_moment,
 )
-from tolsim.physics.geometry import (
-    SIDE_SIGN_X,
-    SIDE_SIGN_Y,
-    TABLE1,
-    ZERO_VELOCITY_SIGN,
-    Bearing,
-)
-from tolsim.physics.hertz import hertz_constants
 
 #: Default number of angular nodes per contact (full circle; see the convergence study in
 #: ``tests/test_friction.py::test_grid_convergence`` and the module docstring).
@@ -502,7 +502,7 @@ def _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_ma
     """Normalised equilibrium residual (F_z, M_x, M_y[, M_z]) / sum F; returns max |res|.
 
     Rows ``first`` .. ``first + nunk - 1`` of the loads (``first`` = 1 when v_B is fixed).
-    External loads (tolsim.physics.ball_loads, R = 1, v = 1, mu = 1 units): the push
+    External loads (tolsim.physics.velocity.ball_loads, R = 1, v = 1, mu = 1 units): the push
     ``push`` = P / mu adds to F_z, the braking ``braking`` = (mu_bb / mu)(Q_back + Q_front)
     adds -braking Omega_perp / |Omega_perp| to (M_x, M_y). loads[4] becomes the potential
     Phi = D + braking |Omega_perp| - push v_B, whose gradient is -loads[:4] (the solver's
@@ -811,18 +811,19 @@ def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_co
     """The full model under external loads, n balls in parallel (R = 1, v = 1, mu = 1 units).
 
     ``push`` (n,) = P / mu [N] and ``braking`` (n,) = (mu_bb / mu)(Q_back + Q_front) [N]
-    (:mod:`tolsim.physics.ball_loads`). Per ball:
+    (:mod:`tolsim.physics.velocity.ball_loads`). Per ball:
 
     1. the traction capacity P_cap / mu = min over Omega of Phi_0, the ball sliding at
        v_B = 1 between grooves at rest (Newton on the moment rows from the point-contact
-       minimiser, :func:`~tolsim.physics.ball_loads.point_traction_capacity`; exactly
+       minimiser, :func:`~tolsim.physics.velocity.ball_loads.point_traction_capacity`; exactly
        sum F_i with Omega = 0 when the pure-sliding moment sum F_i x_i is within the braking,
        the kink of |Omega_perp|); P_cap is D + braking |Omega_perp| there, the saturated
        carriage force F_c / mu = f_TR + f_TL of that state;
     2. if |push| < P_cap, the loaded equilibrium (F_z + push = 0, moments with the braking)
        from pure rolling, and d(epsilon)/d(push), d(epsilon)/d(braking) from its Jacobian
        (:func:`_load_sensitivities`); otherwise the ball slides (no state: NaN). Likewise
-       when ``braking`` >= :func:`~tolsim.physics.ball_loads.stall_moment` (the braking stalls
+       when ``braking`` >= :func:`~tolsim.physics.velocity.ball_loads.stall_moment` (the braking
+       stalls
        the rotation; sliding = 2.0).
 
     ``out_contact`` (n, 4, 6): as :func:`full_kernel` plus the contact power D_i. ``out_load``
@@ -929,7 +930,7 @@ def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_co
 class FullResult(VelocityResult):
     """Result of the full friction model for n balls.
 
-    Besides the fields of :class:`~tolsim.physics.analytic.VelocityResult`
+    Besides the fields of :class:`~tolsim.physics.velocity.analytic.VelocityResult`
     (``zero_velocity_offset`` holds dgamma_i = s_i c_i / R_B [rad], ERRATA 6;
     ``velocity_deviation_eq22`` is None; ``valid`` is ``converged`` with four positive forces).
 
@@ -970,7 +971,8 @@ class LoadedFullResult(FullResult, BallLoadFields):
     """Result of :func:`full` for n balls under external loads (push, neighbours).
 
     The fields of :class:`FullResult` at the loaded state (``drag_force`` is
-    ``carriage_force``), those of :class:`tolsim.physics.ball_loads.BallLoadFields`, and the
+    ``carriage_force``), those of :class:`tolsim.physics.velocity.ball_loads.BallLoadFields`, and
+    the
     dissipated powers. ``creep_stiffness`` and ``braking_sensitivity`` are the tangents at the
     loaded state (from the solver's Jacobian, :func:`_load_sensitivities`). A sliding ball
     has no rolling quasi-static state and ``valid`` False, ``creep_stiffness`` 0 (saturated),
@@ -1140,7 +1142,7 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     ellipses ([Lin2018] Eqs. 1-13 and 18, nothing linearised; see the module docstring).
     Balls are solved in parallel over all cores.
 
-    External loads (:mod:`tolsim.physics.ball_loads`): the push P adds to the z force, the
+    External loads (:mod:`tolsim.physics.velocity.ball_loads`): the push P adds to the z force, the
     ball-ball braking -mu_bb (Q_back + Q_front) R_B Omega_perp / |Omega_perp| to the moments.
     The ball is then solved three times (:func:`full_loaded_kernel`): free rolling (the
     baseline, the unloaded solve), the traction capacity (sliding between grooves at rest)

@@ -4,7 +4,7 @@ With ``propagation = "along_track"`` and a ``[carriage]``, each assembly's balls
 the carriage's loaded zone while the carriage makes its stroke; the carriage is re-solved as
 they move, balls leave the zone at its trailing end and new ones enter at its leading end.
 :func:`first_contact_carriage_track` integrates a block of assemblies and finds the first
-ball-to-ball contact of each, as :func:`tolsim.study.propagation.first_contact_along_track`
+ball-to-ball contact of each, as :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
 does for single trains.
 
 Frames and sign convention
@@ -15,7 +15,7 @@ z = +L/2 and its trailing end at -L/2, L = ``train.loaded_zone_length`` (ball 0,
 trailing ball, has the smallest z).
 
 A ball's centre moves along the rail at v_B = (1 + epsilon) v / 2 ([Lin2018] Eq. 23; the
-convention of :mod:`tolsim.study.propagation`, whose rail positions advance at that speed),
+convention of :mod:`tolsim.study.pipeline.propagation`, whose rail positions advance at that speed),
 so relative to the carriage
 
     dz/dt = v_B - v = -(1 - epsilon) v / 2.
@@ -65,7 +65,8 @@ round and the question does not arise.
 
 Integration
 -----------
-The explicit midpoint rule of :func:`tolsim.study.propagation.first_contact_along_track` over
+The explicit midpoint rule of :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
+over
 ``study.time_steps`` steps of dt: epsilon_1 of every loaded ball with the carriage solved at
 the balls' positions at the start of the step, the positions at the midpoint, epsilon_2 with
 the carriage solved again there (a ball outside the zone at the midpoint keeps epsilon_1),
@@ -78,7 +79,7 @@ zone at the time of contact and both resolved at every evaluation so far; the co
 the linear interpolation of the gap within the step. An assembly's first contact is the
 earliest over its tracks; it is not followed after it.
 
-Unresolved balls (no velocity model takes them, :mod:`tolsim.study.evaluate`; every loaded
+Unresolved balls (no velocity model takes them, :mod:`tolsim.study.pipeline.evaluate`; every loaded
 ball of an assembly whose carriage did not converge or lifted off) are treated as in the
 single-train propagation: such a ball moves at the nominal -v/2 (epsilon = 0), closes no gap,
 and its assembly is invalid (``train_valid`` False) if a loaded ball was unresolved at any
@@ -92,9 +93,10 @@ entering_capacity`) or more balls in its zone than it has slots (:func:`slot_cap
 
 After contact
 -------------
-With ``[contact]`` (a :class:`tolsim.study.friction.TrackFriction` passed as ``friction``)
+With ``[contact]`` (a :class:`tolsim.study.pipeline.track_friction.TrackFriction` passed as
+``friction``)
 every assembly is followed over the whole stroke, and the loaded balls of each track move as
-a train (:mod:`tolsim.study.trains`, "Varying epsilon"): at every step the cluster rule on
+a train (:mod:`tolsim.physics.trains`, "Varying epsilon"): at every step the cluster rule on
 the closed pairs with each ball's epsilon and creep coefficients from its own loaded state
 (the carriage solved at the balls' positions), then the projection of the closing gaps. A
 ball belongs to its track's train for a step when it is in the zone at the step's start,
@@ -104,7 +106,7 @@ gap open; the pair flags follow the balls through the exits and entries
 (:func:`carry_pairs_kernel`). Unloaded balls are in no train and pass through as above. The
 first contact, its pair and ``train_valid`` are located on the free motion of each step and
 counted only up to the first contact, so they are those of the run without ``[contact]``,
-bit for bit. The friction figures: :mod:`tolsim.study.friction`, "With along_track".
+bit for bit. The friction figures: :mod:`tolsim.study.pipeline.track_friction`, "With along_track".
 
 Cost: two batched carriage solves per step (each about 10 us of CPU per assembly of
 ``configs/carriage_preload.toml``, 2 x 13 ball slots) plus the velocity model of the loaded
@@ -135,8 +137,8 @@ from tolsim.physics.carriage import (
     solve_carriage_batch,
 )
 from tolsim.physics.static import GrooveErrors
-from tolsim.study.carriage import CarriageState
-from tolsim.study.evaluate import (
+from tolsim.study.pipeline.carriage import CarriageState
+from tolsim.study.pipeline.evaluate import (
     MODEL_UNRESOLVED,
     BallState,
     StaticResult,
@@ -388,7 +390,7 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
         With the entering balls' draws (:func:`tolsim.study.sampling.sample_block`).
     trace : TrackTrace, optional
         Filled with the positions, epsilon and events of every step.
-    friction : tolsim.study.friction.TrackFriction, optional
+    friction : tolsim.study.pipeline.track_friction.TrackFriction, optional
         With it (a study with ``[contact]``) every assembly is followed over the whole stroke
         and its loaded balls move as trains after they touch (module docstring, "After
         contact"); the friction figures are accumulated in ``friction``. The first contact
@@ -411,7 +413,7 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
         BallState).
     state : BallState
         The initial balls at t = 0, shape (size, tracks * balls), for the epsilon statistics.
-    carriage : tolsim.study.carriage.CarriageState
+    carriage : tolsim.study.pipeline.carriage.CarriageState
         The carriages at t = 0.
     """
     if config.carriage is None or config.study.propagation != "along_track":

@@ -29,8 +29,8 @@ Definitions
   When the two differ, the percentile index is the one to believe.
 * **Independent balls.** Both intervals above take the balls as independent. The balls of
   one assembly are correlated (they share the rail and carriage errors), which makes them
-  too narrow; :func:`tolsim.study.estimators.cluster_proportion` and
-  :func:`tolsim.study.estimators.cluster_capability` give the intervals with the assembly
+  too narrow; :func:`tolsim.study.statistics.intervals.cluster_proportion` and
+  :func:`tolsim.study.statistics.intervals.cluster_capability` give the intervals with the assembly
   as the sampling unit (cluster ratio estimator, delta method, Korn-Graubard effective
   sample size).
 * **Spec limit on the contact probability** P_max: the study meets it with 95 % confidence
@@ -52,9 +52,10 @@ import numpy as np
 from scipy.special import ndtr, ndtri
 
 # the result types, the binomial intervals and the histogram quantiles live in
-# tolsim.study.estimators (no tolsim imports, so tolsim.study.statistics can use them too);
+# tolsim.study.statistics.intervals (no tolsim imports, so tolsim.study.statistics.accumulator can
+# use them too);
 # re-exported here
-from tolsim.study.estimators import (  # noqa: F401
+from tolsim.study.statistics.intervals import (  # noqa: F401
     PPM_BELOW,
     Capability,
     ClusterMoments,
@@ -237,8 +238,9 @@ def dataset_quality(ds) -> dict:
     Balls of one assembly share its rail and carriage errors and are correlated, so the
     intervals treat the assembly as the sampling unit: the fraction out of spec is the ratio
     estimator over assemblies with Korn & Graubard's effective sample size
-    (:func:`tolsim.study.estimators.cluster_proportion`), Cp and Cpk have delta-method
-    intervals over assemblies (:func:`~tolsim.study.estimators.cluster_capability`), from the
+    (:func:`tolsim.study.statistics.intervals.cluster_proportion`), Cp and Cpk have delta-method
+    intervals over assemblies (:func:`~tolsim.study.statistics.intervals.cluster_capability`), from
+    the
     per-assembly moments the file stores. A file without them (schema 1) gets the
     independent-ball intervals of the histogram (Wilson, Bissell), which are too narrow for
     correlated balls.

@@ -1,13 +1,15 @@
 """Registry of ball-velocity models: name -> function.
 
 Every entry has the signature ``model(contact_angle_deviation, normal_force, bearing=TABLE1,
-**options) -> VelocityResult`` (:class:`tolsim.physics.analytic.VelocityResult`); callers pick
+**options) -> VelocityResult`` (:class:`tolsim.physics.velocity.analytic.VelocityResult`); callers
+pick
 a model by name from here, never with an if/elif chain.
 """
 
 import numpy as np
 
-from tolsim.physics import analytic, friction
+from tolsim.physics.velocity import analytic
+from tolsim.physics.velocity import full as friction
 
 MODELS = {
     "eq24": analytic.eq24,

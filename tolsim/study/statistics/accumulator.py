@@ -16,7 +16,8 @@ bit-identical however the blocks were grouped into chunks or spread over workers
   one time bin (horizon / ``time_bins``); the survival curve S(t) = P(no contact by t) is
   exact at the bin edges.
 * every train counts. A ball outside the fast velocity model's validity is re-solved with the
-  full model (:mod:`tolsim.study.evaluate`); the counts say how many were, how many the full
+  full model (:mod:`tolsim.study.pipeline.evaluate`); the counts say how many were, how many the
+  full
   model could not take, and how long the re-solves took. A ball that no model resolves
   (static not converged, loss of contact, full model failed) leaves its train *unresolved*
   unless the train has a contact that is certain without it (a pair of resolved balls that
@@ -41,7 +42,7 @@ import copy
 
 import numpy as np
 
-from tolsim.study.estimators import (
+from tolsim.study.statistics.intervals import (
     ClusterMoments,
     assembly_totals,
     clopper_pearson_interval,
@@ -90,9 +91,10 @@ class Accumulator:
 
     Besides the ball-level moments, the accumulator keeps the count, mean and co-moment matrix
     of the per-assembly totals (valid balls, balls out of spec, sum and sum of squares of
-    epsilon; :class:`tolsim.study.estimators.ClusterMoments`), so that ball-level proportions
+    epsilon; :class:`tolsim.study.statistics.intervals.ClusterMoments`), so that ball-level
+    proportions
     and Cpk get intervals with the assembly as the sampling unit
-    (:func:`tolsim.study.estimators.cluster_proportion`, ``cluster_capability``).
+    (:func:`tolsim.study.statistics.intervals.cluster_proportion`, ``cluster_capability``).
     """
 
     #: array attributes, in the order they are saved
@@ -170,7 +172,7 @@ class Accumulator:
                            len(self.time_histogram), self.velocity_deviation_limit, self.tracks)
 
     def add_carriage(self, carriage):
-        """Add the carriages of a block of assemblies (a :class:`tolsim.study.carriage.
+        """Add the carriages of a block of assemblies (a :class:`tolsim.study.pipeline.carriage.
         CarriageState`): moments, min and max of the displacement and the diagonal
         stiffness over the solved ones, and the count of the others."""
         block = self._empty_like()
@@ -208,7 +210,7 @@ class Accumulator:
 
         Parameters
         ----------
-        state : tolsim.study.evaluate.BallState
+        state : tolsim.study.pipeline.evaluate.BallState
             Balls of shape (m, balls); epsilon is NaN for unresolved balls.
         contact_time : ndarray (m,)
             [s], inf when no contact within the horizon. A finite time must be certain: the
@@ -218,7 +220,7 @@ class Accumulator:
             Extra validity of the train (along-track propagation: every ball resolved at
             every step).
         """
-        from tolsim.study.evaluate import MODEL_FULL
+        from tolsim.study.pipeline.evaluate import MODEL_FULL
 
         eps, valid = state.velocity_deviation, state.valid
         block = self._empty_like()

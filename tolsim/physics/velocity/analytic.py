@@ -13,13 +13,13 @@ Three models, each a Numba kernel over many balls behind a validated public func
     The authors' prior point-contact model (ref. [11] of [Lin2018]): three contacts roll at
     their centres, the fourth slides; Fig. 7(b) baseline.
 
-External loads (issue 13; derived in :mod:`tolsim.physics.ball_loads`): ``analytic`` takes
+External loads (issue 13; derived in :mod:`tolsim.physics.velocity.ball_loads`): ``analytic`` takes
 a push P of the neighbours (z-force row of Eq. 18) and their ball-to-ball braking moment
 (moment rows, about the rolling axis) as keyword arguments, and returns the carriage friction
 force, the creep stiffness K = dP/d(epsilon), the traction capacity and a sliding flag
 (:func:`analytic_loaded_kernel`, kept apart from the study's :func:`analytic_kernel`, whose
 speed and bits are unchanged). :func:`creep_coefficients_kernel` is its lean twin at zero load,
-the creep coefficients a study's trains need (:mod:`tolsim.study.friction`).
+the creep coefficients a study's trains need (:mod:`tolsim.study.pipeline.track_friction`).
 
 Signs (derived in :mod:`tolsim.physics.geometry`): c_i = s_i R dgamma_i with
 s = (-1, +1, -1, +1), sgn(omega_i) = (+1, -1, -1, +1), so the friction force on the ball is
@@ -42,7 +42,9 @@ from numba import prange
 
 from tolsim._jit import jit, pjit
 from tolsim.physics._fastmath import cbrt_nonnegative, sin_cos_near
-from tolsim.physics.ball_loads import (
+from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity.ball_loads import (
     DEFAULT_BALL_FRICTION,
     BallLoadFields,
     as_ball_loads,
@@ -50,16 +52,15 @@ from tolsim.physics.ball_loads import (
     rolling_axis,
     stall_moment,
 )
-from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing
-from tolsim.physics.hertz import hertz_constants
 
 # --------------------------------------------------------------------------------------------
 # Validity: thresholds derived from an error budget against the full model (flags, never
 # errors)
 # --------------------------------------------------------------------------------------------
 # A ball is *valid* for a fast model when its epsilon is within VALIDITY_ERROR_BUDGET of the
-# comprehensive model (tolsim.physics.friction.full) fed the same dbeta_i and F_i. In a study
-# an invalid ball is re-solved with ``full`` (tolsim.study.evaluate), so the thresholds trade
+# comprehensive model (tolsim.physics.velocity.full.full) fed the same dbeta_i and F_i. In a study
+# an invalid ball is re-solved with ``full`` (tolsim.study.pipeline.evaluate), so the thresholds
+# trade
 # speed (the share of balls the fast model keeps; full solves ~24 000 balls/s against ~15 M/s
 # for analytic and ~90 M/s for eq24) against accuracy (the error on the balls it keeps), not
 # truth against bias.
@@ -150,7 +151,8 @@ class LoadedVelocityResult(VelocityResult, BallLoadFields):
 
     The fields of :class:`VelocityResult` at the loaded state (``velocity_deviation``,
     ``zero_velocity_offset``, ``velocity_deviation_eq22``), those of
-    :class:`tolsim.physics.ball_loads.BallLoadFields`, and the two coefficients that make the
+    :class:`tolsim.physics.velocity.ball_loads.BallLoadFields`, and the two coefficients that make
+    the
     carriage force linear in the loads (the model is linear):
     F_c = free_rolling_carriage_force + carriage_force_per_push P
     + carriage_force_per_neighbour_force (Q_back + Q_front); likewise
@@ -378,11 +380,11 @@ def analytic_loaded_kernel(
     """The analytic model under external loads; unchecked fast path (trains call it).
 
     Eqs. (17), (18) [ERRATA 8], (21) with the push P in the z-force row and the ball-ball
-    braking moment in the moment rows (:mod:`tolsim.physics.ball_loads`):
+    braking moment in the moment rows (:mod:`tolsim.physics.velocity.ball_loads`):
 
         sum u_i = -P / mu,  sum u_i x_i + sum m_i y_i = -(mu_bb / mu)(Q_back + Q_front) e,
 
-    e the rolling axis (:func:`~tolsim.physics.ball_loads.rolling_axis`). The system is
+    e the rolling axis (:func:`~tolsim.physics.velocity.ball_loads.rolling_axis`). The system is
     linear in the loads, so each ball is solved three times on the same matrix: free (the
     arithmetic of :func:`analytic_kernel`, so P = Q = 0 reproduces its epsilon bit for bit),
     per unit P and per unit Q_back + Q_front; the loaded state is their superposition, and
@@ -535,9 +537,9 @@ def creep_coefficients_kernel(dbeta, force, force_cbrt, nominal_angle, ball_radi
     with push and neighbour forces zero, written into ``out_load`` (n, 9): the free, unit-push
     and unit-braking solves with the same arithmetic (so epsilon, K, c, F_0, a, b agree with
     it to round-off, tests/test_friction_study.py), the rolling axis and the stall moment of
-    :mod:`tolsim.physics.ball_loads` from the same sines and cosines. What it leaves out is
+    :mod:`tolsim.physics.velocity.ball_loads` from the same sines and cosines. What it leaves out is
     what a study does not need and what costs most there (the vertex search of
-    :func:`tolsim.physics.ball_loads.point_traction_capacity`, Eq. 22, dgamma, validity):
+    :func:`tolsim.physics.velocity.ball_loads.point_traction_capacity`, Eq. 22, dgamma, validity):
     column ``traction_capacity`` holds a **lower bound** of the point-contact traction
     capacity instead, from a dual-feasible point of its linear programme. With
     u_i = 1 + a_i . w (a_i = (p_y, -p_x)) and any lambda_i in [-1, 1],
@@ -556,7 +558,7 @@ def creep_coefficients_kernel(dbeta, force, force_cbrt, nominal_angle, ball_radi
 
     ``dbeta``, ``force``, ``force_cbrt`` (:func:`tolsim.physics._fastmath.cbrt_nonnegative` of
     ``force``): C-contiguous (n, 4) float64; ``out_load`` (n, 9). Called by
-    :mod:`tolsim.study.friction` (``creep_model = "analytic"``), one call per chunk.
+    :mod:`tolsim.study.pipeline.track_friction` (``creep_model = "analytic"``), one call per chunk.
     """
     half_tan = 0.5 * np.tan(nominal_angle)
     sin_b0, cos_b0 = np.sin(nominal_angle), np.cos(nominal_angle)
@@ -639,7 +641,8 @@ def creep_coefficients_kernel(dbeta, force, force_cbrt, nominal_angle, ball_radi
 
 @jit(inline="always")
 def _creep_rolling_axis(x0, y0, x1, y1, x2, y2, x3, y3, f0, f1, f2, f3):
-    """:func:`tolsim.physics.ball_loads.rolling_axis` from the local x axes x_i = (-p_y, p_x)
+    """:func:`tolsim.physics.velocity.ball_loads.rolling_axis` from the local x axes
+    x_i = (-p_y, p_x)
     (same least squares, same Cramer's rule); (1, 0) if singular."""
     a00 = a01 = a02 = a11 = a12 = a22 = 0.0
     b0 = b1 = b2 = 0.0
@@ -857,7 +860,7 @@ def eq24(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1) -> Ve
         ``MIN_DIAGONAL_FORCE_RATIO``, some |dbeta_i| above ``MAX_ANGLE_DEVIATION``, the pairing
         asymmetry above ``MAX_PAIRING_ASYMMETRY`` or |epsilon| above
         ``MAX_EQ24_VELOCITY_DEVIATION``. Inside them epsilon was measured within
-        ``VALIDITY_ERROR_BUDGET`` of :func:`tolsim.physics.friction.full`.
+        ``VALIDITY_ERROR_BUDGET`` of :func:`tolsim.physics.velocity.full.full`.
     """
     dbeta, force, shape = _as_ball_arrays(contact_angle_deviation, normal_force)
     eps = np.empty(len(dbeta))
@@ -879,13 +882,14 @@ def analytic(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
     the exact Eq. (22) with the same dgamma is returned as ``velocity_deviation_eq22``.
     a_i = a(F_i) from :mod:`tolsim.physics.hertz`. mu cancels (without external loads).
 
-    External loads (:mod:`tolsim.physics.ball_loads`): a push P enters the z-force row of Eq.
+    External loads (:mod:`tolsim.physics.velocity.ball_loads`): a push P enters the z-force row of
+    Eq.
     (18), the ball-ball braking moment -mu_bb (Q_back + Q_front) R_B e its moment rows (about
     the rolling axis e); see :func:`analytic_loaded_kernel`. Then mu matters
     (``bearing.friction_coefficient`` > 0), and the result also carries the carriage friction
     force, its free-rolling baseline, the creep stiffness K = dP/d(epsilon) (exact for the
     linear model), the traction capacity of the rigid ball with point contacts
-    (:func:`~tolsim.physics.ball_loads.point_traction_capacity`, a lower bound of the full
+    (:func:`~tolsim.physics.velocity.ball_loads.point_traction_capacity`, a lower bound of the full
     model's) and the ``sliding`` flag |P| >= capacity. With ``push=0`` (or zero neighbour
     forces) epsilon is bit for bit the unloaded one.
 
@@ -917,7 +921,7 @@ def analytic(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
         constants, "Validity"): |c_i/a_i| > ``MAX_ZERO_VELOCITY_RATIO`` or |dbeta_i +
         dgamma_i| > ``MAX_ANGLE_SUM`` at any contact, or |epsilon| >
         ``MAX_VELOCITY_DEVIATION``. Inside them epsilon was measured within
-        ``VALIDITY_ERROR_BUDGET`` of :func:`tolsim.physics.friction.full` (derived for the
+        ``VALIDITY_ERROR_BUDGET`` of :func:`tolsim.physics.velocity.full.full` (derived for the
         default ``k_f``). With either: :class:`LoadedVelocityResult`, whose ``valid`` applies
         the same criteria to the loaded dgamma_i and the free epsilon, and is False when
         sliding.

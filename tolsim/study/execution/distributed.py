@@ -1,6 +1,7 @@
 """Run the chunks of a study on a dask.distributed cluster (``tolsim run --scheduler``).
 
-:func:`tolsim.study.runner.run_study` stays the orchestrator: it cuts the study into chunks of
+:func:`tolsim.study.execution.runner.run_study` stays the orchestrator: it cuts the study into
+chunks of
 whole random blocks, merges the per-block accumulators strictly in block order, checkpoints and
 stops at a precision target. This module only changes where the chunk results come from: a
 :class:`DaskSession` submits them as dask tasks and hands them back in block order
@@ -13,7 +14,8 @@ Design
 * A task is a run of consecutive chunks (:func:`chunks_per_task`): about :data:`TASK_BALLS`
   balls, fewer when the study is small, so that every worker thread gets at least
   :data:`TASKS_PER_THREAD` tasks. It returns the chunks' ``(block_index, Accumulator,
-  spot_rows)`` lists, as :func:`tolsim.study.runner.run_chunk` does: about 12 kB per block,
+  spot_rows)`` lists, as :func:`tolsim.study.execution.runner.run_chunk` does: about 12 kB per
+  block,
   never an array per ball (the rows of ``save_samples`` assemblies aside, which are asked for).
 * Look-ahead: at most :data:`LOOKAHEAD_PER_THREAD` x (worker threads) + 1 tasks are submitted
   and not yet merged. A task that finishes out of turn keeps its result on its worker until
@@ -259,7 +261,7 @@ class DaskSession:
         ----------
         config : tolsim.study.spec.StudyConfig
         chunks : list of list of int
-            Consecutive block indices, as :func:`tolsim.study.runner.run_study` cuts them.
+            Consecutive block indices, as :func:`tolsim.study.execution.runner.run_study` cuts them.
         spot_indices : tolsim.study.sampling.SpotCheckPlan
         save_samples : int
 
@@ -299,7 +301,7 @@ class DaskSession:
                 self.client.cancel(list(pending))
 
     def spot_checks(self, config, rows):
-        """:func:`tolsim.study.runner.finish_spot_checks` as a task (the full-model
+        """:func:`tolsim.study.execution.runner.finish_spot_checks` as a task (the full-model
         re-solves of the recorded candidates)."""
         future = self.client.submit(_run_spot_checks, config, rows, self._context(),
                                     key=f"tolsim-spot-checks-{uuid.uuid4().hex[:8]}",
@@ -364,15 +366,15 @@ def dask_setup(worker):
 
 def _run_task(config, chunks, spot_indices, save_samples, context):
     """One task: ``run_chunk`` over consecutive chunks, the next chunk drawn in a thread while
-    one is evaluated (:func:`tolsim.study.runner._prefetched`)."""
-    from tolsim.study.runner import _prefetched
+    one is evaluated (:func:`tolsim.study.execution.runner._prefetched`)."""
+    from tolsim.study.execution.runner import _prefetched
 
     with _TaskContext(context):
         return list(_prefetched(config, chunks, spot_indices, save_samples))
 
 
 def _run_spot_checks(config, rows, context):
-    from tolsim.study.runner import finish_spot_checks
+    from tolsim.study.execution.runner import finish_spot_checks
 
     with _TaskContext(context):
         return finish_spot_checks(config, rows)
@@ -403,7 +405,7 @@ class _TaskContext:
 
         global _prepared
         if not _prepared:
-            from tolsim.study.runner import retain_freed_memory
+            from tolsim.study.execution.runner import retain_freed_memory
 
             retain_freed_memory()
             _prepared = True

@@ -3,8 +3,8 @@
 [Lin2018] stops where ball-to-ball contact begins (Sec. 4: "the effect of velocity difference
 on the level of ball-to-ball contact force and sliding friction loss still remains a
 question"). This module derives what a touching neighbour does to one ball; the velocity
-models take the loads as keyword arguments (:func:`tolsim.physics.analytic.analytic`,
-:func:`tolsim.physics.friction.full`).
+models take the loads as keyword arguments (:func:`tolsim.physics.velocity.analytic.analytic`,
+:func:`tolsim.physics.velocity.full.full`).
 
 Nomenclature (code name <- symbol)
 ----------------------------------
@@ -70,7 +70,7 @@ Q pass through the centre (z, no moment): the push P = Q_back - Q_front along +z
 Equilibrium (Eq. 18 with the loads)
 -----------------------------------
 Force along z (the first row of Eq. 18): sum_i f_i + P = 0. Moments: sum_i (-R f_i x_i -
-M_i y_i) + M_bb = 0, i.e. in the rows of :mod:`tolsim.physics.analytic` (friction over mu,
+M_i y_i) + M_bb = 0, i.e. in the rows of :mod:`tolsim.physics.velocity.analytic` (friction over mu,
 u_i = f_i / mu, m_i = M_i / (mu R)):
 
     sum u_i = -P / mu,   sum u_i x_i + sum m_i y_i = -(mu_bb / mu) (Q_back + Q_front) e,

@@ -1,6 +1,6 @@
 """Interval estimators of a study: binomial intervals, histogram quantiles, and intervals that
 treat the assembly as the sampling unit. Pure NumPy/SciPy (no other tolsim import), so both
-:mod:`tolsim.study.quality` and :mod:`tolsim.study.statistics` can import it.
+:mod:`tolsim.study.statistics.quality` and :mod:`tolsim.study.statistics.accumulator` can import it.
 
 Independent trials
 ------------------
@@ -127,7 +127,7 @@ CLUSTER_INTERVALS = ("wilson", "clopper-pearson")
 
 
 # ---------------------------------------------------------------------------------------------
-# result types (re-exported by tolsim.study.quality)
+# result types (re-exported by tolsim.study.statistics.quality)
 # ---------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -169,7 +169,7 @@ class Proportion:
 
 @dataclass(frozen=True)
 class Capability:
-    """Capability of epsilon against |epsilon| <= L (see :mod:`tolsim.study.quality`).
+    """Capability of epsilon against |epsilon| <= L (see :mod:`tolsim.study.statistics.quality`).
 
     Attributes
     ----------

@@ -6,10 +6,10 @@ For the outputs a quality engineer signs off,
 * the gap closure of each adjacent pair over the horizon,
   c_j = (epsilon_j - epsilon_(j+1)) v/2 T, the distance by which the trailing ball j gains on
   ball j + 1 in the stroke (with constant epsilon the balls touch when it exceeds their
-  initial gap, :func:`tolsim.study.propagation.first_contact_constant`),
+  initial gap, :func:`tolsim.study.pipeline.propagation.first_contact_constant`),
 
 :func:`linear_stackup` linearises the study's own evaluation path
-(:func:`tolsim.study.evaluate.evaluate_balls`: its static model, its velocity model, the
+(:func:`tolsim.study.pipeline.evaluate.evaluate_balls`: its static model, its velocity model, the
 full-model re-solves) at the nominal state, every tolerance source at its mean, by central
 differences (one evaluation of 2 d + 1 trains for d sources: epsilon of a ball depends on
 that ball's own source values only, so perturbing a source at every ball at once gives
@@ -245,7 +245,7 @@ def linear_stackup(config) -> LinearStackup:
     LinearStackup
         See the module docstring for the definitions.
     """
-    from tolsim.study.evaluate import evaluate_balls
+    from tolsim.study.pipeline.evaluate import evaluate_balls
 
     balls = config.train.balls
     tolerances = [t for t in config.tolerances if t.distribution.is_random]

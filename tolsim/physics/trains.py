@@ -1,12 +1,12 @@
 r"""Trains of balls after contact: clusters, ball-to-ball forces, net pushes (issue 13, part 2).
 
 The loaded balls of one track form a *train*, numbered from the trailing end (ball 0) to the
-leading end (ball n - 1), as in :mod:`tolsim.study.propagation`. Pair j is ball j and ball
+leading end (ball n - 1), as in :mod:`tolsim.study.pipeline.propagation`. Pair j is ball j and ball
 j + 1, with gap g_j >= 0. This module moves the balls after they touch. It is a pure layer
 over arrays: epsilon, the creep stiffnesses and the gaps come in, and trajectories and
 contact forces go out. It imports nothing from io, cli or reports.
 
-Conventions (those of :mod:`tolsim.study.propagation`)
+Conventions (those of :mod:`tolsim.study.pipeline.propagation`)
 --------------------------------------------------------
 The top groove (the carriage) moves at +v along z. A free ball's centre moves at
 (1 + epsilon_i) v / 2, so the gap of pair j closes at -dg_j/dt = (epsilon_j - epsilon_{j+1})
@@ -27,7 +27,7 @@ epsilon; from the single-ball physics), the ball rolls at
     w_i = epsilon_i + (Q_{i-1} - Q_i) / K_i + c_i (Q_{i-1} + Q_i)                        (1)
 
 The optional c_i [1/N] (``braking_sensitivity``, default 0; the field of the same name in
-:class:`tolsim.physics.ball_loads.BallLoadFields`, d epsilon / d(Q_back + Q_front) at fixed
+:class:`tolsim.physics.velocity.ball_loads.BallLoadFields`, d epsilon / d(Q_back + Q_front) at fixed
 P) carries the ball-to-ball friction. Both balls of a pair spin the same way, so their
 surfaces slide at the contact. The Coulomb friction there (mu_bb Q) puts a moment on each
 ball, and that moment changes epsilon in proportion to the normal force, whichever side the
@@ -133,7 +133,8 @@ predicted to close within 1e-12 x horizon of it (simultaneous events).
 
 First contact. Before the first event every ball is a singleton, so w_i = epsilon_i
 exactly, and pair j closes at g_j / ((eps_j - eps_{j+1}) v / 2). This is the same
-expression as :func:`tolsim.study.propagation.first_contact_constant`, evaluated in the same
+expression as :func:`tolsim.study.pipeline.propagation.first_contact_constant`, evaluated in the
+same
 order, ties going to the smallest j. A pair closed at t = 0 with eps_j > eps_{j+1} is always
 in one block (a block boundary needs eps_j <= w_j <= w_{j+1} <= eps_{j+1}). A closed pair
 with eps_j <= eps_{j+1} can be pooled only together with such a pair. So the first contact
@@ -143,9 +144,9 @@ propagation.
 Varying epsilon: the step rule of ``along_track``
 -------------------------------------------------
 With ``along_track`` propagation epsilon and K of every ball change as it rolls, and the
-trains are followed with the integrator's steps of dt (:class:`tolsim.study.friction.
-TrackFriction` drives the two kernels below from :mod:`tolsim.study.propagation` and
-:mod:`tolsim.study.carriage_track`). A pair is *closed* at the start of a step when the
+trains are followed with the integrator's steps of dt (:class:`tolsim.study.pipeline.track_friction.
+TrackFriction` drives the two kernels below from :mod:`tolsim.study.pipeline.propagation` and
+:mod:`tolsim.study.pipeline.carriage_track`). A pair is *closed* at the start of a step when the
 previous step ended with it in contact (at t = 0: a zero initial gap). Per step:
 
 1. *Cluster rule* (:func:`step_clusters_kernel`, the rule of :func:`cluster_velocities`):
@@ -192,7 +193,8 @@ stroke from the steps in which a contact starts or ends (tests/test_friction_alo
 Quasi-static assumption (numbers)
 ---------------------------------
 Take a 10 mm steel ball: m = 7850 kg/m^3 x (4/3) pi (5 mm)^3 = 4.11 g. The creep stiffness
-is K ~ 3e2 to 1e4 N. :func:`tolsim.physics.analytic.analytic` gives 673 N for each ball of the
+is K ~ 3e2 to 1e4 N. :func:`tolsim.physics.velocity.analytic.analytic` gives 673 N for each ball of
+the
 paper's pair ([Lin2018] Sec. 3.2 case (a): N_y = 200 N, rho = -/+0.6, theta = 2 deg, 57 and
 226 N per contact), 705 N for the nominal ball at N_y = 200 N (141 N per contact) and 280 N
 at 50 N (K ~ F^(2/3)); up to 1e4 N when K epsilon ~ a few N at epsilon ~ 1e-3. The groove
@@ -241,7 +243,7 @@ Q_{-1} = Q_{n-1} = 0. Consequences, which the tests check:
 Not modelled: an end seal or retainer that would press on the end balls; with the
 event-driven solution, balls entering or leaving the loaded zone during the stroke (the set
 of balls is fixed over the horizon). With a carriage and ``along_track`` propagation balls
-do enter and leave (:mod:`tolsim.study.carriage_track`, "After contact"): a ball leaving
+do enter and leave (:mod:`tolsim.study.pipeline.carriage_track`, "After contact"): a ball leaving
 the zone drops its contacts, one entering it joins its train with an open gap.
 
 Outputs
@@ -551,7 +553,8 @@ def step_project_kernel(start, end, stiffness, braking, loaded, member, ok, labe
 
 @jit
 def _first_contact_pairwise(gap, eps, half_speed, horizon):
-    """The rule of :func:`tolsim.study.propagation.constant_contact_kernel` for one train."""
+    """The rule of :func:`tolsim.study.pipeline.propagation.constant_contact_kernel` for one
+    train."""
     best = np.inf
     pair = -1
     for j in range(gap.shape[0]):
@@ -766,7 +769,7 @@ def _fill_invalid(t_, first_time, first_pair, out_first_time, out_first_pair,
                   out_label, out_grid_displacement, out_grid_force, out_grid_push,
                   out_grid_label, out_segment_time, out_segment_force):
     """Outputs of a train that could not be followed: NaN, -1, and the pairwise first
-    contact of :func:`tolsim.study.propagation.first_contact_constant`."""
+    contact of :func:`tolsim.study.pipeline.propagation.first_contact_constant`."""
     out_valid[t_] = False
     out_first_time[t_] = first_time
     out_first_pair[t_] = first_pair
@@ -887,7 +890,7 @@ class TrainResult:
 
     Shapes: m trains, n balls, n - 1 pairs, S grid samples. A train with an unresolved or
     sliding ball (non-finite epsilon, K or c) has ``valid = False``. Its first contact follows
-    :func:`tolsim.study.propagation.first_contact_constant` (resolved pairs only), and
+    :func:`tolsim.study.pipeline.propagation.first_contact_constant` (resolved pairs only), and
     everything else is NaN or -1.
 
     Attributes
@@ -895,7 +898,7 @@ class TrainResult:
     valid : ndarray of bool (m,)
     first_contact_time : ndarray (m,)
         [s], inf if no contact within the horizon. Bit for bit equal to
-        :func:`tolsim.study.propagation.first_contact_constant`.
+        :func:`tolsim.study.pipeline.propagation.first_contact_constant`.
     first_contact_pair : ndarray of int (m,)
         Trailing ball of the first touching pair, -1 if none.
     contact_time : ndarray (m, n - 1)

@@ -3,9 +3,9 @@ r"""What contact costs: the carriage friction of ball trains in a study (issue 1
 A study with ``[contact]`` (:class:`tolsim.study.spec.ContactSettings`) follows every train of
 every sampled assembly over the stroke after its balls touch and records what the carriage pays
 for it. Each ball's creep coefficients come from the single-ball physics (the loaded analytic
-model, :mod:`tolsim.physics.ball_loads`, through
-:func:`tolsim.physics.analytic.creep_coefficients_kernel`, its fast path at zero load; or
-:func:`tolsim.physics.friction.full`), the trains from :mod:`tolsim.study.trains`; what is
+model, :mod:`tolsim.physics.velocity.ball_loads`, through
+:func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`, its fast path at zero load; or
+:func:`tolsim.physics.velocity.full.full`), the trains from :mod:`tolsim.physics.trains`; what is
 added here is the carriage friction force of a track over the stroke, its reduction to one row
 per assembly, the streamed statistics (:class:`FrictionStatistics`) and the result-file
 variables (:data:`FRICTION_VARIABLES`).
@@ -17,7 +17,7 @@ force of pair j (balls j, j + 1) [N]; F_track -> the track's carriage friction f
 
 The friction force of a track
 -----------------------------
-The loaded analytic model is linear in the loads (:mod:`tolsim.physics.ball_loads`): a ball
+The loaded analytic model is linear in the loads (:mod:`tolsim.physics.velocity.ball_loads`): a ball
 with net push P_i = Q_{i-1} - Q_i and neighbour-force sum S_i = Q_{i-1} + Q_i carries
 
     F_c,i = F_0,i + a_i P_i + b_i S_i.
@@ -40,7 +40,7 @@ and b = 0.0707, k = 0.149 and the track's friction rises by 0.79 N over its 2.82
 (+28 %) for the rest of the stroke (tests/test_friction_study.py).
 
 With constant epsilon the contact forces are piecewise constant between events
-(:func:`tolsim.study.trains.train_contact_constant` with ``segments=True``), so (1) is too,
+(:func:`tolsim.physics.trains.train_contact_constant` with ``segments=True``), so (1) is too,
 and every figure over the stroke is exact (no time step): the time mean of the increase
 (the segment durations as weights), its maximum and minimum, the ripple of F_track
 (max - min over the stroke; the baseline is constant), the largest ball-to-ball force, the
@@ -51,15 +51,15 @@ With ``along_track`` propagation
 Epsilon, K and the other creep coefficients of a ball change as it rolls past the rail errors
 and through the carriage's load distribution, and with a carriage balls leave and enter its
 loaded zone. The trains are then followed step by step, inside the propagation's midpoint
-integration (:class:`TrackFriction`, driven by :func:`tolsim.study.propagation.
-first_contact_along_track` and :func:`tolsim.study.carriage_track.
+integration (:class:`TrackFriction`, driven by :func:`tolsim.study.pipeline.propagation.
+first_contact_along_track` and :func:`tolsim.study.pipeline.carriage_track.
 first_contact_carriage_track`). At every step of dt = T / ``study.time_steps`` each ball's
 epsilon and creep coefficients come from its loaded state at its position, at the start of
 the step (predictor, only for trains with a closed pair) and at its midpoint; the cluster rule
-(:func:`tolsim.study.trains.cluster_velocities`, touching = the closed pairs) gives the loaded
+(:func:`tolsim.physics.trains.cluster_velocities`, touching = the closed pairs) gives the loaded
 velocities w_i, the balls advance at (1 + w_i) v / 2, and a gap that closes inside the step
 is closed by the kappa-weighted projection of the end positions, whose multipliers give the
-step-mean forces Qbar_j (eqs. 7, 8 of :mod:`tolsim.study.trains`, "Varying epsilon", with the
+step-mean forces Qbar_j (eqs. 7, 8 of :mod:`tolsim.physics.trains`, "Varying epsilon", with the
 derivation). A contact ends when the cluster rule leaves its balls apart: its force returns to
 zero and the gap opens. Per step k, with the coefficients at the midpoint,
 
@@ -87,7 +87,7 @@ zero and the gap opens. Per step k, with the coefficients at the midpoint,
   step is a lower bound of its maximum (certain exceedance, below).
 
 *Error of the step.* For constant epsilon and K the step is exact whatever dt (derivation in
-:mod:`tolsim.study.trains`): the positions at step ends and the step-mean forces are the
+:mod:`tolsim.physics.trains`): the positions at step ends and the step-mean forces are the
 event-driven ones, so the baseline, ``increase_mean`` and ``contact_fraction`` agree with
 the exact figures above to rounding (1e-8 relative, tests/test_friction_along_track.py).
 Maxima and minima are taken over step means, so a contact that forms inside the last step
@@ -109,7 +109,7 @@ is counted either way.)
 step when it is in the loaded zone at the step's start, midpoint and end: a ball leaving at
 the trailing end drops its contacts in the step in which it leaves, a ball entering at the
 leading end joins from the step after, with an open gap. Beyond the ends of the train no
-force acts (Q = 0, :mod:`tolsim.study.trains`, "Ends of the loaded zone"). Unloaded balls
+force acts (Q = 0, :mod:`tolsim.physics.trains`, "Ends of the loaded zone"). Unloaded balls
 (in the return path, or of a train longer than the zone at t = 0) are in no train and are
 passed through as by the first-contact propagation. K comes from each ball's own loaded
 state in the carriage solved at its position. Every assembly is followed over the whole
@@ -129,14 +129,14 @@ consistent with each other. Without a carriage the assembly is its train.
 
 Unresolved and sliding trains (counted, bounded, never dropped)
 ---------------------------------------------------------------
-* A ball without epsilon (unresolved in :mod:`tolsim.study.evaluate`), or whose creep
+* A ball without epsilon (unresolved in :mod:`tolsim.study.pipeline.evaluate`), or whose creep
   coefficients are not finite (K <= 0, |c K| >= 1 where the train model does not apply, a
   ``full`` creep solve that failed), leaves its train unresolved: the train is not followed.
 * **Sliding.** The linear creep law holds while each ball rolls. It stops when the push on a
   ball reaches its traction capacity, |P_i| >= P_cap,i, or the neighbour forces stall its
-  rotation, S_i >= braking capacity (:mod:`tolsim.physics.ball_loads`). Every segment of a
+  rotation, S_i >= braking capacity (:mod:`tolsim.physics.velocity.ball_loads`). Every segment of a
   train is checked against the capacities at zero neighbour force (the traction capacity
-  through a lower bound, :func:`tolsim.physics.analytic.creep_coefficients_kernel`). The
+  through a lower bound, :func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`). The
   braking only raises the traction capacity (it adds a non-negative term to the function whose
   minimum is P_cap), so this check is conservative: it may flag a ball that would still roll,
   never miss one. A train with a sliding ball is **unresolved from the onset of sliding**: the
@@ -146,7 +146,7 @@ Unresolved and sliding trains (counted, bounded, never dropped)
 * An assembly is resolved when all its tracks are. Its friction figures enter the
   histograms, quantiles and moments only then (estimates over the resolved assemblies, as for
   the time to contact). The exceedance of the spec limit L (``friction_increase_limit_N``)
-  is counted like P(contact) in :mod:`tolsim.study.statistics`: an assembly *certainly*
+  is counted like P(contact) in :mod:`tolsim.study.statistics.accumulator`: an assembly *certainly*
   exceeds when a resolved track, or a sliding track before its onset, has an increase above
   L; with k such assemblies, u unresolved ones without a certain exceedance and N in all,
   P(increase > L) is k / (N - u) with its Clopper-Pearson interval, and the
@@ -156,12 +156,13 @@ Which creep model
 -----------------
 ``creep_model = "analytic"`` (default): K, the braking sensitivity c, F_0, a, b and the
 capacities from the loaded analytic model at the ball's own loaded contact state (dbeta_i, F_i
-from the study's static model; :func:`tolsim.physics.analytic.creep_coefficients_kernel`, one
+from the study's static model; :func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`,
+one
 vectorised call per chunk, about 7 M balls/s on 2 cores), for every ball, also those whose
 epsilon the study took from the full model (K is a smooth property of the contact state: the
 analytic K is 2.6-5.7 % below the full model's on the paper's ball, tests/test_ball_push.py).
 ``"full"``: K, c, F_0 and the traction and braking capacities from
-:func:`tolsim.physics.friction.full` at zero load (slow: about 1e4 balls/s); the carriage-force
+:func:`tolsim.physics.velocity.full.full` at zero load (slow: about 1e4 balls/s); the carriage-force
 slopes a, b stay the analytic ones (the full model gives the force at a load, not its slopes).
 The train's epsilon is always the study's epsilon of the ball.
 
@@ -189,18 +190,24 @@ from numba import prange
 
 from tolsim._jit import pjit
 from tolsim.physics._fastmath import cbrt_nonnegative
-from tolsim.physics.analytic import LOAD_COLUMNS, creep_coefficients_kernel
 from tolsim.physics.geometry import K_F_PAPER
 from tolsim.physics.hertz import hertz_constants
-from tolsim.study.estimators import histogram_quantiles
-from tolsim.study.statistics import QUANTILES, Accumulator, _merge_moments, clopper_pearson
-from tolsim.study.trains import (
+from tolsim.physics.trains import (
     step_clusters_kernel,
     step_project_kernel,
     train_contact_constant,
 )
+from tolsim.physics.velocity.analytic import LOAD_COLUMNS, creep_coefficients_kernel
+from tolsim.study.statistics.accumulator import (
+    QUANTILES,
+    Accumulator,
+    _merge_moments,
+    clopper_pearson,
+)
+from tolsim.study.statistics.intervals import histogram_quantiles
 
-#: Columns of the per-ball creep coefficients (:data:`tolsim.physics.analytic.LOAD_COLUMNS`).
+#: Columns of the per-ball creep coefficients
+# (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`).
 _K = LOAD_COLUMNS.index("creep_stiffness")
 _C = LOAD_COLUMNS.index("braking_sensitivity")
 _F0 = LOAD_COLUMNS.index("free_rolling_carriage_force")
@@ -226,7 +233,7 @@ FORCE_EDGES = np.concatenate([[0.0], np.logspace(-6.0, 4.0, 10 * 50 + 1)])
 # --------------------------------------------------------------------------------------------
 def _creep_analytic(dbeta, force, bearing, ball_friction):
     """LOAD_COLUMNS of the loaded analytic model at zero load, (balls, 9)
-    (:func:`tolsim.physics.analytic.creep_coefficients_kernel`)."""
+    (:func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`)."""
     n = len(dbeta)
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                          bearing.poisson_ratio)
@@ -242,7 +249,7 @@ def _creep_analytic(dbeta, force, bearing, ball_friction):
 def _creep_full(dbeta, force, bearing, ball_friction):
     """As :func:`_creep_analytic`, with K, c, F_0 and the capacities from the full model
     (NaN where it cannot take the ball or does not converge); the slopes a, b analytic."""
-    from tolsim.physics.friction import full
+    from tolsim.physics.velocity.full import full
 
     load = _creep_analytic(dbeta, force, bearing, ball_friction)
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
@@ -279,13 +286,13 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
     ----------
     config : tolsim.study.spec.StudyConfig
         With ``contact`` settings.
-    state : tolsim.study.evaluate.BallState
+    state : tolsim.study.pipeline.evaluate.BallState
         Balls of shape (m, tracks * balls).
 
     Returns
     -------
     ndarray, shape (m * tracks * balls, len(LOAD_COLUMNS))
-        The columns of :data:`tolsim.physics.analytic.LOAD_COLUMNS` at zero load (K [N],
+        The columns of :data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS` at zero load (K [N],
         c [1/N], F_0 [N], a, b [-], P_cap, braking capacity [N]); NaN for an unresolved ball
         (``state.valid`` False: its contact state may be missing or partial).
     """
@@ -368,7 +375,7 @@ def stroke_friction_kernel(segment_start, segment_force, valid, load, horizon, o
 
 @pjit
 def train_inputs_kernel(eps, load, out_stiffness, out_braking):
-    """K and c of the balls for :func:`tolsim.study.trains.train_contact_constant`: NaN K
+    """K and c of the balls for :func:`tolsim.physics.trains.train_contact_constant`: NaN K
     (and c = 0) for a ball that leaves its train unresolved (module docstring): epsilon, K,
     c, F_0, a or b not finite, K <= 0 or |c K| >= 1."""
     for t in prange(eps.shape[0]):
@@ -524,7 +531,7 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
         With ``contact`` settings.
     initial_gap : ndarray, shape (m, tracks * (balls - 1))
         Gaps at the start of the stroke [m], track by track.
-    state : tolsim.study.evaluate.BallState
+    state : tolsim.study.pipeline.evaluate.BallState
         The evaluated balls at the start of the stroke, shape (m, tracks * balls).
     block : tolsim.study.sampling.Block, optional
         The block of the assemblies; needed with ``along_track`` propagation, whose trains
@@ -630,7 +637,7 @@ def step_friction_kernel(loaded, member, load, force, ok, contact, formed, weigh
 
 def _flat_balls(state, index):
     """The balls ``index`` (into the flattened balls) of a BallState, as a flat BallState."""
-    from tolsim.study.evaluate import BallState
+    from tolsim.study.pipeline.evaluate import BallState
 
     def flat(x, tail=()):
         return np.asarray(x).reshape((-1,) + tail)[index]
@@ -644,8 +651,8 @@ def _flat_balls(state, index):
 class TrackFriction:
     """The trains of a block followed after contact, step by step (``along_track``).
 
-    The integrators (:func:`tolsim.study.propagation.first_contact_along_track`,
-    :func:`tolsim.study.carriage_track.first_contact_carriage_track`) call it at every
+    The integrators (:func:`tolsim.study.pipeline.propagation.first_contact_along_track`,
+    :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`) call it at every
     midpoint step when they are given one: :meth:`begin` with the closed pairs at t = 0,
     then per step :meth:`predict` (the velocities of the predictor), :meth:`velocity` (those
     of the step, at the midpoint) and :meth:`advance` (the projection and the step's
@@ -781,7 +788,7 @@ class TrackFriction:
 
     def carry(self, old_id, new_id):
         """Follow the pair flags to the balls' new slots (after exits and entries)."""
-        from tolsim.study.carriage_track import carry_pairs_kernel
+        from tolsim.study.pipeline.carriage_track import carry_pairs_kernel
 
         old_id = np.ascontiguousarray(old_id).reshape(len(self.closed), -1)
         new_id = np.ascontiguousarray(new_id).reshape(len(self.closed), -1)
@@ -811,18 +818,19 @@ def follow_along_track(config, block, initial_state=None, record=False):
     """Integrate a block with ``along_track`` propagation and its trains after contact.
 
     Returns (time, pair, train_valid, resolve_seconds, state, carriage, friction): the
-    outputs of :func:`tolsim.study.propagation.first_contact_along_track` (free balls; state
-    the balls at t = 0, carriage None) or of :func:`tolsim.study.carriage_track.
+    outputs of :func:`tolsim.study.pipeline.propagation.first_contact_along_track` (free balls;
+    state
+    the balls at t = 0, carriage None) or of :func:`tolsim.study.pipeline.carriage_track.
     first_contact_carriage_track`, and the :class:`TrackFriction` that followed the trains.
     """
     friction = TrackFriction(config, record=record)
     if config.carriage is not None:
-        from tolsim.study.carriage_track import first_contact_carriage_track
+        from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
 
         *out, state, carriage = first_contact_carriage_track(config, block, friction=friction)
         return (*out, state, carriage, friction)
-    from tolsim.study.evaluate import evaluate_balls, loads_at
-    from tolsim.study.propagation import first_contact_along_track
+    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
+    from tolsim.study.pipeline.propagation import first_contact_along_track
     from tolsim.study.sampling import error_values
 
     state = initial_state
@@ -843,7 +851,7 @@ class FrictionStatistics:
     assemblies the count, mean and M2 (Chan et al.), min and max of every column of
     :data:`COLUMNS`, and fixed-bin histograms (:data:`FORCE_EDGES`, with underflow and
     overflow counts) of :data:`HISTOGRAM_COLUMNS`. Merging in block order makes the result
-    independent of the chunking, as :class:`tolsim.study.statistics.Accumulator`.
+    independent of the chunking, as :class:`tolsim.study.statistics.accumulator.Accumulator`.
 
     Parameters
     ----------
@@ -971,7 +979,8 @@ class FrictionStatistics:
 
 
 class FrictionAccumulator(Accumulator):
-    """:class:`~tolsim.study.statistics.Accumulator` with the friction statistics of a study
+    """:class:`~tolsim.study.statistics.accumulator.Accumulator` with the friction statistics
+    of a study
     with ``[contact]`` in :attr:`friction` (a :class:`FrictionStatistics`), merged and
     checkpointed with it (state keys ``friction_*``)."""
 
@@ -1058,9 +1067,9 @@ class FrictionExamples:
 
 
 def _evaluate_assemblies(config, block):
-    """The balls of a block, as :func:`tolsim.study.runner.run_chunk` evaluates them."""
-    from tolsim.study.carriage import evaluate_carriage
-    from tolsim.study.evaluate import evaluate_balls, loads_per_ball
+    """The balls of a block, as :func:`tolsim.study.execution.runner.run_chunk` evaluates them."""
+    from tolsim.study.pipeline.carriage import evaluate_carriage
+    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_per_ball
     from tolsim.study.sampling import error_values
 
     values = error_values(config, block)
@@ -1240,7 +1249,8 @@ FRICTION_COORDINATES = {
 
 #: Declarations for :mod:`tolsim.io.schema` of the variables of a study with ``[contact]``:
 #: name -> (dims, units, long_name, kind). "Worst track": the track of an assembly with the
-#: largest friction increase (:mod:`tolsim.study.friction`); statistics over the assemblies
+#: largest friction increase (:mod:`tolsim.study.pipeline.track_friction`); statistics over the
+# assemblies
 #: whose friction is resolved.
 FRICTION_VARIABLES = {
     "ball_friction_coefficient": ((), "1", "Coulomb friction coefficient of the "
@@ -1312,7 +1322,7 @@ for _name, _what in _HIST_WHAT.items():
                               "i"),
     })
 
-# Sobol' indices of the friction increase (tolsim.study.sensitivity, output
+# Sobol' indices of the friction increase (tolsim.study.analyses.sensitivity, output
 # ``friction_increase``), named like its SENSITIVITY_VARIABLES
 for _index, _label in (("first_order", "first-order"), ("total", "total-effect")):
     for _suffix, _end in (("", ""), ("_ci_lower", "lower"), ("_ci_upper", "upper")):
@@ -1341,7 +1351,7 @@ FRICTION_ASSUMPTIONS_ALONG_TRACK = (
 def friction_variables(result) -> tuple:
     """(coordinates, data variables, attributes) of a study with ``[contact]``.
 
-    ``result``: a :class:`tolsim.study.runner.StudyResult` whose statistics carry
+    ``result``: a :class:`tolsim.study.execution.runner.StudyResult` whose statistics carry
     :class:`FrictionStatistics` (``statistics.friction``) and, optionally, its
     ``friction_examples``.
     """

@@ -3,7 +3,7 @@
 :func:`run_study` is the Python API behind ``tolsim run``. Work is cut into chunks of whole
 random blocks (:mod:`tolsim.study.sampling`); each chunk is sampled, evaluated through the
 static model and the Numba velocity kernel in one go, propagated, and reduced to one
-:class:`~tolsim.study.statistics.Accumulator` per block. Blocks are merged strictly in
+:class:`~tolsim.study.statistics.accumulator.Accumulator` per block. Blocks are merged strictly in
 block order, so the result does not depend on ``chunk_blocks`` or ``workers``.
 
 Long runs are resumable: after merged blocks the state is saved (at most every
@@ -13,7 +13,8 @@ fingerprint: config, seed, samples, version) continues from it, giving a bit-ide
 result. The caller deletes the checkpoint after writing the final output.
 
 A checkpoint only ever holds a completely merged state. After each block the statistics
-(merged into a copy, :meth:`~tolsim.study.statistics.Accumulator.merged`), the next block
+(merged into a copy, :meth:`~tolsim.study.statistics.accumulator.Accumulator.merged`), the next
+block
 and the spot-check rows are replaced together, by one assignment of a :class:`_Progress`; a
 KeyboardInterrupt (Ctrl-C), wherever it lands, saves the last such state.
 
@@ -26,7 +27,7 @@ run too). The interval is not corrected for the data-dependent stopping.
 Rare events (issue 15): with ``[study] estimator = "subset"`` or ``"importance"`` the plain
 Monte Carlo run of ``samples`` assemblies is made as always (it gives the epsilon
 statistics, the time to contact, the spot checks and a first P(contact)), and *after* it the
-estimator runs on every event the study defines (:func:`tolsim.study.limit_state.
+estimator runs on every event the study defines (:func:`tolsim.study.analyses.limit_state.
 estimate_events`: contact within the horizon, |epsilon| and friction spec exceedance), in
 this process (``workers`` and ``scheduler`` serve the plain run), seeded from the study's
 seed with the spawn key documented there, and not checkpointed (it takes seconds where the
@@ -46,10 +47,12 @@ import numpy as np
 from numba.core import event as numba_event
 
 from tolsim import __version__
-from tolsim.study import saved_samples
-from tolsim.study.carriage import evaluate_carriage, solve_config_carriage
-from tolsim.study.carriage_track import first_contact_carriage_track
-from tolsim.study.evaluate import (
+from tolsim.study.analyses.limit_state import check_supported, estimate_events
+from tolsim.study.analyses.worst_case import linear_stackup
+from tolsim.study.execution import saved_samples
+from tolsim.study.pipeline.carriage import evaluate_carriage, solve_config_carriage
+from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
+from tolsim.study.pipeline.evaluate import (
     MODEL_FAST,
     BallState,
     evaluate_balls,
@@ -57,15 +60,14 @@ from tolsim.study.evaluate import (
     loads_at,
     loads_per_ball,
 )
-from tolsim.study.friction import (
+from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
+from tolsim.study.pipeline.track_friction import (
     TrackFriction,
     accumulator_from_state,
     evaluate_friction,
     friction_examples,
     study_accumulator,
 )
-from tolsim.study.limit_state import check_supported, estimate_events
-from tolsim.study.propagation import first_contact_along_track, first_contact_tracks
 from tolsim.study.sampling import (
     SPOT_CHECK_SCHEME,
     block_size_of,
@@ -76,8 +78,7 @@ from tolsim.study.sampling import (
     select_spot_checks,
     spot_check_plan,
 )
-from tolsim.study.statistics import Accumulator
-from tolsim.study.worst_case import linear_stackup
+from tolsim.study.statistics.accumulator import Accumulator
 
 #: Balls evaluated together in one chunk (sets the default ``chunk_blocks``).
 CHUNK_BALLS = 1 << 18
@@ -88,7 +89,7 @@ SPOT_FIELDS = ("ball_index", "contact_angle_deviation", "normal_force",
 
 @dataclass
 class SpotChecks:
-    """Balls re-solved with the full model (``tolsim.physics.friction.full``).
+    """Balls re-solved with the full model (``tolsim.physics.velocity.full.full``).
 
     Arrays have length k (the ``spot_check`` dimension); ``status`` explains a k of zero.
     ``stratum``: 0 uniform, 1 near the spec limit (:class:`tolsim.study.sampling.
@@ -121,21 +122,25 @@ class StudyResult:
     workers: int = 1
     resumed_blocks: int = 0
     meta: dict = field(default_factory=dict)
-    sensitivity: object = None  # tolsim.study.sensitivity.SensitivityResult, if asked for
+    sensitivity: object = None  # tolsim.study.analyses.sensitivity.SensitivityResult, if asked for
     target: object = None  # the PrecisionTarget of the run, if it had one
     target_reached: bool = False
     samples_maximum: int = 0  # the samples asked for (= config.study.samples without target)
-    stackup: object = None  # tolsim.study.worst_case.LinearStackup: worst case and RSS
-    samples: dict | None = None  # the first assemblies' rows (tolsim.study.saved_samples)
-    carriage_nominal: object = None  # tolsim.study.carriage.CarriageResult: nominal assembly
-    friction_examples: object = None  # tolsim.study.friction.FrictionExamples ([contact])
-    # a rare-event estimator (study.estimator): event -> tolsim.study.limit_state.EventEstimate
+    stackup: object = None  # tolsim.study.analyses.worst_case.LinearStackup: worst case and RSS
+    # the first assemblies' rows (tolsim.study.execution.saved_samples)
+    samples: dict | None = None
+    # tolsim.study.pipeline.carriage.CarriageResult: nominal assembly
+    carriage_nominal: object = None
+    # tolsim.study.pipeline.track_friction.FrictionExamples ([contact])
+    friction_examples: object = None
+    # a rare-event estimator (study.estimator): event ->
+    # tolsim.study.analyses.limit_state.EventEstimate
     rare_events: dict | None = None
 
     @property
     def friction(self):
         """The friction statistics of a study with ``[contact]``
-        (:class:`tolsim.study.friction.FrictionStatistics`), else None."""
+        (:class:`tolsim.study.pipeline.track_friction.FrictionStatistics`), else None."""
         return getattr(self.statistics, "friction", None)
 
     @property
@@ -171,7 +176,8 @@ class PrecisionTarget:
     """Stop a study once P(contact) is known precisely enough.
 
     The interval is the 95 % interval that covers the partial-identification bounds of
-    P(contact) (:meth:`~tolsim.study.statistics.Accumulator.contact_probability_bounds`);
+    P(contact)
+    (:meth:`~tolsim.study.statistics.accumulator.Accumulator.contact_probability_bounds`);
     with no unresolved trains it is the Clopper-Pearson interval of k contacts in N trains.
 
     Parameters
@@ -299,7 +305,7 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
     ``drawn``: ``draw_chunk(config, block_indices)`` when the caller has it already
     (constant propagation only). ``save_samples``: the spot rows of a block also hold the
     rows of its assemblies among the first ``save_samples``
-    (:func:`tolsim.study.saved_samples.sample_rows`).
+    (:func:`tolsim.study.execution.saved_samples.sample_rows`).
     """
     out = []
     balls = config.balls
@@ -573,10 +579,11 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         resumed or ignored checkpoint, Numba compiling the kernels (:data:`COMPILING_MESSAGE`).
     save_samples : int
         Keep the inputs and outputs of the first this many assemblies (``samples`` of the
-        result, :mod:`tolsim.study.saved_samples`); 0: none.
+        result, :mod:`tolsim.study.execution.saved_samples`); 0: none.
     scheduler : str or distributed.Client, optional
         Run the chunks, grouped into tasks, and the spot checks on dask.distributed
-        (:mod:`tolsim.study.distributed`; ``pip install "tolsim[dask]"``): a scheduler address
+        (:mod:`tolsim.study.execution.distributed`; ``pip install "tolsim[dask]"``): a scheduler
+        address
         (``tcp://host:8786``), a scheduler file, ``local[:N]`` (a LocalCluster of N worker
         processes, started and closed here), a connected Client or a dask cluster object
         (a ``dask_jobqueue.SLURMCluster``, say; both left running). The results
@@ -643,7 +650,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     numba_event.register("numba:compile", notice)
     try:
         if scheduler is not None:  # tasks on dask.distributed, merged below in block order
-            from tolsim.study.distributed import DaskSession
+            from tolsim.study.execution.distributed import DaskSession
 
             session = DaskSession(scheduler, notify=notify)
             workers = session.workers  # recorded in the result
@@ -718,7 +725,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     meta = {"spot_check_seconds": time.perf_counter() - started - elapsed}
     sensitivity = None
     if config.study.sensitivity_samples:
-        from tolsim.study.sensitivity import study_sensitivity
+        from tolsim.study.analyses.sensitivity import study_sensitivity
 
         t0 = time.perf_counter()
         sensitivity = study_sensitivity(result_config,
@@ -778,7 +785,7 @@ def finish_spot_checks(config, rows: dict) -> SpotChecks:
     module = friction_module()
     if k == 0 or module is None or not hasattr(module, "full"):
         status = ("no spot checks requested" if config.study.spot_checks == 0 else
-                  "full model not available (tolsim.physics.friction.full missing): "
+                  "full model not available (tolsim.physics.velocity.full.full missing): "
                   "0 spot checks")
         if k and module is None:
             rows = {key: v[:0] if isinstance(v, np.ndarray) else v for key, v in rows.items()}

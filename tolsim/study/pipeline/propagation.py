@@ -15,19 +15,21 @@ touches when the gap closes.
     midpoint rule; a contact event is located by linear interpolation of the gap within the
     step in which it changes sign (exact for piecewise-constant epsilon).
 
-Unresolved balls (epsilon NaN: no model could solve them, :mod:`tolsim.study.evaluate`) never
+Unresolved balls (epsilon NaN: no model could solve them, :mod:`tolsim.study.pipeline.evaluate`)
+never
 close a gap: a contact is reported only for a pair whose two balls are resolved (in mode (b):
 at every evaluation so far, since an unresolved step leaves the ball's position unknown from
 then on). A reported contact is therefore certain; whether the train's first contact is
 known, or whether it touches at all when no resolved pair does, is for the statistics to
-bound (:mod:`tolsim.study.statistics`).
+bound (:mod:`tolsim.study.statistics.accumulator`).
 
 Travel to contact is the carriage travel v t [m].
 
 After contact (a study with ``[contact]``, issue 13): mode (a) leaves the trains to the
-event-driven solution of :mod:`tolsim.study.trains`; mode (b) follows them inside its own
-integration when it is given a :class:`tolsim.study.friction.TrackFriction` (the step rule
-of :mod:`tolsim.study.trains`, "Varying epsilon"). The first contact is still located on
+event-driven solution of :mod:`tolsim.physics.trains`; mode (b) follows them inside its own
+integration when it is given a :class:`tolsim.study.pipeline.track_friction.TrackFriction` (the
+step rule
+of :mod:`tolsim.physics.trains`, "Varying epsilon"). The first contact is still located on
 each step's free motion, so it is the same with and without ``[contact]``.
 """
 
@@ -35,7 +37,7 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import pjit
-from tolsim.study.evaluate import evaluate_balls, loads_at
+from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
 from tolsim.study.sampling import error_values
 
 #: What each propagation model assumes, in one sentence (summary, report, netCDF attribute).
@@ -186,11 +188,12 @@ def first_contact_along_track(config, block, initial_state=None, *, friction=Non
     block : tolsim.study.sampling.Block
     initial_state : BallState, optional
         The balls at t = 0 (evaluated here if not given).
-    friction : tolsim.study.friction.TrackFriction, optional
+    friction : tolsim.study.pipeline.track_friction.TrackFriction, optional
         With it (a study with ``[contact]``) the balls move as trains after they touch: the
-        step rule of :mod:`tolsim.study.trains` at every step, each ball's creep
+        step rule of :mod:`tolsim.physics.trains` at every step, each ball's creep
         coefficients from its loaded state at its position, and the friction figures
-        accumulated in ``friction`` (module docstring of :mod:`tolsim.study.friction`). The
+        accumulated in ``friction`` (module docstring of
+        :mod:`tolsim.study.pipeline.track_friction`). The
         first contact is the same as without it (it is located on the free motion of the
         step, which is the motion up to it).
 

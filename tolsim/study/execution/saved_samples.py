@@ -21,7 +21,8 @@ from tolsim.study.spec import SOURCES
 #: Prefix of the sample rows in a block's records (beside its spot-check rows) and of their
 #: variables.
 PREFIX = "sample_"
-#: Codes of ``sample_model`` (:data:`tolsim.study.evaluate.MODEL_UNRESOLVED`, ``MODEL_FAST``,
+#: Codes of ``sample_model`` (:data:`tolsim.study.pipeline.evaluate.MODEL_UNRESOLVED`,
+# ``MODEL_FAST``,
 #: ``MODEL_FULL``) and their CF flag meanings.
 MODEL_FLAGS = {-1: "unresolved", 0: "fast_model", 1: "full_model"}
 _UNITS = {"length": "m", "angle": "rad"}
@@ -66,7 +67,7 @@ def sample_rows(config, save_samples, start, values, initial_gap, state, contact
     values : dict
         source -> ndarray (m, balls), the source values of the evaluated assemblies [SI].
     initial_gap : ndarray (m, balls - 1)
-    state : tolsim.study.evaluate.BallState
+    state : tolsim.study.pipeline.evaluate.BallState
         Of shape (m, balls).
     contact_time, contact_pair : ndarray (m,)
         First contact (inf / -1: none).
@@ -121,7 +122,7 @@ def take(config, parts, save_samples: int, spot_plan) -> dict | None:
     rows = concatenate(parts)
     index = rows.get(f"{PREFIX}index", np.empty(0, np.int64))
     if not np.array_equal(index[:wanted], np.arange(wanted)):
-        from tolsim.study.runner import run_chunk
+        from tolsim.study.execution.runner import run_chunk
         from tolsim.study.sampling import n_blocks
 
         blocks = list(range(n_blocks(wanted, config.study.block_size)))

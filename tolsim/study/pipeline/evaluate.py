@@ -17,17 +17,18 @@ Two registries, picked by name from the config (no if/elif chains):
 
 ``VELOCITY_KERNELS``
     name -> ``f(dbeta, force, bearing, out_eps, out_valid)`` calling the Numba kernels of
-    :mod:`tolsim.physics.analytic` directly on preallocated arrays.
+    :mod:`tolsim.physics.velocity.analytic` directly on preallocated arrays.
 
 Every ball counts. A ball whose static solution converged with all four forces > 0 but which
 lies outside the fast model's validity (the error-budget thresholds of
-:mod:`tolsim.physics.analytic`) is re-solved with the full friction model
-(:func:`tolsim.physics.friction.full`, batched over the balls that need it), and its epsilon
+:mod:`tolsim.physics.velocity.analytic`) is re-solved with the full friction model
+(:func:`tolsim.physics.velocity.full.full`, batched over the balls that need it), and its epsilon
 enters the train like any other. Only a ball that no model can solve stays *unresolved*
 (epsilon NaN): its static solve did not converge, it lost a contact, or ``full`` could not
 take it (did not converge, or a contact angle or ellipse outside the model's range). The
 statistics count unresolved balls by cause and bound the probabilities over their trains
-(:mod:`tolsim.study.statistics`); none is silently dropped. Since invalid balls are re-solved,
+(:mod:`tolsim.study.statistics.accumulator`); none is silently dropped. Since invalid balls are
+re-solved,
 the fast model's thresholds trade speed against accuracy, not truth against bias.
 
 ``velocity_model = "full"`` evaluates every ball with the full model (slow; for checks).
@@ -42,7 +43,9 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-from tolsim.physics.analytic import (
+from tolsim.physics.geometry import K_F_PAPER, paired_forces
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity.analytic import (
     MAX_ANGLE_DEVIATION,
     MAX_ANGLE_SUM,
     MAX_EQ24_VELOCITY_DEVIATION,
@@ -53,8 +56,6 @@ from tolsim.physics.analytic import (
     analytic_kernel,
     eq24_kernel,
 )
-from tolsim.physics.geometry import K_F_PAPER, paired_forces
-from tolsim.physics.hertz import hertz_constants
 
 CONTACTS = ("BL", "BR", "TR", "TL")
 
@@ -68,9 +69,9 @@ def static_module():
 
 
 def friction_module():
-    """:mod:`tolsim.physics.friction` if it is installed, else None."""
+    """:mod:`tolsim.physics.velocity.full` if it is installed, else None."""
     try:
-        return importlib.import_module("tolsim.physics.friction")
+        return importlib.import_module("tolsim.physics.velocity.full")
     except ImportError:
         return None
 
@@ -264,7 +265,7 @@ MODEL_FAST, MODEL_FULL, MODEL_UNRESOLVED = 0, 1, -1
 
 
 def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
-    """epsilon of balls from :func:`tolsim.physics.friction.full`, never raising.
+    """epsilon of balls from :func:`tolsim.physics.velocity.full.full`, never raising.
 
     Balls that ``full`` cannot take (fewer than four positive forces, a loaded contact angle
     outside (0, 90) deg, a contact ellipse wider than R_B / 2) and balls for which it does not

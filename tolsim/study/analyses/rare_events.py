@@ -89,7 +89,7 @@ R_j(k) = sum_c sum_l I_{c,l} I_{c,l+k} / (n - k N_c) - P_j^2, R_j(0) = P_j (1 - 
 chains whose seeds come from one chain of the level before (often copies of one repeated
 state) are correlated. tolsim therefore estimates the variance of P_j over chain
 *families*, the chains seeded from one chain of the level before, as a cluster-sampling
-variance (the assembly as the sampling unit of :mod:`tolsim.study.estimators`, here the
+variance (the assembly as the sampling unit of :mod:`tolsim.study.statistics.intervals`, here the
 family), which holds the correlation along each chain as well (:func:`level_statistics`)::
 
     delta_j^2 = K / (K - 1) sum_F (S_F - P_j n_F)^2 / (n P_j)^2
@@ -196,7 +196,7 @@ References
 .. [Melchers1989] R. E. Melchers, "Importance sampling in structural systems", Structural
    Safety 6 (1989) 3-10, doi:10.1016/0167-4730(89)90003-9.
 .. [ClopperPearson1934] C. J. Clopper, E. S. Pearson, Biometrika 26 (1934) 404-413 (see
-   :func:`tolsim.study.estimators.clopper_pearson_interval`).
+   :func:`tolsim.study.statistics.intervals.clopper_pearson_interval`).
 """
 
 import math
@@ -208,7 +208,7 @@ from scipy.optimize import minimize
 from scipy.special import log_ndtr, logsumexp, ndtr, ndtri
 from scipy.stats import t as t_distribution
 
-from tolsim.study.estimators import clopper_pearson_interval
+from tolsim.study.statistics.intervals import clopper_pearson_interval
 
 #: Key under the given SeedSequence of every stream drawn here ('rare' in ASCII), so that a
 #: caller passing its study's root sequence does not collide with the study's own streams.
@@ -1188,7 +1188,7 @@ def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=No
 
     ``limit_state`` is a limit state of a series event with ``dimension``,
     ``component_names`` and ``component(k)`` (a limit state of component k alone; e.g.
-    :class:`tolsim.study.limit_state.LimitState`). A series event (the union of its
+    :class:`tolsim.study.analyses.limit_state.LimitState`). A series event (the union of its
     components: any pair touches, any ball beyond the limit) has a design point per
     component, often several of similar beta (the pairs of a train). Importance sampling
     around one of them misses the others' failure domains and is low by a factor of up to

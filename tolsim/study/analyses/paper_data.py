@@ -17,8 +17,6 @@ References
 import numpy as np
 import pandas as pd
 
-from tolsim.physics.analytic import analytic, eq24, point
-from tolsim.physics.friction import contact_friction, full
 from tolsim.physics.geometry import (
     TABLE1,
     TABLE1_NORMAL_LOAD,
@@ -26,6 +24,8 @@ from tolsim.physics.geometry import (
     paired_forces,
 )
 from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity.analytic import analytic, eq24, point
+from tolsim.physics.velocity.full import contact_friction, full
 
 #: Conformity ratios of Fig. 4 (see the module docstring).
 FIG4_CONFORMITIES = (0.51, 0.52, 0.53, 0.54)

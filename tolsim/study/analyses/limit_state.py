@@ -1,10 +1,11 @@
 r"""The standard-normal space of a study and its limit states, for the rare-event estimators.
 
-:mod:`tolsim.study.rare_events` estimates P(g(U) <= 0) for U ~ N(0, I_d) and a limit state g
+:mod:`tolsim.study.analyses.rare_events` estimates P(g(U) <= 0) for U ~ N(0, I_d) and a limit state
+g
 on arrays of shape (n, d). This module gives a study's d, the map from U to the study's
 :class:`~tolsim.study.sampling.Block` and the limit state g of each event the study defines
 (issue 15), and runs the estimator the config names for each event
-(:func:`estimate_events`, called by :func:`tolsim.study.runner.run_study` after its plain
+(:func:`estimate_events`, called by :func:`tolsim.study.execution.runner.run_study` after its plain
 Monte Carlo run).
 
 The standard-normal space
@@ -36,16 +37,17 @@ column as an independent standard normal (the same distribution).
 Limit states (failure where g <= 0; NaN: unresolved)
 ----------------------------------------------------
 Each is computed on the block built from U through the study's own evaluation path
-(:func:`tolsim.study.sampling.error_values`, :func:`tolsim.study.evaluate.evaluate_balls` or
-:func:`tolsim.study.carriage.evaluate_carriage`, the propagation, the friction of the
+(:func:`tolsim.study.sampling.error_values`, :func:`tolsim.study.pipeline.evaluate.evaluate_balls`
+or
+:func:`tolsim.study.pipeline.carriage.evaluate_carriage`, the propagation, the friction of the
 trains), row by row: the value of a row does not depend on the other rows of the call (no
 BLAS product mixes rows), so the estimators' results do not depend on the batch size.
 
 ``contact`` (every study with at least two balls per track) [m]
     ``constant`` propagation: the smallest margin over the adjacent pairs of every track,
     g = min_j (g0_j - c_j(T)), c_j(T) = (eps_j - eps_{j+1}) v T / 2 the closure of pair j at
-    the horizon T ([Lin2018] Sec. 3.2; :mod:`tolsim.study.propagation`, mode a). g <= 0 iff
-    a pair touches within the horizon, as :func:`~tolsim.study.propagation.
+    the horizon T ([Lin2018] Sec. 3.2; :mod:`tolsim.study.pipeline.propagation`, mode a). g <= 0 iff
+    a pair touches within the horizon, as :func:`~tolsim.study.pipeline.propagation.
     first_contact_tracks` decides (a gap of exactly 0 that does not close, where the kernel
     needs a closing rate > 0, is given the smallest positive g). The event is a *series
     system*: the union of its pairs' events, each with a smooth margin g_j (the components,
@@ -53,7 +55,8 @@ BLAS product mixes rows), so the estimators' results do not depend on the batch 
 
     ``along_track`` (single trains): the smallest gap of a resolved pair at the end of any
     integration step, g = min_{k, j} g_j(t_k), from the midpoint integration of
-    :func:`~tolsim.study.propagation.first_contact_along_track` (the same arithmetic); g <= 0
+    :func:`~tolsim.study.pipeline.propagation.first_contact_along_track` (the same arithmetic); g
+    <= 0
     iff that function reports a contact (a gap that reaches exactly 0 without closing
     further is given the smallest positive g). It is continuous but not smooth (the minimum
     over a time grid): importance sampling is not attempted (FORM needs a smooth limit state)
@@ -80,7 +83,8 @@ BLAS product mixes rows), so the estimators' results do not depend on the batch 
 
     g_contact the contact margin above [m] and v T / 2 the travel over which it is
     measured (g_contact / (v T / 2) is the margin in epsilon-difference units). g <= 0 iff the
-    increase reaches L (:mod:`tolsim.study.friction`; the plain run counts > L, a tie of
+    increase reaches L (:mod:`tolsim.study.pipeline.track_friction`; the plain run counts > L, a
+    tie of
     measure zero). g jumps at the contact boundary (the contact forces start at K delta-eps),
     so importance sampling is not attempted; subset simulation is used, as for along_track.
     An unresolved or sliding assembly whose increase certainly exceeds L (as the plain run's
@@ -92,11 +96,11 @@ in U, which the sampler never draws: the config keeps every distribution inside,
 
 Estimators
 ----------
-``subset``: :func:`~tolsim.study.rare_events.subset_simulation` on g, for every event.
+``subset``: :func:`~tolsim.study.analyses.rare_events.subset_simulation` on g, for every event.
 ``importance``: on a smooth series event (``contact`` with ``constant`` propagation,
 ``velocity_deviation_exceedance``), FORM on *every component* and importance sampling from
 the mixture of the shifted normals around their design points
-(:func:`tolsim.study.rare_events.series_importance_sampling`). Around the one design point
+(:func:`tolsim.study.analyses.rare_events.series_importance_sampling`). Around the one design point
 that FORM finds on g itself, the samples miss the other pairs' failure domains: on
 ``configs/rare_contact.toml`` that gave P(contact) = 1.8e-4 (95 % interval 1.6e-4 to 2.0e-4)
 for a true 1.18e-3, the pairs of the train having betas of 3.44 to 3.58. On the other events
@@ -109,12 +113,13 @@ Seeds
 The estimator of event e draws from ``SeedSequence(seed, spawn_key=(4, EVENT_KEYS[e]))``
 (:data:`RARE_EVENT_SPAWN_KEY`; the plain run uses (0, k) and (1, ...), the sensitivity
 analysis (2,) and (3,)), so the events' estimates are independent of each other and of the
-plain run, and reproducible. :mod:`tolsim.study.rare_events` adds its own stream key below.
+plain run, and reproducible. :mod:`tolsim.study.analyses.rare_events` adds its own stream key below.
 
 The design point in physical units
 ----------------------------------
 Importance sampling reports u* in the standard space. :func:`design_point_summary` maps it
-to the study's factors (:func:`tolsim.study.sensitivity.study_factors`: every random source,
+to the study's factors (:func:`tolsim.study.analyses.sensitivity.study_factors`: every random
+source,
 and the gaps): a source of one value per assembly gives its value at u*; a source with one
 value per ball (``ball`` sources, rail fields), per track or per gap gives the value of the
 element (ball, track or pair) whose column has the largest |u*| (u* is zero, to the
@@ -135,7 +140,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tolsim.study.rare_events import (
+from tolsim.study.analyses.rare_events import (
     ESTIMATOR_TITLES,
     SeriesDesignPoints,
     series_importance_sampling,
@@ -166,7 +171,7 @@ EVENT_TITLES = {"contact": "P(contact)", "velocity_deviation_exceedance": "P(an 
                 "|epsilon| > limit)", "friction_exceedance": "P(friction increase > limit)"}
 #: Units of each event's g.
 EVENT_UNITS = {"contact": "m", "velocity_deviation_exceedance": "1", "friction_exceedance": "1"}
-#: Name of the gap factor (as :data:`tolsim.study.sensitivity.INITIAL_GAP`).
+#: Name of the gap factor (as :data:`tolsim.study.analyses.sensitivity.INITIAL_GAP`).
 INITIAL_GAP = "initial_gap"
 
 
@@ -281,8 +286,8 @@ def _balls(config, block):
     """BallState of a block's assemblies at the start of the stroke (as ``run_chunk``), with
     the assemblies :func:`outside_model_range` evaluated at the nominal errors and then
     marked unresolved (epsilon NaN, not valid)."""
-    from tolsim.study.carriage import evaluate_carriage
-    from tolsim.study.evaluate import evaluate_balls, loads_at, loads_per_ball
+    from tolsim.study.pipeline.carriage import evaluate_carriage
+    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at, loads_per_ball
 
     values = error_values(config, block)
     bad = outside_model_range(config, values) if values else np.zeros(block.size, bool)
@@ -314,7 +319,7 @@ def contact_margins(config, block, state) -> np.ndarray:
 
     g_j = g0_j - (eps_j - eps_{j+1}) v T / 2 (``constant`` propagation; NaN where a ball of
     the pair is unresolved); a pair touches within the horizon iff g_j <= 0, as
-    :func:`tolsim.study.propagation.first_contact_tracks` decides (module docstring).
+    :func:`tolsim.study.pipeline.propagation.first_contact_tracks` decides (module docstring).
     """
     tracks, balls = config.n_tracks, config.train.balls
     m = block.size
@@ -373,11 +378,11 @@ def series(components) -> np.ndarray:
 def contact_margin_along_track(config, block, state):
     """(g [m], hit, resolved) of the contact event with ``along_track`` propagation.
 
-    The midpoint integration of :func:`tolsim.study.propagation.first_contact_along_track`
+    The midpoint integration of :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
     (the same arithmetic, step by step), recording the smallest gap of a resolved pair at the
     end of each step and its contact decision (module docstring).
     """
-    from tolsim.study.evaluate import evaluate_balls, loads_at
+    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
 
     v = config.motion.groove_velocity
     horizon = config.motion.duration
@@ -449,7 +454,7 @@ def event_values(config, block, events=None) -> dict:
     if "velocity_deviation_exceedance" in events:
         out["velocity_deviation_exceedance"] = series(exceedance_margins(config, state))
     if "friction_exceedance" in events:
-        from tolsim.study.friction import evaluate_friction
+        from tolsim.study.pipeline.track_friction import evaluate_friction
 
         limit = config.contact.friction_increase_limit
         figures = evaluate_friction(config, block.initial_gap, state, block=block)
@@ -510,7 +515,7 @@ class LimitState:
         return component_values(self.config, self._block(u), self.event)
 
     def component(self, k):
-        """g of component k alone: a limit state for :func:`~tolsim.study.rare_events.
+        """g of component k alone: a limit state for :func:`~tolsim.study.analyses.rare_events.
         find_design_point`."""
         return lambda u: self.components(u)[:, k]
 
@@ -532,7 +537,7 @@ class DesignPointSummary:
     Attributes
     ----------
     factors : tuple of str
-        :func:`tolsim.study.sensitivity.study_factors`.
+        :func:`tolsim.study.analyses.sensitivity.study_factors`.
     kinds : tuple of str
         ``length`` [m] or ``angle`` [rad] per factor.
     value : ndarray (k,)
@@ -603,7 +608,7 @@ def _factor_columns(config) -> dict:
 
 def design_point_summary(config, point, component="") -> DesignPointSummary:
     """Map a design point u* (d,) to the study's factors (module docstring)."""
-    from tolsim.study.sensitivity import study_factors
+    from tolsim.study.analyses.sensitivity import study_factors
 
     u = np.asarray(point, dtype=float)
     block = block_from_normals(config, u[None])
@@ -643,7 +648,7 @@ class EventEstimate:
     event : str
     requested : str
         The config's estimator.
-    result : tolsim.study.rare_events.RareEventResult
+    result : tolsim.study.analyses.rare_events.RareEventResult
         The estimate reported (flagged, without a number, when no estimator could back one).
     note : str
         One line when another estimator than the requested one gave ``result`` (importance
@@ -842,7 +847,7 @@ def rare_event_variables(result) -> tuple:
     (wall time) and, when it has something to say, ``estimator_note`` (a fallback) or
     ``estimator_message`` (no number); the plain run's
     counts (``n_contact`` ...) stay. Importance sampling adds the design point along
-    ``factor`` (names: :func:`tolsim.study.sensitivity.study_factors`).
+    ``factor`` (names: :func:`tolsim.study.analyses.sensitivity.study_factors`).
     """
     config = result.config
     data, attrs, factors = {}, {}, None

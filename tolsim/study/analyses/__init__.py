@@ -1,0 +1,1 @@
+"""Analyses built on the pipeline: sensitivity, worst case, rare events, the paper's data."""

@@ -1,0 +1,1 @@
+"""Studies of studies: what-if sweeps and tolerance allocation."""

@@ -1,0 +1,2 @@
+"""Where a study runs: chunks, checkpoints, saved samples, backends (inline, processes,
+dask)."""

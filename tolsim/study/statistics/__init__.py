@@ -1,0 +1,1 @@
+"""Streamed statistics of a study: accumulators, interval estimators, quality figures."""
