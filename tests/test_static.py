@@ -422,26 +422,27 @@ def test_newton_iterations_and_convergence():
 # --------------------------------------------------------------------------------------------
 def _lane_tile(nx, ny, e, bearing=TABLE1, tol=1e-12):
     """Run the lane kernels on one tile; (verified per lane, work array)."""
+    import tolsim.physics.static._kernels as lanes
     from tolsim.physics import static as st_
 
     fields = to_groove_errors(e)
     m = len(nx)
-    assert m <= st_._TILE
+    assert m <= lanes._TILE
     items = [("side_load", nx, 0), ("normal_load", ny, 0)] + st_.error_items(fields, bearing)
     (lx, ly, e_n, e_t, rb, rt, ob, ot, dd), _ = st_.prepare_inputs(items, bearing)
     d = bearing.groove_radius - bearing.ball_radius
     s0, c0 = np.sin(bearing.nominal_contact_angle), np.cos(bearing.nominal_contact_angle)
-    w = np.empty((st_._ROWS, st_._TILE))
-    st_._lane_gather(0, m, lx[:, 0], ly[:, 0], e_n, e_t, rb[:, 0], rt[:, 0], ob, ot, dd[:, 0],
-                     K, w)
+    w = np.empty((lanes._ROWS, lanes._TILE))
+    lanes._lane_gather(0, m, lx[:, 0], ly[:, 0], e_n, e_t, rb[:, 0], rt[:, 0], ob, ot,
+                       dd[:, 0], K, w)
     for groove in range(2):
-        st_._lane_start(m, groove, s0, c0, d, K, w)
-        st_._lane_newton(m, groove, s0, c0, d, K, w)
-    st_._lane_outputs(m, s0, c0, d, K, w)
+        lanes._lane_start(m, groove, s0, c0, d, K, w)
+        lanes._lane_newton(m, groove, s0, c0, d, K, w)
+    lanes._lane_outputs(m, s0, c0, d, K, w)
     outs = (np.empty((m, 4)), np.empty((m, 4)), np.empty((m, 4)), np.empty((m, 2)),
             np.empty((m, 2)), np.empty(m, bool), np.empty(m, np.int64), np.empty(m, np.int64),
             np.empty(m))
-    ok = np.array([st_._lane_store(0, j, tol, K * 1e-9**1.5, w, *outs) for j in range(m)])
+    ok = np.array([lanes._lane_store(0, j, tol, K * 1e-9**1.5, w, *outs) for j in range(m)])
     return ok, w
 
 
