@@ -49,6 +49,7 @@ from tolsim.physics.static.solve import (
     prepare_inputs,
     solve_static,
     solve_static_displacement,
+    turned_flank_offsets,
 )
 
 __all__ = [
@@ -80,4 +81,5 @@ __all__ = [
     "static_displacement_kernel",
     "static_load_kernel",
     "static_sensitivity",
+    "turned_flank_offsets",
 ]

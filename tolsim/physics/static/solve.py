@@ -146,6 +146,38 @@ class GrooveErrors:
     }
 
 
+def turned_flank_offsets(contact_angle_deviation, bearing: Bearing = TABLE1):
+    """Arc-centre offsets that turn each flank about the nominal ball centre by dbeta_i.
+
+    Realises given contact-angle deviations as groove errors: a rigid ball at the nominal
+    centre O then touches flank i at beta_0 + dbeta_i.
+
+    Parameters
+    ----------
+    contact_angle_deviation : array_like
+        dbeta_i [rad], per flank in the order BL, BR, TR, TL (trailing axis 4).
+    bearing : Bearing
+        Ball and groove (default [Lin2018] Table 1); d = R_G - R_B.
+
+    Returns
+    -------
+    normal : ndarray
+        ``arc_centre_offset_normal`` e_n = d (1 - cos dbeta_i) [m] of :class:`GrooveErrors`.
+    tangential : ndarray
+        ``arc_centre_offset_tangential`` e_t = d sin dbeta_i [m] of :class:`GrooveErrors`.
+
+    Notes
+    -----
+    Turning the flank's arc centre C_i = -d n_i about O by dbeta_i keeps it at the distance d
+    from O; in the flank's own frame the centre moves by e_n = d (1 - cos dbeta_i) along n_i
+    and by e_t = d sin dbeta_i along -t_i, so the rigid ball sees atan(e_t / (d - e_n)) =
+    dbeta_i exactly (errors 1 and 2 in the Notes of :class:`GrooveErrors`).
+    """
+    dbeta = np.asarray(contact_angle_deviation, dtype=float)
+    dist = bearing.groove_radius - bearing.ball_radius
+    return dist * (1.0 - np.cos(dbeta)), dist * np.sin(dbeta)
+
+
 @dataclass(frozen=True)
 class StaticSolution:
     """Static solution for an array of balls (ball shape ``s``; contacts BL, BR, TR, TL).
