@@ -292,7 +292,7 @@ def test_loads_without_errors_paired_forces_and_elastic_angle_effect(capsys):
 def test_elastic_angle_shift_small_load_limit():
     # Pure N_y, no errors: the ball sinks by s = delta / cos(b0) into the bottom groove and
     # the contact line turns by -s sin(b0) / d, i.e. dbeta = -delta tan(b0) / d to first order
-    # (geometry of the module docstring). The ratio tends to 1 as the load falls; measured
+    # (GrooveErrors Notes). The ratio tends to 1 as the load falls; measured
     # 1 - 3.6e-4 at 1 N, 1 - 1.7e-3 at 10 N, 1 - 1.2e-2 at 200 N (-0.466 deg).
     for ny, rel in ((1.0, 1e-3), (10.0, 3e-3), (200.0, 2e-2)):
         s = solve_static(0.0, ny)

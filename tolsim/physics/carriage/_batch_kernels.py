@@ -102,7 +102,7 @@ def _lane_groove(w, groove, s0, c0, dist, k):
     """
     i0 = 2 * groove
     sgn = 1.0 if groove == 0 else -1.0
-    ax, ay = -sgn * s0, -sgn * c0  # n_i of the first flank (BL or TR, static's docstring)
+    ax, ay = -sgn * s0, -sgn * c0  # n_i of the first flank (BL or TR, GrooveErrors Notes)
     bx, by = sgn * s0, -sgn * c0  # and of the second (BR or TL)
     rk = _L_KB if groove == 0 else _L_KT
     rf = _L_RB if groove == 0 else _L_F
