@@ -56,7 +56,7 @@ def random_balls(rng, n, max_deg=2.0, low=40.0, high=250.0):
 
 
 # --------------------------------------------------------------------------------------------
-# Kinematics of the ball-ball contact (ball_loads module docstring)
+# Kinematics of the ball-ball contact (ball_loads.ball_contact_slip Notes)
 # --------------------------------------------------------------------------------------------
 def test_ball_contact_kinematics_nominal_rolling():
     # Nominal rolling Omega_0 = (v / (2 R cos beta_0), 0, 0) (tolsim.physics.geometry): the
@@ -135,7 +135,7 @@ def test_no_loads_reproduce_today_full(rng):
 @pytest.mark.parametrize("surface, free_spin, n", [("planar", False, 30), ("planar", True, 10),
                                                    ("curved", False, 6)])
 def test_full_power_balance_random(rng, surface, free_spin, n):
-    # ball_loads module docstring: v F_c + P v_B = sum_i D_i + D_bb in equilibrium, with
+    # ball_loads.BallLoadFields Notes: v F_c + P v_B = sum_i D_i + D_bb in equilibrium, with
     # P = Q_back - Q_front and D_bb = mu_bb (Q_back + Q_front) R_B |Omega_perp|. Random balls
     # (|dbeta| <= 2 deg, F 40..250 N), neighbour forces 0..20 N, mu_bb 0..0.3, solved to
     # tol = 1e-12 (the imbalance is the residual times the velocities: at the default 1e-10
@@ -219,7 +219,7 @@ def test_full_loaded_solver_twin_scipy_root():
 # Creep stiffness
 # --------------------------------------------------------------------------------------------
 def test_creep_stiffness_nominal_closed_form():
-    # ball_loads module docstring: for the nominal ball (theta = rho = 0, Table 1, N_y = 200 N)
+    # ball_loads.BallLoadFields Notes: for the nominal ball (theta = rho = 0, Table 1, N_y = 200 N)
     # every contact carries -P/4 and K = -4 mu k_f R_B F / (a tan beta_0) = 704.6 N per unit
     # epsilon; dF_c/dP = -1/2 and dF_c/d(Q_back + Q_front) = mu_bb / (2 cos beta_0); the
     # braking leaves epsilon unchanged (symmetry). Round-off tolerance 1e-12.
@@ -358,7 +358,7 @@ def test_case_b_is_the_undeviated_ball_rotated(theta, f1, f2, q_back, q_front):
 # Signs
 # --------------------------------------------------------------------------------------------
 def test_push_from_behind_speeds_the_ball_up(rng):
-    # ball_loads module docstring: P > 0 must be balanced by raceway friction along -z, which
+    # ball_loads.BallLoadFields Notes: P > 0 must be balanced by raceway friction along -z, which
     # opposes the ball's slip over the grooves, so the ball slips forward: epsilon grows
     # (K > 0; for the full model by convexity of Phi). It also helps the carriage along
     # (dF_c/dP < 0), and braking neighbours cost carriage force and slow the rolling.
@@ -424,7 +424,7 @@ def test_full_gross_sliding_saturates():
 
 
 def test_braking_stall_is_sliding():
-    # ball_loads module docstring: neighbours braking beyond M_stall / (mu_bb R_B) stop the
+    # ball_loads.BallLoadFields Notes: neighbours braking beyond M_stall / (mu_bb R_B) stop the
     # rotation. Nominal ball: M_stall = mu R_B cos(beta_0) sum F, so the braking capacity is
     # 400 N for mu_bb = 0.1 (1e-12). Both models flag it just above; the full model converges
     # just below (0.9 of it) and reports the stalled ball as sliding with epsilon NaN.

@@ -1,7 +1,7 @@
 """Tests of the carriage (tolsim issue 12, "Done means"), :mod:`tolsim.physics.carriage`.
 
-Each test names its source (the issue's list, or a closed form derived in the docstring of
-the module or here) and an explicit tolerance.
+Each test names its source (the issue's list, or a closed form derived in the Notes of
+:func:`tolsim.physics.carriage.solve_carriage` or here) and an explicit tolerance.
 """
 
 import numpy as np
@@ -305,7 +305,7 @@ def test_open_contacts_are_reported():
 
 # --------------------------------------------------------------------------------------------
 # "Done means" 5 (continued): yaw, pitch, Fig. 8 and the old linear rule. Derivations in the
-# module docstring, section "How carriage loads map to the balls' side-force ratio".
+# Notes of solve_carriage, section "How carriage loads map to the balls' side-force ratio".
 # --------------------------------------------------------------------------------------------
 D_ARC = TABLE1.groove_radius - TABLE1.ball_radius  # |P - C| at zero approach change [m]
 

@@ -216,9 +216,9 @@ def test_ball_z_and_loaded_are_validated():
 # End relief
 # --------------------------------------------------------------------------------------------
 def test_end_relief_profile():
-    # h(z) = depth ((|z| - (L/2 - l)) / l)^2 beyond L/2 - l (tolsim.physics.carriage module
-    # docstring): 0 inside, depth at the ends, continuous with a continuous slope (0 at
-    # L/2 - l), even in z; exact arithmetic up to round-off (1e-15 relative).
+    # h(z) = depth ((|z| - (L/2 - l)) / l)^2 beyond L/2 - l (Notes of
+    # tolsim.physics.carriage.end_relief): 0 inside, depth at the ends, continuous with a
+    # continuous slope (0 at L/2 - l), even in z; exact arithmetic up to round-off (1e-15 relative).
     zone, depth, length = 0.1, 3e-6, 0.02
     z = np.array([0.0, 0.029, 0.03, 0.035, 0.04, 0.05, -0.04, 0.06])
     h = end_relief(z, zone, depth, length)
@@ -233,10 +233,10 @@ def test_end_relief_profile():
 def test_end_relief_unloads_the_end_balls_gradually():
     # Wrapped guide, preload o = 3 um, no load: by the mirror symmetry of the tracks the
     # carriage does not move and each ball is alone in its module. Both carriage flanks
-    # receding by h re-centre the ball to approaches (o - h)/2 (tolsim.physics.carriage module
-    # docstring, end relief): F = K ((o - h)/2)^1.5, to second order in h/d (measured 7.7e-4 of
-    # the unrelieved force; tolerance 2e-3). As a ball rolls towards the end its force falls
-    # monotonically; before the relief it is exactly the unrelieved one.
+    # receding by h re-centre the ball to approaches (o - h)/2 (Notes of
+    # tolsim.physics.carriage.end_relief): F = K ((o - h)/2)^1.5, to second order in h/d
+    # (measured 7.7e-4 of the unrelieved force; tolerance 2e-3). As a ball rolls towards the
+    # end its force falls monotonically; before the relief it is exactly the unrelieved one.
     layout = wrapped()
     zone, o, depth, length = 6 * 0.0125, 3e-6, 2e-6, 0.02
     shift = np.linspace(0.0, 0.0312, 53)  # ball 3 from z = 6.25 mm to the end (37.45 mm)
@@ -380,7 +380,7 @@ def test_along_track_agrees_with_constant_propagation_before_any_ball_moves_on()
 def test_results_do_not_depend_on_batching_or_threads():
     # Each assembly's Newton starts from its own previous solution and every kernel solves an
     # assembly by the same operations in any batch and on any number of threads
-    # (tolsim.physics.carriage, "Many assemblies at once"): the first block alone, as part of
+    # (solve_carriage_batch Notes, "Many assemblies at once"): the first block alone, as part of
     # two blocks drawn together, and on one thread give bit-identical results.
     c = config(vertical=300.0, gap='{ distribution = "uniform", low_um = 0.0, high_um = 30.0 }',
                tolerances=ALL_KINDS, relief="end_relief_depth_um = 1.0\n"

@@ -157,7 +157,7 @@ def test_contact_friction_twin_random(rng):
 
 @pytest.mark.parametrize("surface", ["planar", "curved"])
 def test_ball_loads_twin_random(rng, surface):
-    # _ball_loads (via friction_loads) against the 3-D cubature twin at a random motion near
+    # ball_loads_kernel (via friction_loads) against the 3-D cubature twin at a random motion near
     # rolling, with omega_z != 0 so every term of r x dF is exercised. Tolerance: 1e-8 of
     # mu F R (fine grid) and 2e-6 (default grid; 2e-5 for the moments: the off-axis poles of
     # omega_z != 0 converge more slowly, measured 7e-6 on M_z, cf. the contact twin).

@@ -100,7 +100,8 @@ def test_the_load_case_and_the_preload_are_the_files(carriage_result, carriage_r
     assert "pitching moment (about the lateral axis x) | | 2 N m" in text
     assert "rolling moment (about the rail axis z) | | 0 N m | | default: 0" in text
     # preload: o = 2 um; F0 = K (o/2)^1.5 with K = 2.345e10 N/m^1.5 for the Table 1 ball in
-    # its flank (tolsim.physics.carriage docstring, "numbers for the [Lin2018] Table 1 ball")
+    # its flank (tolsim.physics.carriage.solve_carriage Notes, "numbers for the [Lin2018]
+    # Table 1 ball")
     f0 = float(ds.preload_contact_force)
     np.testing.assert_allclose(f0, 2.345e10 * (1e-6) ** 1.5, rtol=1e-3)
     assert "preload class: diametral ball oversize o | | 2 µm" in text

@@ -292,7 +292,7 @@ def test_loads_without_errors_paired_forces_and_elastic_angle_effect(capsys):
 def test_elastic_angle_shift_small_load_limit():
     # Pure N_y, no errors: the ball sinks by s = delta / cos(b0) into the bottom groove and
     # the contact line turns by -s sin(b0) / d, i.e. dbeta = -delta tan(b0) / d to first order
-    # (geometry of the module docstring). The ratio tends to 1 as the load falls; measured
+    # (GrooveErrors Notes). The ratio tends to 1 as the load falls; measured
     # 1 - 3.6e-4 at 1 N, 1 - 1.7e-3 at 10 N, 1 - 1.2e-2 at 200 N (-0.466 deg).
     for ny, rel in ((1.0, 1e-3), (10.0, 3e-3), (200.0, 2e-2)):
         s = solve_static(0.0, ny)
@@ -422,26 +422,27 @@ def test_newton_iterations_and_convergence():
 # --------------------------------------------------------------------------------------------
 def _lane_tile(nx, ny, e, bearing=TABLE1, tol=1e-12):
     """Run the lane kernels on one tile; (verified per lane, work array)."""
+    import tolsim.physics.static._kernels as lanes
     from tolsim.physics import static as st_
 
     fields = to_groove_errors(e)
     m = len(nx)
-    assert m <= st_._TILE
+    assert m <= lanes._TILE
     items = [("side_load", nx, 0), ("normal_load", ny, 0)] + st_.error_items(fields, bearing)
     (lx, ly, e_n, e_t, rb, rt, ob, ot, dd), _ = st_.prepare_inputs(items, bearing)
     d = bearing.groove_radius - bearing.ball_radius
     s0, c0 = np.sin(bearing.nominal_contact_angle), np.cos(bearing.nominal_contact_angle)
-    w = np.empty((st_._ROWS, st_._TILE))
-    st_._lane_gather(0, m, lx[:, 0], ly[:, 0], e_n, e_t, rb[:, 0], rt[:, 0], ob, ot, dd[:, 0],
-                     K, w)
+    w = np.empty((lanes._ROWS, lanes._TILE))
+    lanes._lane_gather(0, m, lx[:, 0], ly[:, 0], e_n, e_t, rb[:, 0], rt[:, 0], ob, ot,
+                       dd[:, 0], K, w)
     for groove in range(2):
-        st_._lane_start(m, groove, s0, c0, d, K, w)
-        st_._lane_newton(m, groove, s0, c0, d, K, w)
-    st_._lane_outputs(m, s0, c0, d, K, w)
+        lanes._lane_start(m, groove, s0, c0, d, K, w)
+        lanes._lane_newton(m, groove, s0, c0, d, K, w)
+    lanes._lane_outputs(m, s0, c0, d, K, w)
     outs = (np.empty((m, 4)), np.empty((m, 4)), np.empty((m, 4)), np.empty((m, 2)),
             np.empty((m, 2)), np.empty(m, bool), np.empty(m, np.int64), np.empty(m, np.int64),
             np.empty(m))
-    ok = np.array([st_._lane_store(0, j, tol, K * 1e-9**1.5, w, *outs) for j in range(m)])
+    ok = np.array([lanes._lane_store(0, j, tol, K * 1e-9**1.5, w, *outs) for j in range(m)])
     return ok, w
 
 

@@ -1,7 +1,8 @@
 """Trains of balls after contact (tolsim.physics.trains): clusters, forces, events.
 
 References for the expected values:
-* "module" = the derivation in the docstring of tolsim.physics.trains, eqs. (1)-(6);
+* "module" = the derivation in the Notes of tolsim.physics.trains.cluster_velocities, eqs.
+  (1)-(6);
 * issue 13 ("After contact", Done means) for the two-ball result;
 * [Lin2018] Sec. 3.2 for the paper's pair.
 Each kernel has an independent twin here. ``cluster_velocities`` is checked against the

@@ -218,15 +218,12 @@ def _angles_and_forces(args, bearing):
     if not (math.isfinite(nx) and math.isfinite(ny)):
         raise UsageError("--load-n must be two finite numbers")
 
-    from tolsim.physics.static import GrooveErrors, solve_static
+    from tolsim.physics.static import GrooveErrors, solve_static, turned_flank_offsets
 
-    dist = bearing.groove_radius - bearing.ball_radius
     normal = np.array(given.get("arc_offset_um", [0.0] * 4)) * 1e-6
     tangential = np.array(given.get("arc_offset_tangential_um", [0.0] * 4)) * 1e-6
     if not given:  # rigid dbeta_i realised by turning each flank about the ball centre
-        dbeta = np.deg2rad(dbeta_deg)
-        tangential = dist * np.sin(dbeta)
-        normal = dist * (1.0 - np.cos(dbeta))
+        normal, tangential = turned_flank_offsets(np.deg2rad(dbeta_deg), bearing)
     errors = GrooveErrors(
         arc_centre_offset_normal=normal,
         arc_centre_offset_tangential=tangential,

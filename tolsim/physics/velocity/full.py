@@ -2,62 +2,9 @@
 
 One ball between a fixed bottom groove and a top groove moving at v along the rail (z), with
 given contact angles beta_i and normal forces F_i ([Lin2018] Sec. 2, Fig. 2). Unknowns: the
-ball velocity v_B and its angular velocity Omega = (omega_x, omega_y[, omega_z]). Nothing is
-linearised:
-
-* **Kinematics** (Eqs. 1-9). The slip of the ball over groove i at a point r of the contact is
-  dv = v_B z + Omega x r - V_i z (V = 0 bottom, v top), projected on the contact's tangent
-  plane. Planar contact (default, as in the paper): r = R p_i + x x_i + z z_i, and the slip
-  field is a rotation omega_i = Omega . y_i about the zero-velocity point (c_i, d_i) (Eq. 8),
-  c_i = (v_B - V_i - R Omega . x_i) / omega_i, d_i = -R omega_z / omega_i.
-  Curved contact (``surface="curved"``): the contact follows the deformed-surface radius
-  R_d = 2 f D / (2 f + 1) in the cross-section ([Harris2007], after [Jones1959]),
-  r = (h + sqrt(R_d^2 - x^2)) p_i + x x_i + z z_i with h = sqrt(R^2 - a^2) - sqrt(R_d^2 - a^2)
-  (the ellipse's edges lie on the undeformed ball), so the rolling radius varies across the
-  ellipse (Heathcote slip).
-* **Friction** (Eq. 11-13). Coulomb: traction -mu sigma dv/|dv| on the ball, with the Hertz
-  pressure sigma = sigma_0 sqrt(1 - x^2/a^2 - z^2/b^2), sigma_0 = 3 F / (2 pi a b) (Eq. 11;
-  the ellipse lies in the x-z plane, a across the groove, ERRATA 3-4). Forces and moments
-  about the ball centre are the full 3-D sums of r x dF: the moment of contact i is
-  -R f_i x_i - M_i y_i + R f_x,i z (planar), which is where ERRATA 8's sign comes from.
-* **Equilibrium** (Eq. 18 in full nonlinear form): sum of z forces, x and y moments (and the
-  z moment when omega_z is free) vanish. Normal forces pass through the ball centre.
-
-External loads (issue 13; :mod:`tolsim.physics.velocity.ball_loads`): the neighbours' push P adds to
-the z force and their ball-to-ball braking -mu_bb (Q_back + Q_front) R_B Omega_perp /
-|Omega_perp| to the moments; the equations stay the gradient of a convex potential (D plus
-the braking term minus P v_B), which the solver minimises as before
-(:func:`full_loaded_kernel`). The ball's traction capacity is the same minimisation with both
-grooves at rest and v_B fixed; beyond it the ball slides.
-
-Quadrature (the direction field is singular at the zero-velocity point). The integrals are
-taken in polar coordinates *centred on the zero-velocity point*, in the coordinates
-(x/a, z/b) where the ellipse is the unit disc. For planar contact the slip direction is
-constant along each ray, so the radial integrals of the Hertz pressure are closed-form
-(``_ray_moments``); only the angular integral is numerical:
-
-* pole inside the ellipse: the angular integrand is smooth and periodic; the trapezoidal rule
-  on a mapped angle tan(phi) = tan(chi) / q, q = (b/a)^0.3, clusters nodes where the
-  direction field turns fast (phi ~ +-90 deg for a long thin ellipse); exponential
-  convergence;
-* pole outside: the rays cover a cone of half-angle asin(1/|P|); Gauss-Legendre on it (the
-  integrand vanishes linearly at the cone's edges and is analytic inside).
-
-For the curved surface the pole is the exact zero of the slip field (a quadratic), the
-direction still varies along each ray, and the radial integral uses Gauss-Legendre in
-theta (s = cos theta, which absorbs the sqrt of the pressure at the edge).
-
-The equilibrium is solved per ball by a damped Newton method (central-difference Jacobian,
-backtracking line search, Levenberg-Marquardt fallback) from pure rolling at the contact
-centres (least squares over the four contacts). The equations are the gradient of the
-dissipated power D(v_B, Omega) = sum int mu sigma |slip| dA, which is convex, so a step is
-also accepted when it decreases D (Armijo). Non-convergence is a flag (``converged``), never
-an exception.
-
-Known limit: near two-point contact (e.g. |rho| > 0.94 at theta = 3 deg with paired
-forces) the heavily loaded pair tends to *stick* (zero spin and zero slip at the centre):
-the minimum of D sits on a kink where the friction is set-valued, the smooth residual cannot
-vanish, and the ball is returned with ``converged = False`` (residual ~1e-2).
+ball velocity v_B and its angular velocity Omega = (omega_x, omega_y[, omega_z]). The model
+(kinematics, friction, equilibrium, external loads), the quadrature and the solver are in the
+Notes of :func:`full`; the Numba loops in :mod:`tolsim.physics.velocity._full_kernels`.
 
 References
 ----------
@@ -75,31 +22,21 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from numba import prange
 
-from tolsim._jit import jit, pjit
-from tolsim.physics.geometry import (
-    SIDE_SIGN_X,
-    SIDE_SIGN_Y,
-    TABLE1,
-    ZERO_VELOCITY_SIGN,
-    Bearing,
-)
+from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, ZERO_VELOCITY_SIGN, Bearing
 from tolsim.physics.hertz import hertz_constants
-from tolsim.physics.velocity.analytic import VelocityResult, _as_ball_arrays
-from tolsim.physics.velocity.ball_loads import (
-    DEFAULT_BALL_FRICTION,
-    SIDE_SIGN_X_T,
-    SIDE_SIGN_Y_T,
-    BallLoadFields,
-    as_ball_loads,
-    point_traction_capacity,
-    rolling_axis,
-    stall_moment,
+from tolsim.physics.velocity._full_kernels import (
+    FULL_LOAD_COLUMNS,
+    ball_loads_kernel,
+    contact_friction_kernel,
+    full_kernel,
+    full_loaded_kernel,
 )
+from tolsim.physics.velocity.analytic import VelocityResult, as_ball_arrays
+from tolsim.physics.velocity.ball_loads import DEFAULT_BALL_FRICTION, BallLoadFields, as_ball_loads
 
 #: Default number of angular nodes per contact (full circle; see the convergence study in
-#: ``tests/test_friction.py::test_grid_convergence`` and the module docstring).
+#: ``tests/test_friction.py::test_grid_convergence`` and the Notes of :func:`full`).
 DEFAULT_ANGULAR_NODES = 32
 #: Default number of radial nodes per ray for the curved surface.
 DEFAULT_RADIAL_NODES = 8
@@ -110,10 +47,6 @@ ANGLE_MAP_EXPONENT = 0.3
 DEFAULT_TOLERANCE = 1e-10
 #: Default iteration cap of the Newton solver.
 DEFAULT_MAX_ITER = 60
-#: |pole|/a beyond which a contact is treated as pure sliding (uniform slip direction).
-_SLIDING_POLE = 1e7
-#: Relative step of the central-difference Jacobian (unknowns scaled by v and v/R).
-_FD_STEP = 1e-6
 #: Names of the surface models.
 SURFACES = ("planar", "curved")
 
@@ -152,775 +85,6 @@ def quadrature_grid(angular_nodes, radial_nodes, ellipticity):
     for arr in out:
         arr.setflags(write=False)
     return out
-
-
-# --------------------------------------------------------------------------------------------
-# Kernels: typed loops, no checks.
-# --------------------------------------------------------------------------------------------
-@jit(inline="always")
-def _ray_moments(beta, disc, inside):
-    """Closed-form radial integrals along one ray in the unit disc.
-
-    For a ray u = P + r e from the pole P, with beta = P . e and disc = beta^2 + 1 - |P|^2
-    (> 0), 1 - |u|^2 = (r_2 - r)(r - r_1). Returns I_k = int sqrt(1 - |u|^2) r^k dr over the
-    part of the ray inside the disc with r >= 0, for k = 1, 2 (r = m + h s,
-    int sqrt(1 - s^2) s^j ds from s0 to 1 in closed form).
-    """
-    h = np.sqrt(disc)
-    m = -beta
-    if inside:
-        s0 = beta / h if h > 0.0 else 1.0
-        s0 = min(1.0, max(-1.0, s0))
-        rt = np.sqrt(max(0.0, 1.0 - s0 * s0))
-        asn = np.arcsin(s0)
-        j0 = 0.5 * (0.5 * np.pi - s0 * rt - asn)
-        j1 = rt * rt * rt / 3.0
-        j2 = 0.125 * (0.5 * np.pi - s0 * (2.0 * s0 * s0 - 1.0) * rt - asn)
-    else:
-        j0 = 0.5 * np.pi
-        j1 = 0.0
-        j2 = 0.125 * np.pi
-    h2 = h * h
-    i1 = h2 * (m * j0 + h * j1)
-    i2 = h2 * (m * m * j0 + 2.0 * m * h * j1 + h2 * j2)
-    return i1, i2
-
-
-@jit
-def planar_contact_integrals(pt, ps, a, b, cin, sin_, win, xo, wo, out):
-    """Friction integrals of one planar contact for a pole at (x, z) = (pt a, ps b).
-
-    Writes S = (S_x, S_z, S_n, S_d) into ``out`` such that, with omega_i the spin and
-    sigma_0 = 3F/(2 pi a b), the friction force on the ball along x_i and z_i and its moment
-    about the contact normal y_i are mu sigma_0 a b sgn(omega_i) (S_x, S_z, S_n) (Eqs. 12-13
-    without the small-offset assumption; S_n [m], S_x and S_z [-]), and the dissipated power
-    int mu sigma |slip| dA is mu sigma_0 a b |omega_i| S_d (S_d [m]).
-    """
-    pp = pt * pt + ps * ps
-    sx = 0.0
-    sz = 0.0
-    sn = 0.0
-    sd = 0.0
-    c = pt * a
-    d = ps * b
-    if pp <= 1.0:
-        for j in range(cin.shape[0]):
-            e1 = cin[j]
-            e2 = sin_[j]
-            beta = pt * e1 + ps * e2
-            disc = beta * beta + 1.0 - pp
-            i1, i2 = _ray_moments(beta, disc, True)
-            ll = np.sqrt(b * b * e2 * e2 + a * a * e1 * e1)
-            w = win[j]
-            sx -= w * b * e2 / ll * i1
-            sz += w * a * e1 / ll * i1
-            sn -= w * ((d * b * e2 + c * a * e1) * i1 / ll + ll * i2)
-            sd += w * ll * i2
-    else:
-        rp = np.sqrt(pp)
-        half = np.arcsin(1.0 / rp)
-        base = np.arctan2(ps, pt) + np.pi
-        for j in range(xo.shape[0]):
-            ang = half * xo[j]
-            phi = base + ang
-            e1 = np.cos(phi)
-            e2 = np.sin(phi)
-            sa = rp * np.sin(ang)
-            disc = 1.0 - sa * sa
-            if disc <= 0.0:
-                continue
-            beta = -rp * np.cos(ang)
-            i1, i2 = _ray_moments(beta, disc, False)
-            ll = np.sqrt(b * b * e2 * e2 + a * a * e1 * e1)
-            w = half * wo[j]
-            sx -= w * b * e2 / ll * i1
-            sz += w * a * e1 / ll * i1
-            sn -= w * ((d * b * e2 + c * a * e1) * i1 / ll + ll * i2)
-            sd += w * ll * i2
-    out[0] = sx
-    out[1] = sz
-    out[2] = sn
-    out[3] = sd
-
-
-@pjit
-def contact_friction_kernel(offset_ratio, lateral_ratio, semi_major, semi_minor, cin, sin_, win,
-                            xo, wo, out):
-    """Normalised friction of planar contacts: out[k] = (f_x, f_z, M_O) / (sgn(omega) mu F).
-
-    M_O is the resisting spin moment of Eq. (13) [m] (positive at c/a = 0, Eq. 14).
-    """
-    scale = 1.5 / np.pi  # sigma_0 a b / F
-    for k in prange(offset_ratio.shape[0]):
-        s3 = np.empty(4)
-        pt = offset_ratio[k]
-        ps = lateral_ratio[k]
-        if np.hypot(pt, ps) > _SLIDING_POLE:
-            # pure sliding: slip along (-d, c) direction of the centre, friction opposes it
-            # (Eq. 15)
-            a = semi_major[k]
-            b = semi_minor[k]
-            ux = -ps * b
-            uz = pt * a
-            un = np.hypot(ux, uz)
-            out[k, 0] = -ux / un
-            out[k, 1] = -uz / un
-            out[k, 2] = 0.0
-            continue
-        planar_contact_integrals(pt, ps, semi_major[k], semi_minor[k], cin, sin_, win, xo, wo,
-                                 s3)
-        out[k, 0] = scale * s3[0]
-        out[k, 1] = scale * s3[1]
-        out[k, 2] = -scale * s3[2]
-
-
-@jit
-def _curved_pole(vrel, w, om, omz, a, b, rd, h):
-    """Zero of the slip on the curved surface, normalised (x0/a, z0/b); (0, 0) if none."""
-    # u_z(x) = vrel - (h + S) w - x om = 0, S = sqrt(rd^2 - x^2); squared: quadratic in x.
-    k = vrel - h * w
-    aa = om * om + w * w
-    best = 0.0
-    found = False
-    if aa > 0.0:
-        disc = w * w * (aa * rd * rd - k * k)
-        if disc >= 0.0:
-            sq = np.sqrt(disc)
-            for sgn in (-1.0, 1.0):
-                x = (k * om + sgn * sq) / aa
-                if abs(x) < rd and (k - x * om) * w >= 0.0:
-                    if (not found) or abs(x) < abs(best):
-                        best = x
-                        found = True
-    if not found:
-        return 0.0, 0.0, False
-    s = np.sqrt(rd * rd - best * best)
-    den = s * om - best * w
-    z = 0.0
-    if den != 0.0:
-        z = -omz * ((h + s) * s + best * best) / den
-    return best / a, z / b, True
-
-
-@jit
-def _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_scale, curved,
-                rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact):
-    """Friction loads on one ball (R = 1, v = 1 units; mu = 1).
-
-    state = (v_B, omega_x, omega_y, omega_z). Writes loads = (F_z, M_x, M_y, M_z, D), D the
-    dissipated power (the equilibrium is the minimum of D, a convex function), and per
-    contact ``contact[i] = (c_i/a_i, d_i/b_i, F_z,i, omega_i, roll_i)``; when ``contact`` has
-    a sixth column, ``contact[i, 5]`` = D_i, the power dissipated in contact i.
-    """
-    with_power = contact.shape[1] > 5
-    vb = state[0]
-    wx = state[1]
-    wy = state[2]
-    wz = state[3]
-    fz_tot = 0.0
-    mx = 0.0
-    my = 0.0
-    mz = 0.0
-    power = 0.0
-    s3 = np.empty(4)
-    for i in range(4):
-        f = force[i]
-        a = semi_major[i]
-        b = semi_minor[i]
-        yx = -px[i]
-        yy = -py[i]
-        xx = yy  # x_i = y_i x z = (y_y, -y_x)
-        xy = -yx
-        om = wx * yx + wy * yy  # spin about the inward normal
-        wr_ = wx * xx + wy * xy  # rolling component about x_i
-        u0 = vb - vgroove[i] - wr_
-        contact[i, 3] = om
-        contact[i, 4] = wr_
-        power_before = power
-        if f <= 0.0:
-            contact[i, 0] = np.nan
-            contact[i, 1] = np.nan
-            contact[i, 2] = 0.0
-            if with_power:
-                contact[i, 5] = 0.0
-            continue
-        if not curved:
-            # pole (c, d) of the rotation field; pure sliding if it is (nearly) at infinity
-            if abs(om) * _SLIDING_POLE * a > np.hypot(u0, wz):
-                pt = u0 / om / a
-                ps = -wz / om / b
-                planar_contact_integrals(pt, ps, a, b, cin, sin_, win, xo, wo, s3)
-                scale = sigma_scale * f * (1.0 if om > 0.0 else -1.0)
-                fx = scale * s3[0]
-                fz = scale * s3[1]
-                mn = scale * s3[2]
-                power += sigma_scale * f * abs(om) * s3[3]
-            else:
-                pt = np.inf
-                ps = 0.0
-                slip = np.hypot(u0, wz)
-                if slip > 0.0:
-                    fx = -f * wz / slip
-                    fz = -f * u0 / slip
-                else:
-                    fx = 0.0
-                    fz = 0.0
-                mn = 0.0
-                power += f * slip
-            fz_tot += fz
-            mx += -fz * xx + mn * yx
-            my += -fz * xy + mn * yy
-            mz += fx
-            contact[i, 0] = pt
-            contact[i, 1] = ps
-            contact[i, 2] = fz
-            if with_power:
-                contact[i, 5] = power - power_before
-        else:
-            pt, ps, ok = _curved_pole(vb - vgroove[i], wr_, om, wz, a, b, rd, hoff[i])
-            pp = pt * pt + ps * ps
-            sig0 = sigma_scale * f  # mu sigma_0 a b, with mu = 1
-            ffx = 0.0
-            ffy = 0.0
-            ffz = 0.0
-            gx = 0.0
-            gy = 0.0
-            gz = 0.0
-            if pp <= 1.0:
-                nang = cin.shape[0]
-            else:
-                nang = xo.shape[0]
-                rp = np.sqrt(pp)
-                half = np.arcsin(1.0 / rp)
-                base = np.arctan2(ps, pt) + np.pi
-            for j in range(nang):
-                if pp <= 1.0:
-                    e1 = cin[j]
-                    e2 = sin_[j]
-                    beta = pt * e1 + ps * e2
-                    disc = beta * beta + 1.0 - pp
-                    wang = win[j]
-                    s0 = beta / np.sqrt(disc) if disc > 0.0 else 1.0
-                    s0 = min(1.0, max(-1.0, s0))
-                else:
-                    ang = half * xo[j]
-                    e1 = np.cos(base + ang)
-                    e2 = np.sin(base + ang)
-                    sa = rp * np.sin(ang)
-                    disc = 1.0 - sa * sa
-                    beta = -rp * np.cos(ang)
-                    wang = half * wo[j]
-                    s0 = -1.0
-                if disc <= 0.0:
-                    continue
-                hh = np.sqrt(disc)
-                m = -beta
-                th0 = np.arccos(s0)
-                for k in range(tr.shape[0]):
-                    th = th0 * tr[k]
-                    st = np.sin(th)
-                    r = m + hh * np.cos(th)
-                    wgt = wang * th0 * wr[k] * disc * st * st * r  # sqrt(1-|u|^2) r dr dphi
-                    x = a * (pt + r * e1)
-                    z = b * (ps + r * e2)
-                    s = np.sqrt(rd * rd - x * x)
-                    rad = hoff[i] + s
-                    uz = vb - vgroove[i] - rad * wr_ - x * om
-                    ut = (wz * (rad * s + x * x) + z * (s * om - x * wr_)) / rd
-                    un = np.hypot(ut, uz)
-                    if un == 0.0:
-                        continue
-                    # tangent t = (s x_i - x p_i)/rd; traction -sig0 (ut t + uz z)/|u|
-                    tx = (s * xx - x * px[i]) / rd
-                    ty = (s * xy - x * py[i]) / rd
-                    q = -sig0 * wgt / un
-                    dfx = q * ut * tx
-                    dfy = q * ut * ty
-                    dfz = q * uz
-                    rx = rad * px[i] + x * xx
-                    ry = rad * py[i] + x * xy
-                    ffx += dfx
-                    ffy += dfy
-                    ffz += dfz
-                    power += sig0 * wgt * un
-                    gx += ry * dfz - z * dfy
-                    gy += z * dfx - rx * dfz
-                    gz += rx * dfy - ry * dfx
-            fz_tot += ffz
-            mx += gx
-            my += gy
-            mz += gz
-            contact[i, 0] = pt if ok else np.nan
-            contact[i, 1] = ps if ok else np.nan
-            contact[i, 2] = ffz
-            if with_power:
-                contact[i, 5] = power - power_before
-    loads[0] = fz_tot
-    loads[1] = mx
-    loads[2] = my
-    loads[3] = mz
-    loads[4] = power
-
-
-@jit(inline="always")
-def _solve_small(jac, rhs, n, out):
-    """Gaussian elimination with partial pivoting of an n x n system (n <= 4); False if
-    singular."""
-    a = jac.copy()
-    b = rhs.copy()
-    for k in range(n):
-        piv = k
-        for r in range(k + 1, n):
-            if abs(a[r, k]) > abs(a[piv, k]):
-                piv = r
-        if a[piv, k] == 0.0 or not np.isfinite(a[piv, k]):
-            return False
-        if piv != k:
-            for c in range(n):
-                tmp = a[k, c]
-                a[k, c] = a[piv, c]
-                a[piv, c] = tmp
-            tmp = b[k]
-            b[k] = b[piv]
-            b[piv] = tmp
-        for r in range(k + 1, n):
-            fac = a[r, k] / a[k, k]
-            for c in range(k, n):
-                a[r, c] -= fac * a[k, c]
-            b[r] -= fac * b[k]
-    for k in range(n - 1, -1, -1):
-        acc = b[k]
-        for c in range(k + 1, n):
-            acc -= a[k, c] * out[c]
-        out[k] = acc / a[k, k]
-    return True
-
-
-@jit
-def _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major, semi_minor,
-              sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res):
-    """Normalised equilibrium residual (F_z, M_x, M_y[, M_z]) / sum F; returns max |res|.
-
-    Rows ``first`` .. ``first + nunk - 1`` of the loads (``first`` = 1 when v_B is fixed).
-    External loads (tolsim.physics.velocity.ball_loads, R = 1, v = 1, mu = 1 units): the push
-    ``push`` = P / mu adds to F_z, the braking ``braking`` = (mu_bb / mu)(Q_back + Q_front)
-    adds -braking Omega_perp / |Omega_perp| to (M_x, M_y). loads[4] becomes the potential
-    Phi = D + braking |Omega_perp| - push v_B, whose gradient is -loads[:4] (the solver's
-    merit); both are skipped when zero, so the unloaded residual is unchanged bit for bit.
-    """
-    _ball_loads(state, px, py, vgroove, force, semi_major, semi_minor, sigma_scale, curved, rd,
-                hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact)
-    if push != 0.0:
-        loads[0] += push
-        loads[4] -= push * state[0]
-    if braking > 0.0:
-        spin_perp = np.hypot(state[1], state[2])
-        if spin_perp > 0.0:
-            loads[1] -= braking * state[1] / spin_perp
-            loads[2] -= braking * state[2] / spin_perp
-        loads[4] += braking * spin_perp
-    total = force[0] + force[1] + force[2] + force[3]
-    worst = 0.0
-    for k in range(nunk):
-        res[k] = loads[first + k] / total
-        worst = max(worst, abs(res[k]))
-    if not np.isfinite(worst):
-        worst = np.inf
-    return worst
-
-
-@jit
-def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff, free_spin,
-               tol, max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
-               first=0, push=0.0, braking=0.0, groove_speed=1.0, given_start=False):
-    """Damped Newton solve of the equilibrium of one ball (R = 1, v = 1, mu = 1).
-
-    Writes the solution into ``state`` (v_B, omega_x, omega_y, omega_z), the per-contact
-    quantities into ``contact`` and (residual, iterations, converged) into ``info``.
-
-    Options for external loads (:func:`_residual`): ``push`` = P / mu and ``braking`` =
-    (mu_bb / mu)(Q_back + Q_front). ``first`` = 1 fixes v_B = state[0] and solves the moment
-    rows for Omega only; ``groove_speed`` is the top groove's velocity (0: both grooves at
-    rest, the sliding state of the traction capacity); ``given_start`` starts from ``state``
-    instead of pure rolling. The defaults are the unloaded problem.
-    """
-    px = np.empty(4)
-    py = np.empty(4)
-    vgroove = np.array([0.0, 0.0, groove_speed, groove_speed])
-    sxs = (-1.0, 1.0, 1.0, -1.0)
-    sys_ = (-1.0, -1.0, 1.0, 1.0)
-    for i in range(4):
-        px[i] = sxs[i] * np.sin(beta[i])
-        py[i] = sys_[i] * np.cos(beta[i])
-    nunk = (4 if free_spin else 3) - first
-    total = force[0] + force[1] + force[2] + force[3]
-    if not given_start:
-        # Start: pure rolling at the contact centres, v_B + w_x p_y - w_y p_x = V_i (least
-        # squares over the contacts that carry load).
-        ata = np.zeros((3, 3))
-        atb = np.zeros(3)
-        for i in range(4):
-            if force[i] > 0.0:
-                row = (1.0, py[i], -px[i])
-                for r in range(3):
-                    atb[r] += row[r] * vgroove[i]
-                    for c in range(3):
-                        ata[r, c] += row[r] * row[c]
-        x0 = np.zeros(3)
-        state[:] = 0.0
-        if _solve_small(ata, atb, 3, x0):
-            state[0] = x0[0]
-            state[1] = x0[1]
-            state[2] = x0[2]
-        else:
-            state[0] = 0.5
-            state[1] = 0.5 / np.cos(beta[0])
-    loads = np.empty(5)
-    res = np.empty(4)
-    res_new = np.empty(4)
-    trial = np.empty(4)
-    jac = np.empty((nunk, nunk))
-    step = np.zeros(4)
-    rp = np.empty(4)
-    rm = np.empty(4)
-    work = np.empty((4, 5))
-    worst = _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major,
-                      semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
-                      loads, contact, res)
-    dis = loads[4]
-    it = 0
-    converged = worst <= tol
-    while not converged and it < max_iter:
-        it += 1
-        # central-difference Jacobian
-        for c in range(nunk):
-            k = first + c
-            hstep = _FD_STEP * max(1.0, abs(state[k]))
-            trial[:] = state
-            trial[k] = state[k] + hstep
-            _residual(trial, nunk, first, push, braking, px, py, vgroove, force, semi_major,
-                      semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
-                      loads, work, rp)
-            trial[k] = state[k] - hstep
-            _residual(trial, nunk, first, push, braking, px, py, vgroove, force, semi_major,
-                      semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
-                      loads, work, rm)
-            for r in range(nunk):
-                jac[r, c] = (rp[r] - rm[r]) / (2.0 * hstep)
-        neg = np.empty(nunk)
-        for r in range(nunk):
-            neg[r] = -res[r]
-        merit = 0.0
-        for r in range(nunk):
-            merit += res[r] * res[r]
-        accepted = False
-        new = worst
-        if first > 0:
-            trial[0] = state[0]
-        # 1) Newton step with backtracking on the sum of squares
-        if _solve_small(jac, neg, nunk, step):
-            t = 1.0
-            for _ls in range(8):
-                for c in range(nunk):
-                    trial[first + c] = state[first + c] + t * step[c]
-                if first + nunk < 4:
-                    trial[3] = 0.0
-                new = _residual(trial, nunk, first, push, braking, px, py, vgroove, force,
-                                semi_major, semi_minor, sigma_scale, curved, rd, hoff, cin,
-                                sin_, win, xo, wo, tr, wr, loads, work, res_new)
-                msum = 0.0
-                slope = 0.0  # directional derivative of D: gradient = -loads
-                for r in range(nunk):
-                    msum += res_new[r] * res_new[r]
-                    slope -= res[r] * step[r] * total
-                if (msum < (1.0 - 1e-4 * t) * merit or new <= tol
-                        or loads[4] <= dis + 1e-4 * t * slope):
-                    accepted = True
-                    break
-                t *= 0.5
-        # 2) Levenberg-Marquardt steps (near two-point contact the Jacobian is nearly singular:
-        #    the sliding contacts' forces saturate at mu F)
-        if not accepted:
-            jtj = np.empty((nunk, nunk))
-            jtr = np.empty(nunk)
-            big = 0.0
-            for c in range(nunk):
-                jtr[c] = 0.0
-                for r in range(nunk):
-                    jtr[c] -= jac[r, c] * res[r]
-                for d in range(nunk):
-                    acc = 0.0
-                    for r in range(nunk):
-                        acc += jac[r, c] * jac[r, d]
-                    jtj[c, d] = acc
-                big = max(big, jtj[c, c])
-            lam = 1e-6
-            damped = np.empty((nunk, nunk))
-            for _lm in range(30):
-                for c in range(nunk):
-                    for d in range(nunk):
-                        damped[c, d] = jtj[c, d]
-                    damped[c, c] += lam * (jtj[c, c] + 1e-12 * big)
-                if _solve_small(damped, jtr, nunk, step):
-                    for c in range(nunk):
-                        trial[first + c] = state[first + c] + step[c]
-                    if first + nunk < 4:
-                        trial[3] = 0.0
-                    new = _residual(trial, nunk, first, push, braking, px, py, vgroove, force,
-                                    semi_major, semi_minor, sigma_scale, curved, rd, hoff, cin,
-                                    sin_, win, xo, wo, tr, wr, loads, work, res_new)
-                    msum = 0.0
-                    slope = 0.0
-                    for r in range(nunk):
-                        msum += res_new[r] * res_new[r]
-                        slope -= res[r] * step[r] * total
-                    if msum < merit or new <= tol or loads[4] <= dis + 1e-4 * slope:
-                        accepted = True
-                        break
-                lam *= 10.0
-        if not accepted:
-            break
-        state[:] = trial
-        for r in range(nunk):
-            res[r] = res_new[r]
-        worst = new
-        dis = loads[4]
-        converged = worst <= tol
-    # final per-contact quantities at the accepted state
-    worst = _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major,
-                      semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
-                      loads, contact, res)
-    info[0] = worst
-    info[1] = it
-    info[2] = 1.0 if worst <= tol else 0.0
-
-
-@pjit
-def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_coefficient,
-                curved, rd, free_spin, tol, max_iter, cin, sin_, win, xo, wo, tr, wr,
-                out_state, out_contact, out_info):
-    """Solve the full model for n balls in parallel (R = 1, v = 1, mu = 1 units).
-
-    Lengths are in units of R_B (``semi_*_coefficient`` and ``rd`` already divided by R_B).
-    """
-    sigma_scale = 1.5 / np.pi  # mu sigma_0 a b / F with mu = 1
-    for n in prange(dbeta.shape[0]):
-        beta = np.empty(4)
-        a = np.empty(4)
-        b = np.empty(4)
-        hoff = np.empty(4)
-        for i in range(4):
-            beta[i] = nominal_angle + dbeta[n, i]
-            f13 = np.cbrt(force[n, i])
-            a[i] = semi_major_coefficient * f13
-            b[i] = semi_minor_coefficient * f13
-            # curved surface: centre of the deformed arc at h p_i (edges on the ball)
-            hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
-                                                                          - a[i] * a[i]))
-        state = np.zeros(4)
-        contact = np.empty((4, 5))
-        info = np.zeros(3)
-        npos = 0
-        for i in range(4):
-            if force[n, i] > 0.0:
-                npos += 1
-        if npos < 3:
-            for k in range(4):
-                out_state[n, k] = np.nan
-                for m in range(5):
-                    out_contact[n, k, m] = np.nan
-            out_info[n, 0] = np.inf
-            out_info[n, 1] = 0.0
-            out_info[n, 2] = 0.0
-            continue
-        _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                   max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
-        for k in range(4):
-            out_state[n, k] = state[k]
-            for m in range(5):
-                out_contact[n, k, m] = contact[k, m]
-        out_info[n, 0] = info[0]
-        out_info[n, 1] = info[1]
-        out_info[n, 2] = info[2]
-
-
-@jit
-def _load_sensitivities(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff,
-                        free_spin, push, braking, cin, sin_, win, xo, wo, tr, wr, state):
-    """d(epsilon)/d(push) and d(epsilon)/d(braking) at an equilibrium ``state`` (internal units).
-
-    The equilibrium res(x; push, braking) = 0 (res = loads / sum F, x = (v_B, Omega)) moves
-    by dx = -J^-1 (d res / d load) d load, J the central-difference Jacobian of the solver;
-    d res / d push = e_z / sum F and d res / d braking = -(0, e_x, e_y[, 0]) / sum F with e =
-    Omega_perp / |Omega_perp|. epsilon = 2 v_B - 1 (v = 1). NaN if J is singular.
-    """
-    px = np.empty(4)
-    py = np.empty(4)
-    vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-    sxs = (-1.0, 1.0, 1.0, -1.0)
-    sys_ = (-1.0, -1.0, 1.0, 1.0)
-    for i in range(4):
-        px[i] = sxs[i] * np.sin(beta[i])
-        py[i] = sys_[i] * np.cos(beta[i])
-    nunk = 4 if free_spin else 3
-    total = force[0] + force[1] + force[2] + force[3]
-    loads = np.empty(5)
-    work = np.empty((4, 5))
-    rp = np.empty(4)
-    rm = np.empty(4)
-    trial = np.empty(4)
-    jac = np.empty((nunk, nunk))
-    for c in range(nunk):
-        hstep = _FD_STEP * max(1.0, abs(state[c]))
-        trial[:] = state
-        trial[c] = state[c] + hstep
-        _residual(trial, nunk, 0, push, braking, px, py, vgroove, force, semi_major, semi_minor,
-                  sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rp)
-        trial[c] = state[c] - hstep
-        _residual(trial, nunk, 0, push, braking, px, py, vgroove, force, semi_major, semi_minor,
-                  sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rm)
-        for r in range(nunk):
-            jac[r, c] = (rp[r] - rm[r]) / (2.0 * hstep)
-    unit = np.zeros(nunk)
-    sol = np.zeros(4)
-    unit[0] = 1.0 / total
-    deps_dpush = np.nan
-    if _solve_small(jac, unit, nunk, sol):
-        deps_dpush = -2.0 * sol[0]
-    deps_dbraking = np.nan
-    spin_perp = np.hypot(state[1], state[2])
-    if spin_perp > 0.0:
-        unit[0] = 0.0
-        unit[1] = -state[1] / spin_perp / total
-        unit[2] = -state[2] / spin_perp / total
-        if _solve_small(jac, unit, nunk, sol):
-            deps_dbraking = -2.0 * sol[0]
-    return deps_dpush, deps_dbraking
-
-
-#: Columns of ``out_load`` of :func:`full_loaded_kernel` (internal units, over mu).
-FULL_LOAD_COLUMNS = ("traction_capacity", "saturated_carriage_force", "capacity_residual",
-                     "velocity_deviation_per_push", "velocity_deviation_per_braking",
-                     "sliding", "stall_moment")
-
-
-@pjit
-def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_coefficient,
-                       semi_minor_coefficient, curved, rd, free_spin, tol, max_iter, cin, sin_,
-                       win, xo, wo, tr, wr, out_state, out_contact, out_info, out_load):
-    """The full model under external loads, n balls in parallel (R = 1, v = 1, mu = 1 units).
-
-    ``push`` (n,) = P / mu [N] and ``braking`` (n,) = (mu_bb / mu)(Q_back + Q_front) [N]
-    (:mod:`tolsim.physics.velocity.ball_loads`). Per ball:
-
-    1. the traction capacity P_cap / mu = min over Omega of Phi_0, the ball sliding at
-       v_B = 1 between grooves at rest (Newton on the moment rows from the point-contact
-       minimiser, :func:`~tolsim.physics.velocity.ball_loads.point_traction_capacity`; exactly
-       sum F_i with Omega = 0 when the pure-sliding moment sum F_i x_i is within the braking,
-       the kink of |Omega_perp|); P_cap is D + braking |Omega_perp| there, the saturated
-       carriage force F_c / mu = f_TR + f_TL of that state;
-    2. if |push| < P_cap, the loaded equilibrium (F_z + push = 0, moments with the braking)
-       from pure rolling, and d(epsilon)/d(push), d(epsilon)/d(braking) from its Jacobian
-       (:func:`_load_sensitivities`); otherwise the ball slides (no state: NaN). Likewise
-       when ``braking`` >= :func:`~tolsim.physics.velocity.ball_loads.stall_moment` (the braking
-       stalls
-       the rotation; sliding = 2.0).
-
-    ``out_contact`` (n, 4, 6): as :func:`full_kernel` plus the contact power D_i. ``out_load``
-    (n, 7): the columns ``FULL_LOAD_COLUMNS`` (capacity residual 0 when exact; sliding 0.0,
-    1.0 for |push| >= capacity, 2.0 for a stall; stall moment over mu). ``out_info`` of a
-    sliding ball is that of the capacity solve.
-    """
-    sigma_scale = 1.5 / np.pi
-    for n in prange(dbeta.shape[0]):
-        beta = np.empty(4)
-        a = np.empty(4)
-        b = np.empty(4)
-        hoff = np.empty(4)
-        for i in range(4):
-            beta[i] = nominal_angle + dbeta[n, i]
-            f13 = np.cbrt(force[n, i])
-            a[i] = semi_major_coefficient * f13
-            b[i] = semi_minor_coefficient * f13
-            hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
-                                                                          - a[i] * a[i]))
-        for k in range(4):
-            out_state[n, k] = np.nan
-            for m in range(6):
-                out_contact[n, k, m] = np.nan
-        for m in range(7):
-            out_load[n, m] = np.nan
-        out_info[n, 0] = np.inf
-        out_info[n, 1] = 0.0
-        out_info[n, 2] = 0.0
-        npos = 0
-        for i in range(4):
-            if force[n, i] > 0.0:
-                npos += 1
-        if npos < 3:
-            continue
-        # 1) traction capacity
-        state = np.zeros(4)
-        contact = np.empty((4, 6))
-        info = np.zeros(3)
-        total = force[n, 0] + force[n, 1] + force[n, 2] + force[n, 3]
-        mx0 = 0.0
-        my0 = 0.0
-        for i in range(4):
-            # moment of pure forward sliding, F_i x_i, x_i = (-p_y, p_x)
-            mx0 -= force[n, i] * SIDE_SIGN_Y_T[i] * np.cos(beta[i])
-            my0 += force[n, i] * SIDE_SIGN_X_T[i] * np.sin(beta[i])
-        brake = braking[n]
-        if np.hypot(mx0, my0) <= brake:
-            capacity = total
-            saturated = -(force[n, 2] + force[n, 3])
-            cap_residual = 0.0
-            cap_ok = True
-        else:
-            ex, ey = rolling_axis(beta, force[n])
-            _, wx0, wy0 = point_traction_capacity(beta, force[n], brake, ex, ey)
-            state[0] = 1.0
-            state[1] = wx0
-            state[2] = wy0
-            state[3] = 0.0
-            _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                       max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
-                       1, 0.0, brake, 0.0, True)
-            capacity = brake * np.hypot(state[1], state[2])
-            for i in range(4):
-                capacity += contact[i, 5]
-            saturated = contact[2, 2] + contact[3, 2]
-            cap_residual = info[0]
-            cap_ok = info[2] > 0.5
-        out_load[n, 0] = capacity
-        out_load[n, 1] = saturated
-        out_load[n, 2] = cap_residual
-        load_p = push[n]
-        stall = stall_moment(beta, force[n])
-        out_load[n, 6] = stall
-        if (cap_ok and abs(load_p) >= capacity) or brake >= stall:
-            out_load[n, 5] = 1.0 if cap_ok and abs(load_p) >= capacity else 2.0
-            out_info[n, 0] = cap_residual
-            out_info[n, 2] = 1.0 if cap_ok else 0.0
-            continue
-        out_load[n, 5] = 0.0
-        # 2) the loaded equilibrium
-        state[:] = 0.0
-        _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                   max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
-                   0, load_p, brake, 1.0, False)
-        for k in range(4):
-            out_state[n, k] = state[k]
-            for m in range(6):
-                out_contact[n, k, m] = contact[k, m]
-        out_info[n, 0] = info[0]
-        out_info[n, 1] = info[1]
-        out_info[n, 2] = info[2]
-        dp, db = _load_sensitivities(beta, force[n], a, b, sigma_scale, curved, rd, hoff,
-                                     free_spin, load_p, brake, cin, sin_, win, xo, wo, tr, wr,
-                                     state)
-        out_load[n, 3] = dp
-        out_load[n, 4] = db
 
 
 # --------------------------------------------------------------------------------------------
@@ -1116,8 +280,9 @@ def friction_loads(ball_velocity, angular_velocity, contact_angle, normal_force,
     contact = np.empty((4, 5))
     grid_arrays = quadrature_grid(n_ang, n_rad, hc.ellipticity)
     with np.errstate(divide="ignore", invalid="ignore"):
-        _ball_loads(state, px, py, np.array([0.0, 0.0, 1.0, 1.0]), force, a, b, 1.5 / np.pi,
-                    surface == "curved", rd, hoff, *grid_arrays, loads, contact)
+        ball_loads_kernel(state, px, py, np.array([0.0, 0.0, 1.0, 1.0]), force, a, b,
+                          1.5 / np.pi, surface == "curved", rd, hoff, *grid_arrays, loads,
+                          contact)
     mu = bearing.friction_coefficient
     return mu * loads[0], mu * radius * loads[1:4], mu * contact[:, 2], mu * v * loads[4]
 
@@ -1139,7 +304,7 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
 
     Solves the quasi-static equilibrium of each ball (z force, x and y moments, and the z
     moment when ``free_spin``) under Coulomb friction integrated over the four Hertz
-    ellipses ([Lin2018] Eqs. 1-13 and 18, nothing linearised; see the module docstring).
+    ellipses ([Lin2018] Eqs. 1-13 and 18, nothing linearised; see the Notes of :func:`full`).
     Balls are solved in parallel over all cores.
 
     External loads (:mod:`tolsim.physics.velocity.ball_loads`): the push P adds to the z force, the
@@ -1185,6 +350,67 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
         ``push`` and ``neighbour_force``: :class:`FullResult`, exactly as before; with either:
         :class:`LoadedFullResult`, whose epsilon is the unloaded one bit for bit when the loads
         are zero.
+
+    Notes
+    -----
+    One ball between a fixed bottom groove and a top groove moving at v along the rail (z), with
+    given contact angles beta_i and normal forces F_i ([Lin2018] Sec. 2, Fig. 2). Unknowns: the
+    ball velocity v_B and its angular velocity Omega = (omega_x, omega_y[, omega_z]). Nothing is
+    linearised:
+
+    * **Kinematics** (Eqs. 1-9). The slip of the ball over groove i at a point r of the contact is
+      dv = v_B z + Omega x r - V_i z (V = 0 bottom, v top), projected on the contact's tangent
+      plane. Planar contact (default, as in the paper): r = R p_i + x x_i + z z_i, and the slip
+      field is a rotation omega_i = Omega . y_i about the zero-velocity point (c_i, d_i) (Eq. 8),
+      c_i = (v_B - V_i - R Omega . x_i) / omega_i, d_i = -R omega_z / omega_i.
+      Curved contact (``surface="curved"``): the contact follows the deformed-surface radius
+      R_d = 2 f D / (2 f + 1) in the cross-section ([Harris2007], after [Jones1959]),
+      r = (h + sqrt(R_d^2 - x^2)) p_i + x x_i + z z_i with h = sqrt(R^2 - a^2) - sqrt(R_d^2 - a^2)
+      (the ellipse's edges lie on the undeformed ball), so the rolling radius varies across the
+      ellipse (Heathcote slip).
+    * **Friction** (Eq. 11-13). Coulomb: traction -mu sigma dv/|dv| on the ball, with the Hertz
+      pressure sigma = sigma_0 sqrt(1 - x^2/a^2 - z^2/b^2), sigma_0 = 3 F / (2 pi a b) (Eq. 11;
+      the ellipse lies in the x-z plane, a across the groove, ERRATA 3-4). Forces and moments
+      about the ball centre are the full 3-D sums of r x dF: the moment of contact i is
+      -R f_i x_i - M_i y_i + R f_x,i z (planar), which is where ERRATA 8's sign comes from.
+    * **Equilibrium** (Eq. 18 in full nonlinear form): sum of z forces, x and y moments (and the
+      z moment when omega_z is free) vanish. Normal forces pass through the ball centre.
+
+    External loads (issue 13; :mod:`tolsim.physics.velocity.ball_loads`): the neighbours' push P
+    adds to the z force and their ball-to-ball braking -mu_bb (Q_back + Q_front) R_B Omega_perp /
+    |Omega_perp| to the moments; the equations stay the gradient of a convex potential (D plus the
+    braking term minus P v_B), which the solver minimises as before (:func:`full_loaded_kernel`).
+    The ball's traction capacity is the same minimisation with both grooves at rest and v_B fixed;
+    beyond it the ball slides.
+
+    Quadrature (the direction field is singular at the zero-velocity point). The integrals are
+    taken in polar coordinates *centred on the zero-velocity point*, in the coordinates
+    (x/a, z/b) where the ellipse is the unit disc. For planar contact the slip direction is
+    constant along each ray, so the radial integrals of the Hertz pressure are closed-form
+    (``_full_kernels._ray_moments``); only the angular integral is numerical:
+
+    * pole inside the ellipse: the angular integrand is smooth and periodic; the trapezoidal rule
+      on a mapped angle tan(phi) = tan(chi) / q, q = (b/a)^0.3, clusters nodes where the
+      direction field turns fast (phi ~ +-90 deg for a long thin ellipse); exponential
+      convergence;
+    * pole outside: the rays cover a cone of half-angle asin(1/|P|); Gauss-Legendre on it (the
+      integrand vanishes linearly at the cone's edges and is analytic inside).
+
+    For the curved surface the pole is the exact zero of the slip field (a quadratic), the
+    direction still varies along each ray, and the radial integral uses Gauss-Legendre in
+    theta (s = cos theta, which absorbs the sqrt of the pressure at the edge).
+
+    The equilibrium is solved per ball by a damped Newton method (central-difference Jacobian,
+    backtracking line search, Levenberg-Marquardt fallback) from pure rolling at the contact
+    centres (least squares over the four contacts). The equations are the gradient of the
+    dissipated power D(v_B, Omega) = sum int mu sigma |slip| dA, which is convex, so a step is
+    also accepted when it decreases D (Armijo). Non-convergence is a flag (``converged``), never
+    an exception.
+
+    Known limit: near two-point contact (e.g. |rho| > 0.94 at theta = 3 deg with paired
+    forces) the heavily loaded pair tends to *stick* (zero spin and zero slip at the centre):
+    the minimum of D sits on a kink where the friction is set-valued, the smooth residual cannot
+    vanish, and the ball is returned with ``converged = False`` (residual ~1e-2).
     """
     if surface not in SURFACES:
         raise ValueError(f"surface = {surface!r}; choose one of {SURFACES}")
@@ -1195,7 +421,7 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     if not (int(max_iter) == max_iter and max_iter >= 1):
         raise ValueError(f"max_iter = {max_iter!r} must be a positive integer")
     n_ang, n_rad = _parse_grid(grid)
-    dbeta, force, shape = _as_ball_arrays(contact_angle_deviation, normal_force)
+    dbeta, force, shape = as_ball_arrays(contact_angle_deviation, normal_force)
     loaded = push is not None or neighbour_force is not None
     if loaded:
         load_p, load_q = as_ball_loads(push, neighbour_force, ball_friction, shape)

@@ -86,7 +86,7 @@ and its assembly is invalid (``train_valid`` False) if a loaded ball was unresol
 evaluation before the assembly's first contact. A ball in the loaded zone whose four contacts
 have opened (under an end relief deeper than the ball's approach, for one) is unresolved in
 this sense, as a ball that lost contact in the constant propagation: keep the relief depth
-below the preload oversize (module docstring of :mod:`tolsim.physics.carriage`) to unload
+below the preload oversize (Notes of :func:`tolsim.physics.carriage.end_relief`) to unload
 the end balls gradually while they stay in four-point contact. An assembly is invalid, too,
 if it needs more entering balls than were drawn (:func:`tolsim.study.sampling.
 entering_capacity`) or more balls in its zone than it has slots (:func:`slot_capacity`).
