@@ -77,7 +77,7 @@ def __getattr__(name):
     module = API.get(name)
     if module is None:
         raise AttributeError(f"module 'tolsim' has no attribute {name!r}")
-    import importlib
+    import importlib  # noqa: PLC0415
 
     value = getattr(importlib.import_module(module), name)
     globals()[name] = value  # later look-ups skip this function

@@ -169,9 +169,9 @@ def summary(result, tolerance_rows, files, elapsed) -> str:
 
 
 def run(args) -> int:
-    from tolsim.io.allocation import allocated_config_text, given_scales, tolerance_lines
-    from tolsim.io.config import ConfigError, load_config, parse_config
-    from tolsim.study.design.allocate import (
+    from tolsim.io.allocation import allocated_config_text, given_scales, tolerance_lines  # noqa: PLC0415
+    from tolsim.io.config import ConfigError, load_config, parse_config  # noqa: PLC0415
+    from tolsim.study.design.allocate import (  # noqa: PLC0415
         AllocationInfeasible,
         AllocationSettings,
         check_allocation,
@@ -202,9 +202,9 @@ def run(args) -> int:
     def optimum_config(scales):
         return parse_config(optimum_text(scales), f"{args.config} (allocated)")
 
-    import tqdm
+    import tqdm  # noqa: PLC0415
 
-    from tolsim.study.design.allocate import run_allocation
+    from tolsim.study.design.allocate import run_allocation  # noqa: PLC0415
 
     quiet = True if args.quiet else None
     bar = tqdm.tqdm(total=settings.max_evaluations, unit="eval", file=sys.stderr,
@@ -255,7 +255,7 @@ def run(args) -> int:
                f"Made by: {_command_line(args)}")
     text = optimum_text(scales, comment)
     rows = tolerance_lines(config.text, config, scales)
-    from tolsim.reports.allocate import write_allocation
+    from tolsim.reports.allocate import write_allocation  # noqa: PLC0415
 
     try:
         files = write_allocation(result, out, optimum_text=text, tolerance_rows=rows,

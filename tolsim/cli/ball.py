@@ -218,7 +218,7 @@ def _angles_and_forces(args, bearing):
     if not (math.isfinite(nx) and math.isfinite(ny)):
         raise UsageError("--load-n must be two finite numbers")
 
-    from tolsim.physics.static import GrooveErrors, solve_static, turned_flank_offsets
+    from tolsim.physics.static import GrooveErrors, solve_static, turned_flank_offsets  # noqa: PLC0415
 
     normal = np.array(given.get("arc_offset_um", [0.0] * 4)) * 1e-6
     tangential = np.array(given.get("arc_offset_tangential_um", [0.0] * 4)) * 1e-6
@@ -269,7 +269,7 @@ def _bearing_and_velocity(args):
     """Bearing and top-groove velocity [m/s] from --config or Table 1."""
     bearing, velocity = TABLE1, TABLE1_GROOVE_VELOCITY
     if args.config:
-        from tolsim.io.config import ConfigError, load_config  # io layer, only when asked
+        from tolsim.io.config import ConfigError, load_config  # io layer, only when asked # noqa: PLC0415
 
         try:
             config = load_config(args.config)
@@ -289,7 +289,7 @@ def _bearing_and_velocity(args):
 def largest_force(bearing) -> float:
     """Contact force [N] at which the Hertz ellipse's semi-major axis reaches R_B / 2, the
     edge of every velocity model (:func:`tolsim.physics.velocity.full.full` refuses beyond)."""
-    from tolsim.physics.hertz import hertz_constants
+    from tolsim.physics.hertz import hertz_constants  # noqa: PLC0415
 
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                          bearing.poisson_ratio)

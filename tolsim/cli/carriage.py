@@ -71,7 +71,7 @@ def evaluate(config, seed=None) -> dict:
     UsageError
         A load the layout cannot carry, or lift-off.
     """
-    from tolsim.study.pipeline.carriage import solve_config_carriage
+    from tolsim.study.pipeline.carriage import solve_config_carriage  # noqa: PLC0415
 
     try:
         result = solve_config_carriage(config, seed)
@@ -184,7 +184,7 @@ def _text(out) -> str:
 
 
 def run(args) -> int:
-    from tolsim.io.config import ConfigError, load_config
+    from tolsim.io.config import ConfigError, load_config  # noqa: PLC0415
 
     try:
         config = load_config(args.config)
@@ -197,7 +197,7 @@ def run(args) -> int:
         raise UsageError(f"--seed = {args.seed} must be >= 0")
     out = evaluate(config, args.seed)
     if args.plot:
-        from tolsim.reports.carriage import plot_load_distribution
+        from tolsim.reports.carriage import plot_load_distribution  # noqa: PLC0415
 
         try:
             plot_load_distribution(out, args.plot)

@@ -66,7 +66,7 @@ def run(args) -> int:
     out = args.out
     if os.path.exists(out) and not os.path.isdir(out):
         raise UsageError(f"--out {out} exists and is not a folder")
-    from tolsim.reports.compare import NotAResult, compare_runs
+    from tolsim.reports.compare import NotAResult, compare_runs  # noqa: PLC0415
 
     started = time.perf_counter()
 

@@ -47,7 +47,7 @@ def run(args) -> int:
     parent = os.path.dirname(os.path.abspath(out))
     if not os.path.isdir(parent):
         raise UsageError(f"--out {out}: parent folder {parent} does not exist")
-    from tolsim.reports.paper import make_paper
+    from tolsim.reports.paper import make_paper  # noqa: PLC0415
 
     started = time.perf_counter()
 

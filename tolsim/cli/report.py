@@ -78,7 +78,7 @@ def add_parser(subparsers, formatter_class=None):
 
 
 def run(args) -> int:
-    from tolsim.reports.study import NotAResult, make_report
+    from tolsim.reports.study import NotAResult, make_report  # noqa: PLC0415
 
     out = getattr(args, "out", None) or os.path.splitext(args.result)[0] + "-report"
     if os.path.exists(out) and not os.path.isdir(out):
@@ -89,7 +89,7 @@ def run(args) -> int:
         if not args.quiet:
             print(f"[{time.perf_counter() - started:5.1f} s] {msg}", file=sys.stderr)
 
-    from tolsim.reports.sweep import is_sweep_file
+    from tolsim.reports.sweep import is_sweep_file  # noqa: PLC0415
 
     if is_sweep_file(args.result):
         return _sweep_report(args, out, say, started)
@@ -109,8 +109,8 @@ def run(args) -> int:
 
 def _sweep_report(args, out, say, started) -> int:
     """``tolsim report`` on a sweep file (:func:`tolsim.reports.sweep.make_sweep_report`)."""
-    from tolsim.reports.study import NotAResult
-    from tolsim.reports.sweep import NotASweep, make_sweep_report
+    from tolsim.reports.study import NotAResult  # noqa: PLC0415
+    from tolsim.reports.sweep import NotASweep, make_sweep_report  # noqa: PLC0415
 
     try:
         result = make_sweep_report(args.result, out, progress=say)

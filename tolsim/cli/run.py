@@ -76,7 +76,7 @@ def _seconds(text):
 def _target(text):
     """An argparse ``type``: a :class:`tolsim.study.execution.runner.PrecisionTarget` (``0.005`` or
     ``10%``); imported only when the flag is given."""
-    from tolsim.study.execution.runner import PrecisionTarget
+    from tolsim.study.execution.runner import PrecisionTarget  # noqa: PLC0415
 
     try:
         return PrecisionTarget.parse(text)
@@ -144,7 +144,7 @@ def _strata_text(ds) -> str:
     """'; near the limit: RMS .., max ..' when some spot checks were drawn near the limit."""
     if "spot_check_stratum" not in ds:
         return ""
-    import numpy as np
+    import numpy as np  # noqa: PLC0415
 
     near = np.asarray(ds.spot_check_stratum) == 1
     both = (np.asarray(ds.spot_check_valid_analytic, dtype=bool)
@@ -189,7 +189,7 @@ def _estimator_lines(ds, prefix, title) -> list:
     """Lines on a probability made by a rare-event estimator (issue 15): which estimator, P
     with its CV and interval, the evaluations; importance sampling's design point; a
     fallback; or why there is no number."""
-    from tolsim.study.analyses.rare_events import ESTIMATOR_TITLES
+    from tolsim.study.analyses.rare_events import ESTIMATOR_TITLES  # noqa: PLC0415
 
     var = ds[prefix]
     a = var.attrs
@@ -359,7 +359,7 @@ def summary(ds, output, elapsed) -> str:
     else:
         lines.append(f"spot checks: {a['spot_check_status']}")
     if "velocity_deviation_out_of_spec_fraction" in ds:
-        from tolsim.study.statistics.quality import format_fraction
+        from tolsim.study.statistics.quality import format_fraction  # noqa: PLC0415
 
         line = (f"|epsilon| > {_pct(float(ds.velocity_deviation_limit))}: " + format_fraction(
             float(ds.velocity_deviation_out_of_spec_fraction),
@@ -443,7 +443,7 @@ def _check_output(output: Path, checkpoint: Path):
 
 
 def run(args) -> int:
-    from tolsim.io.config import ConfigError, load_config
+    from tolsim.io.config import ConfigError, load_config  # noqa: PLC0415
 
     try:
         config = load_config(args.config).with_overrides(samples=args.samples, seed=args.seed)
@@ -458,7 +458,7 @@ def run(args) -> int:
     checkpoint = Path(f"{output}.partial")
     _check_output(output, checkpoint)
     if args.scheduler is not None:  # before any work: the extra, the value, the flags
-        from tolsim.study.execution import distributed
+        from tolsim.study.execution import distributed  # noqa: PLC0415
 
         if args.workers != 1:
             raise UsageError("--workers and --scheduler: the scheduler's workers do the work; "
@@ -472,15 +472,15 @@ def run(args) -> int:
     if config.sweep is not None:  # a what-if sweep: its points into one file
         return _run_sweep(args, config, output)
 
-    import tqdm
+    import tqdm  # noqa: PLC0415
 
-    from tolsim.io.netcdf import write_result
-    from tolsim.study.execution.runner import fingerprint, run_study
+    from tolsim.io.netcdf import write_result  # noqa: PLC0415
+    from tolsim.study.execution.runner import fingerprint, run_study  # noqa: PLC0415
 
     if args.fresh and checkpoint.exists():
         checkpoint.unlink()
     if args.resume:
-        import numpy as np
+        import numpy as np  # noqa: PLC0415
 
         try:
             with np.load(checkpoint) as data:
@@ -525,7 +525,7 @@ def run(args) -> int:
 
 def sweep_summary(ds, output, elapsed) -> str:
     """Short plain-text summary of a sweep's result: one line per point."""
-    import numpy as np
+    import numpy as np  # noqa: PLC0415
 
     keys = ds.attrs["sweep_keys"].split()
     names = ds.attrs["sweep_coordinates"].split()
@@ -561,9 +561,9 @@ def sweep_summary(ds, output, elapsed) -> str:
 
 def _run_sweep(args, config, output) -> int:
     """``tolsim run`` on a config with ``[sweep]``: every point, one file (tolsim.io.sweep)."""
-    import tqdm
+    import tqdm  # noqa: PLC0415
 
-    from tolsim.io.sweep import parts_folder, run_sweep
+    from tolsim.io.sweep import parts_folder, run_sweep  # noqa: PLC0415
 
     sweep = config.sweep
     folder = parts_folder(output)
