@@ -8,7 +8,10 @@ one line naming the file, the line (where it can be found) and the key, e.g.::
     study.toml:12: tolerances.top_rotation.std_deg = -0.1 must be >= 0
 
 The sections and their keys are documented in ``tolsim/data/default.toml`` (the packaged
-default study) and in ``configs/*.toml``.
+default study) and in ``configs/*.toml``. They are read by :mod:`~tolsim.io.config.sections`,
+``[sweep]`` by :mod:`~tolsim.io.config.sweep` and ``[allocate]`` by
+:mod:`~tolsim.io.config.allocation`, all on :mod:`~tolsim.io.config.reader` (the units, the
+errors and the TOML line scanner); this module puts them together.
 """
 
 import re
