@@ -35,7 +35,8 @@ INTERVAL_VARIABLES = {
 
 _FACTOR = ("factor",)
 #: name -> (dims, units, long_name, dtype kind): the variables of a rare-event estimator
-#: (:mod:`tolsim.io.schema` declares them, optional), for each event of :data:`EVENTS`.
+#: (:mod:`tolsim.io.schema` declares them, optional), for each event of
+#: :data:`tolsim.study.analyses.limit_state.EVENTS`.
 RARE_EVENT_VARIABLES = {
     "velocity_deviation_exceedance_probability": (
         (), "1", "probability that an assembly has a ball with |epsilon| above its limit, over "
