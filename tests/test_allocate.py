@@ -21,8 +21,8 @@ from scipy.optimize import brentq, minimize
 from scipy.stats import beta, norm
 
 from tolsim.cli import main
-from tolsim.io.allocation import allocated_config_text, given_scales, tolerance_lines
 from tolsim.io.config import ConfigError, load_config, parse_config
+from tolsim.io.config.allocation import allocated_config_text, given_scales, tolerance_lines
 from tolsim.study.design.allocate import (
     AllocationSettings,
     SourceCost,

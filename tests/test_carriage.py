@@ -436,7 +436,7 @@ def default_equivalent_carriage(scale=1.0):
     """The packaged default study's loads on the equivalent phi = 0 single-track carriage.
 
     Returns the solution, the ball positions [m] and the old rule's rho_j = M z_j / (sum z^2
-    N_y) (``tolsim/io/config.py`` ``_loads``) for the yaw moment times ``scale``.
+    N_y) (``tolsim/io/config/sections.py`` ``read_loads``) for the yaw moment times ``scale``.
     """
     from tolsim.io.config import load_config
 

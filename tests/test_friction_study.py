@@ -21,6 +21,7 @@ from scipy.stats import binomtest
 from tolsim.cli import main
 from tolsim.io.config import load_config, parse_config
 from tolsim.io.netcdf import read_result, result_to_dataset, write_result
+from tolsim.io.schema.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, paired_forces
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.trains import train_contact_constant
@@ -481,7 +482,7 @@ def test_no_contact_section_changes_nothing(tmp_path):
     da, db = result_to_dataset(a), result_to_dataset(b)
     extra = set(db.variables) - set(da.variables)
     assert not set(da.variables) - set(db.variables)
-    assert extra == {*fr.FRICTION_VARIABLES, *fr.FRICTION_COORDINATES}
+    assert extra == {*FRICTION_VARIABLES, *FRICTION_COORDINATES}
     assert "sensitivity_friction_total" in extra
     for name in da.data_vars:
         xr.testing.assert_identical(da[name].drop_attrs(), db[name].drop_attrs())

@@ -26,6 +26,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import ConfigError, load_config, parse_config
 from tolsim.io.netcdf import read_result, result_to_dataset, write_result
+from tolsim.io.schema import rare_events
 from tolsim.study.analyses import limit_state
 from tolsim.study.analyses.rare_events import RARE_EVENT_STREAM, STATUS_NO_FAILURE
 from tolsim.study.execution.runner import PrecisionTarget, run_study
@@ -388,7 +389,7 @@ def test_monte_carlo_estimator_is_the_plain_run(tmp_path):
     ds = result_to_dataset(default, history="t")
     assert ds.contact_probability.attrs["estimator"] == "monte_carlo"
     assert ds.contact_probability_ci_lower.attrs["interval"] == "Clopper-Pearson"
-    assert not [name for name in ds.variables if name in limit_state.RARE_EVENT_VARIABLES]
+    assert not [name for name in ds.variables if name in rare_events.RARE_EVENT_VARIABLES]
     assert "estimator" not in ds.attrs
 
 

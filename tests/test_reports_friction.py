@@ -22,11 +22,11 @@ from test_reports import check_figure
 
 from tolsim.io.config import load_config, parse_config
 from tolsim.io.netcdf import write_result
+from tolsim.io.schema.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
 from tolsim.reports import assumptions as A
 from tolsim.reports import study as study_report
 from tolsim.reports import verdict as V
 from tolsim.study.execution.runner import run_study
-from tolsim.study.pipeline.track_friction import FRICTION_COORDINATES, FRICTION_VARIABLES
 from tolsim.study.statistics.intervals import format_fraction
 
 CONFIGS = os.path.join(os.path.dirname(__file__), "..", "configs")

@@ -331,7 +331,7 @@ def test_threshold_indices_closed_form_limits():
 
 
 def test_sensitivity_variables_for_the_result_file():
-    from tolsim.study.analyses.sensitivity import SENSITIVITY_VARIABLES, sensitivity_variables
+    from tolsim.io.schema.sensitivity import SENSITIVITY_VARIABLES, sensitivity_variables
 
     config = _config(CONFIG_SIDE)
     res = study_sensitivity(config, samples=64, n_resamples=50)

@@ -2,7 +2,7 @@
 cost.
 
 A thin layer over :func:`tolsim.study.design.allocate.run_allocation`,
-:func:`tolsim.io.allocation.allocated_config_text` and
+:func:`tolsim.io.config.allocation.allocated_config_text` and
 :func:`tolsim.reports.allocate.write_allocation`.
 """
 
@@ -169,8 +169,12 @@ def summary(result, tolerance_rows, files, elapsed) -> str:
 
 
 def run(args) -> int:
-    from tolsim.io.allocation import allocated_config_text, given_scales, tolerance_lines  # noqa: PLC0415
     from tolsim.io.config import ConfigError, load_config, parse_config  # noqa: PLC0415
+    from tolsim.io.config.allocation import (  # noqa: PLC0415
+        allocated_config_text,
+        given_scales,
+        tolerance_lines,
+    )
     from tolsim.study.design.allocate import (  # noqa: PLC0415
         AllocationInfeasible,
         AllocationSettings,

@@ -1,5 +1,6 @@
 """I/O layer: the TOML study config (:mod:`~tolsim.io.config`), the declared netCDF schema
-(:mod:`~tolsim.io.schema`) and the result writer/reader (:mod:`~tolsim.io.netcdf`).
+(:mod:`~tolsim.io.schema`), the result writer/reader (:mod:`~tolsim.io.netcdf`) and a
+what-if sweep's run into one result file (:mod:`~tolsim.io.sweep`).
 
 Typical use, without the command line::
 

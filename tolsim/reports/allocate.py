@@ -13,7 +13,7 @@ error leaves no half-written output):
   proportions times a common factor, with the limit, the config as given, the optimum and
   the verification's interval; (b) the optimum scale factor of each source within its
   bounds;
-* ``allocated.toml``: the optimum as a ready-to-run config (:func:`tolsim.io.allocation.
+* ``allocated.toml``: the optimum as a ready-to-run config (:func:`tolsim.io.config.allocation.
   allocated_config_text`), with the verification's seed and samples, so ``tolsim run`` on it
   reproduces the verification;
 * ``allocate.json``: every number of the page; ``allocate.csv``: one row per decision
@@ -476,9 +476,9 @@ def write_allocation(result, folder, *, optimum_text, tolerance_rows=None,
     folder : str or path
         Created if missing; files of the same names in it are replaced.
     optimum_text : str
-        The allocated config (:func:`tolsim.io.allocation.allocated_config_text`).
+        The allocated config (:func:`tolsim.io.config.allocation.allocated_config_text`).
     tolerance_rows : dict, optional
-        :func:`tolsim.io.allocation.tolerance_lines` of the optimum.
+        :func:`tolsim.io.config.allocation.tolerance_lines` of the optimum.
     written_scales : dict, optional
         source -> the scale written in the allocated config (the optimum times a scale the
         config already set).

@@ -213,7 +213,7 @@ class _FileSensitivity:
 def sensitivity_from_file(ds):
     """The indices stored in the file (``factor`` dimension, names in ``factor_name``), or None.
 
-    Reads the variables of :data:`tolsim.study.analyses.sensitivity.SENSITIVITY_VARIABLES`:
+    Reads the variables of :data:`tolsim.io.schema.sensitivity.SENSITIVITY_VARIABLES`:
     epsilon's
     ``sensitivity_first_order`` / ``sensitivity_total`` and, when present, the contact
     indicator's ``sensitivity_contact_*``, the friction increase's ``sensitivity_friction_*``
@@ -849,7 +849,7 @@ def carriage_content(ds, config=None) -> dict:
     ----------
     ds : xarray.Dataset
         A result file with a ``track`` dimension (the variables of
-        :data:`tolsim.study.pipeline.carriage.CARRIAGE_VARIABLES`).
+        :data:`tolsim.io.schema.carriage.CARRIAGE_VARIABLES`).
     config : StudyConfig, optional
         The embedded config (ball positions, N_0, K, per-ball oversizes); without it the
         section shows what the file holds.
@@ -1082,7 +1082,7 @@ def plot_friction(ds, sens=None, ball_diameter=np.nan):
     Parameters
     ----------
     ds : xarray.Dataset
-        A result file with the friction variables (:data:`tolsim.study.pipeline.track_friction.
+        A result file with the friction variables (:data:`tolsim.io.schema.friction.
         FRICTION_VARIABLES`).
     sens : optional
         Sensitivity indices with the output ``friction_increase`` (panel d).
@@ -1289,7 +1289,7 @@ def friction_content(ds, sens=None) -> dict:
     Parameters
     ----------
     ds : xarray.Dataset
-        A result file with the friction variables (:data:`tolsim.study.pipeline.track_friction.
+        A result file with the friction variables (:data:`tolsim.io.schema.friction.
         FRICTION_VARIABLES`).
     sens : optional
         Sensitivity indices; those of the output ``friction_increase`` rank the drivers.

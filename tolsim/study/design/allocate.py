@@ -101,7 +101,7 @@ refused (:func:`check_allocation`).
 Everything here works on plain numbers and :class:`~tolsim.study.spec.StudyConfig` objects:
 :func:`allocate_scales` is the generic core (it takes any evaluator scales -> (estimate,
 bounds), so the tests drive it with a closed-form limit state), :func:`run_allocation` runs
-it on a study. No file, TOML or plotting here (:mod:`tolsim.io.allocation` reads
+it on a study. No file, TOML or plotting here (:mod:`tolsim.io.config.allocation` reads
 ``[allocate]`` and writes the allocated config, :mod:`tolsim.reports.allocate` the report).
 
 References
@@ -461,7 +461,7 @@ def largest_scale(tolerance, bearing) -> float:
 
 @dataclass(frozen=True)
 class AllocationSettings:
-    """The settings of ``tolsim allocate`` (``[allocate]``, :mod:`tolsim.io.allocation`).
+    """The settings of ``tolsim allocate`` (``[allocate]``, :mod:`tolsim.io.config.allocation`).
 
     Attributes
     ----------

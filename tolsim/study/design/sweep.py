@@ -1,8 +1,8 @@
 """What-if sweeps: one study at many values of some config keys (issue 14, part 1).
 
-A config with a ``[sweep]`` section (read by :mod:`tolsim.io.sweep`) is a family of studies,
-its *points*: each point is the config with the swept keys set to one combination of their
-values, as a complete :class:`~tolsim.study.spec.StudyConfig`. This module holds the
+A config with a ``[sweep]`` section (read by :mod:`tolsim.io.config.sweep`) is a family of
+studies, its *points*: each point is the config with the swept keys set to one combination of
+their values, as a complete :class:`~tolsim.study.spec.StudyConfig`. This module holds the
 description of that family (:class:`Sweep`, :class:`SweepAxis`); running the points and
 writing them into one result file is :func:`tolsim.io.sweep.run_sweep`.
 

@@ -7,7 +7,8 @@ train's first contact (time and pair), so the user can do their own analysis of 
 assemblies behind the statistics. The rows are cut from the blocks as the runner merges them
 (:func:`sample_rows`), so they are bit-identical whatever the chunking or workers; blocks
 whose rows a resumed run does not have are evaluated again (:func:`take`). The result file
-holds them along a ``sample`` dimension (:data:`SAMPLE_VARIABLES`).
+holds them along a ``sample`` dimension
+(:data:`tolsim.io.schema.samples.SAMPLE_VARIABLES`).
 
 With ``along_track`` propagation the source values, contact state and epsilon are those at
 the start of the stroke (the balls' initial rail positions); the contact time follows the
@@ -16,8 +17,6 @@ whole stroke.
 
 import numpy as np
 
-from tolsim.study.spec import SOURCES
-
 #: Prefix of the sample rows in a block's records (beside its spot-check rows) and of their
 #: variables.
 PREFIX = "sample_"
@@ -25,32 +24,6 @@ PREFIX = "sample_"
 # ``MODEL_FAST``,
 #: ``MODEL_FULL``) and their CF flag meanings.
 MODEL_FLAGS = {-1: "unresolved", 0: "fast_model", 1: "full_model"}
-_UNITS = {"length": "m", "angle": "rad"}
-
-#: Declarations for :mod:`tolsim.io.schema`: name -> (dims, units, long_name, dtype kind).
-SAMPLE_VARIABLES = {
-    "sample": (("sample",), "1", "assembly index (the first assemblies of the study, in "
-               "block order)", "i"),
-    **{f"{PREFIX}error_{source}": (("sample", "ball"), _UNITS[kind],
-                                   f"value of the tolerance source {source} at the ball",
-                                   "f")
-       for source, (kind, _) in SOURCES.items()},
-    f"{PREFIX}initial_gap": (("sample", "pair"), "m", "gap between adjacent balls at the "
-                             "start of the stroke", "f"),
-    f"{PREFIX}contact_angle_deviation": (("sample", "ball", "contact"), "rad",
-                                         "loaded contact angle deviation of the ball", "f"),
-    f"{PREFIX}normal_force": (("sample", "ball", "contact"), "N",
-                              "contact force of the ball", "f"),
-    f"{PREFIX}velocity_deviation": (("sample", "ball"), "1", "velocity deviation epsilon of "
-                                    "the ball (missing: unresolved)", "f"),
-    f"{PREFIX}model": (("sample", "ball"), "1", "model that gave epsilon (flag_meanings)",
-                       "i"),
-    f"{PREFIX}contact_time": (("sample",), "s", "time of the first ball-to-ball contact of "
-                              "the train (missing: none within the horizon)", "f"),
-    f"{PREFIX}contact_pair": (("sample",), "1", "adjacent pair of the first contact, named "
-                              "by its trailing ball; with a carriage track * (balls - 1) + "
-                              "trailing ball (-1: none within the horizon)", "i"),
-}
 
 
 def sample_rows(config, save_samples, start, values, initial_gap, state, contact_time,
@@ -129,28 +102,3 @@ def take(config, parts, save_samples: int, spot_plan) -> dict | None:
         rows = concatenate([spots for _, _, spots in run_chunk(
             config, blocks, spot_plan, save_samples=wanted)])
     return {k: v[:wanted] for k, v in rows.items()}
-
-
-def dataset_variables(config, samples: dict) -> dict:
-    """name -> (dims, values) of the ``sample`` variables of a result file."""
-    out = {}
-    for name, values in samples.items():
-        if name == f"{PREFIX}index":
-            out["sample"] = (("sample",), values)
-            continue
-        values = np.array(values)
-        dims = SAMPLE_VARIABLES[name][0]
-        if config.carriage is not None and {"ball", "pair"} & set(dims):
-            # (sample, tracks * k, ...) -> (sample, track, k, ...)
-            values = values.reshape((len(values), config.n_tracks, -1) + values.shape[2:])
-            dims = dims[:1] + ("track",) + dims[1:]
-        if name == f"{PREFIX}contact_time":
-            values[~np.isfinite(values)] = np.nan  # no contact: missing
-        out[name] = (dims, values)
-    return out
-
-
-def flag_attributes() -> dict:
-    """CF 3.5 flag attributes of ``sample_model``."""
-    return {"flag_values": np.array(list(MODEL_FLAGS), dtype=np.int8),
-            "flag_meanings": " ".join(MODEL_FLAGS.values())}

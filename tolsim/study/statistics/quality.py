@@ -73,28 +73,6 @@ from tolsim.study.statistics.intervals import (  # noqa: F401
 PERCENTILE_LEVELS = (ndtr(-3.0), 0.5, ndtr(3.0))
 INTERVALS = ("wilson", "clopper-pearson")
 
-#: Declarations of the result-file variables of this module (name -> (units, long_name)),
-#: for :mod:`tolsim.io.schema`; all scalars.
-QUALITY_VARIABLES = {
-    "velocity_deviation_out_of_spec_fraction": (
-        "1", "fraction of valid balls with |epsilon| above the limit"),
-    "velocity_deviation_out_of_spec_ci_lower": (
-        "1", "lower end of the 95 % interval of the fraction out of spec, assemblies as the "
-             "sampling unit"),
-    "velocity_deviation_out_of_spec_ci_upper": (
-        "1", "upper end of the 95 % interval of the fraction out of spec, assemblies as the "
-             "sampling unit"),
-    "velocity_deviation_cp": ("1", "process potential Cp = L / (3 sigma) of epsilon"),
-    "velocity_deviation_cpk": ("1", "process capability Cpk = (L - |mu|) / (3 sigma) of "
-                                    "epsilon"),
-    "velocity_deviation_cpk_ci_lower": ("1", "lower end of the 95 % interval of Cpk, delta "
-                                             "method over assemblies"),
-    "velocity_deviation_cpk_ci_upper": ("1", "upper end of the 95 % interval of Cpk, delta "
-                                             "method over assemblies"),
-    "velocity_deviation_cpk_percentile": (
-        "1", "percentile (ISO 22514-2) capability index of epsilon"),
-}
-
 
 _INTERVAL_FUNCTIONS = {"wilson": wilson_interval, "clopper-pearson": clopper_pearson_interval}
 
@@ -232,8 +210,9 @@ def contact_probability_verdict(probability, upper, limit) -> str:
 
 
 def dataset_quality(ds) -> dict:
-    """The quality variables (:data:`QUALITY_VARIABLES`) of a result Dataset (needs no xarray:
-    any mapping of name -> array-like with the result-file variables works).
+    """The quality variables (:data:`tolsim.io.schema.quality.QUALITY_VARIABLES`) of a result
+    Dataset (needs no xarray: any mapping of name -> array-like with the result-file variables
+    works).
 
     Balls of one assembly share its rail and carriage errors and are correlated, so the
     intervals treat the assembly as the sampling unit: the fraction out of spec is the ratio

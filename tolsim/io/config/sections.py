@@ -1,28 +1,19 @@
-"""Study configuration: TOML (read with :mod:`tomllib`) -> validated frozen dataclasses.
-
-Every dimensional key carries its unit as a suffix (``ball_diameter_mm``, ``std_um``,
-``yaw_moment_N_m``); values are converted to SI once, here, and nothing downstream sees a
-unit again. Any problem raises :class:`ConfigError`, a :class:`ValueError` whose message is
-one line naming the file, the line (where it can be found) and the key, e.g.::
-
-    study.toml:12: tolerances.top_rotation.std_deg = -0.1 must be >= 0
-
-The sections and their keys are documented in ``tolsim/data/default.toml`` (the packaged
-default study) and in ``configs/*.toml``.
+"""The section readers of a study config (``[bearing]``, ``[motion]``, ``[train]``, ``[loads]``,
+``[carriage]``, ``[tolerances]``, ``[[correlation]]``, ``[study]``, ``[contact]``): each
+reads its :class:`~tolsim.io.config.reader.Table` into the frozen dataclasses of
+:mod:`tolsim.study.spec`, values in SI; :func:`tolsim.io.config.parse_config` combines them.
 """
 
 import csv
 import hashlib
 import io
 import math
-import re
-import tomllib
 from dataclasses import replace
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from tolsim.io.config.reader import UNITS, Table
 from tolsim.physics.carriage import CarriageLayout, CarriageLoad
 from tolsim.physics.geometry import Bearing
 from tolsim.study.analyses.rare_events import MIN_CHAINS
@@ -43,225 +34,17 @@ from tolsim.study.spec import (
     Distribution,
     Loads,
     Motion,
-    StudyConfig,
     StudySettings,
     Tolerance,
     Train,
     correlation_matrix_problem,
 )
 
-__all__ = ["ConfigError", "StudyConfig", "default_config_text", "load_config", "parse_config"]
-
-#: Unit suffixes of config keys: quantity kind -> {suffix: factor to SI}.
-UNITS = {
-    "length": {"m": 1.0, "mm": 1e-3, "um": 1e-6},
-    "angle": {"rad": 1.0, "mrad": 1e-3, "deg": math.pi / 180.0, "arcmin": math.pi / 10800.0},
-    "force": {"N": 1.0, "kN": 1e3},
-    "moment": {"N_m": 1.0, "N_mm": 1e-3},
-    "pressure": {"Pa": 1.0, "MPa": 1e6, "GPa": 1e9},
-    "velocity": {"m_per_s": 1.0, "mm_per_s": 1e-3},
-    "time": {"s": 1.0, "min": 60.0},
-    "fraction": {"percent": 1e-2, "ppm": 1e-6},
-    "dimensionless": {"": 1.0},
-}
-
 #: Fewest measured values an ``empirical`` distribution accepts.
 MIN_EMPIRICAL_VALUES = 10
 
 
-class ConfigError(ValueError):
-    """A bad study configuration; the message is one line naming the key (file:line: key)."""
-
-
-# --------------------------------------------------------------------------------------------
-# Reader
-# --------------------------------------------------------------------------------------------
-class _Source:
-    """The TOML text, for error messages with file and line."""
-
-    def __init__(self, text, path):
-        self.text, self.path = text, path
-        self.lines = text.splitlines()
-
-    def line_of(self, table, key=None):
-        """Line number (1-based) of ``key`` in ``[table]`` (or of the header), else None.
-
-        The k-th ``[[name]]`` of an array of tables is the table ``name[k]`` (k from 1).
-        """
-        header = re.compile(r"""^\s*\[(\[?)\s*([A-Za-z0-9_.\s"']+?)\s*\]\]?\s*(#.*)?$""")
-        current, found_header, counts = "", None, {}
-        for number, line in enumerate(self.lines, 1):
-            m = header.match(line)
-            if m:
-                current = ".".join(p.strip().strip("\"'") for p in m.group(2).split("."))
-                if m.group(1):
-                    counts[current] = counts.get(current, 0) + 1
-                    current = f"{current}[{counts[current]}]"
-                if current == table and found_header is None:
-                    found_header = number
-                continue
-            if key is not None:
-                quoted = rf"""(?:{re.escape(key)}|"{re.escape(key)}"|'{re.escape(key)}')"""
-                if current == table and re.match(rf"^\s*{quoted}\s*=", line):
-                    return number
-                # dotted parent tables (a.b.key = ...)
-                rel = (table + "." + key)[len(current) + 1 :] if current else table + "." + key
-                if table.startswith(current) and re.match(rf"^\s*{re.escape(rel)}\s*=", line):
-                    return number
-        return found_header
-
-    def error(self, table, key, message):
-        """A ConfigError 'file:line: table.key message'."""
-        line = self.line_of(table, key)
-        if line is None and key is not None:  # key is itself a [table.key] header
-            line = self.line_of(f"{table}.{key}" if table else key)
-        if line is None and "." in table:  # inline table: point at its parent key
-            parent, _, last = table.rpartition(".")
-            line = self.line_of(parent, last)
-        where = f"{self.path}:{line}" if line else self.path
-        name = f"{table}.{key}" if key else table
-        return ConfigError(f"{where}: {name} {message}")
-
-
-class _Table:
-    """One TOML table being read: typed getters with units; unknown keys are errors."""
-
-    def __init__(self, data, name, source):
-        if not isinstance(data, dict):
-            raise source.error(name, None, f"must be a table, got {type(data).__name__}")
-        self.data, self.name, self.source = data, name, source
-        self.used = set()
-
-    def error(self, key, message):
-        return self.source.error(self.name, key, message)
-
-    def has(self, key):
-        return key in self.data
-
-    def _number(self, key, value, *, integer=False):
-        ok_types = (int,) if integer else (int, float)
-        if isinstance(value, bool) or not isinstance(value, ok_types):
-            kind = "an integer" if integer else "a number"
-            raise self.error(key, f"= {value!r} must be {kind}, got {type(value).__name__}")
-        if not math.isfinite(value):
-            raise self.error(key, f"= {value!r} must be finite")
-        return value
-
-    def quantity(self, name, kind, *, default=None, required=True, allow_list=False,
-                 minimum=None, positive=False):
-        """Read ``name_<unit>`` and return it in SI (a float, or a tuple with allow_list)."""
-        found = self.unit_key(name, kind, required=required and default is None)
-        if found is None:
-            return default
-        key, factor = found
-        raw = self.data[key]
-        values = raw if (allow_list and isinstance(raw, list)) else [raw]
-        if allow_list and isinstance(raw, list) and not raw:
-            raise self.error(key, "must not be an empty list")
-        out = []
-        for v in values:
-            v = self._number(key, v)
-            if positive and not v > 0:
-                raise self.error(key, f"= {v!r} must be > 0")
-            if minimum is not None and v < minimum:
-                raise self.error(key, f"= {v!r} must be >= {minimum}")
-            out.append(float(v) * factor)
-        return tuple(out) if (allow_list and isinstance(raw, list)) else out[0]
-
-    def unit_key(self, name, kind, *, required=True):
-        """(key, factor to SI) of the one ``name_<unit>`` key given, or None if absent.
-
-        Raises for two units, no unit, an unknown unit suffix, or a missing required key.
-        """
-        units = UNITS[kind]
-        keys = [f"{name}_{u}" if u else name for u in units]
-        present = [k for k in keys if k in self.data]
-        if len(present) > 1:
-            raise self.error(present[1], f"given together with {present[0]}: use one")
-        if not present:
-            if name in self.data and kind != "dimensionless":
-                raise self.error(name, f"needs a unit suffix: one of {', '.join(keys)}")
-            for k in self.data:
-                if k.startswith(f"{name}_") and k[len(name) + 1 :] not in units:
-                    raise self.error(k, f"has an unknown unit suffix (use one of "
-                                        f"{', '.join(keys)})")
-            if required:
-                raise self.error(keys[0] if kind == "dimensionless" else f"{name}_<unit>",
-                                 f"is missing (one of {', '.join(keys)})")
-            return None
-        key = present[0]
-        self.used.add(key)
-        return key, units[key[len(name) + 1 :] if key != name else ""]
-
-    def text(self, key, *, default=None):
-        """A free string (a file name, a column name); missing -> ``default`` or an error."""
-        if key not in self.data:
-            if default is None:
-                raise self.error(key, "is missing")
-            return default
-        self.used.add(key)
-        v = self.data[key]
-        if not isinstance(v, str) or not v.strip():
-            raise self.error(key, f"= {v!r} must be a non-empty string")
-        return v
-
-    def key_for(self, name, kind):
-        """The key actually used for quantity ``name`` (``name_<unit>`` if absent)."""
-        for u in UNITS[kind]:
-            if (f"{name}_{u}" if u else name) in self.data:
-                return f"{name}_{u}" if u else name
-        return f"{name}_<unit>"
-
-    def integer(self, key, *, default=None, minimum=None):
-        if key not in self.data:
-            if default is None:
-                raise self.error(key, "is missing")
-            return default
-        self.used.add(key)
-        v = self._number(key, self.data[key], integer=True)
-        if minimum is not None and v < minimum:
-            raise self.error(key, f"= {v!r} must be >= {minimum}")
-        return int(v)
-
-    def string(self, key, choices, *, default=None):
-        if key not in self.data:
-            if default is None:
-                raise self.error(key, f"is missing (one of {', '.join(choices)})")
-            return default
-        self.used.add(key)
-        v = self.data[key]
-        if not isinstance(v, str):
-            raise self.error(key, f"= {v!r} must be a string, one of {', '.join(choices)}")
-        if v not in choices:
-            raise self.error(key, f"= {v!r} is not one of {', '.join(choices)}")
-        return v
-
-    def boolean(self, key, *, default=False):
-        if key not in self.data:
-            return default
-        self.used.add(key)
-        v = self.data[key]
-        if not isinstance(v, bool):
-            raise self.error(key, f"= {v!r} must be true or false")
-        return v
-
-    def table(self, key, *, required=True):
-        if key not in self.data:
-            if required:
-                raise self.source.error(f"{self.name}.{key}" if self.name else key, None,
-                                        "section is missing")
-            return None
-        self.used.add(key)
-        return _Table(self.data[key], f"{self.name}.{key}" if self.name else key, self.source)
-
-    def finish(self):
-        """Raise on the first key that was not read."""
-        for key in self.data:
-            if key not in self.used:
-                raise self.error(key, "is not a known key")
-
-
-def _distribution(table: _Table, kind: str) -> Distribution:
+def _distribution(table: Table, kind: str) -> Distribution:
     """Read a distribution table; values in SI of the quantity ``kind``."""
     name = table.string("distribution", DISTRIBUTIONS)
     q = lambda key, **kw: table.quantity(key, kind, **kw)  # noqa: E731
@@ -299,7 +82,7 @@ def _distribution(table: _Table, kind: str) -> Distribution:
     return d
 
 
-def _empirical(table: _Table, kind: str) -> Distribution:
+def _empirical(table: Table, kind: str) -> Distribution:
     """Measured values from a CSV column: ``file``, ``column_<unit>``, optional ``sha256``."""
     file = table.text("file")
     column_key, factor = table.unit_key("column", kind)
@@ -356,7 +139,7 @@ def _empirical(table: _Table, kind: str) -> Distribution:
                         data_sha256=sha256)
 
 
-def _check_range(table: _Table, source: str, kind: str, dist: Distribution, bearing):
+def _check_range(table: Table, source: str, kind: str, dist: Distribution, bearing):
     """Raise if ``dist`` reaches beyond the errors the static model accepts.
 
     Lengths: a quarter of the ball-groove centre distance (f - 1/2) D, angles pi/8, as
@@ -396,7 +179,7 @@ def _check_range(table: _Table, source: str, kind: str, dist: Distribution, bear
                            f"accepts for {source}: is the unit right?")
 
 
-def _bearing(t: _Table) -> Bearing:
+def read_bearing(t: Table) -> Bearing:
     diameter = t.quantity("ball_diameter", "length", positive=True)
     values = dict(
         ball_radius=0.5 * diameter,
@@ -420,7 +203,7 @@ def _bearing(t: _Table) -> Bearing:
                                             "range") from None
 
 
-def _motion(t: _Table) -> Motion:
+def read_motion(t: Table) -> Motion:
     v = t.quantity("groove_velocity", "velocity", positive=True)
     has_stroke = any(t.has(f"stroke_{u}") for u in UNITS["length"])
     has_duration = any(t.has(f"duration_{u}") for u in UNITS["time"])
@@ -434,7 +217,7 @@ def _motion(t: _Table) -> Motion:
     return Motion(groove_velocity=v, duration=duration)
 
 
-def _train(t: _Table, bearing: Bearing) -> Train:
+def read_train(t: Table, bearing: Bearing) -> Train:
     balls = t.integer("balls", minimum=1)
     gap_table = t.table("initial_gap")
     gap = _distribution(gap_table, "length")
@@ -454,7 +237,7 @@ def _train(t: _Table, bearing: Bearing) -> Train:
     return Train(balls=balls, initial_gap=gap, loaded_zone_length=length)
 
 
-def _loads(t: _Table, train: Train, bearing: Bearing) -> Loads:
+def read_loads(t: Table, train: Train, bearing: Bearing) -> Loads:
     n = train.balls
 
     def per_ball(value, key):
@@ -487,7 +270,7 @@ def _loads(t: _Table, train: Train, bearing: Bearing) -> Loads:
                  yaw_moment=float(yaw))
 
 
-def _carriage(t: _Table, bearing: Bearing) -> Carriage:
+def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     """``[carriage]``, ``[carriage.load]`` and ``[[carriage.track]]`` (tolsim issue 12)."""
     n = t.integer("balls_per_track", minimum=1)
     pitch = t.quantity("ball_pitch", "length")
@@ -540,7 +323,7 @@ def _carriage(t: _Table, bearing: Bearing) -> Carriage:
                                "[[carriage.track]]")
     xs, ys, phis, per_track = [], [], [], []
     for number, item in enumerate(raw, 1):
-        tr = _Table(item, f"{t.name}.track[{number}]", t.source)
+        tr = Table(item, f"{t.name}.track[{number}]", t.source)
         xs.append(tr.quantity("x", "length"))
         ys.append(tr.quantity("y", "length", default=0.0))
         phis.append(tr.quantity("orientation", "angle"))
@@ -589,7 +372,7 @@ def _carriage(t: _Table, bearing: Bearing) -> Carriage:
                     end_relief_depth=relief_depth, end_relief_length=relief_length)
 
 
-def _carriage_propagation(t: _Table, carriage: Carriage, train: Train, study_table: _Table,
+def check_carriage_propagation(t: Table, carriage: Carriage, train: Train, study_table: Table,
                           study: StudySettings):
     """Raise for what a [carriage] study cannot combine with its propagation: end relief
     without along_track or longer than half the loaded zone; one ball per track, fixed
@@ -617,7 +400,7 @@ def _carriage_propagation(t: _Table, carriage: Carriage, train: Train, study_tab
                       "scatter as [tolerances.ball_oversize] instead")
 
 
-def _tolerances(t: _Table | None, bearing: Bearing) -> tuple:
+def read_tolerances(t: Table | None, bearing: Bearing) -> tuple:
     if t is None:
         return ()
     out = []
@@ -654,7 +437,7 @@ FRACTION_KEYS = ("velocity_deviation_range", "velocity_deviation_limit",
                  "contact_probability_limit", "out_of_spec_limit")
 
 
-def _contact(t: _Table) -> ContactSettings:
+def read_contact(t: Table) -> ContactSettings:
     """``[contact]``: after balls touch (issue 13; :class:`ContactSettings`)."""
     s = ContactSettings(
         ball_friction_coefficient=t.quantity("ball_friction_coefficient", "dimensionless",
@@ -669,7 +452,7 @@ def _contact(t: _Table) -> ContactSettings:
     return s
 
 
-def _study(t: _Table) -> StudySettings:
+def read_study(t: Table) -> StudySettings:
     for name in FRACTION_KEYS:
         if t.has(name):  # a bare 0.5 was read as 50 % where 0.5 % was meant
             v = t.data[name]
@@ -739,7 +522,7 @@ ESTIMATOR_KEYS = {"monte_carlo": (), "subset": ("samples_per_level", "p0", "max_
                   "importance": ("samples_per_level", "p0", "max_levels", "importance_samples")}
 
 
-def _estimator(t: _Table, s: StudySettings) -> StudySettings:
+def _estimator(t: Table, s: StudySettings) -> StudySettings:
     """``[study] estimator`` and its settings (issue 15;
     :mod:`tolsim.study.analyses.limit_state`)."""
     estimator = t.string("estimator", ESTIMATORS, default="monte_carlo")
@@ -775,7 +558,7 @@ def _draw_scope(tolerance) -> str:
             "ball": "one value per ball"}[tolerance.scope]
 
 
-def _correlations(root: _Table, tolerances: tuple) -> tuple:
+def read_correlations(root: Table, tolerances: tuple) -> tuple:
     """The ``[[correlation]]`` groups: validated Gaussian-copula correlation matrices.
 
     A group correlates sources drawn alike (one scope; rail random fields of one correlation
@@ -792,7 +575,7 @@ def _correlations(root: _Table, tolerances: tuple) -> tuple:
     given = {t.source: t for t in tolerances}
     owner, out = {}, []
     for number, item in enumerate(raw, 1):
-        t = _Table(item, f"correlation[{number}]", root.source)
+        t = Table(item, f"correlation[{number}]", root.source)
         sources = t.data.get("sources")
         t.used.add("sources")
         if not (isinstance(sources, list) and len(sources) >= 2
@@ -839,136 +622,3 @@ def _correlations(root: _Table, tolerances: tuple) -> tuple:
         t.finish()
         out.append(Correlation(tuple(sources), tuple(tuple(row) for row in matrix)))
     return tuple(out)
-
-
-def parse_config(text: str, path: str = "<string>") -> StudyConfig:
-    """Validate a study given as TOML text.
-
-    Parameters
-    ----------
-    text : str
-        The TOML document.
-    path : str
-        Name used in error messages.
-
-    Returns
-    -------
-    StudyConfig
-
-    Raises
-    ------
-    ConfigError
-        One line: ``path:line: section.key problem``.
-    """
-    source = _Source(text, path)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        message = " ".join(str(exc).split())
-        at = re.search(r" \(at line (\d+), column (\d+)\)$", message)
-        if at:  # "path:line: ..." like every other config error
-            message = f"{message[: at.start()]} (column {at.group(2)})"
-            path = f"{path}:{at.group(1)}"
-        raise ConfigError(f"{path}: invalid TOML: {message}") from None
-    if "sweep" not in data:
-        return _build(data, source, text, path)
-    # a what-if sweep (issue 14): the base study, then one complete config per point
-    from tolsim.io.sweep import parse_sweep
-
-    base = {key: value for key, value in data.items() if key != "sweep"}
-    config = _build(base, source, text, path)
-    sweep = parse_sweep(_Table(data["sweep"], "sweep", source), base,
-                        lambda point: _build(point, source, text, path))
-    return replace(config, sweep=sweep)
-
-
-def _build(data: dict, source: "_Source", text: str, path: str) -> StudyConfig:
-    """The StudyConfig of a parsed TOML document (``data``); errors name ``source``'s lines."""
-    root = _Table(data, "", source)
-    bearing = _bearing(root.table("bearing"))
-    motion = _motion(root.table("motion"))
-    carriage = None
-    if root.has("carriage"):  # loads from [carriage.load]; [train] optional
-        if root.has("loads"):
-            raise source.error("loads", None, "section beside [carriage]: a carriage takes "
-                                              "its loads from [carriage.load]; remove [loads]")
-        carriage = _carriage(root.table("carriage"), bearing)
-        layout = carriage.layout
-        if root.has("train"):
-            train = _train(root.table("train"), bearing)
-            if train.balls != layout.balls_per_track:
-                raise source.error("train", "balls", f"= {train.balls} but "
-                                   f"carriage.balls_per_track = {layout.balls_per_track}")
-        else:  # the balls of one track at the nominal pitch
-            gap = max(layout.ball_pitch - 2.0 * bearing.ball_radius, 0.0)
-            train = Train(balls=layout.balls_per_track,
-                          initial_gap=Distribution(kind="fixed", value=gap),
-                          loaded_zone_length=max(layout.balls_per_track * layout.ball_pitch,
-                                                 2.0 * bearing.ball_radius))
-        loads = None
-    else:
-        train = _train(root.table("train"), bearing)
-        loads = _loads(root.table("loads"), train, bearing)
-    tolerances = _tolerances(root.table("tolerances", required=False), bearing)
-    correlations = _correlations(root, tolerances)
-    study_table = root.table("study")
-    study = _study(study_table)
-    if carriage is not None:  # the carriage solve is the static model of its balls
-        given = study_table.data.get("static_model")
-        if given not in (None, "solved"):
-            raise study_table.error("static_model", f"= {given!r}: a study with a [carriage] "
-                                    "solves every ball with the carriage (elastic, "
-                                    "displacement-controlled); remove the key or set 'solved'")
-        study = replace(study, static_model="solved")
-        _carriage_propagation(_Table(data["carriage"], "carriage", source), carriage, train,
-                              study_table, study)
-    contact = None
-    if root.has("contact"):  # after contact: trains and friction (issue 13)
-        contact = _contact(root.table("contact"))
-        if not bearing.friction_coefficient > 0:
-            raise source.error("bearing", "friction_coefficient", "= 0: a study with [contact] "
-                               "needs raceway friction (> 0) to carry the balls' pushes")
-    allocation = None
-    if root.has("allocate"):  # read by `tolsim allocate` (issue 14); `tolsim run` ignores it
-        from tolsim.io.allocation import parse_allocation
-
-        allocation = parse_allocation(root.table("allocate"), tolerances)
-    for key in data:
-        if key not in root.used:
-            raise source.error(key, None, "is not a known section (bearing, motion, train, "
-                                          "loads, carriage, tolerances, correlation, study, "
-                                          "contact, sweep, allocate)")
-    config = StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
-                         correlations, carriage, contact, allocation)
-    if study.estimator != "monte_carlo":  # a rare-event estimator needs a limit state
-        from tolsim.study.analyses.limit_state import check_supported
-
-        try:
-            check_supported(config)
-        except ValueError as exc:
-            raise study_table.error("estimator", str(exc).removeprefix("estimator ")) from None
-    return config
-
-
-def default_config_text() -> str:
-    """The TOML text of the packaged default study (``tolsim/data/default.toml``)."""
-    return resources.files("tolsim").joinpath("data/default.toml").read_text(encoding="utf-8")
-
-
-def load_config(path=None) -> StudyConfig:
-    """Read and validate a study config file (the packaged default when ``path`` is None).
-
-    Raises
-    ------
-    ConfigError
-        For a missing or unreadable file or any invalid content (one line, names the key).
-    """
-    if path is None:
-        return parse_config(default_config_text(), "default.toml")
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read config: {exc.__class__.__name__}: "
-                          f"{getattr(exc, 'strerror', None) or exc}") from None
-    return parse_config(text, str(path))

@@ -33,6 +33,7 @@ import math
 import re
 import tomllib
 
+from tolsim.io.config.reader import UNITS
 from tolsim.study.design.allocate import (
     DEFAULT_CONFIDENCE,
     DEFAULT_COST_EXPONENT,
@@ -54,7 +55,8 @@ SOURCE_KEYS = {"min_scale": DEFAULT_MIN_SCALE, "max_scale": None,
 
 
 def parse_allocation(table, tolerances) -> AllocationSettings:
-    """Read ``[allocate]`` (a ``tolsim.io.config._Table``) for the config's ``tolerances``.
+    """Read ``[allocate]`` (a :class:`tolsim.io.config.reader.Table`) for the config's
+    ``tolerances``.
 
     Raises
     ------
@@ -226,8 +228,6 @@ def tolerance_lines(text: str, config, scales: dict) -> dict:
         ``("std_deg", "0.1", "0.0734")``; a ``cpk`` source also gets its implied std, an
         ``empirical`` one a note on its measured values.
     """
-    from tolsim.io.config import UNITS
-
     raw = tomllib.loads(text).get("tolerances", {})
     out = {}
     for tolerance in config.tolerances:

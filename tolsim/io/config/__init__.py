@@ -1,0 +1,172 @@
+"""Study configuration: TOML (read with :mod:`tomllib`) -> validated frozen dataclasses.
+
+Every dimensional key carries its unit as a suffix (``ball_diameter_mm``, ``std_um``,
+``yaw_moment_N_m``); values are converted to SI once, here, and nothing downstream sees a
+unit again. Any problem raises :class:`ConfigError`, a :class:`ValueError` whose message is
+one line naming the file, the line (where it can be found) and the key, e.g.::
+
+    study.toml:12: tolerances.top_rotation.std_deg = -0.1 must be >= 0
+
+The sections and their keys are documented in ``tolsim/data/default.toml`` (the packaged
+default study) and in ``configs/*.toml``. They are read by :mod:`~tolsim.io.config.sections`,
+``[sweep]`` by :mod:`~tolsim.io.config.sweep` and ``[allocate]`` by
+:mod:`~tolsim.io.config.allocation`, all on :mod:`~tolsim.io.config.reader` (the units, the
+errors and the TOML line scanner); this module puts them together.
+"""
+
+import re
+import tomllib
+from dataclasses import replace
+from importlib import resources
+from pathlib import Path
+
+from tolsim.io.config.allocation import parse_allocation
+from tolsim.io.config.reader import UNITS, ConfigError, Source, Table
+from tolsim.io.config.sections import (
+    ESTIMATOR_KEYS,
+    FRACTION_KEYS,
+    MIN_EMPIRICAL_VALUES,
+    check_carriage_propagation,
+    read_bearing,
+    read_carriage,
+    read_contact,
+    read_correlations,
+    read_loads,
+    read_motion,
+    read_study,
+    read_tolerances,
+    read_train,
+)
+from tolsim.io.config.sweep import parse_sweep
+from tolsim.study.analyses.limit_state import check_supported
+from tolsim.study.spec import Distribution, StudyConfig, Train
+
+__all__ = ["ESTIMATOR_KEYS", "FRACTION_KEYS", "MIN_EMPIRICAL_VALUES", "UNITS", "ConfigError",
+           "StudyConfig", "default_config_text", "load_config", "parse_config"]
+
+
+def parse_config(text: str, path: str = "<string>") -> StudyConfig:
+    """Validate a study given as TOML text.
+
+    Parameters
+    ----------
+    text : str
+        The TOML document.
+    path : str
+        Name used in error messages.
+
+    Returns
+    -------
+    StudyConfig
+
+    Raises
+    ------
+    ConfigError
+        One line: ``path:line: section.key problem``.
+    """
+    source = Source(text, path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        message = " ".join(str(exc).split())
+        at = re.search(r" \(at line (\d+), column (\d+)\)$", message)
+        if at:  # "path:line: ..." like every other config error
+            message = f"{message[: at.start()]} (column {at.group(2)})"
+            path = f"{path}:{at.group(1)}"
+        raise ConfigError(f"{path}: invalid TOML: {message}") from None
+    if "sweep" not in data:
+        return _build(data, source, text, path)
+    # a what-if sweep (issue 14): the base study, then one complete config per point
+    base = {key: value for key, value in data.items() if key != "sweep"}
+    config = _build(base, source, text, path)
+    sweep = parse_sweep(Table(data["sweep"], "sweep", source), base,
+                        lambda point: _build(point, source, text, path))
+    return replace(config, sweep=sweep)
+
+
+def _build(data: dict, source: "Source", text: str, path: str) -> StudyConfig:
+    """The StudyConfig of a parsed TOML document (``data``); errors name ``source``'s lines."""
+    root = Table(data, "", source)
+    bearing = read_bearing(root.table("bearing"))
+    motion = read_motion(root.table("motion"))
+    carriage = None
+    if root.has("carriage"):  # loads from [carriage.load]; [train] optional
+        if root.has("loads"):
+            raise source.error("loads", None, "section beside [carriage]: a carriage takes "
+                                              "its loads from [carriage.load]; remove [loads]")
+        carriage = read_carriage(root.table("carriage"), bearing)
+        layout = carriage.layout
+        if root.has("train"):
+            train = read_train(root.table("train"), bearing)
+            if train.balls != layout.balls_per_track:
+                raise source.error("train", "balls", f"= {train.balls} but "
+                                   f"carriage.balls_per_track = {layout.balls_per_track}")
+        else:  # the balls of one track at the nominal pitch
+            gap = max(layout.ball_pitch - 2.0 * bearing.ball_radius, 0.0)
+            train = Train(balls=layout.balls_per_track,
+                          initial_gap=Distribution(kind="fixed", value=gap),
+                          loaded_zone_length=max(layout.balls_per_track * layout.ball_pitch,
+                                                 2.0 * bearing.ball_radius))
+        loads = None
+    else:
+        train = read_train(root.table("train"), bearing)
+        loads = read_loads(root.table("loads"), train, bearing)
+    tolerances = read_tolerances(root.table("tolerances", required=False), bearing)
+    correlations = read_correlations(root, tolerances)
+    study_table = root.table("study")
+    study = read_study(study_table)
+    if carriage is not None:  # the carriage solve is the static model of its balls
+        given = study_table.data.get("static_model")
+        if given not in (None, "solved"):
+            raise study_table.error("static_model", f"= {given!r}: a study with a [carriage] "
+                                    "solves every ball with the carriage (elastic, "
+                                    "displacement-controlled); remove the key or set 'solved'")
+        study = replace(study, static_model="solved")
+        check_carriage_propagation(Table(data["carriage"], "carriage", source), carriage, train,
+                              study_table, study)
+    contact = None
+    if root.has("contact"):  # after contact: trains and friction (issue 13)
+        contact = read_contact(root.table("contact"))
+        if not bearing.friction_coefficient > 0:
+            raise source.error("bearing", "friction_coefficient", "= 0: a study with [contact] "
+                               "needs raceway friction (> 0) to carry the balls' pushes")
+    allocation = None
+    if root.has("allocate"):  # read by `tolsim allocate` (issue 14); `tolsim run` ignores it
+        allocation = parse_allocation(root.table("allocate"), tolerances)
+    for key in data:
+        if key not in root.used:
+            raise source.error(key, None, "is not a known section (bearing, motion, train, "
+                                          "loads, carriage, tolerances, correlation, study, "
+                                          "contact, sweep, allocate)")
+    config = StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
+                         correlations, carriage, contact, allocation)
+    if study.estimator != "monte_carlo":  # a rare-event estimator needs a limit state
+        try:
+            check_supported(config)
+        except ValueError as exc:
+            raise study_table.error("estimator", str(exc).removeprefix("estimator ")) from None
+    return config
+
+
+def default_config_text() -> str:
+    """The TOML text of the packaged default study (``tolsim/data/default.toml``)."""
+    return resources.files("tolsim").joinpath("data/default.toml").read_text(encoding="utf-8")
+
+
+def load_config(path=None) -> StudyConfig:
+    """Read and validate a study config file (the packaged default when ``path`` is None).
+
+    Raises
+    ------
+    ConfigError
+        For a missing or unreadable file or any invalid content (one line, names the key).
+    """
+    if path is None:
+        return parse_config(default_config_text(), "default.toml")
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc.__class__.__name__}: "
+                          f"{getattr(exc, 'strerror', None) or exc}") from None
+    return parse_config(text, str(path))
