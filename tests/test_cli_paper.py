@@ -201,7 +201,7 @@ def test_tolsim_paper_output_is_byte_identical_between_runs(tmp_path, monkeypatc
     written = []
     for k, (step, favour_last) in enumerate(((2.0, True), (40.0, False))):
         with monkeypatch.context() as m:
-            m.setattr(paper, "time", _SlowClock(step))
+            m.setattr(paper.report, "time", _SlowClock(step))
             _as_on_another_machine(m, favour_last)
             out = tmp_path / f"run{k}"
             paper.make_paper(out, quick=True)

@@ -48,7 +48,7 @@ def make_sweep_report(path, folder, *, progress=None) -> SweepReportOutputs:
 
     Raises
     ------
-    tolsim.reports.study.NotAResult
+    tolsim.reports.result_view.NotAResult
         If ``path`` is not a tolsim result.
     NotASweep
         If it is the result of a single study (:func:`tolsim.reports.study.make_report`).
