@@ -201,7 +201,7 @@ def test_tolsim_paper_output_is_byte_identical_between_runs(tmp_path, monkeypatc
     written = []
     for k, (step, favour_last) in enumerate(((2.0, True), (40.0, False))):
         with monkeypatch.context() as m:
-            m.setattr(paper, "time", _SlowClock(step))
+            m.setattr(paper.report, "time", _SlowClock(step))
             _as_on_another_machine(m, favour_last)
             out = tmp_path / f"run{k}"
             paper.make_paper(out, quick=True)
@@ -225,9 +225,10 @@ def test_fig7_largest_difference_reports_every_mirror_image():
         grid = pd.DataFrame({"side_force_ratio": rr, "theta_deg": tt,
                                    "full": d, "eq24": 0.0 * d, "point": d,
                                    "full_minus_eq24": d, "full_converged": True})
-        summary = paper._fig7_summary(grid)
+        summary = paper.fig7_summary(grid)
         assert summary["max_at"] == [(-0.8, -3.0), (-0.8, 3.0), (0.8, -3.0), (0.8, 3.0)]
         assert paper.locations_text(summary["max_at"]) == "ρ = ±0.80, θ = ±3.00°"
     # a single, unmirrored maximum keeps its signs
     assert paper.locations_text([(-0.8, 3.0)]) == "ρ = -0.80, θ = +3.00°"
-    assert paper._tiny(-1.6e-17) == paper._tiny(0.0) == paper._tiny(1e-17) == "0 ± 1e-12"
+    tiny = paper.readme._tiny
+    assert tiny(-1.6e-17) == tiny(0.0) == tiny(1e-17) == "0 ± 1e-12"

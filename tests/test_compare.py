@@ -21,19 +21,23 @@ from tolsim.reports.compare import (
     PAIRING_INDEPENDENT,
     PAIRING_SHARED,
     VELOCITY_DEVIATION_LEVELS,
-    cluster_mean_and_std,
     compare_datasets,
     config_differences,
     flatten_config,
-    histogram_quantile_interval,
-    mover_difference,
-    newcombe_difference,
     run_labels,
     run_statistics,
     shares_random_numbers,
-    welch_difference,
 )
-from tolsim.study.statistics.intervals import ClusterMoments, assembly_totals, wilson_interval
+from tolsim.study.statistics.intervals import (
+    ClusterMoments,
+    assembly_totals,
+    cluster_mean_and_std,
+    histogram_quantile_interval,
+    mover_difference,
+    newcombe_difference,
+    welch_difference,
+    wilson_interval,
+)
 
 CONFIGS = os.path.join(os.path.dirname(__file__), "..", "configs")
 

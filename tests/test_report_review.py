@@ -20,6 +20,7 @@ from tolsim.reports import assumptions as A
 from tolsim.reports import study as study_report
 from tolsim.reports import verdict as V
 from tolsim.study.execution.runner import run_study
+from tolsim.study.statistics import quality
 
 
 @pytest.fixture(scope="module")
@@ -196,7 +197,7 @@ def test_verdict_of_the_default_study(default_result, default_report):
     # The default config sets a limit on |epsilon| (0.5 %) but none on P(contact), on the
     # fraction out of spec or on Cpk: every check says "no spec limit given".
     _, ds, _ = default_result
-    q = study_report.quality.dataset_quality(ds)
+    q = quality.dataset_quality(ds)
     verdict = V.study_verdict(ds, q)
     assert verdict.status == V.NO_LIMIT
     assert [c.status for c in verdict.checks] == [V.NO_LIMIT] * 3
@@ -233,7 +234,7 @@ def test_verdict_takes_every_limit_from_the_config(tmp_path):
     write_result(run_study(config), path, history="test")
     with xr.open_dataset(path) as ds:
         ds = ds.load()
-    verdict = V.study_verdict(ds, study_report.quality.dataset_quality(ds))
+    verdict = V.study_verdict(ds, quality.dataset_quality(ds))
     assert [c.status for c in verdict.checks] == [V.PASS, V.PASS, V.FAIL]
     assert verdict.status == V.FAIL
     rows = {r.item: (r.value, r.source) for r in A.assumption_table(ds)

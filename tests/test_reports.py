@@ -11,6 +11,7 @@ import pytest
 
 from tolsim.reports import paper, style
 from tolsim.reports import study as study_report
+from tolsim.study.statistics import quality
 
 
 def _renderer(fig):
@@ -197,7 +198,7 @@ def test_study_figures_labels_and_layout(rng):
                  study_report.plot_spot_checks):
         fig = plot(ds)
         assert check_figure(fig) == [], plot.__name__
-    q = study_report.quality.dataset_quality(ds)
+    q = quality.dataset_quality(ds)
     fig = study_report.plot_quality(ds, q)
     assert check_figure(fig) == []
     # the quality annotation states the computed Cpk

@@ -271,7 +271,7 @@ def test_figures_have_one_series_per_track(carriage_result):
     assert pair_ax.get_ylabel() == "assemblies whose first contact is here [-]"
     assert "per assembly" in fig.axes[1].get_ylabel()
 
-    ball_z, n0, _ = study_report._carriage_geometry(config)
+    ball_z, n0, _ = study_report.sections._carriage_geometry(config)
     fig = study_report.plot_carriage_loads(ds, ball_z, n0)
     assert check_figure(fig) == []
     ny_ax, rho_ax = fig.axes

@@ -265,7 +265,7 @@ def test_sensitivity_section_keeps_epsilon_and_contact(friction_result, friction
     _, ds = friction_result
     _, page = friction_report
     sens = study_report.sensitivity_from_file(ds)
-    fig = study_report.plot_sensitivity(study_report._without_output(sens))
+    fig = study_report.plot_sensitivity(study_report.without_output(sens))
     assert len(fig.axes) == 2
     section = _text(_section(page, "<h2>7. What drives the risk"))
     assert "The drivers of the friction increase are ranked in section 5." in section
@@ -317,14 +317,14 @@ def test_a_file_without_friction_is_reported_as_before(friction_result):
         "contact": "4. Ball-to-ball contact", "quality": "5. Quality engineering",
         "sensitivity": "6. What drives the risk",
         "spot_checks": "7. Model check: analytic versus the full friction model"}
-    assert study_report._sign_off_title(plain) == "8. Review and sign-off"
+    assert study_report.page._sign_off_title(plain) == "8. Review and sign-off"
     assert study_report.captions(plain) == study_report.CAPTIONS
     assert len(V.study_verdict(plain).checks) == 3
     assert not [r for r in A.assumption_table(plain) if r.topic == "after contact"
                 or "friction increase" in r.item]
     sens = study_report.sensitivity_from_file(plain)
     assert sens.outputs == ("velocity_deviation", "contact")
-    assert study_report._without_output(sens) is sens
+    assert study_report.without_output(sens) is sens
     assert not any("Friction after contact" in s for s in study_report.headline(plain, sens))
 
 

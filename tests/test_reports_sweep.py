@@ -20,13 +20,13 @@ from tolsim.io.sweep import combine_points, run_sweep
 from tolsim.reports.sweep import (
     CSV_NAME,
     HTML_NAME,
-    _point_value,
     is_sweep_file,
     make_sweep_report,
     point_dataset,
     series_of,
     sweep_layout,
 )
+from tolsim.reports.sweep.points import _point_value
 from tolsim.reports.verdict import study_verdict
 from tolsim.study.execution.runner import run_study
 from tolsim.study.statistics.intervals import format_fraction

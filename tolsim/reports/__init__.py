@@ -12,6 +12,8 @@
   it): the curves against the swept keys and a verdict per point.
 * :mod:`tolsim.reports.allocate`: the least-cost tolerances against a probabilistic target,
   with the trade-off curve and the allocated config (``tolsim allocate``).
+* :mod:`tolsim.reports.result_view`: the one reader of a result file for the reports, and
+  the typed accessors (scalars, attributes, the embedded config) they all read it through.
 
 Figures are built on :class:`matplotlib.figure.Figure` objects directly, never through
 ``pyplot``: no global state, no GUI backend, nothing to close, and the caller's backend is

@@ -31,6 +31,7 @@ import tempfile
 from datetime import UTC, datetime
 
 import numpy as np
+from matplotlib.ticker import FixedFormatter, FixedLocator, NullFormatter
 
 from tolsim import __version__
 from tolsim.reports.study import CSS
@@ -192,8 +193,6 @@ def plot_trade_off(result):
     search = result.search
     reference = search.reference_cost
     limit = result.limit
-    from matplotlib.ticker import FixedFormatter, FixedLocator, NullFormatter
-
     fig, (ax, bx) = new_figure(11.0, 5.2, ncols=2, width_ratios=(1.5, 1.0))
     floor = 0.3 / result.samples  # where an upper bound of 0 events would be drawn
 

@@ -24,14 +24,22 @@ variables say.
 """
 
 import math
-import tomllib
 from dataclasses import dataclass
 
 import numpy as np
 
 from tolsim.physics.geometry import TABLE1
+from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.velocity import analytic
+from tolsim.reports.result_view import (
+    config_key,
+    config_or_none,
+    config_toml,
+    integer,
+    number,
+)
 from tolsim.reports.verdict import any_train, contact_unit, counted, has_friction, tracks_of
+from tolsim.study.spec import SOURCES
 from tolsim.study.statistics.intervals import format_fraction
 
 #: The paper.
@@ -91,49 +99,8 @@ class ToleranceRow:
     key: str
 
 
-# --------------------------------------------------------------------------------------------
-# Reading the config
-# --------------------------------------------------------------------------------------------
-def config_of(ds):
-    """The :class:`~tolsim.study.spec.StudyConfig` embedded in a result (seed of the file)."""
-    from tolsim.io.config import parse_config
-
-    name = ds.attrs.get("title", "result").split(": ", 1)[-1]
-    config = parse_config(str(ds.attrs["config"]), name)
-    return config.with_overrides(seed=int(ds.attrs["seed"]))
-
-
-def _config_or_none(ds):
-    try:
-        return config_of(ds)
-    except Exception:  # noqa: BLE001 - the report must not fail on an old or foreign config
-        return None
-
-
-def _toml(ds) -> dict:
-    try:
-        return tomllib.loads(str(ds.attrs.get("config", "")))
-    except tomllib.TOMLDecodeError:
-        return {}
-
-
-def _key(data, section, name):
-    """``[section] key`` of the config key for quantity ``name`` (any unit suffix), or ''."""
-    table = data
-    for part in section.split("."):
-        table = table.get(part, {}) if isinstance(table, dict) else {}
-    if not isinstance(table, dict):
-        return ""
-    for key in table:
-        if key == name or key.startswith(f"{name}_"):
-            value = table[key]
-            shown = value if not isinstance(value, dict | list) else None
-            return f"[{section}] {key}" + (f" = {shown}" if shown is not None else "")
-    return ""
-
-
 def _source(data, section, name, default_text):
-    return _key(data, section, name) or default_text
+    return config_key(data, section, name) or default_text
 
 
 def _table1(value, reference, rel=1e-9):
@@ -197,13 +164,11 @@ def tolerance_table(config, ds=None) -> list:
     ds : xarray.Dataset, optional
         The result file (for the config keys as written).
     """
-    from tolsim.study.spec import SOURCES
-
-    data = _toml(ds) if ds is not None else {}
+    data = config_toml(ds) if ds is not None else {}
     if config is None:
         return raw_tolerance_table(data)
     gap = config.train.initial_gap
-    key = _key(data, "train", "initial_gap") or "[train] initial_gap"
+    key = config_key(data, "train", "initial_gap") or "[train] initial_gap"
     if getattr(config, "carriage", None) is not None and "train" not in data:
         key = "default without [train]: the ball pitch − D ([carriage] ball_pitch)"
     rows = [ToleranceRow(
@@ -230,14 +195,6 @@ def _range(values, fmt="{:.4g}", unit=""):
     if math.isclose(lo, hi, rel_tol=1e-12, abs_tol=1e-15):
         return fmt.format(lo) + unit
     return f"{fmt.format(lo)} to {fmt.format(hi)}{unit}"
-
-
-def _i(ds, name):
-    return int(np.asarray(ds[name])) if name in ds.variables else None
-
-
-def _f(ds, name):
-    return float(np.asarray(ds[name])) if name in ds.variables else float("nan")
 
 
 def validity_text(velocity_model) -> str:
@@ -314,7 +271,7 @@ def carriage_load_items(ds, data=None) -> list:
     out = []
     for name, (term, sign, unit) in CARRIAGE_LOAD_TERMS.items():
         if name in by_name:
-            key = _key(data or {}, "carriage.load", CARRIAGE_LOAD_KEYS[name])
+            key = config_key(data or {}, "carriage.load", CARRIAGE_LOAD_KEYS[name])
             out.append((term, sign * float(by_name[name]) + 0.0, unit,
                         key or "default: 0"))
     return out
@@ -358,7 +315,7 @@ def carriage_assumptions(ds, config, data) -> list:
             f"nominal, from the pitch: ball j at z_j = (j − (n − 1)/2) × {1e3 * pitch:.4g} mm "
             "(ball 0 trailing), the same in every assembly; the sampled initial gaps set "
             "when neighbouring balls touch but do not move the balls in the load distribution",
-            _key(data, "carriage", "ball_pitch") + "; tolsim.physics.carriage.CarriageLayout")
+            config_key(data, "carriage", "ball_pitch") + "; tolsim.physics.carriage.CarriageLayout")
     loads = carriage_load_items(ds, data)
     if loads:
         add("load case at the reference point",
@@ -382,15 +339,13 @@ def carriage_assumptions(ds, config, data) -> list:
         "tolerance per ball, the gaps per pair of each track",
         "tolsim.study.sampling (tolsim issue 12)")
     if config is not None:
-        from tolsim.physics.hertz import hertz_constants
-
         b = config.bearing
         k = float(hertz_constants(b.ball_radius, b.conformity, b.youngs_modulus,
                                   b.poisson_ratio).load_deflection_constant)
         add("Hertz contact", f"F = K δ^1.5 on each flank, K = {k:.4g} N/m^1.5 (the ball in "
             "its gothic-arch flank, from D, f, E and ν above)",
             "tolsim.physics.hertz.hertz_constants; Johnson, Contact Mechanics, 1985, Sec. 4.2")
-    oversize, force = _f(ds, "preload_oversize"), _f(ds, "preload_contact_force")
+    oversize, force = number(ds, "preload_oversize"), number(ds, "preload_contact_force")
     if carriage is not None:
         oversize = carriage.preload_oversize
     text = (f"diametral ball oversize o = {1e6 * oversize:.4g} µm on every ball: "
@@ -401,9 +356,9 @@ def carriage_assumptions(ds, config, data) -> list:
     if config is not None and any(t.source == "ball_oversize" and t.distribution.is_random
                                   for t in config.tolerances):
         text += "; the sampled ball_oversize adds to it (see the sampled inputs)"
-    add("preload", text, _key(data, "carriage", "preload_oversize")
+    add("preload", text, config_key(data, "carriage", "preload_oversize")
         or "default: no preload (o = 0)")
-    failed, n = _i(ds, "n_assemblies_carriage_failed"), _i(ds, "n_assemblies")
+    failed, n = integer(ds, "n_assemblies_carriage_failed", None), integer(ds, "n_assemblies", None)
     add("carriages not solved",
         "a carriage whose Newton does not converge or that lifts off is kept: its balls "
         "count as not converged and its trains as unresolved (bounded in P(contact))"
@@ -440,7 +395,7 @@ def friction_assumptions(ds, config, data) -> list:
         rows.append(Assumption("after contact", item, str(value), source))
 
     tracks = tracks_of(ds)
-    mu_bb = _f(ds, "ball_friction_coefficient")
+    mu_bb = number(ds, "ball_friction_coefficient")
     model = str(ds.attrs.get("contact_creep_model", "analytic"))
     along = ds.attrs.get("propagation") == "along_track"
     solved = ("with along_track the same rule at every time step, with each ball's ε and K "
@@ -465,7 +420,7 @@ def friction_assumptions(ds, config, data) -> list:
         (f"{mu_bb:.4g}: Coulomb friction at each ball-to-ball contact (both balls spin the "
          "same way, so their surfaces slide there); it brakes both balls of a pair, and "
          "the grooves pay for that couple" if np.isfinite(mu_bb) else "n/a"),
-        _key(data, "contact", "ball_friction_coefficient")
+        config_key(data, "contact", "ball_friction_coefficient")
         or "default: 0.1 (steel on steel, boundary lubrication)")
     beta = (config.bearing.nominal_contact_angle if config is not None
             else TABLE1.nominal_contact_angle)
@@ -482,7 +437,7 @@ def friction_assumptions(ds, config, data) -> list:
     add("creep stiffness K = dP/dε and carriage-force slopes",
         f"{model}: {creep_text}; a ball rolls at ε_i + P_i / K_i (+ the braking by its "
         "neighbours' forces), linear in the loads",
-        (_key(data, "contact", "creep_model") or "default: analytic")
+        (config_key(data, "contact", "creep_model") or "default: analytic")
         + " (tolsim.physics.velocity.ball_loads, tolsim.physics.velocity.analytic)")
     add("carriage friction force of a track",
         "F = Σ F₀,i + Σ_j k_j Q_j over the balls i and the touching pairs j: F₀ the "
@@ -500,8 +455,8 @@ def friction_assumptions(ds, config, data) -> list:
     else:
         add("worst track per assembly", "one train per assembly: the assembly is its train",
             "tolsim.study.pipeline.track_friction (one row per assembly: the worst track)")
-    sliding = _i(ds, "n_assemblies_sliding")
-    unresolved = _i(ds, "n_assemblies_friction_unresolved")
+    sliding = integer(ds, "n_assemblies_sliding", None)
+    unresolved = integer(ds, "n_assemblies_friction_unresolved", None)
     add("sliding balls",
         "where a push reaches a ball's traction capacity, or its neighbours' forces stall its "
         "rotation, the linear creep law ends: the train is unresolved from the onset of "
@@ -520,12 +475,12 @@ def assumption_table(ds, config=None) -> list:
     Parameters
     ----------
     ds : xarray.Dataset
-        A result file of ``tolsim run`` (:func:`tolsim.reports.study.read_result_file`).
+        A result file of ``tolsim run`` (:func:`tolsim.reports.result_view.read_result_file`).
     config : StudyConfig, optional
         The embedded config (parsed from ``ds.attrs["config"]`` when not given).
     """
-    config = config if config is not None else _config_or_none(ds)
-    data = _toml(ds)
+    config = config if config is not None else config_or_none(ds)
+    data = config_toml(ds)
     a = ds.attrs
     rows = []
 
@@ -550,7 +505,7 @@ def assumption_table(ds, config=None) -> list:
                 ("friction coefficient μ", "friction_coefficient", b.friction_coefficient,
                  TABLE1.friction_coefficient, f"{b.friction_coefficient:.4g}")):
             same = _table1(value, reference)
-            key = _key(data, "bearing", name)
+            key = config_key(data, "bearing", name)
             where = (key + ("; as the paper's Table 1 bearing" if same else "; differs "
                             "from the paper's Table 1 bearing")) if key else (
                 f"{default} (the paper's Table 1 bearing)")
@@ -559,14 +514,15 @@ def assumption_table(ds, config=None) -> list:
         add("motion", "carriage speed v", f"{1e3 * m.groove_velocity:.4g} mm/s",
             _source(data, "motion", "groove_velocity", "config"))
         add("motion", "stroke (horizon)", f"{1e3 * m.stroke:.4g} mm in {m.duration:.4g} s",
-            _key(data, "motion", "stroke") or _key(data, "motion", "duration") or "config")
+            config_key(data, "motion", "stroke") or config_key(data, "motion", "duration")
+            or "config")
         tr = config.train
         no_train = config.carriage is not None and "train" not in data
         add("train", "balls per track (loaded zone)", tr.balls,
-            _key(data, "carriage", "balls_per_track") if no_train
+            config_key(data, "carriage", "balls_per_track") if no_train
             else _source(data, "train", "balls", "config"))
         add("train", "loaded zone length", f"{1e3 * tr.loaded_zone_length:.4g} mm",
-            _key(data, "train", "loaded_zone_length")
+            config_key(data, "train", "loaded_zone_length")
             or ("default without [train]: balls × ball pitch" if no_train
                 else "default: balls × (D + mean initial gap)"))
         lo = config.loads
@@ -581,9 +537,9 @@ def assumption_table(ds, config=None) -> list:
                 side += (f" (yaw moment {lo.yaw_moment:.4g} N m shared linearly over the nominal "
                          "ball slots: N_x,j = M z_j / Σ z², rigid carriage)")
             add("loads", "side load N_x per ball", side,
-                " and ".join(k for k in (_key(data, "loads", "side_load"),
-                                         _key(data, "loads", "side_force_ratio"),
-                                         _key(data, "loads", "yaw_moment")) if k)
+                " and ".join(k for k in (config_key(data, "loads", "side_load"),
+                                         config_key(data, "loads", "side_force_ratio"),
+                                         config_key(data, "loads", "yaw_moment")) if k)
                 or "default: no side load")
             add("loads", "side force ratio ρ = N_x / N_y", _range(lo.side_force_ratio,
                                                                    fmt="{:+.3g}"),
@@ -592,7 +548,7 @@ def assumption_table(ds, config=None) -> list:
         gap_text = (f"{gap.kind}: {distribution_text(gap, 'length')}; independent per pair, "
                     "clipped at 0; balls start at pitch D + gap, the train centred on the "
                     "carriage")
-        gap_key = _key(data, "train", "initial_gap") or "[train] initial_gap"
+        gap_key = config_key(data, "train", "initial_gap") or "[train] initial_gap"
         if config.carriage is not None:
             gap_text += "; one train per track, the gaps of each track drawn on their own"
             if "train" not in data:
@@ -665,8 +621,9 @@ def assumption_table(ds, config=None) -> list:
         "paper's Table 1 bearing (218 478 contact states, 20 000 fresh balls)"
         + ("" if table1 else "; this bearing differs from Table 1, so the budget is not "
            "proven for it: see the spot checks"))
-    outside, redone = _i(ds, "n_balls_outside_validity"), _i(ds, "n_balls_resolved_full")
-    failed, n = _i(ds, "n_balls_full_failed") or 0, _i(ds, "n_balls") or 0
+    outside, redone = (integer(ds, "n_balls_outside_validity", None),
+                       integer(ds, "n_balls_resolved_full", None))
+    failed, n = integer(ds, "n_balls_full_failed", None) or 0, integer(ds, "n_balls", None) or 0
     if outside is not None:
         redone = "?" if redone is None else f"{redone:,}"  # older files lack the counts
         add("validity budget", "balls outside the thresholds, re-solved with the full model",
@@ -684,23 +641,25 @@ def assumption_table(ds, config=None) -> list:
         _source(data, "study", "spot_checks", f"{default} (0)"))
 
     add("sampling", "assemblies, seed, block size",
-        f"{_i(ds, 'n_assemblies') or 0:,} assemblies, seed {a.get('seed', '?')}, "
+        f"{integer(ds, 'n_assemblies', None) or 0:,} assemblies, seed {a.get('seed', '?')}, "
         f"blocks of {a.get('block_size', '?')}",
-        "; ".join(k for k in (_key(data, "study", "samples"), _key(data, "study", "seed"),
-                              _key(data, "study", "block_size")) if k)
+        "; ".join(k for k in (config_key(data, "study", "samples"),
+                              config_key(data, "study", "seed"),
+                              config_key(data, "study", "block_size")) if k)
         + " (--samples and --seed on the command line override them: see history)")
     add("sampling", "sampling of the per-assembly factors", a.get("sampling", "?"),
         _source(data, "study", "sampling", f"{default} (random)"))
 
-    eps_limit, p_limit = _f(ds, "velocity_deviation_limit"), _f(ds, "contact_probability_limit")
+    eps_limit, p_limit = (number(ds, "velocity_deviation_limit"),
+                          number(ds, "contact_probability_limit"))
     add("spec limits", "limit on |ε| per ball",
         f"{100 * eps_limit:.4g} %" if np.isfinite(eps_limit) else "no spec limit given",
         _source(data, "study", "velocity_deviation_limit", "not set"))
     add("spec limits", f"limit on P(contact) per {contact_unit(ds)[0]}",
         format_fraction(p_limit) if np.isfinite(p_limit) else "no spec limit given",
         _source(data, "study", "contact_probability_limit", "not set"))
-    oos, cpk_min = (_f(ds, "velocity_deviation_out_of_spec_limit"),
-                    _f(ds, "velocity_deviation_cpk_minimum"))
+    oos, cpk_min = (number(ds, "velocity_deviation_out_of_spec_limit"),
+                    number(ds, "velocity_deviation_cpk_minimum"))
     add("spec limits", "allowed fraction of balls beyond the limit on |ε|",
         format_fraction(oos) if np.isfinite(oos) else "no spec limit given",
         _source(data, "study", "out_of_spec_limit", "not set"))
@@ -708,7 +667,7 @@ def assumption_table(ds, config=None) -> list:
         f"{cpk_min:.3g}" if np.isfinite(cpk_min) else "no spec limit given",
         _source(data, "study", "cpk_minimum", "not set"))
     if has_friction(ds):
-        limit = _f(ds, "friction_increase_limit")
+        limit = number(ds, "friction_increase_limit")
         add("spec limits", f"limit on the friction increase per {contact_unit(ds)[0]}",
             f"{limit:.4g} N (allowed fraction beyond it: none in the config)"
             if np.isfinite(limit) and limit > 0 else "no spec limit given",

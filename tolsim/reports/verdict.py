@@ -44,7 +44,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tolsim.reports.result_view import number
 from tolsim.study.statistics.intervals import clopper_pearson_interval, format_fraction
+from tolsim.study.statistics.quality import dataset_quality
 
 PASS, FAIL, UNDECIDED, NO_LIMIT = "pass", "fail", "undecided", "no spec limit given"
 #: How a status is shown in the table of checks.
@@ -140,10 +142,6 @@ def judge_lower_limit(lower, upper, limit) -> str:
     return UNDECIDED
 
 
-def _f(ds, name):
-    return float(np.asarray(ds[name])) if name in ds.variables else float("nan")
-
-
 def tracks_of(ds) -> int:
     """Trains per assembly of a carriage study (the size of its ``track`` dimension), or 0
     for a study of single trains."""
@@ -199,25 +197,26 @@ def _sentence(status, what, lower, upper, limit_text, side):
 def contact_check(ds) -> SpecCheck:
     """P(contact) per train (per assembly in a carriage study) against
     ``contact_probability_limit``."""
-    p = _f(ds, "contact_probability")
-    lo, hi = _f(ds, "contact_probability_bounds_ci_lower"), _f(
+    p = number(ds, "contact_probability")
+    lo, hi = number(ds, "contact_probability_bounds_ci_lower"), number(
         ds, "contact_probability_bounds_ci_upper")
     covering = np.isfinite(lo) and np.isfinite(hi)
     if not covering:
-        lo, hi = _f(ds, "contact_probability_ci_lower"), _f(ds, "contact_probability_ci_upper")
-    limit = _limit(_f(ds, "contact_probability_limit"))
+        lo, hi = (number(ds, "contact_probability_ci_lower"),
+                  number(ds, "contact_probability_ci_upper"))
+    limit = _limit(number(ds, "contact_probability_limit"))
     status = judge_upper_limit(lo, hi, limit)
     one, many = contact_unit(ds)
-    kind = (f"interval covering the bounds over all {many}" if covering and _f(
+    kind = (f"interval covering the bounds over all {many}" if covering and number(
         ds, "n_assemblies_unresolved") > 0 else _interval_kind(estimator_label(ds)))
     estimate = (f"{format_fraction(p)} ({100 * CONFIDENCE:.0f} % {kind}: "
                 f"{format_fraction(lo)} to {format_fraction(hi)})")
     req = f"P(contact) ≤ {format_fraction(limit)}" if limit else NO_LIMIT
     reason = _sentence(status, "P(contact)", format_fraction(lo), format_fraction(hi), req,
                        "max")
-    unresolved = _f(ds, "n_assemblies_unresolved")
+    unresolved = number(ds, "n_assemblies_unresolved")
     if status == UNDECIDED and covering and unresolved > 0 and judge_upper_limit(
-            _f(ds, "contact_probability_ci_lower"), _f(ds, "contact_probability_ci_upper"),
+            number(ds, "contact_probability_ci_lower"), number(ds, "contact_probability_ci_upper"),
             limit) != UNDECIDED:
         reason = reason.replace("more samples are needed to decide",
                                 f"the {int(unresolved):,} unresolved {many} leave it open")
@@ -228,14 +227,14 @@ def contact_check(ds) -> SpecCheck:
 
 def out_of_spec_check(ds, q, out_of_spec_limit=None) -> SpecCheck:
     """Fraction of balls with |epsilon| above the limit L against an allowed fraction."""
-    eps_limit = _limit(_f(ds, "velocity_deviation_limit"))
+    eps_limit = _limit(number(ds, "velocity_deviation_limit"))
     quantity = "fraction of balls out of spec"
     if eps_limit is None or not q:
         return SpecCheck(quantity + " (|ε| > L)", NO_LIMIT, "no limit L on |ε|: not computed",
                          NO_LIMIT, "no limit on |ε| in the config")
     quantity = f"fraction of balls with |ε| > {100 * eps_limit:.3g} %"
     prop = q["_proportion"]
-    limit = _limit(_f(ds, "velocity_deviation_out_of_spec_limit")
+    limit = _limit(number(ds, "velocity_deviation_out_of_spec_limit")
                    if out_of_spec_limit is None else out_of_spec_limit)
     status = judge_upper_limit(prop.lower, prop.upper, limit)
     req = f"≤ {format_fraction(limit)}" if limit else NO_LIMIT
@@ -251,7 +250,7 @@ def cpk_check(ds, q, cpk_minimum=None) -> SpecCheck:
         return SpecCheck("process capability Cpk of ε", NO_LIMIT,
                          "no limit L on |ε|: not computed", NO_LIMIT,
                          "no limit on |ε| in the config")
-    limit = _limit(_f(ds, "velocity_deviation_cpk_minimum")
+    limit = _limit(number(ds, "velocity_deviation_cpk_minimum")
                    if cpk_minimum is None else cpk_minimum)
     status = judge_lower_limit(cap.cpk_lower, cap.cpk_upper, limit)
     req = f"Cpk ≥ {limit:.3g}" if limit else NO_LIMIT
@@ -279,19 +278,19 @@ def friction_check(ds, friction_exceedance_limit=None):
         Allowed fraction p_max of assemblies whose increase exceeds L [-] (none in the
         config: without it the estimate is shown with no verdict).
     """
-    limit_n = _limit(_f(ds, "friction_increase_limit"))
+    limit_n = _limit(number(ds, "friction_increase_limit"))
     if not has_friction(ds) or limit_n is None:
         return None
-    p = _f(ds, "friction_exceedance_probability")
-    k, u = _f(ds, "n_friction_exceedance"), _f(ds, "n_assemblies_friction_unresolved")
-    n = _f(ds, "n_assemblies")
+    p = number(ds, "friction_exceedance_probability")
+    k, u = number(ds, "n_friction_exceedance"), number(ds, "n_assemblies_friction_unresolved")
+    n = number(ds, "n_assemblies")
     covering = u > 0 and np.isfinite(k) and np.isfinite(n) and n > 0
     if covering:  # the interval covering the bounds over all assemblies
         lo = clopper_pearson_interval(int(k), int(n), CONFIDENCE)[0]
         hi = clopper_pearson_interval(int(k + u), int(n), CONFIDENCE)[1]
     else:
-        lo, hi = (_f(ds, "friction_exceedance_probability_ci_lower"),
-                  _f(ds, "friction_exceedance_probability_ci_upper"))
+        lo, hi = (number(ds, "friction_exceedance_probability_ci_lower"),
+                  number(ds, "friction_exceedance_probability_ci_upper"))
     allowed = _limit(friction_exceedance_limit)
     status = judge_upper_limit(lo, hi, allowed)
     one, many = contact_unit(ds)
@@ -351,8 +350,6 @@ def study_verdict(ds, q=None, *, out_of_spec_limit=None, cpk_minimum=None,
     Verdict
     """
     if q is None:
-        from tolsim.study.statistics.quality import dataset_quality
-
         q = dataset_quality(ds)
     checks = (contact_check(ds), out_of_spec_check(ds, q, out_of_spec_limit),
               cpk_check(ds, q, cpk_minimum))

@@ -303,8 +303,8 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
        (``tolsim/io/config/sections.py`` ``read_loads``) is exactly the linearised carriage.
        Beyond it: N_y of a ball is even and convex in g_1 (the pair approaches are delta_v
        +/- c g_1 and F ~ delta^1.5), so at the common u_y the end balls take more N_y and the
-       middle ones less (sum N_y = V); rho is odd in M, so rho - rho_old = O(M^3). Default study (10 balls at
-       10.05 mm, V = 10 x 200 N, M = 15 N m, no preload): theta_y = 57.3 urad, u_y = -9.21 um,
+       middle ones less (sum N_y = V); rho is odd in M, so rho - rho_old = O(M^3). Default
+       study (10 balls at 10.05 mm, V = 10 x 200 N, M = 15 N m, no preload): theta_y = 57.3 urad, u_y = -9.21 um,
        max |rho - rho_old| = 0.0071 at the end balls (z = -/+45.2 mm: -/+0.4000 against
        -/+0.4071; 0.87 % of the rho range), 95 % of it from N_y = 203.4 N there (197.8 N in the
        middle); N_x is within 0.067 N of the old rule. With two balls (Fig. 8) the track is

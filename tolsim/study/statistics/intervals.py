@@ -93,6 +93,21 @@ results.
   interval, but the coverage stays nominal: 94.6-95.9 % for Cp, Cpk at mu = 0 and at
   mu = 0.5 sigma in the runs above (Bissell's independent-ball interval: 48-51 %).
 
+Differences of two runs, and intervals on the aggregates a result file holds
+-----------------------------------------------------------------------------
+Used by ``tolsim compare`` (:mod:`tolsim.reports.compare`), whose differences are unpaired:
+the two estimates are taken as independent.
+
+* :func:`mover_difference`: the MOVER of Zou & Donner ([ZouDonner2008]) from the intervals
+  of two estimates; :func:`newcombe_difference`, Newcombe's hybrid score interval of a
+  difference of proportions ([Newcombe1998] method 10), is the case with Wilson intervals.
+* :func:`welch_difference`: Welch's interval with the Welch-Satterthwaite degrees of freedom
+  ([Welch1947], [Satterthwaite1946]).
+* :func:`cluster_mean_and_std`: the mean and standard deviation of epsilon over balls with
+  delta-method standard errors over assemblies ([Cochran1977] Sec. 6.3-6.4).
+* :func:`histogram_quantile_interval`: Woodruff's interval of a quantile read off a
+  histogram ([Woodruff1952]).
+
 References
 ----------
 .. [Wilson1927] E. B. Wilson, "Probable inference, the law of succession, and statistical
@@ -108,8 +123,19 @@ References
    (1990) 331-340.
 .. [Chan1979] T. F. Chan, G. H. Golub, R. J. LeVeque, "Updating formulae and a pairwise
    algorithm for computing sample variances", Stanford CS report STAN-CS-79-773 (1979).
+.. [Newcombe1998] R. G. Newcombe, "Interval estimation for the difference between
+   independent proportions: comparison of eleven methods", Stat. Med. 17 (1998) 873-890.
+.. [ZouDonner2008] G. Y. Zou, A. Donner, "Construction of confidence limits about effect
+   measures: a general approach", Stat. Med. 27 (2008) 1693-1702.
+.. [Welch1947] B. L. Welch, "The generalization of 'Student's' problem when several different
+   population variances are involved", Biometrika 34 (1947) 28-35.
+.. [Satterthwaite1946] F. E. Satterthwaite, "An approximate distribution of estimates of
+   variance components", Biometrics Bulletin 2 (1946) 110-114.
+.. [Woodruff1952] R. S. Woodruff, "Confidence intervals for medians and other position
+   measures", J. Am. Stat. Assoc. 47 (1952) 635-646.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -588,3 +614,193 @@ def _percentile_index(limit, quantiles):
     if np.all(np.isfinite([q_lo, med, q_hi])) and q_hi > med > q_lo:
         return float(min((limit - med) / (q_hi - med), (med + limit) / (med - q_lo)))
     return float("nan")
+
+
+# --------------------------------------------------------------------------------------------
+# Differences of two runs, and intervals on aggregates (tolsim compare)
+# --------------------------------------------------------------------------------------------
+def mover_difference(estimate_1, lower_1, upper_1, estimate_2, lower_2, upper_2):
+    """Interval of theta_1 - theta_2 from the intervals of two independent estimates.
+
+    The MOVER ([ZouDonner2008]; Newcombe's method 10 is the case with Wilson intervals)::
+
+        L = d - sqrt((t1 - l1)^2 + (u2 - t2)^2),   U = d + sqrt((u1 - t1)^2 + (t2 - l2)^2)
+
+    with d = t1 - t2.
+
+    Parameters
+    ----------
+    estimate_1, lower_1, upper_1 : float
+        theta_1 and its interval.
+    estimate_2, lower_2, upper_2 : float
+        theta_2 and its interval (same confidence level).
+
+    Returns
+    -------
+    (difference, lower, upper) : floats; NaN where an end needed is NaN.
+    """
+    t1, l1, u1, t2, l2, u2 = (float(x) for x in (estimate_1, lower_1, upper_1, estimate_2,
+                                                 lower_2, upper_2))
+    d = t1 - t2
+    lower = d - math.hypot(t1 - l1, u2 - t2)
+    upper = d + math.hypot(u1 - t1, t2 - l2)
+    return d, lower, upper
+
+
+def newcombe_difference(successes_1, trials_1, successes_2, trials_2,
+                        confidence_level=0.95):
+    """Newcombe's hybrid score interval of p_1 - p_2 ([Newcombe1998] method 10).
+
+    The MOVER (:func:`mover_difference`) on the Wilson score intervals (no continuity
+    correction) of the two independent proportions p_i = k_i / n_i.
+
+    Parameters
+    ----------
+    successes_1, trials_1 : float
+        k_1 and n_1 of the first proportion.
+    successes_2, trials_2 : float
+        k_2 and n_2 of the second.
+    confidence_level : float
+
+    Returns
+    -------
+    (difference, lower, upper) : floats [-], within [-1, 1]; NaN when a trials count is 0.
+    """
+    k1, n1, k2, n2 = (float(x) for x in (successes_1, trials_1, successes_2, trials_2))
+    if n1 == 0 or n2 == 0:
+        nan = float("nan")
+        return (k1 / n1 if n1 else nan) - (k2 / n2 if n2 else nan), nan, nan
+    l1, u1 = wilson_interval(k1, n1, confidence_level)
+    l2, u2 = wilson_interval(k2, n2, confidence_level)
+    d, lower, upper = mover_difference(k1 / n1, l1, u1, k2 / n2, l2, u2)
+    return d, max(lower, -1.0), min(upper, 1.0)
+
+
+def welch_difference(estimate_1, standard_error_1, df_1, estimate_2, standard_error_2, df_2,
+                     confidence_level=0.95):
+    """Welch's interval of theta_1 - theta_2 from two independent estimates.
+
+    d -+ t(nu) sqrt(se_1^2 + se_2^2) with the Welch-Satterthwaite degrees of freedom
+    ([Welch1947], [Satterthwaite1946])::
+
+        nu = (se_1^2 + se_2^2)^2 / (se_1^4 / df_1 + se_2^4 / df_2)
+
+    Parameters
+    ----------
+    estimate_1, standard_error_1, df_1 : float
+        theta_1, its standard error and the degrees of freedom of that (``inf``: known).
+    estimate_2, standard_error_2, df_2 : float
+        The same of theta_2.
+    confidence_level : float
+
+    Returns
+    -------
+    (difference, lower, upper, df) : floats; an exact difference (lower = upper) when both
+    standard errors are 0.
+    """
+    d = float(estimate_1) - float(estimate_2)
+    v1, v2 = float(standard_error_1) ** 2, float(standard_error_2) ** 2
+    v = v1 + v2
+    if v == 0.0:
+        return d, d, d, float("inf")
+    denominator = sum(vi * vi / float(df) for vi, df in ((v1, df_1), (v2, df_2))
+                      if vi > 0.0 and np.isfinite(df))
+    df = v * v / denominator if denominator > 0 else float("inf")
+    q = 0.5 + confidence_level / 2
+    t = float(ndtri(q)) if not np.isfinite(df) else float(t_distribution.ppf(q, df))
+    half = t * math.sqrt(v)
+    return d, d - half, d + half, float(df)
+
+
+def cluster_mean_and_std(moments: ClusterMoments):
+    """Mean and standard deviation of epsilon over balls, with delta-method standard errors
+    over assemblies.
+
+    mu = Sbar / nbar and sigma^2 = Qbar / nbar - mu^2 from the means of the per-assembly
+    totals (n_a, k_a, S_a, Q_a) (:data:`tolsim.study.statistics.intervals.CLUSTER_COLUMNS`); their
+    variances by linearisation with the covariance of the means C / (A (A - 1)) ([Cochran1977]
+    Sec. 6.3-6.4; the gradients of :func:`tolsim.study.statistics.intervals.cluster_capability`)::
+
+        d mu      = (dSbar - mu dnbar) / nbar
+        d sigma^2 = (dQbar - 2 mu dSbar + (2 mu^2 - m2) dnbar) / nbar,   m2 = Qbar / nbar
+        d sigma   = d sigma^2 / (2 sigma)
+
+    Parameters
+    ----------
+    moments : ClusterMoments
+        Of the totals in :data:`~tolsim.study.statistics.intervals.CLUSTER_COLUMNS` order.
+
+    Returns
+    -------
+    (mean, se_mean, std, se_std) : floats [-]; NaN without valid balls, standard errors NaN
+    for fewer than two assemblies (and se_std for sigma = 0).
+    """
+    nan = float("nan")
+    a = int(moments.count)
+    n_bar, s_bar, q_bar = (float(moments.mean[i]) for i in (0, 2, 3))
+    if a == 0 or n_bar == 0:
+        return nan, nan, nan, nan
+    mu = s_bar / n_bar
+    m2 = q_bar / n_bar
+    sigma = math.sqrt(max(m2 - mu * mu, 0.0))
+    if a < 2:
+        return mu, nan, sigma, nan
+    se_mu = math.sqrt(ratio_variance(moments, 2, 0)[1])
+    g_var = np.array([2 * mu * mu - m2, 0.0, -2 * mu, 1.0]) / n_bar
+    cov = np.asarray(moments.comoment, dtype=float)[:4, :4] / ((a - 1) * a)
+    se_var = math.sqrt(max(float(g_var @ cov @ g_var), 0.0))
+    se_sigma = se_var / (2 * sigma) if sigma > 0 else nan
+    return mu, se_mu, sigma, se_sigma
+
+
+def histogram_quantile_interval(counts, edges, level, effective_trials, underflow=0,
+                                overflow=0, confidence_level=0.95):
+    """Woodruff's interval of a quantile read off a fixed-bin histogram ([Woodruff1952]).
+
+    The Wilson interval (p_L, p_U) of the proportion ``level`` at ``effective_trials`` is
+    turned into values through the histogram's distribution function (linear in a bin,
+    :func:`tolsim.study.statistics.intervals.histogram_quantiles`); each end is then moved out to
+    the
+    edge of its bin, since the histogram places a value only within its bin.
+
+    Parameters
+    ----------
+    counts : array_like of int (bins,)
+    edges : array_like (bins + 1,)
+    level : float
+        Quantile level q in (0, 1) [-].
+    effective_trials : float
+        n behind the proportion (the number of independent values, or an effective size).
+    underflow, overflow : int
+        Values below / above the histogram range.
+    confidence_level : float
+
+    Returns
+    -------
+    (lower, upper) : floats, in the units of ``edges``; an end NaN where it falls below the
+    smallest or above the largest value (not bounded by the data) or outside the histogram.
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    edges = np.asarray(edges, dtype=float)
+    total = float(counts.sum()) + float(underflow) + float(overflow)
+    nan = float("nan")
+    n = float(effective_trials)
+    if total == 0 or not n > 0:
+        return nan, nan
+    p_lower, p_upper = wilson_interval(level * n, n, confidence_level)
+    ends = []
+    for p, side in ((p_lower, "lower"), (p_upper, "upper")):
+        rank = p * total
+        if (side == "lower" and rank < 1.0) or (side == "upper" and rank > total - 1.0):
+            ends.append(nan)  # beyond the extreme values: the data do not bound it
+            continue
+        q = float(histogram_quantiles(counts, edges, [p], underflow, overflow)[0])
+        if not np.isfinite(q):
+            ends.append(nan)
+            continue
+        if side == "lower":
+            k = int(np.clip(np.searchsorted(edges, q, side="right") - 1, 0, len(edges) - 1))
+        else:
+            k = int(np.clip(np.searchsorted(edges, q, side="left"), 0, len(edges) - 1))
+        ends.append(float(edges[k]))
+    return ends[0], ends[1]

@@ -1,0 +1,172 @@
+"""A result file as the reports see it: one reader and typed accessors.
+
+:func:`read_result_file` opens a result file of ``tolsim run`` for a report, or raises
+:class:`NotAResult` with a one-line reason. The accessors read a scalar variable
+(:func:`number`, :func:`integer`), a global attribute (:func:`attribute`), bin edges and
+stored quantiles, and the config embedded in the file (:func:`config_of`,
+:func:`config_or_none`, :func:`config_toml`, :func:`config_key`) of the Dataset it returns,
+or of any result Dataset (a point of a sweep, say), with a default where the file has not
+got the item. Every report module reads a result through them.
+"""
+
+import os
+import tomllib
+
+import numpy as np
+import xarray as xr
+
+from tolsim.io import schema
+from tolsim.io.config import parse_config
+from tolsim.io.netcdf import read_result
+
+#: Names of the tolsim result-file variables the study report needs.
+REQUIRED = ("velocity_deviation_histogram", "contact_probability", "survival_probability",
+            "spot_check_velocity_deviation_analytic", "spot_check_velocity_deviation_full")
+
+
+class NotAResult(ValueError):
+    """The file is missing, not netCDF, or not a tolsim study result."""
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+def read_result_file(path, *, validate=False):
+    """Open a tolsim result file, or raise :class:`NotAResult` with a one-line reason.
+
+    Parameters
+    ----------
+    path : str or path
+        A result file of ``tolsim run``.
+    validate : bool
+        Read it with :func:`tolsim.io.netcdf.read_result`, which checks it against the whole
+        schema (``tolsim compare``). By default only the global attributes and the variables
+        :data:`REQUIRED` are checked (the study report and the sweep report), so that older or
+        partial files are read as far as they can be.
+
+    Returns
+    -------
+    xarray.Dataset
+        Loaded into memory.
+
+    Raises
+    ------
+    NotAResult
+        If the file is missing, a folder, not netCDF, or not a (complete) tolsim result.
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise NotAResult(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise NotAResult(f"{path}: is a folder, not a result file")
+    if validate:
+        try:
+            return read_result(path)
+        except ValueError as exc:
+            raise NotAResult(" ".join(str(exc).split())) from None
+    with open(path, "rb") as fh:
+        magic = fh.read(8)
+    if not (magic.startswith(b"\x89HDF\r\n\x1a\n") or magic[:3] == b"CDF"):
+        raise NotAResult(f"{path}: not a netCDF file")
+    try:
+        with xr.open_dataset(path, engine="netcdf4") as ds:
+            ds = ds.load()
+    except (OSError, ValueError) as exc:
+        raise NotAResult(f"{path}: cannot be read as netCDF ({' '.join(str(exc).split())})"
+                         ) from None
+    missing = [a for a in schema.GLOBAL_ATTRIBUTES if a not in ds.attrs]
+    if missing:
+        raise NotAResult(f"{path}: not a tolsim study result (netCDF without the global "
+                         f"attribute(s) {', '.join(missing)})")
+    absent = [v for v in REQUIRED if v not in ds.variables]
+    if absent:
+        raise NotAResult(f"{path}: not a complete tolsim study result (missing "
+                         f"{', '.join(absent)})")
+    # The full schema check (tolsim.io.schema.validate) is not applied here: the report
+    # needs only the variables above, and reads older or partial files as far as it can.
+    return ds
+
+
+# --------------------------------------------------------------------------------------------
+# Variables and attributes
+# --------------------------------------------------------------------------------------------
+def number(ds, name, default=np.nan) -> float:
+    """The scalar variable ``name`` as a float, ``default`` when the file has not got it."""
+    if name not in ds.variables:
+        return default
+    return float(np.asarray(ds[name]))
+
+
+def integer(ds, name, default=0) -> int:
+    """The scalar variable ``name`` as an int, ``default`` when the file has not got it."""
+    if name not in ds.variables:
+        return default
+    return int(np.asarray(ds[name]))
+
+
+def attribute(ds, name, default="?"):
+    """The global attribute ``name`` as stored, ``default`` when the file has not got it."""
+    return ds.attrs.get(name, default)
+
+
+def bin_edges(ds, bounds) -> np.ndarray:
+    """The bin edges (bins + 1,) of a histogram from its ``(bins, 2)`` bounds variable."""
+    b = np.asarray(ds[bounds], dtype=float)
+    return np.concatenate([b[:, 0], b[-1:, 1]])
+
+
+def quantile_index(ds, level):
+    """Index of ``level`` along the file's ``quantile`` coordinate, or None."""
+    levels = np.asarray(ds["quantile"], dtype=float)
+    hit = np.flatnonzero(np.isclose(levels, level, rtol=0, atol=1e-12))
+    return int(hit[0]) if hit.size else None
+
+
+def quantile_value(ds, name, level) -> float:
+    """``name`` (a variable along ``quantile``) at ``level``, NaN when the variable or the
+    level is absent."""
+    if name not in ds.variables:
+        return float("nan")
+    k = quantile_index(ds, level)
+    return float(np.asarray(ds[name], dtype=float)[k]) if k is not None else float("nan")
+
+
+# --------------------------------------------------------------------------------------------
+# The embedded config
+# --------------------------------------------------------------------------------------------
+def config_of(ds):
+    """The :class:`~tolsim.study.spec.StudyConfig` embedded in a result (seed of the file)."""
+    name = ds.attrs.get("title", "result").split(": ", 1)[-1]
+    config = parse_config(str(ds.attrs["config"]), name)
+    return config.with_overrides(seed=int(ds.attrs["seed"]))
+
+
+def config_or_none(ds):
+    """:func:`config_of`, or None when the embedded config cannot be parsed."""
+    try:
+        return config_of(ds)
+    except Exception:  # noqa: BLE001 - the report must not fail on an old or foreign config
+        return None
+
+
+def config_toml(ds) -> dict:
+    """The embedded config as TOML tables ({} when it is not valid TOML)."""
+    try:
+        return tomllib.loads(str(ds.attrs.get("config", "")))
+    except tomllib.TOMLDecodeError:
+        return {}
+
+
+def config_key(data, section, name):
+    """``[section] key`` of the config key for quantity ``name`` (any unit suffix), or ''."""
+    table = data
+    for part in section.split("."):
+        table = table.get(part, {}) if isinstance(table, dict) else {}
+    if not isinstance(table, dict):
+        return ""
+    for key in table:
+        if key == name or key.startswith(f"{name}_"):
+            value = table[key]
+            shown = value if not isinstance(value, dict | list) else None
+            return f"[{section}] {key}" + (f" = {shown}" if shown is not None else "")
+    return ""
