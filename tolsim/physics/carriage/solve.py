@@ -297,20 +297,19 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
        at 12.5 mm): P = 5 N m, |rho| <= 0.45: R^2 = 0.99985 and the largest deviation from the
        least-squares line 0.54 % of the rho range (the end balls' N_y rises 3.5 %); P = 10 N m:
        R^2 = 0.9975, 2.2 %; P = 20 N m: the end balls go to two-point contact, R^2 = 0.947, 11.6 %.
-    6. *phi = 0 track, vertical load V and yaw M ([Lin2018] Fig. 8; the old per-ball rule).* g_1
-       = theta_y z, g_2 = u_y for every ball and S_12 = 0 at rho = 0, so to first order N_x,j =
-       S_11 theta_y z_j and, from sum z N_x = M, N_x,j = M z_j / sum z^2 at N_y = V/n: the old rule
-       (``tolsim/io/config/sections.py`` ``read_loads``) is exactly the linearised carriage.
-       Beyond it: N_y of a ball is even and convex in g_1 (the pair approaches are delta_v
-       +/- c g_1 and F ~ delta^1.5), so at the common u_y the end balls take more N_y and the
-       middle ones less (sum N_y = V); rho is odd in M, so rho - rho_old = O(M^3). Default
-       study (10 balls at 10.05 mm, V = 10 x 200 N, M = 15 N m, no preload): theta_y = 57.3 urad, u_y = -9.21 um,
-       max |rho - rho_old| = 0.0071 at the end balls (z = -/+45.2 mm: -/+0.4000 against
-       -/+0.4071; 0.87 % of the rho range), 95 % of it from N_y = 203.4 N there (197.8 N in the
-       middle); N_x is within 0.067 N of the old rule. With two balls (Fig. 8) the track is
-       statically determinate: V = 400 N and M = 0.6 x 200 N x 10.5 mm = 1.26 N m give rho =
-       (-0.6, +0.6) exactly, reading ball 0 (trailing) as the paper's Ball 1 (the faster ball
-       behind, which runs into Ball 2).
+    6. *phi = 0 track, vertical load V and yaw M ([Lin2018] Fig. 8; the old per-ball rule).* g_1 =
+       theta_y z, g_2 = u_y for every ball and S_12 = 0 at rho = 0, so to first order N_x,j = S_11
+       theta_y z_j and, from sum z N_x = M, N_x,j = M z_j / sum z^2 at N_y = V/n: the old rule
+       (``tolsim/io/config/sections.py`` ``read_loads``) is exactly the linearised carriage. Beyond
+       it: N_y of a ball is even and convex in g_1 (the pair approaches are delta_v +/- c g_1 and F
+       ~ delta^1.5), so at the common u_y the end balls take more N_y and the middle ones less (sum
+       N_y = V); rho is odd in M, so rho - rho_old = O(M^3). Default study (10 balls at 10.05 mm, V
+       = 10 x 200 N, M = 15 N m, no preload): theta_y = 57.3 urad, u_y = -9.21 um, max |rho -
+       rho_old| = 0.0071 at the end balls (z = -/+45.2 mm: -/+0.4000 against -/+0.4071; 0.87 % of
+       the rho range), 95 % of it from N_y = 203.4 N there (197.8 N in the middle); N_x is within
+       0.067 N of the old rule. With two balls (Fig. 8) the track is statically determinate: V = 400
+       N and M = 0.6 x 200 N x 10.5 mm = 1.26 N m give rho = (-0.6, +0.6) exactly, reading ball 0
+       (trailing) as the paper's Ball 1 (the faster ball behind, which runs into Ball 2).
     """
     check_solver_options(tol, max_iter)
     check_solver_options(ball_tol, ball_max_iter)
