@@ -1,0 +1,101 @@
+"""Tolerance allocation (``tolsim allocate``, issue 14): the loosest set of tolerances that
+meets a probabilistic target at the least manufacturing cost.
+
+:mod:`.targets` (what may be bounded, the cost model, the settings), :mod:`.search` (the
+generic least-cost search, whose Notes state the problem and the method) and :mod:`.run`
+(the search on a study and its verification on a fresh sample). No file, TOML or plotting
+here (:mod:`tolsim.io.config.allocation` reads ``[allocate]`` and writes the allocated
+config, :mod:`tolsim.reports.allocate` the report).
+"""
+
+from tolsim.study.design.allocate.run import (
+    AllocationResult,
+    check_allocation,
+    evaluate_study,
+    evaluation_config,
+    minimum_samples,
+    run_allocation,
+    verification_seed,
+)
+from tolsim.study.design.allocate.search import (
+    AllocationSearch,
+    Point,
+    allocate_scales,
+    fit_probit_plane,
+    solve_cost_subproblem,
+)
+from tolsim.study.design.allocate.targets import (
+    BRACKET_STEPS,
+    DEFAULT_CONFIDENCE,
+    DEFAULT_COST_EXPONENT,
+    DEFAULT_COST_WEIGHT,
+    DEFAULT_MAX_EVALUATIONS,
+    DEFAULT_MAX_SCALE,
+    DEFAULT_MIN_SCALE,
+    MIN_RADIUS,
+    PROBIT_CLIP,
+    RAY_RESOLUTION,
+    SCALE_DIGITS,
+    START_RADIUS,
+    SWEEP_POINTS,
+    TARGETS,
+    TRADE_OFF_FACTORS,
+    VERIFY_SAMPLES_FACTOR,
+    VERIFY_SPAWN_KEY,
+    AllocationInfeasible,
+    AllocationSettings,
+    Evaluation,
+    SourceCost,
+    Target,
+    TargetVariable,
+    binomial_evaluation,
+    largest_scale,
+    parse_target,
+    resolve_sources,
+    round_scale,
+    tolerance_cost,
+)
+
+__all__ = [
+    "AllocationInfeasible",
+    "AllocationResult",
+    "AllocationSearch",
+    "AllocationSettings",
+    "BRACKET_STEPS",
+    "DEFAULT_CONFIDENCE",
+    "DEFAULT_COST_EXPONENT",
+    "DEFAULT_COST_WEIGHT",
+    "DEFAULT_MAX_EVALUATIONS",
+    "DEFAULT_MAX_SCALE",
+    "DEFAULT_MIN_SCALE",
+    "Evaluation",
+    "MIN_RADIUS",
+    "PROBIT_CLIP",
+    "Point",
+    "RAY_RESOLUTION",
+    "SCALE_DIGITS",
+    "START_RADIUS",
+    "SWEEP_POINTS",
+    "SourceCost",
+    "TARGETS",
+    "TRADE_OFF_FACTORS",
+    "Target",
+    "TargetVariable",
+    "VERIFY_SAMPLES_FACTOR",
+    "VERIFY_SPAWN_KEY",
+    "allocate_scales",
+    "binomial_evaluation",
+    "check_allocation",
+    "evaluate_study",
+    "evaluation_config",
+    "fit_probit_plane",
+    "largest_scale",
+    "minimum_samples",
+    "parse_target",
+    "resolve_sources",
+    "round_scale",
+    "run_allocation",
+    "solve_cost_subproblem",
+    "tolerance_cost",
+    "verification_seed",
+]
