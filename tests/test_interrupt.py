@@ -96,13 +96,13 @@ def test_sigint_at_random_moments_then_resume_is_bit_identical(tmp_path, monkeyp
     # The merge of two moment sets sleeps 0.5 ms (it runs halfway through every merge, after
     # the counts were added): a stretch that makes an interrupt land mid-merge in many of
     # the 50 runs (with the old handler about one in seven resumed to a block too many).
-    merge_moments = statistics._merge_moments
+    merge_moments = statistics.merge_moments
 
     def slow_merge_moments(*args):
         time.sleep(5e-4)
         return merge_moments(*args)
 
-    monkeypatch.setattr(statistics, "_merge_moments", slow_merge_moments)
+    monkeypatch.setattr(statistics, "merge_moments", slow_merge_moments)
     config = tiny()
     reference = run_study(config)  # also compiles what the study needs
     t0 = time.perf_counter()

@@ -201,8 +201,8 @@ from tolsim.physics.velocity.analytic import LOAD_COLUMNS, creep_coefficients_ke
 from tolsim.study.statistics.accumulator import (
     QUANTILES,
     Accumulator,
-    _merge_moments,
     clopper_pearson,
+    merge_moments,
 )
 from tolsim.study.statistics.intervals import histogram_quantiles
 
@@ -917,7 +917,7 @@ class FrictionStatistics:
         for name in ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_exceed",
                      "histogram", "underflow", "overflow"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
-        count, self.mean, self.m2 = _merge_moments(self.count, self.mean, self.m2,
+        count, self.mean, self.m2 = merge_moments(self.count, self.mean, self.m2,
                                                    other.count, other.mean, other.m2)
         self.count = np.int64(count)
         self.minimum = np.minimum(self.minimum, other.minimum)

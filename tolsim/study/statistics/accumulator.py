@@ -53,7 +53,7 @@ from tolsim.study.statistics.intervals import (
 QUANTILES = (0.001, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99, 0.999)
 
 
-def _merge_moments(n_a, mean_a, m2_a, n_b, mean_b, m2_b):
+def merge_moments(n_a, mean_a, m2_a, n_b, mean_b, m2_b):
     """Chan et al. merge of (count, mean, M2); elementwise on arrays."""
     n = n_a + n_b
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -189,7 +189,7 @@ class Accumulator:
 
     def _merge_carriage(self, other):
         n_a = self.carriage_count
-        self.carriage_count, self.carriage_mean, self.carriage_m2 = _merge_moments(
+        self.carriage_count, self.carriage_mean, self.carriage_m2 = merge_moments(
             n_a, self.carriage_mean, self.carriage_m2, other.carriage_count,
             other.carriage_mean, other.carriage_m2)
         self.carriage_count = np.int64(self.carriage_count)
@@ -279,12 +279,12 @@ class Accumulator:
                      "time_histogram", "pair_count"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         n_a = self.n_balls_valid - other.n_balls_valid  # already added above
-        _, mean, m2 = _merge_moments(n_a, self.eps_mean, self.eps_m2, other.n_balls_valid,
+        _, mean, m2 = merge_moments(n_a, self.eps_mean, self.eps_m2, other.n_balls_valid,
                                      other.eps_mean, other.eps_m2)
         self.eps_mean, self.eps_m2 = float(mean), float(m2)
         self.eps_min = min(self.eps_min, other.eps_min)
         self.eps_max = max(self.eps_max, other.eps_max)
-        self.ball_count, self.ball_mean, self.ball_m2 = _merge_moments(
+        self.ball_count, self.ball_mean, self.ball_m2 = merge_moments(
             self.ball_count, self.ball_mean, self.ball_m2, other.ball_count, other.ball_mean,
             other.ball_m2)
         self.time_min = min(self.time_min, other.time_min)

@@ -265,7 +265,7 @@ def wilson_interval(successes, trials, confidence_level=0.95):
     (lower, upper) : floats [-], NaN when n = 0.
     """
     k, n = float(successes), float(trials)
-    _check_counts(k, n, confidence_level)
+    check_counts(k, n, confidence_level)
     if n == 0:
         return float("nan"), float("nan")
     z = float(ndtri(0.5 + confidence_level / 2))
@@ -289,7 +289,7 @@ def clopper_pearson_interval(successes, trials, confidence_level=0.95):
     (lower, upper) : floats [-], NaN when n = 0.
     """
     k, n = float(successes), float(trials)
-    _check_counts(k, n, confidence_level)
+    check_counts(k, n, confidence_level)
     if n == 0:
         return float("nan"), float("nan")
     alpha = 1.0 - confidence_level
@@ -298,7 +298,7 @@ def clopper_pearson_interval(successes, trials, confidence_level=0.95):
     return lower, upper
 
 
-def _check_counts(k, n, confidence_level):
+def check_counts(k, n, confidence_level):
     if not n >= 0:
         raise ValueError(f"trials = {n!r} must be >= 0")
     if not (0 <= k <= n) or not np.isfinite(k):

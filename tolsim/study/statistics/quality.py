@@ -60,7 +60,7 @@ from tolsim.study.statistics.intervals import (  # noqa: F401
     Capability,
     ClusterMoments,
     Proportion,
-    _check_counts,
+    check_counts,
     clopper_pearson_interval,
     cluster_capability,
     cluster_proportion,
