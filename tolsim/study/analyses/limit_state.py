@@ -146,6 +146,8 @@ from tolsim.study.analyses.rare_events import (
     series_importance_sampling,
     subset_simulation,
 )
+from tolsim.study.pipeline.block import evaluate_block
+from tolsim.study.pipeline.propagation import StepObserver, integrate_along_track
 from tolsim.study.sampling import (
     Block,
     _draw_widths,
@@ -286,21 +288,11 @@ def _balls(config, block):
     """BallState of a block's assemblies at the start of the stroke (as ``run_chunk``), with
     the assemblies :func:`outside_model_range` evaluated at the nominal errors and then
     marked unresolved (epsilon NaN, not valid)."""
-    from tolsim.study.pipeline.carriage import evaluate_carriage
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at, loads_per_ball
-
     values = error_values(config, block)
     bad = outside_model_range(config, values) if values else np.zeros(block.size, bool)
     if bad.any():
         values = {k: np.where(bad[:, None], 0.0, v) for k, v in values.items()}
-    if config.carriage is not None:
-        state = evaluate_carriage(config, values)[0]
-    else:
-        if config.study.propagation == "constant":
-            nx, ny = loads_per_ball(config, (block.size, config.balls))
-        else:  # loads at the carriage positions, as during the integration
-            nx, ny = loads_at(config, block.initial_position)
-        state = evaluate_balls(config, values, nx, ny)
+    state = evaluate_block(config, block, values, propagate=False).state
     if bad.any():
         state.velocity_deviation[bad] = np.nan
         state.valid[bad] = False
@@ -375,49 +367,34 @@ def series(components) -> np.ndarray:
     return np.where(known, g, np.nan)
 
 
+class SmallestGap(StepObserver):
+    """The smallest gap of a resolved pair at the end of each step [m] (``smallest``), and
+    whether the contact event occurred (``hit``), as :class:`~tolsim.study.pipeline.
+    propagation.FirstContact` decides it."""
+
+    def begin(self, block, position):
+        self.hit = np.zeros(block.size, dtype=bool)
+        self.smallest = np.full(block.size, np.inf)
+
+    def observe(self, step):
+        gap_old, gap_new, ball_ok = step.gap_old, step.gap_new, step.ball_ok
+        pair_ok = ball_ok[:, :-1] & ball_ok[:, 1:]
+        self.hit |= np.any((gap_new <= 0.0) & (gap_old > gap_new) & pair_ok, axis=1)
+        self.smallest = np.minimum(self.smallest,
+                                   _row_min(np.where(pair_ok, gap_new, np.inf)))
+
+
 def contact_margin_along_track(config, block, state):
     """(g [m], hit, resolved) of the contact event with ``along_track`` propagation.
 
     The midpoint integration of :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
-    (the same arithmetic, step by step), recording the smallest gap of a resolved pair at the
-    end of each step and its contact decision (module docstring).
+    (:func:`~tolsim.study.pipeline.propagation.integrate_along_track`, the same arithmetic),
+    recording the smallest gap of a resolved pair at the end of each step and its contact
+    decision (module docstring).
     """
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
-
-    v = config.motion.groove_velocity
-    horizon = config.motion.duration
-    steps = config.study.time_steps
-    dt = horizon / steps
-    diameter = 2.0 * config.bearing.ball_radius
-    size = block.size
-
-    def velocity(position, t):
-        values = error_values(config, block, rail_position=position)
-        nx, ny = loads_at(config, position - v * t)
-        s = evaluate_balls(config, values, nx, ny)
-        return s.velocity_deviation, s.valid
-
-    position = block.initial_position.copy()
-    ball_ok = np.ones(position.shape, dtype=bool)
-    hit = np.zeros(size, dtype=bool)
-    smallest = np.full(size, np.inf)
-    t = 0.0
-    for k in range(steps):
-        if k == 0:
-            eps1, ok1 = state.velocity_deviation, state.valid
-        else:
-            eps1, ok1 = velocity(position, t)
-        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(eps1)) * 0.5 * v
-        eps2, ok2 = velocity(mid, t + 0.5 * dt)
-        ball_ok &= ok1 & ok2
-        new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
-        gap_old = np.diff(position, axis=1) - diameter
-        gap_new = np.diff(new, axis=1) - diameter
-        pair_ok = ball_ok[:, :-1] & ball_ok[:, 1:]
-        hit |= np.any((gap_new <= 0.0) & (gap_old > gap_new) & pair_ok, axis=1)
-        smallest = np.minimum(smallest, _row_min(np.where(pair_ok, gap_new, np.inf)))
-        position = new
-        t = (k + 1) * dt
+    margin = SmallestGap()
+    ball_ok, _ = integrate_along_track(config, block, state, [margin])
+    hit, smallest = margin.hit, margin.smallest
     # a gap at exactly 0 that never closed further is no contact (as the plain run)
     g = np.where(~hit & (smallest <= 0), np.finfo(float).tiny, smallest)
     resolved = state.valid.all(axis=1) & ball_ok.all(axis=1)

@@ -50,21 +50,11 @@ from tolsim import __version__
 from tolsim.study.analyses.limit_state import check_supported, estimate_events
 from tolsim.study.analyses.worst_case import linear_stackup
 from tolsim.study.execution import saved_samples
-from tolsim.study.pipeline.carriage import evaluate_carriage, solve_config_carriage
-from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
-from tolsim.study.pipeline.evaluate import (
-    MODEL_FAST,
-    BallState,
-    evaluate_balls,
-    friction_module,
-    loads_at,
-    loads_per_ball,
-)
-from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
+from tolsim.study.pipeline.block import evaluate_block, evaluates_blocks_together
+from tolsim.study.pipeline.carriage import solve_config_carriage
+from tolsim.study.pipeline.evaluate import MODEL_FAST, BallState, friction_module
 from tolsim.study.pipeline.track_friction import (
-    TrackFriction,
     accumulator_from_state,
-    evaluate_friction,
     friction_examples,
     study_accumulator,
 )
@@ -309,66 +299,37 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
     """
     out = []
     balls = config.balls
-    carriage = None
-    if config.study.propagation == "constant":
-        # One pass over the whole chunk, then split per block.
-        block, values = drawn if drawn is not None else draw_chunk(config, block_indices)
-        if config.carriage is not None:  # one carriage per assembly, its tracks' trains
-            state, carriage = evaluate_carriage(config, values)
-        else:
-            nx, ny = loads_per_ball(config, (block.size, balls))
-            state = evaluate_balls(config, values, nx, ny)
-        t, pair = first_contact_tracks(block.initial_gap, state.velocity_deviation,
-                                       config.motion.groove_velocity, config.motion.duration,
-                                       config.n_tracks)
-        friction = (None if config.contact is None  # after contact: trains and friction
-                    else evaluate_friction(config, block.initial_gap, state))
+    # constant: one pass over the whole chunk, then split per block; along_track: block by
+    # block
+    if evaluates_blocks_together(config):
+        groups = [list(block_indices)]
+    else:
+        groups = [[k] for k in block_indices]
+        drawn = None
+    for group in groups:
+        block, values = drawn if drawn is not None else draw_chunk(config, group)
+        outcome = evaluate_block(config, block, values)
+        state, t, pair = outcome.state, outcome.time, outcome.pair
         offset = 0
-        for index in block_indices:
+        for index in group:
             size = block_size_of(config, index)
             sl = slice(offset, offset + size)
             sub = state.rows(sl)
             acc = study_accumulator(config)
-            acc.add(sub, t[sl], pair[sl])
-            if carriage is not None:
-                acc.add_carriage(carriage.rows(sl))
-            if friction is not None:
-                acc.add_friction(friction.rows(sl))
-            if offset == 0:  # the chunk's re-solves, counted once
-                acc.resolve_seconds = state.resolve_seconds
+            acc.add(sub, t[sl], pair[sl],
+                    None if outcome.train_valid is None else outcome.train_valid[sl])
+            if outcome.carriage is not None:  # the carriages at the start of the stroke
+                acc.add_carriage(outcome.carriage.rows(sl))
+            if outcome.friction is not None:
+                acc.add_friction(outcome.friction.rows(sl))
+            if offset == 0:  # the group's re-solves, counted once
+                acc.resolve_seconds = state.resolve_seconds + outcome.resolve_seconds
             start = index * config.study.block_size
             rows = _spot_rows(sub, start * balls, spot_indices)
             rows.update(saved_samples.sample_rows(config, save_samples, start, values,
                                                   block.initial_gap, state, t, pair, sl))
             out.append((index, acc, rows))
             offset += size
-    else:
-        for k in block_indices:
-            b = sample_block(config, k)
-            values = error_values(config, b)
-            carriage = None
-            # with [contact] the trains are followed after contact, step by step
-            trains = None if config.contact is None else TrackFriction(config)
-            if config.carriage is not None:  # balls rolling through the carriage
-                t, pair, ok, seconds, state, carriage = first_contact_carriage_track(
-                    config, b, friction=trains)
-            else:
-                # loads at the carriage positions, as during the integration
-                nx, ny = loads_at(config, b.initial_position)
-                state = evaluate_balls(config, values, nx, ny)
-                t, pair, ok, seconds = first_contact_along_track(config, b, state,
-                                                                 friction=trains)
-            acc = study_accumulator(config)
-            acc.add(state, t, pair, ok)
-            if carriage is not None:  # the carriages at the start of the stroke
-                acc.add_carriage(carriage)
-            if trains is not None:
-                acc.add_friction(trains.figures())
-            acc.resolve_seconds += seconds
-            rows = _spot_rows(state, b.start * balls, spot_indices)
-            rows.update(saved_samples.sample_rows(config, save_samples, b.start, values,
-                                                  b.initial_gap, state, t, pair))
-            out.append((b.index, acc, rows))
     return out
 
 
@@ -378,7 +339,7 @@ def _prefetched(config, chunks, spot_indices, save_samples=0):
     GIL, so drawing overlaps the kernels). The draws are the same as without the thread.
     Drawing must not launch parallel (``prange``) kernels: Numba's ``workqueue`` threading
     layer, the fallback where no OpenMP or TBB is installed, cannot run two at once."""
-    if config.study.propagation != "constant" or len(chunks) < 2:
+    if not evaluates_blocks_together(config) or len(chunks) < 2:
         for c in chunks:
             yield run_chunk(config, c, spot_indices, None, save_samples)
         return

@@ -1068,15 +1068,10 @@ class FrictionExamples:
 
 def _evaluate_assemblies(config, block):
     """The balls of a block, as :func:`tolsim.study.execution.runner.run_chunk` evaluates them."""
-    from tolsim.study.pipeline.carriage import evaluate_carriage
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_per_ball
-    from tolsim.study.sampling import error_values
+    # block imports this module
+    from tolsim.study.pipeline.block import evaluate_block  # noqa: PLC0415  import cycle
 
-    values = error_values(config, block)
-    if config.carriage is not None:
-        return evaluate_carriage(config, values)[0]
-    nx, ny = loads_per_ball(config, (block.size, config.balls))
-    return evaluate_balls(config, values, nx, ny)
+    return evaluate_block(config, block, propagate=False).state
 
 
 #: Assemblies of the first block looked at first for the examples (all of it if too few touch).
