@@ -365,7 +365,7 @@ def test_ctrl_c_keeps_a_checkpoint(tmp_path):
 def test_retain_freed_memory_only_on_glibc():
     import platform
 
-    from tolsim.study.execution.runner import retain_freed_memory
+    from tolsim.study.execution.chunks import retain_freed_memory
 
     glibc = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
     assert retain_freed_memory() is glibc

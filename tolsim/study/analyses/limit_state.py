@@ -136,6 +136,7 @@ References
    Safety 6 (1989) 3-10, doi:10.1016/0167-4730(89)90003-9.
 """
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -146,14 +147,21 @@ from tolsim.study.analyses.rare_events import (
     series_importance_sampling,
     subset_simulation,
 )
-from tolsim.study.pipeline.block import evaluate_block
+from tolsim.study.analyses.sensitivity import study_factors
+from tolsim.study.pipeline.block import (
+    evaluate_block,
+    has_carriage,
+    has_contact,
+    is_along_track,
+)
 from tolsim.study.pipeline.propagation import StepObserver, integrate_along_track
+from tolsim.study.pipeline.track_friction import evaluate_friction
 from tolsim.study.sampling import (
     Block,
-    _draw_widths,
-    _field_grid,
     block_from_draws,
+    draw_widths,
     error_values,
+    field_grid,
     per_assembly_sources,
 )
 from tolsim.study.spec import ESTIMATORS, SOURCES
@@ -189,7 +197,7 @@ def column_layout(config) -> dict:
     ``entering_gap`` and ``entering_<source>``.
     """
     out, start = {}, 0
-    for name, width in _draw_widths(config, _field_grid(config)).items():
+    for name, width in draw_widths(config, field_grid(config)).items():
         out[name] = slice(start, start + width)
         start += width
     return out
@@ -242,7 +250,7 @@ def study_events(config) -> tuple:
         out.append("contact")
     if config.study.velocity_deviation_limit > 0:
         out.append("velocity_deviation_exceedance")
-    if config.contact is not None and config.contact.friction_increase_limit > 0:
+    if has_contact(config) and config.contact.friction_increase_limit > 0:
         out.append("friction_exceedance")
     return tuple(out)
 
@@ -252,7 +260,7 @@ def check_supported(config) -> None:
     estimator = config.study.estimator
     if estimator == "monte_carlo":
         return
-    if config.carriage is not None and config.study.propagation == "along_track":
+    if has_carriage(config) and is_along_track(config):
         raise ValueError(f"estimator = {estimator!r} is not available for a carriage with "
                          "along_track propagation (balls enter and leave its loaded zone); "
                          "use propagation = 'constant' or estimator = 'monte_carlo'")
@@ -264,7 +272,7 @@ def check_supported(config) -> None:
 def is_smooth(config, event) -> bool:
     """Whether FORM may be tried on the event's limit state (module docstring)."""
     return event in ("contact", "velocity_deviation_exceedance") and \
-        config.study.propagation == "constant"
+        not is_along_track(config)
 
 
 def outside_model_range(config, values) -> np.ndarray:
@@ -421,18 +429,16 @@ def event_values(config, block, events=None) -> dict:
     out = {}
     touched = margin = None
     if "contact" in events or "friction_exceedance" in events:
-        if config.study.propagation == "constant":
+        if is_along_track(config):
+            margin, _, resolved = contact_margin_along_track(config, block, state)
+        else:
             margin = _row_min(contact_margins(config, block, state))
             resolved = state.valid.all(axis=1)
-        else:
-            margin, _, resolved = contact_margin_along_track(config, block, state)
         touched = margin <= 0
         out["contact"] = np.where(touched | resolved, margin, np.nan)
     if "velocity_deviation_exceedance" in events:
         out["velocity_deviation_exceedance"] = series(exceedance_margins(config, state))
     if "friction_exceedance" in events:
-        from tolsim.study.pipeline.track_friction import evaluate_friction
-
         limit = config.contact.friction_increase_limit
         figures = evaluate_friction(config, block.initial_gap, state, block=block)
         scale = 0.5 * config.motion.groove_velocity * config.motion.duration
@@ -585,8 +591,6 @@ def _factor_columns(config) -> dict:
 
 def design_point_summary(config, point, component="") -> DesignPointSummary:
     """Map a design point u* (d,) to the study's factors (module docstring)."""
-    from tolsim.study.analyses.sensitivity import study_factors
-
     u = np.asarray(point, dtype=float)
     block = block_from_normals(config, u[None])
     values = error_values(config, block)
@@ -662,8 +666,6 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     (same settings) when the limit state is not smooth or importance sampling gives no
     number, saying why in ``note``.
     """
-    import time
-
     st = config.study
     started = time.perf_counter()
     g = LimitState(config, event)
@@ -679,9 +681,8 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     elif st.estimator == "importance":
         if not g.smooth:
             why = ("along_track propagation gives a limit state that is not smooth (the "
-                   "smallest gap over the time steps)" if config.study.propagation
-                   != "constant" else "the friction limit state jumps where the balls "
-                   "start to touch")
+                   "smallest gap over the time steps)" if is_along_track(config) else
+                   "the friction limit state jumps where the balls start to touch")
             result = subset()
             note = f"importance sampling not attempted: {why}; subset simulation used"
         else:

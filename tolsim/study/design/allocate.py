@@ -135,6 +135,8 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ndtri
 
+from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.block import has_contact
 from tolsim.study.spec import SOURCES
 from tolsim.study.statistics.intervals import clopper_pearson_interval, cluster_proportion
 
@@ -242,7 +244,7 @@ def _out_of_spec(statistics, target, confidence) -> Evaluation:
 
 
 def _needs_friction_limit(config, target):
-    if config.contact is None or not config.contact.friction_increase_limit > 0:
+    if not has_contact(config) or not config.contact.friction_increase_limit > 0:
         return ("needs a config with [contact] and a friction_increase_limit_N (the "
                 "friction increase whose exceedance it bounds)")
     return None
@@ -907,7 +909,7 @@ def evaluation_config(config, target: Target, samples: int, seed: int):
                     estimator="monte_carlo")
     if target.epsilon_limit is not None:
         study = replace(study, velocity_deviation_limit=target.epsilon_limit)
-    contact = config.contact if config.contact is None else replace(config.contact, examples=0)
+    contact = replace(config.contact, examples=0) if has_contact(config) else None
     return replace(config, study=study, contact=contact)
 
 
@@ -918,8 +920,6 @@ def evaluate_study(config, target: Target, confidence: float, *, workers=1, prog
     -------
     (Evaluation, StudyResult)
     """
-    from tolsim.study.execution.runner import run_study
-
     result = run_study(config, workers=workers, progress=progress)
     return TARGETS[target.variable].evaluate(result.statistics, target, confidence), result
 

@@ -5,7 +5,7 @@ tracks' trains coupled through the carriage), and their epsilon is ``constant`` 
 stroke or re-evaluated ``along_track``. :func:`evaluate_block` looks the pair up in
 :data:`BLOCK_EVALUATIONS` (and :data:`START_EVALUATIONS` for the balls at the start of the
 stroke alone) and returns a :class:`BlockOutcome` with everything its callers need: the run
-(:func:`tolsim.study.execution.runner.run_chunk`), the sensitivity indices, the rare-event
+(:func:`tolsim.study.execution.chunks.run_chunk`), the sensitivity indices, the rare-event
 limit states and the friction examples.
 """
 

@@ -198,6 +198,13 @@ from tolsim.physics.trains import (
     train_contact_constant,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS, creep_coefficients_kernel
+from tolsim.study.pipeline.carriage_track import (
+    carry_pairs_kernel,
+    first_contact_carriage_track,
+)
+from tolsim.study.pipeline.evaluate import BallState, evaluate_balls, loads_at
+from tolsim.study.pipeline.propagation import first_contact_along_track
+from tolsim.study.sampling import error_values, sample_block
 from tolsim.study.statistics.accumulator import (
     QUANTILES,
     Accumulator,
@@ -249,7 +256,7 @@ def _creep_analytic(dbeta, force, bearing, ball_friction):
 def _creep_full(dbeta, force, bearing, ball_friction):
     """As :func:`_creep_analytic`, with K, c, F_0 and the capacities from the full model
     (NaN where it cannot take the ball or does not converge); the slopes a, b analytic."""
-    from tolsim.physics.velocity.full import full
+    from tolsim.physics.velocity.full import full  # noqa: PLC0415  optional full model
 
     load = _creep_analytic(dbeta, force, bearing, ball_friction)
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
@@ -637,8 +644,6 @@ def step_friction_kernel(loaded, member, load, force, ok, contact, formed, weigh
 
 def _flat_balls(state, index):
     """The balls ``index`` (into the flattened balls) of a BallState, as a flat BallState."""
-    from tolsim.study.pipeline.evaluate import BallState
-
     def flat(x, tail=()):
         return np.asarray(x).reshape((-1,) + tail)[index]
 
@@ -788,8 +793,6 @@ class TrackFriction:
 
     def carry(self, old_id, new_id):
         """Follow the pair flags to the balls' new slots (after exits and entries)."""
-        from tolsim.study.pipeline.carriage_track import carry_pairs_kernel
-
         old_id = np.ascontiguousarray(old_id).reshape(len(self.closed), -1)
         new_id = np.ascontiguousarray(new_id).reshape(len(self.closed), -1)
         for name in ("closed", "before"):
@@ -825,14 +828,8 @@ def follow_along_track(config, block, initial_state=None, record=False):
     """
     friction = TrackFriction(config, record=record)
     if config.carriage is not None:
-        from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
-
         *out, state, carriage = first_contact_carriage_track(config, block, friction=friction)
         return (*out, state, carriage, friction)
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
-    from tolsim.study.pipeline.propagation import first_contact_along_track
-    from tolsim.study.sampling import error_values
-
     state = initial_state
     if state is None:  # loads at the carriage positions, as during the integration
         nx, ny = loads_at(config, block.initial_position)
@@ -1067,7 +1064,7 @@ class FrictionExamples:
 
 
 def _evaluate_assemblies(config, block):
-    """The balls of a block, as :func:`tolsim.study.execution.runner.run_chunk` evaluates them."""
+    """The balls of a block, as :func:`tolsim.study.execution.chunks.run_chunk` evaluates them."""
     # block imports this module
     from tolsim.study.pipeline.block import evaluate_block  # noqa: PLC0415  import cycle
 
@@ -1116,8 +1113,6 @@ def friction_examples(config) -> FrictionExamples | None:
     From the first random block of the study (module docstring); each example's worst track
     is followed again on a grid of ``travel_points`` carriage positions.
     """
-    from tolsim.study.sampling import sample_block
-
     count = config.contact.examples
     if count == 0:
         return None

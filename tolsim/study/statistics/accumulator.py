@@ -42,6 +42,7 @@ import copy
 
 import numpy as np
 
+from tolsim.study.pipeline.evaluate import MODEL_FULL
 from tolsim.study.statistics.intervals import (
     ClusterMoments,
     assembly_totals,
@@ -220,8 +221,6 @@ class Accumulator:
             Extra validity of the train (along-track propagation: every ball resolved at
             every step).
         """
-        from tolsim.study.pipeline.evaluate import MODEL_FULL
-
         eps, valid = state.velocity_deviation, state.valid
         block = self._empty_like()
         limit = self.velocity_deviation_limit if self.velocity_deviation_limit > 0 else np.inf
