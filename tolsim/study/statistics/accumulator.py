@@ -42,7 +42,6 @@ import copy
 
 import numpy as np
 
-from tolsim.study.pipeline.evaluate import MODEL_FULL
 from tolsim.study.statistics.intervals import (
     ClusterMoments,
     assembly_totals,
@@ -221,6 +220,9 @@ class Accumulator:
             Extra validity of the train (along-track propagation: every ball resolved at
             every step).
         """
+        # statistics sit below the pipeline, whose package imports this module
+        from tolsim.study.pipeline.evaluate import MODEL_FULL  # noqa: PLC0415  layer
+
         eps, valid = state.velocity_deviation, state.valid
         block = self._empty_like()
         limit = self.velocity_deviation_limit if self.velocity_deviation_limit > 0 else np.inf
