@@ -11,7 +11,7 @@ assembly by assembly, with every ball solved by the public per-ball solver
 single-assembly :func:`tolsim.physics.carriage.solve_carriage` (a Python Newton over the same
 kernels) is timed on the same subset.
 
-Like ``tolsim run`` (:func:`tolsim.study.execution.runner.retain_freed_memory`), the benchmark lets
+Like ``tolsim run`` (:func:`tolsim.study.execution.chunks.retain_freed_memory`), the benchmark lets
 glibc keep freed memory. Wall-clock figures depend on what else the machine runs; the CPU
 time per assembly less so.
 
@@ -40,7 +40,8 @@ from scipy.optimize import root
 from tolsim.io.config import load_config, parse_config
 from tolsim.physics.carriage import BATCH_STATUS, solve_carriage, solve_carriage_batch
 from tolsim.physics.static import GrooveErrors, solve_static_displacement
-from tolsim.study.execution.runner import retain_freed_memory, run_study
+from tolsim.study.execution.chunks import retain_freed_memory
+from tolsim.study.execution.runner import run_study
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "carriage_preload.toml"
 #: Standard deviations of the sampled errors (normal, independent per ball): arc-centre

@@ -125,14 +125,14 @@ def child(balls_total, mode, state_file):
 
 def client_cost_per_block(balls_total):
     """[s] to unpickle and merge one block's result on the client (the serial part)."""
-    from tolsim.study.execution import runner
+    from tolsim.study.execution import chunks, runner
     from tolsim.study.sampling import spot_check_plan
     from tolsim.study.statistics.accumulator import Accumulator
 
     config = study(balls_total)
     plan = spot_check_plan(config)
     chunk = list(range(runner.default_chunk_blocks(config)))
-    payload = pickle.dumps(runner.run_chunk(config, chunk, plan))
+    payload = pickle.dumps(chunks.run_chunk(config, chunk, plan))
     best = np.inf
     for _ in range(5):
         t0 = time.perf_counter()

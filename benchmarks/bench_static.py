@@ -6,7 +6,7 @@ Numba threads and on one (and with the vectorised path switched off), the Newton
 the memory of the result, and the ratio to a plain SciPy baseline (``scipy.optimize.root``
 ball by ball on the same equations, as in ``tests/test_static.py``) measured in the same run.
 
-Like ``tolsim run`` (:func:`tolsim.study.execution.runner.retain_freed_memory`), the benchmark lets
+Like ``tolsim run`` (:func:`tolsim.study.execution.chunks.retain_freed_memory`), the benchmark lets
 glibc keep freed memory: otherwise each call's fresh output arrays are paid for in page
 faults, which on a small VM bound the two-thread figure near the one-thread one.
 
@@ -28,7 +28,7 @@ from tolsim.physics.static import (
     solve_static,
     static_sensitivity,
 )
-from tolsim.study.execution.runner import retain_freed_memory
+from tolsim.study.execution.chunks import retain_freed_memory
 
 SX = np.array([-1.0, 1.0, 1.0, -1.0])
 SY = np.array([-1.0, -1.0, 1.0, 1.0])

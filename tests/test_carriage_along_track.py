@@ -36,10 +36,10 @@ from tolsim.study.pipeline.carriage_track import (
 from tolsim.study.pipeline.propagation import first_contact_tracks
 from tolsim.study.sampling import (
     _ar1,
-    _field_grid,
     block_generator,
     entering_capacity,
     error_values,
+    field_grid,
     moving_ball_values,
     sample_block,
 )
@@ -453,7 +453,7 @@ def test_rail_fields_per_track_twin():
     block = sample_block(c, 0)
     rng = block_generator(c.study.seed, 0)
     tracks, n = 2, c.train.balls
-    origin, spacing, points = _field_grid(c)["bottom_rotation"]
+    origin, spacing, points = field_grid(c)["bottom_rotation"]
     rng.standard_normal((16, tracks * 2))  # factors: BL and top_rotation, per track
     for _ in range(3):  # ball sources: TR, TL, ball_oversize
         rng.standard_normal((16, tracks * n))

@@ -113,7 +113,7 @@ def test_after_contact_panel_matches_the_study_path():
 
     from tolsim.io.config import load_config, parse_config
     from tolsim.study.execution.runner import run_study
-    from tolsim.study.pipeline import track_friction as fr
+    from tolsim.study.statistics import friction as fs
 
     data = paper.after_contact_data()
     full = data["full"]
@@ -124,7 +124,7 @@ def test_after_contact_panel_matches_the_study_path():
     config = Path(__file__).resolve().parent.parent / "configs" / "paper_case_study.toml"
     text = load_config(config).text + "\n[contact]\n"
     result = run_study(parse_config(text, "paper_case_contact.toml"))
-    stats, j = result.friction, fr.COLUMNS.index
+    stats, j = result.friction, fs.COLUMNS.index
     assert stats.n_resolved == stats.n_assemblies == 16
     np.testing.assert_allclose(stats.maximum[j("contact_force_max")], full["contact_force"],
                                rtol=1e-9)

@@ -232,9 +232,9 @@ def _compiling_once(monkeypatch):
     """Make the next study compile a new kernel, as with a cold Numba cache."""
     import numba
 
-    from tolsim.study.execution import runner
+    from tolsim.study.execution import chunks
 
-    run_chunk = runner.run_chunk
+    run_chunk = chunks.run_chunk
     pending = [True]
 
     def compile_then_run(*args, **kwargs):
@@ -243,7 +243,7 @@ def _compiling_once(monkeypatch):
             numba.njit(lambda x: x + 1)(1)  # new code: Numba compiles
         return run_chunk(*args, **kwargs)
 
-    monkeypatch.setattr(runner, "run_chunk", compile_then_run)
+    monkeypatch.setattr(chunks, "run_chunk", compile_then_run)
 
 
 def test_compiling_is_said_once_and_only_when_it_happens(tmp_path, capsys, monkeypatch):

@@ -30,12 +30,14 @@ from tolsim.physics.trains import (
     train_contact_constant,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
+from tolsim.study.analyses import friction_examples as fx
 from tolsim.study.execution.runner import run_study
 from tolsim.study.pipeline import track_friction as fr
 from tolsim.study.pipeline.carriage_track import carry_pairs_kernel, first_contact_carriage_track
 from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
 from tolsim.study.pipeline.propagation import first_contact_along_track
 from tolsim.study.sampling import error_values, sample_block
+from tolsim.study.statistics import friction as fs
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -400,7 +402,7 @@ def test_constant_epsilon_reproduces_the_event_driven_trains():
         along = rec.figures()
         if previous is None:
             constant = replace(c, study=replace(c.study, propagation="constant"))
-            exact, trains = fr._follow_trains(constant, block.initial_gap, state)
+            exact, trains = fr.follow_trains(constant, block.initial_gap, state)
             ref = train_contact_constant(block.initial_gap, trains.velocity_deviation,
                                          trains.stiffness, c.motion.groove_velocity,
                                          c.motion.duration, segments=True,
@@ -414,7 +416,7 @@ def test_constant_epsilon_reproduces_the_event_driven_trains():
                     * c.motion.duration + ref.displacement)
         assert_allclose(rec.trace["end"][-1], expected, rtol=0, atol=1e-14)
         a, e = along.columns(), exact.columns()
-        col = fr.COLUMNS.index
+        col = fs.COLUMNS.index
         for name in ("baseline", "increase_mean", "contact_fraction"):
             assert_allclose(a[:, col(name)], e[:, col(name)], rtol=1e-8, atol=1e-12,
                             err_msg=name)
@@ -425,7 +427,7 @@ def test_constant_epsilon_reproduces_the_event_driven_trains():
         close = np.any(np.diff(np.sort(events, axis=1), axis=1) < dt, axis=1)
 
         off = {name: ~np.isclose(a[:, col(name)], e[:, col(name)], rtol=1e-8, atol=1e-12)
-               for name in fr.COLUMNS}
+               for name in fs.COLUMNS}
         assert not np.any(off["increase_max"] & ~last)
         assert not np.any(off["contact_force_max"] & ~last)
         assert not np.any(off["ripple"] & ~(first | last))
@@ -473,7 +475,7 @@ def test_lin2018_case_a_never_touches_along_track():
     stats = result.friction
     assert result.statistics.n_contact == 0 and stats.n_resolved == 4
     for name in ("increase_max", "contact_force_max", "contact_fraction", "clusters_formed"):
-        assert stats.maximum[fr.COLUMNS.index(name)] == 0.0, name
+        assert stats.maximum[fs.COLUMNS.index(name)] == 0.0, name
 
 
 @pytest.mark.parametrize("mu_bb", [0.0, 0.1])
@@ -671,11 +673,11 @@ def test_paper_mitigated_along_track_no_contact_zero_increase():
     assert stats.n_resolved == stats.n_assemblies == 16 and stats.n_exceed == 0
     for name in ("increase_max", "increase_mean", "contact_force_max", "contact_fraction",
                  "clusters_formed"):
-        j = fr.COLUMNS.index(name)
+        j = fs.COLUMNS.index(name)
         assert stats.minimum[j] == stats.maximum[j] == 0.0, name
     assert stats.exceedance_probability()[0] == 0.0
     assert 2.0 < stats.maximum[0] < 3.0
-    ripple = stats.maximum[fr.COLUMNS.index("ripple")]
+    ripple = stats.maximum[fs.COLUMNS.index("ripple")]
     assert 0.0 < ripple < 0.2 * stats.maximum[0]
     ex = result.friction_examples
     assert np.all(np.ptp(ex.friction_force, axis=1) <= ripple * (1 + 1e-12))
@@ -699,10 +701,10 @@ def test_bit_identical_across_chunking_and_workers():
     # worker processes (every block from its own seed, merged in block order).
     c = friction_yaw_along_track()
     one = run_study(c, chunk_blocks=1)
-    assert isinstance(one.statistics, fr.FrictionAccumulator)
+    assert isinstance(one.statistics, fs.FrictionAccumulator)
     stats = one.friction
     assert stats.n_resolved == 160 and stats.n_sliding == 0
-    assert stats.maximum[fr.COLUMNS.index("contact_force_max")] > 0.1
+    assert stats.maximum[fs.COLUMNS.index("contact_force_max")] > 0.1
     for other in (run_study(c, chunk_blocks=3), run_study(c, workers=2, chunk_blocks=1)):
         assert_same_statistics(one, other)
         for name in ("assembly", "track", "travel", "baseline", "friction_force",
@@ -720,7 +722,7 @@ def test_examples_are_the_study_assemblies_and_trajectories():
     # travel points lies within the step values, starts at the first step's value, and the
     # ball positions start at the sampled ones (exact).
     c = friction_yaw_along_track(samples=64, block=64)
-    ex = fr.friction_examples(c)
+    ex = fx.friction_examples(c)
     block = sample_block(c, 0)
     friction = fr.follow_along_track(c, block)[-1]
     figures = friction.figures()
@@ -783,7 +785,7 @@ def test_carriage_along_track_with_contact():
     assert stats.n_assemblies == 16 and stats.n_resolved + stats.n_unresolved >= 14
     assert stats.count == stats.n_resolved > 0
     assert np.all(np.isfinite(stats.mean)) and np.all(np.isfinite(stats.maximum))
-    assert stats.maximum[fr.COLUMNS.index("contact_force_max")] > 0
+    assert stats.maximum[fs.COLUMNS.index("contact_force_max")] > 0
     assert 0 <= stats.n_exceed <= 16
     ex = result.friction_examples
     assert ex.ball_position.shape == (4, 201, 12) and np.all(np.isfinite(ex.friction_force))

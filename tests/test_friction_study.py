@@ -26,10 +26,12 @@ from tolsim.physics.geometry import K_F_PAPER, TABLE1, paired_forces
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.trains import train_contact_constant
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS, analytic
+from tolsim.study.analyses import friction_examples as fx
 from tolsim.study.execution.runner import StudyInterrupted, run_study
 from tolsim.study.pipeline import track_friction as fr
 from tolsim.study.pipeline.evaluate import BallState
 from tolsim.study.sampling import sample_block
+from tolsim.study.statistics import friction as fs
 from tolsim.study.statistics.accumulator import Accumulator
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -253,7 +255,7 @@ def test_two_balls_closed_form_through_the_study(mu_bb):
     stats = result.friction
     assert stats.n_assemblies == stats.n_resolved == stats.count == 8
     for name, value in expected.items():
-        j = fr.COLUMNS.index(name)
+        j = fs.COLUMNS.index(name)
         assert_allclose([stats.minimum[j], stats.maximum[j]], value, rtol=1e-12,
                         atol=1e-15 if value == 0 else 0, err_msg=name)
     assert_allclose(stats.quantiles("contact_force_max", (0.01, 0.5, 0.99)), q, rtol=1e-12)
@@ -290,7 +292,7 @@ def test_paper_case_a_after_contact():
                     atol=0.005)
     c = load_config(CONFIGS / "paper_case_study.toml")
     result = run_study(parse_config(c.text + "\n[contact]\n", "paper_case_contact.toml"))
-    stats, j = result.friction, fr.COLUMNS.index
+    stats, j = result.friction, fs.COLUMNS.index
     assert_allclose(stats.maximum[j("contact_force_max")], q, rtol=1e-9)
     assert_allclose(stats.maximum[j("increase_max")], increase, rtol=1e-9)
     t_contact = 0.5e-3 / ((eps[0] - eps[1]) * 0.01 / 2)
@@ -309,7 +311,7 @@ def test_two_balls_full_creep_model():
     assert np.all((k > 1.01 * k_analytic) & (k < 1.1 * k_analytic))
     q = (eps[0] - eps[1]) / (1 / k[0] + 1 / k[1] - c[0] + c[1])
     stats = run_study(two_balls(samples=2, block=2, creep="full")).friction
-    j = fr.COLUMNS.index
+    j = fs.COLUMNS.index
     assert_allclose(stats.maximum[j("contact_force_max")], q, rtol=1e-9)
     assert_allclose(stats.maximum[j("baseline")], f0.sum(), rtol=1e-9)
     assert_allclose(stats.maximum[j("increase_max")], ((a[1] - a[0]) + (b[0] + b[1])) * q,
@@ -363,7 +365,7 @@ def test_exceedance_with_unresolved_assemblies_is_bounded():
     exceeds = np.zeros(n, bool)
     exceeds[u:u + k_unresolved] = True
     exceeds[u + k_unresolved:u + k_unresolved + k_resolved] = True
-    stats = fr.FrictionStatistics(friction_increase_limit=0.05)
+    stats = fs.FrictionStatistics(friction_increase_limit=0.05)
     stats.add(figures(resolved, exceeds))
     k = k_resolved + k_unresolved
     assert (stats.n_exceed, stats.n_unresolved, stats.n_resolved) == (k, u, n - u - 2)
@@ -376,7 +378,7 @@ def test_exceedance_with_unresolved_assemblies_is_bounded():
     assert_allclose(ci_low, binomtest(k, n).proportion_ci(method="exact").low, rtol=1e-9)
     assert_allclose(ci_high, binomtest(k + u, n).proportion_ci(method="exact").high, rtol=1e-9)
     # no limit: no probability
-    assert np.isnan(fr.FrictionStatistics().exceedance_probability()[0])
+    assert np.isnan(fs.FrictionStatistics().exceedance_probability()[0])
 
 
 def test_statistics_merge_and_state_round_trip(rng):
@@ -385,9 +387,9 @@ def test_statistics_merge_and_state_round_trip(rng):
     m = 1000
     resolved = rng.random(m) > 0.1
     inc = rng.lognormal(-3.0, 1.0, m)
-    one = fr.FrictionStatistics(0.1)
+    one = fs.FrictionStatistics(0.1)
     one.add(figures(resolved, resolved & (inc > 0.1), increase=inc))
-    blocks = fr.FrictionStatistics(0.1)
+    blocks = fs.FrictionStatistics(0.1)
     for sl in (slice(0, 300), slice(300, 301), slice(301, m)):
         blocks.add(figures(resolved, resolved & (inc > 0.1), increase=inc).rows(sl))
     for name in ("n_assemblies", "n_resolved", "n_exceed", "count", "histogram", "minimum",
@@ -401,13 +403,13 @@ def test_statistics_merge_and_state_round_trip(rng):
                     rtol=0.05)
     assert_allclose(blocks.quantiles("increase_max", (0.0, 1.0)), [x[0], x[-1]], rtol=1e-15)
     # a majority without contact: the median is "no force", exactly 0 (first bin)
-    zeros = fr.FrictionStatistics(0.1)
+    zeros = fs.FrictionStatistics(0.1)
     zeros.add(figures(resolved, resolved & (inc > 0.1), increase=np.where(inc < 0.1, 0.0, inc)))
     assert np.mean(inc[resolved] < 0.1) > 0.6
     assert zeros.quantiles("increase_max", (0.5,))[0] == 0.0
     assert zeros.quantiles("increase_max", (0.9,))[0] > 0.1
-    back = fr.FrictionStatistics.from_state(blocks.state())
-    for name in fr.FrictionStatistics.FIELDS:
+    back = fs.FrictionStatistics.from_state(blocks.state())
+    for name in fs.FrictionStatistics.FIELDS:
         assert_array_equal(getattr(back, name), getattr(blocks, name))
 
 
@@ -432,7 +434,7 @@ def test_bit_identical_across_chunking_and_resume(tmp_path):
     c = friction_yaw()
     a = run_study(c, chunk_blocks=1)
     b = run_study(c, chunk_blocks=4)
-    assert isinstance(a.statistics, fr.FrictionAccumulator)
+    assert isinstance(a.statistics, fs.FrictionAccumulator)
     assert any(k.startswith("friction_") for k in a.statistics.state())
     assert_same_statistics(a, b)
     ckpt = tmp_path / "run.partial"
@@ -456,9 +458,9 @@ def test_examples_do_not_depend_on_the_window(monkeypatch, window):
     # default window of 128, enough of them touch; 1 and 3: too few, then the whole block;
     # 1000: the whole block at once).
     c = friction_yaw(samples=256, block=128)
-    reference = fr.friction_examples(c)
+    reference = fx.friction_examples(c)
     monkeypatch.setattr(fr, "EXAMPLE_WINDOW", window)
-    again = fr.friction_examples(c)
+    again = fx.friction_examples(c)
     for name in ("assembly", "track", "travel", "baseline", "friction_force", "contact_force",
                  "ball_position"):
         assert_array_equal(getattr(again, name), getattr(reference, name), err_msg=name)
@@ -501,7 +503,7 @@ def test_paper_mitigated_matched_deviations_no_contact_zero_increase():
     assert stats.n_resolved == stats.n_assemblies == 16 and stats.n_exceed == 0
     for name in ("increase_max", "increase_mean", "ripple", "contact_force_max",
                  "contact_fraction", "clusters_formed"):
-        j = fr.COLUMNS.index(name)
+        j = fs.COLUMNS.index(name)
         assert stats.minimum[j] == stats.maximum[j] == 0.0, name
     assert stats.exceedance_probability()[0] == 0.0
     assert_array_equal(stats.quantiles("increase_max"), 0.0)
@@ -556,10 +558,10 @@ friction_increase_limit_N = 0.1
 """)
     c = parse_config(text)
     block = sample_block(c, 0)
-    state = fr._evaluate_assemblies(c, block)
+    state = fx._evaluate_assemblies(c, block)
     a = fr.evaluate_friction(c, block.initial_gap, state)
     m = mirrored(c)
-    mstate = fr._evaluate_assemblies(m, sample_block(m, 0))
+    mstate = fx._evaluate_assemblies(m, sample_block(m, 0))
     assert_array_equal(mstate.contact_angle_deviation,
                        state.contact_angle_deviation[..., [1, 0, 3, 2]])
     b = fr.evaluate_friction(m, block.initial_gap, mstate)
@@ -602,13 +604,13 @@ def test_unresolved_ball_makes_the_assembly_unresolved():
     # its assembly, unresolved: NaN figures, counted, never dropped.
     c = two_balls(limit="friction_increase_limit_N = 0.01")
     block = sample_block(c, 0)
-    state = fr._evaluate_assemblies(c, block)
+    state = fx._evaluate_assemblies(c, block)
     state.velocity_deviation[3, 1] = np.nan
     state.valid[3, 1] = False
     out = fr.evaluate_friction(c, block.initial_gap, state)
     assert_array_equal(out.resolved, np.arange(8) != 3)
     assert np.isnan(out.increase_max[3]) and out.worst_track[3] == -1
-    stats = fr.FrictionStatistics.for_config(c)
+    stats = fs.FrictionStatistics.for_config(c)
     stats.add(out)
     assert (stats.n_assemblies, stats.n_resolved, stats.n_unresolved) == (8, 7, 1)
     low, high, _, _ = stats.exceedance_bounds()
@@ -638,7 +640,7 @@ def test_sliding_train_is_unresolved_and_bounded(monkeypatch):
     assert stats.n_exceed == 0 and stats.n_resolved == 500 - contacts
     low, high, _, _ = stats.exceedance_bounds()
     assert (low, high) == (0.0, contacts / 500)
-    assert stats.maximum[fr.COLUMNS.index("contact_force_max")] == 0.0
+    assert stats.maximum[fs.COLUMNS.index("contact_force_max")] == 0.0
 
 
 def test_carriage_reports_the_worst_track():
@@ -650,7 +652,7 @@ def test_carriage_reports_the_worst_track():
     c = parse_config(text, "carriage_contact.toml").with_overrides(samples=24)
     c = replace(c, study=replace(c.study, block_size=24))
     block = sample_block(c, 0)
-    state = fr._evaluate_assemblies(c, block)
+    state = fx._evaluate_assemblies(c, block)
     out = fr.evaluate_friction(c, block.initial_gap, state)
     tracks, n = c.n_tracks, c.train.balls
     assert tracks > 1 and out.resolved.all()
@@ -686,7 +688,7 @@ def test_friction_yaw_config_and_file(tmp_path):
     assert stats.n_resolved == 512 and stats.n_sliding == 0
     assert 0.0 < stats.exceedance_probability()[0] < 0.5
     assert_allclose(stats.column_mean("baseline"), 12.27, rtol=0.03)
-    assert 0.5 < stats.maximum[fr.COLUMNS.index("contact_force_max")] < 10.0
+    assert 0.5 < stats.maximum[fs.COLUMNS.index("contact_force_max")] < 10.0
     assert "friction_increase" in result.sensitivity.outputs
     path = tmp_path / "friction.nc"
     ds = write_result(result, path)
@@ -746,7 +748,7 @@ def test_contact_settings_validate():
             ContactSettings(**{field: value})
     c = two_balls()
     c = replace(c, study=replace(c.study, propagation="along_track"))
-    assert isinstance(fr.study_accumulator(c), fr.FrictionAccumulator)
+    assert isinstance(fs.study_accumulator(c), fs.FrictionAccumulator)
 
 
 @pytest.mark.parametrize(("old", "new", "key"), [

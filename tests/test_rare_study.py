@@ -33,10 +33,10 @@ from tolsim.study.execution.runner import PrecisionTarget, run_study
 from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
 from tolsim.study.pipeline.track_friction import evaluate_friction
 from tolsim.study.sampling import (
-    _draw_widths,
-    _field_grid,
     block_generator,
+    draw_widths,
     error_values,
+    field_grid,
     per_assembly_sources,
     sample_block,
 )
@@ -77,7 +77,7 @@ def normals_of_block(config, index):
     st = config.study
     rng = block_generator(st.seed, index)
     parts = [rng.standard_normal((st.block_size, width))
-             for width in _draw_widths(config, _field_grid(config)).values()]
+             for width in draw_widths(config, field_grid(config)).values()]
     size = min(st.block_size, st.samples - index * st.block_size)
     return np.concatenate(parts, axis=1)[:size]
 

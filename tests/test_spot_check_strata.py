@@ -9,9 +9,10 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from tolsim.io.config import parse_config
+from tolsim.physics.velocity.models import MODEL_FAST
 from tolsim.study import sampling
 from tolsim.study.execution.runner import StudyInterrupted, run_study
-from tolsim.study.pipeline.evaluate import MODEL_FAST, evaluate_balls, loads_per_ball
+from tolsim.study.pipeline.evaluate import evaluate_balls, loads_per_ball
 
 STUDY = """\
 [bearing]

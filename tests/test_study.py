@@ -250,7 +250,7 @@ def test_balls_outside_validity_are_resolved_with_the_full_model():
     # the re-solved balls carry the full model's epsilon for their loaded state, the others
     # the fast model's (round-off: the same kernels on the same inputs)
     from tolsim.physics.velocity.analytic import eq24
-    from tolsim.study.pipeline.evaluate import MODEL_FAST, MODEL_FULL
+    from tolsim.physics.velocity.models import MODEL_FAST, MODEL_FULL
 
     side = np.array([[0, 0, 0, 0, 0, 0.8]]) * 200.0 * np.ones((4, 1))
     state = evaluate_balls(c, {"arc_centre_offset_tangential_BL": np.full((4, 6), 1e-6)},
@@ -365,7 +365,7 @@ def test_ctrl_c_keeps_a_checkpoint(tmp_path):
 def test_retain_freed_memory_only_on_glibc():
     import platform
 
-    from tolsim.study.execution.runner import retain_freed_memory
+    from tolsim.study.execution.chunks import retain_freed_memory
 
     glibc = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
     assert retain_freed_memory() is glibc

@@ -33,7 +33,7 @@ Within a block the draws are, in this order:
 
 With a ``[carriage]`` of T tracks an assembly holds T trains: the per-assembly sources are
 drawn once per track (rail and carriage grooves are ground per track), and every draw has T
-times the columns, track by track (:func:`_draw_widths`); with T = 1 the draws are those of a
+times the columns, track by track (:func:`draw_widths`); with T = 1 the draws are those of a
 single train.
 
 Every distribution maps the standard normal z to its value
@@ -201,7 +201,7 @@ def field_extent(config, initial_span):
     return -initial_span - pad, initial_span + travel + pad
 
 
-def _field_grid(config):
+def field_grid(config):
     """(origin, spacing, points) of the rail-field grid (``along_track`` propagation)."""
     lo, hi = field_extent(config, nominal_span(config))
     grid = {}
@@ -244,7 +244,7 @@ def block_size_of(config, index: int) -> int:
     return size
 
 
-def _draw_widths(config, grid):
+def draw_widths(config, grid):
     """Name -> columns of each standard normal draw of a block, in the documented order.
 
     With a carriage of T tracks every per-assembly source has T columns (one value per
@@ -317,8 +317,8 @@ def sample_block(config, index: int, count: int = 1) -> Block:
         ``index`` and ``start`` of the first block, ``size`` of all of them together.
     """
     st = config.study
-    grid = _field_grid(config)
-    widths = _draw_widths(config, grid)
+    grid = field_grid(config)
+    widths = draw_widths(config, grid)
     size = sum(block_size_of(config, k) for k in range(index, index + count))
     raw = {name: np.empty((size, width)) for name, width in widths.items()}
     row = 0
@@ -329,11 +329,11 @@ def sample_block(config, index: int, count: int = 1) -> Block:
 
 def block_from_draws(config, index: int, start: int, raw: dict) -> Block:
     """The :class:`Block` of drawn independent standard normals ``raw`` (name -> (size,
-    width), the columns of :func:`_draw_widths`): per-track factors, gaps and ball positions,
+    width), the columns of :func:`draw_widths`): per-track factors, gaps and ball positions,
     rail fields by their AR(1) recursion, the entering balls. The one transform behind
     :func:`sample_block` and :func:`tolsim.study.analyses.limit_state.block_from_normals`."""
     st = config.study
-    grid = _field_grid(config)
+    grid = field_grid(config)
     size = len(raw["gap"])
     tracks, balls = config.n_tracks, config.train.balls
     if tracks == 1:

@@ -4,8 +4,8 @@ of its ball trains (:mod:`tolsim.study.pipeline.track_friction`)."""
 import numpy as np
 
 from tolsim.io.schema.declaration import Section
-from tolsim.study.pipeline.track_friction import COLUMNS, HISTOGRAM_COLUMNS
 from tolsim.study.statistics.accumulator import QUANTILES
+from tolsim.study.statistics.friction import COLUMNS, HISTOGRAM_COLUMNS
 
 _HIST_WHAT = {"friction_increase": "the increase of the worst track's largest carriage "
                                    "friction force over its baseline",
@@ -130,7 +130,7 @@ def friction_variables(result) -> tuple:
     """(coordinates, data variables, attributes) of a study with ``[contact]``.
 
     ``result``: a :class:`tolsim.study.execution.runner.StudyResult` whose statistics carry
-    :class:`~tolsim.study.pipeline.track_friction.FrictionStatistics`
+    :class:`~tolsim.study.statistics.friction.FrictionStatistics`
     (``statistics.friction``) and, optionally, its ``friction_examples``.
     """
     config = result.config

@@ -1,15 +1,18 @@
 """Registry of ball-velocity models: name -> function.
 
 Every entry has the signature ``model(contact_angle_deviation, normal_force, bearing=TABLE1,
-**options) -> VelocityResult`` (:class:`tolsim.physics.velocity.analytic.VelocityResult`); callers
-pick
-a model by name from here, never with an if/elif chain.
+**options) -> VelocityResult`` (:class:`tolsim.physics.velocity.analytic.VelocityResult`);
+callers pick a model by name from here, never with an if/elif chain.
 """
 
 import numpy as np
 
 from tolsim.physics.velocity import analytic
 from tolsim.physics.velocity import full as friction
+
+#: Codes of the model that gave a ball's epsilon in a study (``BallState.model``): a fast
+#: model (``eq24``/``analytic``), the full model (a re-solve), or none (unresolved).
+MODEL_FAST, MODEL_FULL, MODEL_UNRESOLVED = 0, 1, -1
 
 MODELS = {
     "eq24": analytic.eq24,

@@ -136,6 +136,7 @@ References
    Safety 6 (1989) 3-10, doi:10.1016/0167-4730(89)90003-9.
 """
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -146,12 +147,21 @@ from tolsim.study.analyses.rare_events import (
     series_importance_sampling,
     subset_simulation,
 )
+from tolsim.study.analyses.sensitivity import study_factors
+from tolsim.study.pipeline.block import (
+    evaluate_block,
+    has_carriage,
+    has_contact,
+    is_along_track,
+)
+from tolsim.study.pipeline.propagation import StepObserver, integrate_along_track
+from tolsim.study.pipeline.track_friction import evaluate_friction
 from tolsim.study.sampling import (
     Block,
-    _draw_widths,
-    _field_grid,
     block_from_draws,
+    draw_widths,
     error_values,
+    field_grid,
     per_assembly_sources,
 )
 from tolsim.study.spec import ESTIMATORS, SOURCES
@@ -187,7 +197,7 @@ def column_layout(config) -> dict:
     ``entering_gap`` and ``entering_<source>``.
     """
     out, start = {}, 0
-    for name, width in _draw_widths(config, _field_grid(config)).items():
+    for name, width in draw_widths(config, field_grid(config)).items():
         out[name] = slice(start, start + width)
         start += width
     return out
@@ -240,7 +250,7 @@ def study_events(config) -> tuple:
         out.append("contact")
     if config.study.velocity_deviation_limit > 0:
         out.append("velocity_deviation_exceedance")
-    if config.contact is not None and config.contact.friction_increase_limit > 0:
+    if has_contact(config) and config.contact.friction_increase_limit > 0:
         out.append("friction_exceedance")
     return tuple(out)
 
@@ -250,7 +260,7 @@ def check_supported(config) -> None:
     estimator = config.study.estimator
     if estimator == "monte_carlo":
         return
-    if config.carriage is not None and config.study.propagation == "along_track":
+    if has_carriage(config) and is_along_track(config):
         raise ValueError(f"estimator = {estimator!r} is not available for a carriage with "
                          "along_track propagation (balls enter and leave its loaded zone); "
                          "use propagation = 'constant' or estimator = 'monte_carlo'")
@@ -262,7 +272,7 @@ def check_supported(config) -> None:
 def is_smooth(config, event) -> bool:
     """Whether FORM may be tried on the event's limit state (module docstring)."""
     return event in ("contact", "velocity_deviation_exceedance") and \
-        config.study.propagation == "constant"
+        not is_along_track(config)
 
 
 def outside_model_range(config, values) -> np.ndarray:
@@ -286,21 +296,11 @@ def _balls(config, block):
     """BallState of a block's assemblies at the start of the stroke (as ``run_chunk``), with
     the assemblies :func:`outside_model_range` evaluated at the nominal errors and then
     marked unresolved (epsilon NaN, not valid)."""
-    from tolsim.study.pipeline.carriage import evaluate_carriage
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at, loads_per_ball
-
     values = error_values(config, block)
     bad = outside_model_range(config, values) if values else np.zeros(block.size, bool)
     if bad.any():
         values = {k: np.where(bad[:, None], 0.0, v) for k, v in values.items()}
-    if config.carriage is not None:
-        state = evaluate_carriage(config, values)[0]
-    else:
-        if config.study.propagation == "constant":
-            nx, ny = loads_per_ball(config, (block.size, config.balls))
-        else:  # loads at the carriage positions, as during the integration
-            nx, ny = loads_at(config, block.initial_position)
-        state = evaluate_balls(config, values, nx, ny)
+    state = evaluate_block(config, block, values, propagate=False).state
     if bad.any():
         state.velocity_deviation[bad] = np.nan
         state.valid[bad] = False
@@ -375,49 +375,34 @@ def series(components) -> np.ndarray:
     return np.where(known, g, np.nan)
 
 
+class SmallestGap(StepObserver):
+    """The smallest gap of a resolved pair at the end of each step [m] (``smallest``), and
+    whether the contact event occurred (``hit``), as :class:`~tolsim.study.pipeline.
+    propagation.FirstContact` decides it."""
+
+    def begin(self, block, position):
+        self.hit = np.zeros(block.size, dtype=bool)
+        self.smallest = np.full(block.size, np.inf)
+
+    def observe(self, step):
+        gap_old, gap_new, ball_ok = step.gap_old, step.gap_new, step.ball_ok
+        pair_ok = ball_ok[:, :-1] & ball_ok[:, 1:]
+        self.hit |= np.any((gap_new <= 0.0) & (gap_old > gap_new) & pair_ok, axis=1)
+        self.smallest = np.minimum(self.smallest,
+                                   _row_min(np.where(pair_ok, gap_new, np.inf)))
+
+
 def contact_margin_along_track(config, block, state):
     """(g [m], hit, resolved) of the contact event with ``along_track`` propagation.
 
     The midpoint integration of :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
-    (the same arithmetic, step by step), recording the smallest gap of a resolved pair at the
-    end of each step and its contact decision (module docstring).
+    (:func:`~tolsim.study.pipeline.propagation.integrate_along_track`, the same arithmetic),
+    recording the smallest gap of a resolved pair at the end of each step and its contact
+    decision (module docstring).
     """
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
-
-    v = config.motion.groove_velocity
-    horizon = config.motion.duration
-    steps = config.study.time_steps
-    dt = horizon / steps
-    diameter = 2.0 * config.bearing.ball_radius
-    size = block.size
-
-    def velocity(position, t):
-        values = error_values(config, block, rail_position=position)
-        nx, ny = loads_at(config, position - v * t)
-        s = evaluate_balls(config, values, nx, ny)
-        return s.velocity_deviation, s.valid
-
-    position = block.initial_position.copy()
-    ball_ok = np.ones(position.shape, dtype=bool)
-    hit = np.zeros(size, dtype=bool)
-    smallest = np.full(size, np.inf)
-    t = 0.0
-    for k in range(steps):
-        if k == 0:
-            eps1, ok1 = state.velocity_deviation, state.valid
-        else:
-            eps1, ok1 = velocity(position, t)
-        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(eps1)) * 0.5 * v
-        eps2, ok2 = velocity(mid, t + 0.5 * dt)
-        ball_ok &= ok1 & ok2
-        new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
-        gap_old = np.diff(position, axis=1) - diameter
-        gap_new = np.diff(new, axis=1) - diameter
-        pair_ok = ball_ok[:, :-1] & ball_ok[:, 1:]
-        hit |= np.any((gap_new <= 0.0) & (gap_old > gap_new) & pair_ok, axis=1)
-        smallest = np.minimum(smallest, _row_min(np.where(pair_ok, gap_new, np.inf)))
-        position = new
-        t = (k + 1) * dt
+    margin = SmallestGap()
+    ball_ok, _ = integrate_along_track(config, block, state, [margin])
+    hit, smallest = margin.hit, margin.smallest
     # a gap at exactly 0 that never closed further is no contact (as the plain run)
     g = np.where(~hit & (smallest <= 0), np.finfo(float).tiny, smallest)
     resolved = state.valid.all(axis=1) & ball_ok.all(axis=1)
@@ -444,18 +429,16 @@ def event_values(config, block, events=None) -> dict:
     out = {}
     touched = margin = None
     if "contact" in events or "friction_exceedance" in events:
-        if config.study.propagation == "constant":
+        if is_along_track(config):
+            margin, _, resolved = contact_margin_along_track(config, block, state)
+        else:
             margin = _row_min(contact_margins(config, block, state))
             resolved = state.valid.all(axis=1)
-        else:
-            margin, _, resolved = contact_margin_along_track(config, block, state)
         touched = margin <= 0
         out["contact"] = np.where(touched | resolved, margin, np.nan)
     if "velocity_deviation_exceedance" in events:
         out["velocity_deviation_exceedance"] = series(exceedance_margins(config, state))
     if "friction_exceedance" in events:
-        from tolsim.study.pipeline.track_friction import evaluate_friction
-
         limit = config.contact.friction_increase_limit
         figures = evaluate_friction(config, block.initial_gap, state, block=block)
         scale = 0.5 * config.motion.groove_velocity * config.motion.duration
@@ -608,8 +591,6 @@ def _factor_columns(config) -> dict:
 
 def design_point_summary(config, point, component="") -> DesignPointSummary:
     """Map a design point u* (d,) to the study's factors (module docstring)."""
-    from tolsim.study.analyses.sensitivity import study_factors
-
     u = np.asarray(point, dtype=float)
     block = block_from_normals(config, u[None])
     values = error_values(config, block)
@@ -685,8 +666,6 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     (same settings) when the limit state is not smooth or importance sampling gives no
     number, saying why in ``note``.
     """
-    import time
-
     st = config.study
     started = time.perf_counter()
     g = LimitState(config, event)
@@ -702,9 +681,8 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     elif st.estimator == "importance":
         if not g.smooth:
             why = ("along_track propagation gives a limit state that is not smooth (the "
-                   "smallest gap over the time steps)" if config.study.propagation
-                   != "constant" else "the friction limit state jumps where the balls "
-                   "start to touch")
+                   "smallest gap over the time steps)" if is_along_track(config) else
+                   "the friction limit state jumps where the balls start to touch")
             result = subset()
             note = f"importance sampling not attempted: {why}; subset simulation used"
         else:

@@ -24,6 +24,7 @@ from tolsim.physics.geometry import (
     paired_forces,
 )
 from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.static import GrooveErrors, solve_static
 from tolsim.physics.velocity.analytic import analytic, eq24, point
 from tolsim.physics.velocity.full import contact_friction, full
 
@@ -141,8 +142,6 @@ def table2_data(bearing: Bearing = TABLE1, normal_load=TABLE1_NORMAL_LOAD,
     rows = []
     loads = [("paired", None)]
     if static:
-        from tolsim.physics.static import GrooveErrors, solve_static
-
         loads.append(("static", (GrooveErrors, solve_static)))
     for case, ball, rho, top, dbeta in _table2_cases(theta):
         base = {"case": case, "ball": ball, "side_force_ratio": rho, "theta_deg": theta_deg,

@@ -47,6 +47,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.special import ndtri
 
+from tolsim.study.pipeline.block import evaluate_block, has_contact
+from tolsim.study.sampling import sample_block
+
 #: Output name of the velocity deviation in :func:`study_sensitivity`.
 VELOCITY_DEVIATION = "velocity_deviation"
 #: Output name of the per-assembly contact indicator in :func:`study_sensitivity`.
@@ -380,59 +383,14 @@ def _evaluate_block(config, block):
     when the train has an unresolved ball and no certain contact); with ``[contact]`` also
     the friction increase (size,) [N] of the worst track (NaN when unresolved,
     :mod:`tolsim.study.pipeline.track_friction`)."""
-    from tolsim.study.pipeline.carriage import evaluate_carriage
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at, loads_per_ball
-    from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
-    from tolsim.study.sampling import error_values
-
-    balls = config.balls
-    values = error_values(config, block)
-    if config.study.propagation == "constant":
-        if config.carriage is not None:  # every assembly's carriage solved (issue 12)
-            state, _ = evaluate_carriage(config, values)
-        else:
-            nx, ny = loads_per_ball(config, (block.size, balls))
-            state = evaluate_balls(config, values, nx, ny)
-        ok = state.valid.all(axis=1)
-        if config.train.balls > 1:
-            t, _ = first_contact_tracks(block.initial_gap, state.velocity_deviation,
-                                        config.motion.groove_velocity,
-                                        config.motion.duration, config.n_tracks)
-        else:
-            t = np.full(block.size, np.inf)
-    elif config.carriage is not None:  # balls rolling through the carriage (issue 12)
-        from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
-
-        trains = _track_friction(config)
-        t, _, ok, _, state, _ = first_contact_carriage_track(config, block, friction=trains)
-        ok = ok & state.valid.all(axis=1)
-    else:
-        nx, ny = loads_at(config, block.initial_position)
-        state = evaluate_balls(config, values, nx, ny)
-        trains = _track_friction(config)
-        t, _, ok, _ = first_contact_along_track(config, block, state, friction=trains)
-        ok = ok & state.valid.all(axis=1)
+    outcome = evaluate_block(config, block)
     # a reported contact is certain even in a train with an unresolved ball; no contact is
     # known only when every ball was resolved (NaN otherwise)
-    hit = np.isfinite(t)
-    contact = np.where(hit, 1.0, np.where(ok, 0.0, np.nan))
-    if config.contact is not None:  # after contact (issue 13): the friction increase
-        from tolsim.study.pipeline.track_friction import evaluate_friction
-
-        friction = (trains.figures() if config.study.propagation == "along_track"
-                    else evaluate_friction(config, block.initial_gap, state))
-        return state.velocity_deviation, contact, friction.increase_max
-    return state.velocity_deviation, contact
-
-
-def _track_friction(config):
-    """The step-by-step trains of an along_track block with ``[contact]`` (issue 13), else
-    None (:class:`tolsim.study.pipeline.track_friction.TrackFriction`)."""
-    if config.contact is None:
-        return None
-    from tolsim.study.pipeline.track_friction import TrackFriction
-
-    return TrackFriction(config)
+    hit = np.isfinite(outcome.time)
+    contact = np.where(hit, 1.0, np.where(outcome.resolved, 0.0, np.nan))
+    if outcome.friction is not None:  # after contact (issue 13): the friction increase
+        return outcome.state.velocity_deviation, contact, outcome.friction.increase_max
+    return outcome.state.velocity_deviation, contact
 
 
 def study_sensitivity(config, samples: int = 2048, *, confidence_level=0.95,
@@ -467,8 +425,6 @@ def study_sensitivity(config, samples: int = 2048, *, confidence_level=0.95,
     ``SeedSequence(seed, spawn_key=(2,))``, the bootstrap uses ``spawn_key=(3,)``, so the
     indices are reproducible and independent of the study's own draws.
     """
-    from tolsim.study.sampling import sample_block
-
     if not (isinstance(samples, (int, np.integer)) and samples >= 2):
         raise ValueError(f"samples = {samples!r} must be an integer >= 2")
     seed = int(np.random.SeedSequence(config.study.seed, spawn_key=(2,)).generate_state(1)[0])
@@ -481,7 +437,7 @@ def study_sensitivity(config, samples: int = 2048, *, confidence_level=0.95,
     boot = np.random.Generator(np.random.PCG64(
         np.random.SeedSequence(config.study.seed, spawn_key=(3,))))
     per_output = {}
-    names = (VELOCITY_DEVIATION, CONTACT) + ((FRICTION_INCREASE,) if config.contact else ())
+    names = (VELOCITY_DEVIATION, CONTACT) + ((FRICTION_INCREASE,) if has_contact(config) else ())
     for k, name in enumerate(names):
         ys = [e[k] for e in evaluated]
         per_output[name] = indices_from_evaluations(

@@ -55,6 +55,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
+from tolsim.study.pipeline.evaluate import evaluate_balls
+
 #: Standard deviations either side of the mean taken as the tolerance band of a ``normal``.
 NORMAL_BAND_STDS = 3.0
 #: Central-difference step of a source as a fraction of its standard deviation (of its half
@@ -245,8 +247,6 @@ def linear_stackup(config) -> LinearStackup:
     LinearStackup
         See the module docstring for the definitions.
     """
-    from tolsim.study.pipeline.evaluate import evaluate_balls
-
     balls = config.train.balls
     tolerances = [t for t in config.tolerances if t.distribution.is_random]
     sources = tuple(t.source for t in tolerances)

@@ -14,7 +14,7 @@ Design
 * A task is a run of consecutive chunks (:func:`chunks_per_task`): about :data:`TASK_BALLS`
   balls, fewer when the study is small, so that every worker thread gets at least
   :data:`TASKS_PER_THREAD` tasks. It returns the chunks' ``(block_index, Accumulator,
-  spot_rows)`` lists, as :func:`tolsim.study.execution.runner.run_chunk` does: about 12 kB per
+  spot_rows)`` lists, as :func:`tolsim.study.execution.chunks.run_chunk` does: about 12 kB per
   block,
   never an array per ball (the rows of ``save_samples`` assemblies aside, which are asked for).
 * Look-ahead: at most :data:`LOOKAHEAD_PER_THREAD` x (worker threads) + 1 tasks are submitted
@@ -47,8 +47,14 @@ import threading
 import time
 import uuid
 from collections import deque
+from concurrent.futures import CancelledError
 
+import numba
 import numpy as np
+import scipy
+
+from tolsim import __version__
+from tolsim.study.execution.chunks import finish_spot_checks, prefetched, retain_freed_memory
 
 #: What to install for ``--scheduler`` (the package's optional extra).
 INSTALL_HINT = 'pip install "tolsim[dask]"'
@@ -85,7 +91,7 @@ def require_distributed():
     """Import and return ``distributed``, or raise :class:`MissingExtraError` saying what to
     install."""
     try:
-        import distributed
+        import distributed  # noqa: PLC0415  optional extra (tolsim[dask])
     except ImportError:
         raise MissingExtraError(f"--scheduler needs dask.distributed, which is not installed: "
                                 f"{INSTALL_HINT}") from None
@@ -241,7 +247,7 @@ class DaskSession:
         :data:`REFRESH_SECONDS`."""
         now = time.monotonic()
         if now - self._looked >= REFRESH_SECONDS:
-            from distributed.comm import get_address_host
+            from distributed.comm import get_address_host  # noqa: PLC0415  optional dask
 
             layout = {}
             for address, threads in self.client.nthreads().items():
@@ -255,7 +261,7 @@ class DaskSession:
         return max(1, sum(self.threads_per_host().values()))
 
     def chunk_results(self, config, chunks, spot_indices, save_samples=0):
-        """The results of ``runner.run_chunk`` over ``chunks``, in order, computed by tasks.
+        """The results of ``chunks.run_chunk`` over ``chunks``, in order, computed by tasks.
 
         Parameters
         ----------
@@ -301,7 +307,7 @@ class DaskSession:
                 self.client.cancel(list(pending))
 
     def spot_checks(self, config, rows):
-        """:func:`tolsim.study.execution.runner.finish_spot_checks` as a task (the full-model
+        """:func:`tolsim.study.execution.chunks.finish_spot_checks` as a task (the full-model
         re-solves of the recorded candidates)."""
         future = self.client.submit(_run_spot_checks, config, rows, self._context(),
                                     key=f"tolsim-spot-checks-{uuid.uuid4().hex[:8]}",
@@ -335,8 +341,6 @@ class DaskSession:
         """The result of a task. A task dask gave up on, or one lost with the scheduler,
         raises a one-line :class:`SchedulerError`; an error of the task itself passes as it
         is."""
-        from concurrent.futures import CancelledError
-
         distributed = require_distributed()
         try:
             return future.result()
@@ -366,16 +370,12 @@ def dask_setup(worker):
 
 def _run_task(config, chunks, spot_indices, save_samples, context):
     """One task: ``run_chunk`` over consecutive chunks, the next chunk drawn in a thread while
-    one is evaluated (:func:`tolsim.study.execution.runner._prefetched`)."""
-    from tolsim.study.execution.runner import _prefetched
-
+    one is evaluated (:func:`tolsim.study.execution.chunks.prefetched`)."""
     with _TaskContext(context):
-        return list(_prefetched(config, chunks, spot_indices, save_samples))
+        return list(prefetched(config, chunks, spot_indices, save_samples))
 
 
 def _run_spot_checks(config, rows, context):
-    from tolsim.study.execution.runner import finish_spot_checks
-
     with _TaskContext(context):
         return finish_spot_checks(config, rows)
 
@@ -401,12 +401,8 @@ class _TaskContext:
         self.lock = None
 
     def __enter__(self):
-        import numba
-
         global _prepared
         if not _prepared:
-            from tolsim.study.execution.runner import retain_freed_memory
-
             retain_freed_memory()
             _prepared = True
         host, worker_threads = _this_worker()
@@ -430,8 +426,6 @@ class _TaskContext:
 def _workqueue_only() -> bool:
     """True when Numba's threading layer is (or may become) ``workqueue``, which cannot run
     parallel kernels from two threads at once."""
-    import numba
-
     try:
         return numba.threading_layer() == "workqueue"
     except ValueError:  # no parallel kernel has run in this process yet: be safe
@@ -441,8 +435,8 @@ def _workqueue_only() -> bool:
 def _this_worker():
     """(host, dask threads) of the worker running this task; (None, 1) outside one."""
     try:
-        from distributed import get_worker
-        from distributed.comm import get_address_host
+        from distributed import get_worker  # noqa: PLC0415  optional dask
+        from distributed.comm import get_address_host  # noqa: PLC0415  optional dask
 
         worker = get_worker()
         return get_address_host(worker.address), max(1, int(worker.state.nthreads))
@@ -453,11 +447,6 @@ def _this_worker():
 # --- helpers ----------------------------------------------------------------------------------
 def _versions() -> dict:
     """The versions that decide the bits of a result."""
-    import numba
-    import scipy
-
-    from tolsim import __version__
-
     return {"tolsim": __version__, "numpy": np.__version__, "scipy": scipy.__version__,
             "numba": numba.__version__}
 

@@ -37,78 +37,42 @@ target applies to plain Monte Carlo only and is refused with another estimator.
 """
 
 import hashlib
+import multiprocessing
 import os
 import threading
 import time
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 
+import numba
 import numpy as np
 from numba.core import event as numba_event
 
 from tolsim import __version__
+from tolsim.study.analyses.friction_examples import friction_examples
 from tolsim.study.analyses.limit_state import check_supported, estimate_events
+from tolsim.study.analyses.sensitivity import study_sensitivity
 from tolsim.study.analyses.worst_case import linear_stackup
 from tolsim.study.execution import saved_samples
-from tolsim.study.pipeline.carriage import evaluate_carriage, solve_config_carriage
-from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
-from tolsim.study.pipeline.evaluate import (
-    MODEL_FAST,
-    BallState,
-    evaluate_balls,
-    friction_module,
-    loads_at,
-    loads_per_ball,
+from tolsim.study.execution.chunks import (
+    SPOT_FIELDS,
+    SpotChecks,
+    concat_spots,
+    finish_spot_checks,
+    prefetched,
+    retain_freed_memory,
+    run_chunk,
 )
-from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
-from tolsim.study.pipeline.track_friction import (
-    TrackFriction,
-    accumulator_from_state,
-    evaluate_friction,
-    friction_examples,
-    study_accumulator,
-)
-from tolsim.study.sampling import (
-    SPOT_CHECK_SCHEME,
-    block_size_of,
-    error_values,
-    n_blocks,
-    near_limit_candidates,
-    sample_block,
-    select_spot_checks,
-    spot_check_plan,
-)
+from tolsim.study.execution.distributed import DaskSession
+from tolsim.study.pipeline.block import has_carriage, has_contact
+from tolsim.study.pipeline.carriage import solve_config_carriage
+from tolsim.study.sampling import SPOT_CHECK_SCHEME, n_blocks, spot_check_plan
 from tolsim.study.statistics.accumulator import Accumulator
+from tolsim.study.statistics.friction import accumulator_from_state, study_accumulator
 
 #: Balls evaluated together in one chunk (sets the default ``chunk_blocks``).
 CHUNK_BALLS = 1 << 18
 
-SPOT_FIELDS = ("ball_index", "contact_angle_deviation", "normal_force",
-               "velocity_deviation_analytic", "valid_analytic", "stratum", "band_balls")
-
-
-@dataclass
-class SpotChecks:
-    """Balls re-solved with the full model (``tolsim.physics.velocity.full.full``).
-
-    Arrays have length k (the ``spot_check`` dimension); ``status`` explains a k of zero.
-    ``stratum``: 0 uniform, 1 near the spec limit (:class:`tolsim.study.sampling.
-    SpotCheckPlan`); ``band``: the near-limit band of |epsilon| [-] and ``band_balls`` the
-    balls of the fast model in it.
-    """
-
-    ball_index: np.ndarray
-    contact_angle_deviation: np.ndarray
-    normal_force: np.ndarray
-    velocity_deviation_analytic: np.ndarray
-    valid_analytic: np.ndarray
-    velocity_deviation_full: np.ndarray
-    converged_full: np.ndarray
-    valid_full: np.ndarray
-    stratum: np.ndarray = field(default_factory=lambda: np.empty(0, np.int8))
-    band: tuple = (float("nan"), float("nan"))
-    band_balls: int = 0
-    status: str = ""
 
 
 @dataclass
@@ -131,7 +95,7 @@ class StudyResult:
     samples: dict | None = None
     # tolsim.study.pipeline.carriage.CarriageResult: nominal assembly
     carriage_nominal: object = None
-    # tolsim.study.pipeline.track_friction.FrictionExamples ([contact])
+    # tolsim.study.analyses.friction_examples.FrictionExamples ([contact])
     friction_examples: object = None
     # a rare-event estimator (study.estimator): event ->
     # tolsim.study.analyses.limit_state.EventEstimate
@@ -140,7 +104,7 @@ class StudyResult:
     @property
     def friction(self):
         """The friction statistics of a study with ``[contact]``
-        (:class:`tolsim.study.pipeline.track_friction.FrictionStatistics`), else None."""
+        (:class:`tolsim.study.statistics.friction.FrictionStatistics`), else None."""
         return getattr(self.statistics, "friction", None)
 
     @property
@@ -256,172 +220,6 @@ def default_chunk_blocks(config) -> int:
     return max(1, CHUNK_BALLS // per_block)
 
 
-def _empty_spot():
-    return {"ball_index": np.empty(0, np.int64),
-            "contact_angle_deviation": np.empty((0, 4)), "normal_force": np.empty((0, 4)),
-            "velocity_deviation_analytic": np.empty(0), "valid_analytic": np.empty(0, bool),
-            "stratum": np.empty(0, np.int8), "band_balls": np.empty(0, np.int64)}
-
-
-def _spot_rows(state: BallState, start_ball: int, plan) -> dict:
-    """Records of the spot-check candidates inside a block (``plan``: a
-    :class:`~tolsim.study.sampling.SpotCheckPlan`): its uniform candidates, then its
-    near-limit candidates; ``band_balls`` holds the block's count of balls in the band."""
-    eps = state.velocity_deviation.reshape(-1)
-    fast_all = state.model.reshape(-1) == MODEL_FAST
-    n = eps.size
-    lo, hi = np.searchsorted(plan.uniform, [start_ball, start_ball + n])
-    uniform = plan.uniform[lo:hi] - start_ball
-    near, in_band = near_limit_candidates(plan, eps, fast_all, start_ball, exclude=uniform)
-    local = np.concatenate([uniform, near]).astype(np.int64)
-    fast = fast_all[local]
-    return {
-        "ball_index": (local + start_ball).astype(np.int64),
-        "contact_angle_deviation": state.contact_angle_deviation.reshape(-1, 4)[local],
-        "normal_force": state.normal_force.reshape(-1, 4)[local],
-        # the study's fast model where it was valid (re-solved balls: NaN, not valid)
-        "velocity_deviation_analytic": np.where(fast, eps[local], np.nan),
-        "valid_analytic": fast,
-        "stratum": np.repeat(np.array([0, 1], np.int8), [len(uniform), len(near)]),
-        "band_balls": np.array([in_band], np.int64),
-    }
-
-
-def _concat_spots(parts):
-    if not parts:
-        return _empty_spot()
-    return {k: np.concatenate([p[k] for p in parts]) for k in SPOT_FIELDS}
-
-
-def draw_chunk(config, block_indices):
-    """The draws and error-source values of consecutive blocks (constant propagation)."""
-    block = sample_block(config, block_indices[0], len(block_indices))
-    return block, error_values(config, block)
-
-
-def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
-    """Evaluate consecutive blocks; return [(block, Accumulator, spot rows)] in order.
-
-    ``drawn``: ``draw_chunk(config, block_indices)`` when the caller has it already
-    (constant propagation only). ``save_samples``: the spot rows of a block also hold the
-    rows of its assemblies among the first ``save_samples``
-    (:func:`tolsim.study.execution.saved_samples.sample_rows`).
-    """
-    out = []
-    balls = config.balls
-    carriage = None
-    if config.study.propagation == "constant":
-        # One pass over the whole chunk, then split per block.
-        block, values = drawn if drawn is not None else draw_chunk(config, block_indices)
-        if config.carriage is not None:  # one carriage per assembly, its tracks' trains
-            state, carriage = evaluate_carriage(config, values)
-        else:
-            nx, ny = loads_per_ball(config, (block.size, balls))
-            state = evaluate_balls(config, values, nx, ny)
-        t, pair = first_contact_tracks(block.initial_gap, state.velocity_deviation,
-                                       config.motion.groove_velocity, config.motion.duration,
-                                       config.n_tracks)
-        friction = (None if config.contact is None  # after contact: trains and friction
-                    else evaluate_friction(config, block.initial_gap, state))
-        offset = 0
-        for index in block_indices:
-            size = block_size_of(config, index)
-            sl = slice(offset, offset + size)
-            sub = state.rows(sl)
-            acc = study_accumulator(config)
-            acc.add(sub, t[sl], pair[sl])
-            if carriage is not None:
-                acc.add_carriage(carriage.rows(sl))
-            if friction is not None:
-                acc.add_friction(friction.rows(sl))
-            if offset == 0:  # the chunk's re-solves, counted once
-                acc.resolve_seconds = state.resolve_seconds
-            start = index * config.study.block_size
-            rows = _spot_rows(sub, start * balls, spot_indices)
-            rows.update(saved_samples.sample_rows(config, save_samples, start, values,
-                                                  block.initial_gap, state, t, pair, sl))
-            out.append((index, acc, rows))
-            offset += size
-    else:
-        for k in block_indices:
-            b = sample_block(config, k)
-            values = error_values(config, b)
-            carriage = None
-            # with [contact] the trains are followed after contact, step by step
-            trains = None if config.contact is None else TrackFriction(config)
-            if config.carriage is not None:  # balls rolling through the carriage
-                t, pair, ok, seconds, state, carriage = first_contact_carriage_track(
-                    config, b, friction=trains)
-            else:
-                # loads at the carriage positions, as during the integration
-                nx, ny = loads_at(config, b.initial_position)
-                state = evaluate_balls(config, values, nx, ny)
-                t, pair, ok, seconds = first_contact_along_track(config, b, state,
-                                                                 friction=trains)
-            acc = study_accumulator(config)
-            acc.add(state, t, pair, ok)
-            if carriage is not None:  # the carriages at the start of the stroke
-                acc.add_carriage(carriage)
-            if trains is not None:
-                acc.add_friction(trains.figures())
-            acc.resolve_seconds += seconds
-            rows = _spot_rows(state, b.start * balls, spot_indices)
-            rows.update(saved_samples.sample_rows(config, save_samples, b.start, values,
-                                                  b.initial_gap, state, t, pair))
-            out.append((b.index, acc, rows))
-    return out
-
-
-def _prefetched(config, chunks, spot_indices, save_samples=0):
-    """``run_chunk`` over the chunks in order, drawing chunk i + 1 in a second thread while
-    chunk i is evaluated (NumPy's generators and ufuncs and the Numba kernels release the
-    GIL, so drawing overlaps the kernels). The draws are the same as without the thread.
-    Drawing must not launch parallel (``prange``) kernels: Numba's ``workqueue`` threading
-    layer, the fallback where no OpenMP or TBB is installed, cannot run two at once."""
-    if config.study.propagation != "constant" or len(chunks) < 2:
-        for c in chunks:
-            yield run_chunk(config, c, spot_indices, None, save_samples)
-        return
-    with ThreadPoolExecutor(1, thread_name_prefix="tolsim-draw") as pool:
-        pending = pool.submit(draw_chunk, config, chunks[0])
-        for i, c in enumerate(chunks):
-            drawn = pending.result()
-            if i + 1 < len(chunks):
-                pending = pool.submit(draw_chunk, config, chunks[i + 1])
-            yield run_chunk(config, c, spot_indices, drawn, save_samples)
-
-
-#: glibc ``mallopt`` parameters and the values :func:`retain_freed_memory` sets.
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-_MMAP_THRESHOLD = 32 << 20  # the largest glibc accepts on 64-bit systems
-_TRIM_THRESHOLD = 1 << 30
-
-
-def retain_freed_memory() -> bool:
-    """Let glibc keep freed memory for reuse instead of returning it to the system.
-
-    Every chunk of a study allocates the same few hundred MB of arrays and frees them. By
-    default glibc serves arrays of this size with fresh ``mmap`` pages and trims the heap on
-    free, so every chunk pays a page fault (and zeroing) per 4 kB touched, serialised in the
-    kernel across the Numba threads; on a 2-core VM that was 15-22 % of a study's run time
-    (``benchmarks/bench_study.py``). With allocations up to 32 MB from the heap and no
-    trimming below 1 GB the second chunk reuses the first one's pages. Peak memory does not
-    change; the process just keeps it until it exits. Returns False (and does nothing) where
-    the C library is not glibc.
-    """
-    import ctypes
-    import platform
-
-    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
-        return False
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        return bool(libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD)
-                    and libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
-    except (OSError, AttributeError):
-        return False
-
-
 #: What ``run_study`` tells ``notify`` when Numba starts compiling (a cold kernel cache).
 COMPILING_MESSAGE = "compiling kernels (first run only)"
 
@@ -450,8 +248,6 @@ class _CompileNotice(numba_event.Listener):
 
 
 def _worker_init(threads, compiling=None):
-    import numba
-
     retain_freed_memory()
     numba.set_num_threads(threads)
     if compiling is not None:  # a multiprocessing Event the parent watches
@@ -489,7 +285,7 @@ def _save_checkpoint(path, fp, state: _Progress):
     parts = state.spots()
     arrays = {f"acc_{k}": v for k, v in acc.state().items()}
     arrays["resolve_seconds"] = np.float64(acc.resolve_seconds)
-    arrays.update({f"spot_{k}": v for k, v in _concat_spots(parts).items()})
+    arrays.update({f"spot_{k}": v for k, v in concat_spots(parts).items()})
     # rows per block and field, to split the rows into blocks again
     arrays["part_lengths"] = np.array([[len(p[k]) for k in SPOT_FIELDS] for p in parts],
                                       dtype=np.int64).reshape(len(parts), len(SPOT_FIELDS))
@@ -650,16 +446,12 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     numba_event.register("numba:compile", notice)
     try:
         if scheduler is not None:  # tasks on dask.distributed, merged below in block order
-            from tolsim.study.execution.distributed import DaskSession
-
             session = DaskSession(scheduler, notify=notify)
             workers = session.workers  # recorded in the result
             results = session.chunk_results(config, chunks, spot_indices, save_samples)
         elif workers == 1:
-            results = _prefetched(config, chunks, spot_indices, save_samples)
+            results = prefetched(config, chunks, spot_indices, save_samples)
         else:
-            import multiprocessing
-
             context = multiprocessing.get_context("spawn")
             threads = max(1, (os.cpu_count() or 1) // workers)
             compiling = context.Event() if notify else None
@@ -717,30 +509,28 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         result_config = config.with_overrides(samples=n_done)
         parts = _spot_rows_of_shorter_run(result_config, spot_indices, parts)
     if session is None:
-        spots = finish_spot_checks(result_config, _concat_spots(parts))
+        spots = finish_spot_checks(result_config, concat_spots(parts))
     else:  # as a task; then the session is closed
         with session:
-            spots = session.spot_checks(result_config, _concat_spots(parts))
-    samples = saved_samples.take(result_config, parts, save_samples, spot_indices)
+            spots = session.spot_checks(result_config, concat_spots(parts))
+    samples = saved_samples.take(result_config, parts, save_samples, spot_indices, run_chunk)
     meta = {"spot_check_seconds": time.perf_counter() - started - elapsed}
     sensitivity = None
     if config.study.sensitivity_samples:
-        from tolsim.study.analyses.sensitivity import study_sensitivity
-
         t0 = time.perf_counter()
         sensitivity = study_sensitivity(result_config,
                                         samples=config.study.sensitivity_samples)
         meta["sensitivity_seconds"] = time.perf_counter() - t0
     # worst case and RSS: one small evaluation (of free balls; not for a carriage, whose
     # balls are coupled through it)
-    stackup = None if config.carriage is not None else linear_stackup(result_config)
+    stackup = None if has_carriage(config) else linear_stackup(result_config)
     nominal = None
-    if config.carriage is not None:  # the load distribution without tolerances
+    if has_carriage(config):  # the load distribution without tolerances
         try:
             nominal = solve_config_carriage(config)
         except ValueError:  # recorded as NaN; the sampled assemblies were counted anyway
             nominal = None
-    examples = None if config.contact is None else friction_examples(result_config)
+    examples = friction_examples(result_config) if has_contact(config) else None
     rare = None
     if config.study.estimator != "monte_carlo":  # after the plain run (module docstring)
         t0 = time.perf_counter()
@@ -770,47 +560,3 @@ def _watch_workers(compiling, notice) -> threading.Event:
 
     threading.Thread(target=watch, name="tolsim-compile-watch", daemon=True).start()
     return finished
-
-
-def finish_spot_checks(config, rows: dict) -> SpotChecks:
-    """Select the spot checks among the recorded candidates
-    (:func:`tolsim.study.sampling.select_spot_checks`) and re-solve them with the full model,
-    if it is installed."""
-    plan = spot_check_plan(config)
-    band_balls = int(np.sum(rows["band_balls"]))
-    chosen = select_spot_checks(plan, rows["ball_index"], rows["stratum"])
-    rows = {key: v[chosen] for key, v in rows.items() if key != "band_balls"}
-    rows.update(band=plan.band, band_balls=band_balls)
-    k = len(rows["ball_index"])
-    module = friction_module()
-    if k == 0 or module is None or not hasattr(module, "full"):
-        status = ("no spot checks requested" if config.study.spot_checks == 0 else
-                  "full model not available (tolsim.physics.velocity.full.full missing): "
-                  "0 spot checks")
-        if k and module is None:
-            rows = {key: v[:0] if isinstance(v, np.ndarray) else v for key, v in rows.items()}
-        return SpotChecks(**rows, velocity_deviation_full=np.empty(0),
-                          converged_full=np.empty(0, bool), valid_full=np.empty(0, bool),
-                          status=status)
-    # a ball without a contact state (its carriage was not solved) has nothing to check
-    finite = (np.all(np.isfinite(rows["contact_angle_deviation"]), axis=1)
-              & np.all(np.isfinite(rows["normal_force"]), axis=1))
-    eps_full = np.full(k, np.nan)
-    converged = np.zeros(k, bool)
-    valid = np.zeros(k, bool)
-    if finite.any():
-        res = module.full(rows["contact_angle_deviation"][finite],
-                          np.maximum(rows["normal_force"][finite], 0.0), config.bearing,
-                          groove_velocity=config.motion.groove_velocity)
-        eps_full[finite] = np.asarray(res.velocity_deviation, dtype=float)
-        conv = np.asarray(getattr(res, "converged", np.ones(finite.sum(), bool)), dtype=bool)
-        converged[finite] = conv
-        valid[finite] = np.asarray(getattr(res, "valid", conv), dtype=bool) & conv
-    n_near = int(np.count_nonzero(rows["stratum"] == 1))
-    status = f"{k} balls re-solved with the full model"
-    if plan.near_limit:
-        status += (f": {k - n_near} drawn uniformly, {n_near} from the {band_balls:,} balls "
-                   f"of the fast model with {100 * plan.band[0]:.3g} % ≤ |ε| ≤ "
-                   f"{100 * plan.band[1]:.3g} % (near the spec limit)")
-    return SpotChecks(**rows, velocity_deviation_full=eps_full, converged_full=converged,
-                      valid_full=valid, status=status)

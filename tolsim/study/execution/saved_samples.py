@@ -17,12 +17,13 @@ whole stroke.
 
 import numpy as np
 
+from tolsim.study.sampling import n_blocks
+
 #: Prefix of the sample rows in a block's records (beside its spot-check rows) and of their
 #: variables.
 PREFIX = "sample_"
-#: Codes of ``sample_model`` (:data:`tolsim.study.pipeline.evaluate.MODEL_UNRESOLVED`,
-# ``MODEL_FAST``,
-#: ``MODEL_FULL``) and their CF flag meanings.
+#: Codes of ``sample_model`` (:data:`tolsim.physics.velocity.models.MODEL_UNRESOLVED`,
+#: ``MODEL_FAST``, ``MODEL_FULL``) and their CF flag meanings.
 MODEL_FLAGS = {-1: "unresolved", 0: "fast_model", 1: "full_model"}
 
 
@@ -81,13 +82,15 @@ def concatenate(parts) -> dict:
     return {k: np.concatenate([p[k] for p in parts if k in p]) for k in names}
 
 
-def take(config, parts, save_samples: int, spot_plan) -> dict | None:
+def take(config, parts, save_samples: int, spot_plan, run_chunk) -> dict | None:
     """The first ``save_samples`` assemblies' rows from the merged blocks' records ``parts``
     (None when not asked for).
 
     A block whose records lack them (a run resumed from a checkpoint, which keeps the
     spot-check rows only, or blocks evaluated again for a shorter run) is evaluated again
-    through the same pipeline: same draws, same result.
+    through the same pipeline: same draws, same result. ``run_chunk``:
+    :func:`tolsim.study.execution.chunks.run_chunk` (passed in: it calls :func:`sample_rows`
+    of this module).
     """
     if not save_samples:
         return None
@@ -95,9 +98,6 @@ def take(config, parts, save_samples: int, spot_plan) -> dict | None:
     rows = concatenate(parts)
     index = rows.get(f"{PREFIX}index", np.empty(0, np.int64))
     if not np.array_equal(index[:wanted], np.arange(wanted)):
-        from tolsim.study.execution.runner import run_chunk
-        from tolsim.study.sampling import n_blocks
-
         blocks = list(range(n_blocks(wanted, config.study.block_size)))
         rows = concatenate([spots for _, _, spots in run_chunk(
             config, blocks, spot_plan, save_samples=wanted)])

@@ -29,6 +29,7 @@ from tolsim.study.pipeline.evaluate import (
     groove_error_fields,
     serial_if_small,
 )
+from tolsim.study.sampling import error_values, sample_block
 
 
 @dataclass(frozen=True)
@@ -97,8 +98,6 @@ def solve_config_carriage(config, seed: int | None = None) -> CarriageResult:
         A config without ``[carriage]``; a load the track layout cannot carry; a carriage
         that lifts off (messages from :func:`tolsim.physics.carriage.solve_carriage`).
     """
-    from tolsim.study.sampling import error_values, sample_block
-
     carriage = config.carriage
     if carriage is None:
         raise ValueError(f"{config.path} has no [carriage] section")

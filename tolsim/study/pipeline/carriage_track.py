@@ -137,9 +137,9 @@ from tolsim.physics.carriage import (
     solve_carriage_batch,
 )
 from tolsim.physics.static import GrooveErrors
+from tolsim.physics.velocity.models import MODEL_UNRESOLVED
 from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.evaluate import (
-    MODEL_UNRESOLVED,
     BallState,
     StaticResult,
     ball_velocities,

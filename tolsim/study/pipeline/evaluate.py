@@ -56,6 +56,7 @@ from tolsim.physics.velocity.analytic import (
     analytic_kernel,
     eq24_kernel,
 )
+from tolsim.physics.velocity.models import MODEL_FAST, MODEL_FULL, MODEL_UNRESOLVED
 
 CONTACTS = ("BL", "BR", "TR", "TL")
 
@@ -259,10 +260,6 @@ def _full(dbeta, force, bearing, out_eps, out_valid):
 
 
 VELOCITY_KERNELS = {"eq24": _eq24, "analytic": _analytic, "full": _full}
-
-#: Codes of :attr:`BallState.model`: which model gave a ball's epsilon.
-MODEL_FAST, MODEL_FULL, MODEL_UNRESOLVED = 0, 1, -1
-
 
 def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
     """epsilon of balls from :func:`tolsim.physics.velocity.full.full`, never raising.

@@ -33,6 +33,8 @@ of :mod:`tolsim.physics.trains`, "Varying epsilon"). The first contact is still 
 each step's free motion, so it is the same with and without ``[contact]``.
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import prange
 
@@ -179,6 +181,173 @@ def first_contact_tracks(initial_gap, velocity_deviation, groove_velocity, horiz
     return t, np.where(np.isfinite(t), first * (balls - 1) + pair[rows, first], -1)
 
 
+@dataclass
+class Step:
+    """One midpoint step of :func:`integrate_along_track`, as its observers see it.
+
+    ``position`` and ``free`` (m, balls): rail positions at the start of the step and at its
+    end on the free motion (each ball at its own epsilon) [m]; ``gap_old``, ``gap_new``
+    (m, balls - 1): the pairs' gaps there [m]; ``ball_ok`` (m, balls): resolved at every
+    evaluation so far; ``state1``, ``state2``: the balls at the start and at the midpoint.
+    """
+
+    index: int
+    t: float
+    dt: float
+    position: np.ndarray
+    free: np.ndarray
+    gap_old: np.ndarray
+    gap_new: np.ndarray
+    ball_ok: np.ndarray
+    state1: object
+    state2: object
+
+
+class StepObserver:
+    """What :func:`integrate_along_track` calls at every step (each method may be left out:
+    the base class does nothing)."""
+
+    def begin(self, block, position):
+        """Before the first step: the block and its balls' rail positions at t = 0 [m]."""
+
+    def predict(self, state, w):
+        """The predictor's epsilon (m, balls) from the balls ``state`` at the start of the
+        step; ``w`` the epsilon so far (the free one)."""
+        return w
+
+    def observe(self, step: Step):
+        """After the free motion of a step (:class:`Step`)."""
+
+    def advance(self, step: Step, new):
+        """The positions at the end of the step (m, balls) [m]; ``new`` those so far (the
+        free motion)."""
+        return new
+
+
+def integrate_along_track(config, block, initial_state=None, observers=()):
+    """The explicit midpoint integration of a block's trains along the track (mode b).
+
+    Per step of dt: epsilon_1 of every ball at its rail position and carriage position at
+    the start of the step (the error sources read at the rail position, the loads
+    interpolated at the carriage position, :func:`tolsim.study.pipeline.evaluate.loads_at`),
+    the positions at the midpoint with it (or with the observers' predictor), epsilon_2
+    there, then the step with epsilon_2: the free motion, which the observers see
+    (:meth:`StepObserver.observe`) and may then replace (:meth:`StepObserver.advance`: the
+    trains after contact).
+
+    Parameters
+    ----------
+    config : StudyConfig
+    block : tolsim.study.sampling.Block
+    initial_state : BallState, optional
+        The balls at t = 0 (evaluated here if not given).
+    observers : sequence of StepObserver
+
+    Returns
+    -------
+    ball_ok : ndarray of bool (size, balls)
+        Balls resolved at every evaluation.
+    resolve_seconds : float
+        Time spent re-solving balls with the full model during the integration [s].
+    """
+    v = config.motion.groove_velocity
+    horizon = config.motion.duration
+    steps = config.study.time_steps
+    dt = horizon / steps
+    diameter = 2.0 * config.bearing.ball_radius
+
+    resolve_seconds = 0.0
+
+    def evaluate(position, t):
+        nonlocal resolve_seconds
+        values = error_values(config, block, rail_position=position)
+        nx, ny = loads_at(config, position - v * t)
+        state = evaluate_balls(config, values, nx, ny)
+        resolve_seconds += state.resolve_seconds
+        return state
+
+    position = block.initial_position.copy()
+    ball_ok = np.ones(position.shape, dtype=bool)  # resolved at every evaluation so far
+    for observer in observers:
+        observer.begin(block, position)
+    t = 0.0
+    for k in range(steps):
+        if k == 0 and initial_state is not None:
+            state1 = initial_state
+        else:
+            state1 = evaluate(position, t)
+        eps1, ok1 = state1.velocity_deviation, state1.valid
+        w1 = eps1
+        for observer in observers:  # touching balls move together (predictor)
+            w1 = observer.predict(state1, w1)
+        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(w1)) * 0.5 * v
+        state2 = evaluate(mid, t + 0.5 * dt)
+        eps2, ok2 = state2.velocity_deviation, state2.valid
+        ball_ok &= ok1 & ok2
+        new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
+        gap_old = np.diff(position, axis=1) - diameter
+        gap_new = np.diff(new, axis=1) - diameter
+        step = Step(k, t, dt, position, new, gap_old, gap_new, ball_ok, state1, state2)
+        for observer in observers:
+            observer.observe(step)
+        for observer in observers:
+            new = observer.advance(step, new)
+        position = new
+        t = (k + 1) * dt
+    return ball_ok, resolve_seconds
+
+
+class FirstContact(StepObserver):
+    """The first contact of each train: ``time`` [s] (inf: none) and ``pair`` (-1: none),
+    located by linear interpolation of the gap within the step in which it closes, for a
+    pair whose two balls are resolved so far (module docstring)."""
+
+    def begin(self, block, position):
+        self.time = np.full(block.size, np.inf)
+        self.pair = np.full(block.size, -1, dtype=np.int64)
+
+    def observe(self, step):
+        gap_old, gap_new, ball_ok = step.gap_old, step.gap_new, step.ball_ok
+        closing = (gap_new <= 0.0) & (gap_old > gap_new) & ball_ok[:, :-1] & ball_ok[:, 1:]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(gap_old <= 0.0, 0.0, gap_old / (gap_old - gap_new))
+        tc = np.where(closing, step.t + frac * step.dt, np.inf)
+        first = np.argmin(tc, axis=1)
+        tmin = tc[np.arange(len(tc)), first]
+        hit = np.isfinite(tmin) & ~np.isfinite(self.time)
+        self.time[hit] = tmin[hit]
+        self.pair[hit] = first[hit]
+
+
+class TrainMotion(StepObserver):
+    """The trains after contact (a study with ``[contact]``): the step rule of
+    :mod:`tolsim.physics.trains` at every step through a
+    :class:`tolsim.study.pipeline.track_friction.TrackFriction`, which accumulates the
+    friction figures."""
+
+    def __init__(self, friction, groove_velocity):
+        self.friction = friction
+        self.v = groove_velocity
+
+    def begin(self, block, position):
+        self.everyone = np.ones(position.shape, dtype=bool)
+        self.friction.begin(block.size, np.asarray(block.initial_gap) <= 0.0)
+
+    def predict(self, state, w):
+        friction, everyone = self.friction, self.everyone
+        load = friction.coefficients(state, everyone, friction.touching())
+        return friction.predict(state.velocity_deviation, load, everyone, everyone)
+
+    def advance(self, step, new):
+        # the step of the trains: cluster rule, then projection
+        friction, everyone = self.friction, self.everyone
+        position, dt, v = step.position, step.dt, self.v
+        eps2 = step.state2.velocity_deviation
+        w2 = friction.velocity(eps2, friction.coefficients(step.state2, everyone), everyone,
+                               everyone)
+        return friction.advance(position, position + dt * (1.0 + np.nan_to_num(w2)) * 0.5 * v)
+
+
 def first_contact_along_track(config, block, initial_state=None, *, friction=None):
     """First contact of the trains of a block with epsilon re-evaluated along the track (b).
 
@@ -209,62 +378,9 @@ def first_contact_along_track(config, block, initial_state=None, *, friction=Non
     resolve_seconds : float
         Time spent re-solving balls with the full model during the integration [s].
     """
-    v = config.motion.groove_velocity
-    horizon = config.motion.duration
-    steps = config.study.time_steps
-    dt = horizon / steps
-    diameter = 2.0 * config.bearing.ball_radius
-    size = block.size
-
-    resolve_seconds = 0.0
-
-    def evaluate(position, t):
-        nonlocal resolve_seconds
-        values = error_values(config, block, rail_position=position)
-        nx, ny = loads_at(config, position - v * t)
-        state = evaluate_balls(config, values, nx, ny)
-        resolve_seconds += state.resolve_seconds
-        return state
-
-    position = block.initial_position.copy()
-    time = np.full(size, np.inf)
-    pair = np.full(size, -1, dtype=np.int64)
-    ball_ok = np.ones(position.shape, dtype=bool)  # resolved at every evaluation so far
+    first = FirstContact()
+    observers = [first]
     if friction is not None:
-        everyone = np.ones(position.shape, dtype=bool)
-        friction.begin(size, np.asarray(block.initial_gap) <= 0.0)
-    t = 0.0
-    for k in range(steps):
-        if k == 0 and initial_state is not None:
-            state1 = initial_state
-        else:
-            state1 = evaluate(position, t)
-        eps1, ok1 = state1.velocity_deviation, state1.valid
-        w1 = eps1
-        if friction is not None:  # touching balls move together (predictor)
-            load = friction.coefficients(state1, everyone, friction.touching())
-            w1 = friction.predict(eps1, load, everyone, everyone)
-        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(w1)) * 0.5 * v
-        state2 = evaluate(mid, t + 0.5 * dt)
-        eps2, ok2 = state2.velocity_deviation, state2.valid
-        ball_ok &= ok1 & ok2
-        new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
-        gap_old = np.diff(position, axis=1) - diameter
-        gap_new = np.diff(new, axis=1) - diameter
-        closing = (gap_new <= 0.0) & (gap_old > gap_new) & ball_ok[:, :-1] & ball_ok[:, 1:]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            frac = np.where(gap_old <= 0.0, 0.0, gap_old / (gap_old - gap_new))
-        tc = np.where(closing, t + frac * dt, np.inf)
-        first = np.argmin(tc, axis=1)
-        tmin = tc[np.arange(size), first]
-        hit = np.isfinite(tmin) & ~np.isfinite(time)
-        time[hit] = tmin[hit]
-        pair[hit] = first[hit]
-        if friction is not None:  # the step of the trains: cluster rule, then projection
-            w2 = friction.velocity(eps2, friction.coefficients(state2, everyone), everyone,
-                                   everyone)
-            new = friction.advance(position,
-                                   position + dt * (1.0 + np.nan_to_num(w2)) * 0.5 * v)
-        position = new
-        t = (k + 1) * dt
-    return time, pair, ball_ok.all(axis=1), resolve_seconds
+        observers.append(TrainMotion(friction, config.motion.groove_velocity))
+    ball_ok, resolve_seconds = integrate_along_track(config, block, initial_state, observers)
+    return first.time, first.pair, ball_ok.all(axis=1), resolve_seconds

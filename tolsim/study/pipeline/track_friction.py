@@ -181,10 +181,8 @@ in the loaded zone (NaN once they have left it); the balls that entered since ar
 friction force, not in the positions and pair forces.
 """
 
-from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
-import numba
 import numpy as np
 from numba import prange
 
@@ -198,13 +196,14 @@ from tolsim.physics.trains import (
     train_contact_constant,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS, creep_coefficients_kernel
-from tolsim.study.statistics.accumulator import (
-    QUANTILES,
-    Accumulator,
-    clopper_pearson,
-    merge_moments,
+from tolsim.study.pipeline.carriage_track import (
+    carry_pairs_kernel,
+    first_contact_carriage_track,
 )
-from tolsim.study.statistics.intervals import histogram_quantiles
+from tolsim.study.pipeline.evaluate import BallState, evaluate_balls, loads_at
+from tolsim.study.pipeline.propagation import first_contact_along_track
+from tolsim.study.sampling import error_values
+from tolsim.study.statistics.friction import COLUMNS
 
 #: Columns of the per-ball creep coefficients
 # (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`).
@@ -216,16 +215,6 @@ _B = LOAD_COLUMNS.index("carriage_force_per_neighbour_force")
 _PCAP = LOAD_COLUMNS.index("traction_capacity")
 _BCAP = LOAD_COLUMNS.index("braking_capacity")
 
-#: Per-assembly figures with streamed moments, in :attr:`FrictionStatistics.COLUMNS` order.
-COLUMNS = ("baseline", "increase_max", "increase_mean", "ripple", "contact_force_max",
-           "contact_fraction", "clusters_formed")
-#: Per-assembly figures with a histogram (all forces [N], on :data:`FORCE_EDGES`).
-HISTOGRAM_COLUMNS = ("increase_max", "ripple", "contact_force_max")
-#: Edges of the force histograms [N]: a first bin [0, 1e-6 N) for "no force", then 50 bins
-#: per decade up to 1e4 N (quantiles within one bin: a relative 4.7 %, or 1e-6 N; a quantile
-#: in the first bin is reported as 0). Below 0 and from 1e4 N up the values are counted as
-#: underflow and overflow.
-FORCE_EDGES = np.concatenate([[0.0], np.logspace(-6.0, 4.0, 10 * 50 + 1)])
 
 
 # --------------------------------------------------------------------------------------------
@@ -249,7 +238,7 @@ def _creep_analytic(dbeta, force, bearing, ball_friction):
 def _creep_full(dbeta, force, bearing, ball_friction):
     """As :func:`_creep_analytic`, with K, c, F_0 and the capacities from the full model
     (NaN where it cannot take the ball or does not converge); the slopes a, b analytic."""
-    from tolsim.physics.velocity.full import full
+    from tolsim.physics.velocity.full import full  # noqa: PLC0415  optional full model
 
     load = _creep_analytic(dbeta, force, bearing, ball_friction)
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
@@ -442,7 +431,7 @@ class FrictionState:
 
 @dataclass
 class _Trains:
-    """What :func:`_follow_trains` computed per train (trains = m * tracks)."""
+    """What :func:`follow_trains` computed per train (trains = m * tracks)."""
 
     load: np.ndarray  # (trains, n, len(LOAD_COLUMNS))
     valid: np.ndarray  # (trains,) the train was followed
@@ -493,7 +482,7 @@ def _worst_tracks(config, m, *, track_ok, baseline, increase_max, increase_mean,
     )
 
 
-def _follow_trains(config, initial_gap, state):
+def follow_trains(config, initial_gap, state):
     """(FrictionState of the assemblies, _Trains): the trains of ``state`` over the stroke."""
     tracks, n = config.n_tracks, config.train.balls
     m = state.velocity_deviation.shape[0]
@@ -553,7 +542,7 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
                              "block (block=...): the trains are followed along the track")
         initial = None if config.carriage is not None else state
         return follow_along_track(config, block, initial)[-1].figures()
-    return _follow_trains(config, initial_gap, state)[0]
+    return follow_trains(config, initial_gap, state)[0]
 
 
 # --------------------------------------------------------------------------------------------
@@ -637,8 +626,6 @@ def step_friction_kernel(loaded, member, load, force, ok, contact, formed, weigh
 
 def _flat_balls(state, index):
     """The balls ``index`` (into the flattened balls) of a BallState, as a flat BallState."""
-    from tolsim.study.pipeline.evaluate import BallState
-
     def flat(x, tail=()):
         return np.asarray(x).reshape((-1,) + tail)[index]
 
@@ -788,8 +775,6 @@ class TrackFriction:
 
     def carry(self, old_id, new_id):
         """Follow the pair flags to the balls' new slots (after exits and entries)."""
-        from tolsim.study.pipeline.carriage_track import carry_pairs_kernel
-
         old_id = np.ascontiguousarray(old_id).reshape(len(self.closed), -1)
         new_id = np.ascontiguousarray(new_id).reshape(len(self.closed), -1)
         for name in ("closed", "before"):
@@ -825,14 +810,8 @@ def follow_along_track(config, block, initial_state=None, record=False):
     """
     friction = TrackFriction(config, record=record)
     if config.carriage is not None:
-        from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
-
         *out, state, carriage = first_contact_carriage_track(config, block, friction=friction)
         return (*out, state, carriage, friction)
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
-    from tolsim.study.pipeline.propagation import first_contact_along_track
-    from tolsim.study.sampling import error_values
-
     state = initial_state
     if state is None:  # loads at the carriage positions, as during the integration
         nx, ny = loads_at(config, block.initial_position)
@@ -841,394 +820,6 @@ def follow_along_track(config, block, initial_state=None, record=False):
     return (*out, state, None, friction)
 
 
-# --------------------------------------------------------------------------------------------
-# Streamed statistics
-# --------------------------------------------------------------------------------------------
-class FrictionStatistics:
-    """Mergeable statistics of the friction figures of assemblies (module docstring).
-
-    Exact counts (assemblies, resolved, sliding, certain exceedances); over the resolved
-    assemblies the count, mean and M2 (Chan et al.), min and max of every column of
-    :data:`COLUMNS`, and fixed-bin histograms (:data:`FORCE_EDGES`, with underflow and
-    overflow counts) of :data:`HISTOGRAM_COLUMNS`. Merging in block order makes the result
-    independent of the chunking, as :class:`tolsim.study.statistics.accumulator.Accumulator`.
-
-    Parameters
-    ----------
-    friction_increase_limit : float
-        Spec limit L on the increase [N] (0: none).
-    """
-
-    #: array attributes, in the order they are saved
-    FIELDS = ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_exceed", "count",
-              "mean", "m2", "minimum", "maximum", "histogram", "underflow", "overflow")
-
-    def __init__(self, friction_increase_limit=0.0):
-        self.friction_increase_limit = float(friction_increase_limit)
-        self.edges = FORCE_EDGES.copy()
-        c, h = len(COLUMNS), len(HISTOGRAM_COLUMNS)
-        i8 = np.int64
-        self.n_assemblies = i8(0)
-        self.n_resolved = i8(0)
-        self.n_unresolved = i8(0)  # unresolved without a certain exceedance
-        self.n_sliding = i8(0)
-        self.n_exceed = i8(0)
-        self.count = i8(0)
-        self.mean = np.zeros(c)
-        self.m2 = np.zeros(c)
-        self.minimum = np.full(c, np.inf)
-        self.maximum = np.full(c, -np.inf)
-        self.histogram = np.zeros((h, len(self.edges) - 1), dtype=i8)
-        self.underflow = np.zeros(h, dtype=i8)
-        self.overflow = np.zeros(h, dtype=i8)
-
-    @classmethod
-    def for_config(cls, config) -> "FrictionStatistics":
-        return cls(config.contact.friction_increase_limit)
-
-    def add(self, figures: FrictionState):
-        """Add one block of assemblies."""
-        block = FrictionStatistics(self.friction_increase_limit)
-        resolved = np.asarray(figures.resolved, dtype=bool)
-        exceeds = np.asarray(figures.exceeds, dtype=bool)
-        block.n_assemblies = np.int64(len(resolved))
-        block.n_resolved = np.int64(np.count_nonzero(resolved))
-        block.n_unresolved = np.int64(np.count_nonzero(~resolved & ~exceeds))
-        block.n_sliding = np.int64(np.count_nonzero(figures.sliding))
-        block.n_exceed = np.int64(np.count_nonzero(exceeds))
-        x = figures.columns()[resolved]
-        block.count = np.int64(len(x))
-        if len(x):
-            block.mean = x.mean(axis=0)
-            block.m2 = ((x - block.mean) ** 2).sum(axis=0)
-            block.minimum = x.min(axis=0)
-            block.maximum = x.max(axis=0)
-            top = len(self.edges) - 1
-            for h, name in enumerate(HISTOGRAM_COLUMNS):
-                v = x[:, COLUMNS.index(name)]
-                k = np.searchsorted(self.edges, v, side="right") - 1  # bin [e_k, e_k+1)
-                block.underflow[h] = np.count_nonzero(k < 0)
-                block.overflow[h] = np.count_nonzero(k >= top)
-                block.histogram[h] = np.bincount(k[(k >= 0) & (k < top)], minlength=top)
-        self.merge(block)
-
-    def merge(self, other: "FrictionStatistics"):
-        """Merge ``other`` into self (the order of merges is part of the result)."""
-        for name in ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_exceed",
-                     "histogram", "underflow", "overflow"):
-            setattr(self, name, getattr(self, name) + getattr(other, name))
-        count, self.mean, self.m2 = merge_moments(self.count, self.mean, self.m2,
-                                                   other.count, other.mean, other.m2)
-        self.count = np.int64(count)
-        self.minimum = np.minimum(self.minimum, other.minimum)
-        self.maximum = np.maximum(self.maximum, other.maximum)
-
-    def state(self) -> dict:
-        """All arrays, for a checkpoint."""
-        out = {name: np.asarray(getattr(self, name)) for name in self.FIELDS}
-        out["edges"] = self.edges
-        out["friction_increase_limit"] = np.float64(self.friction_increase_limit)
-        return out
-
-    @classmethod
-    def from_state(cls, state: dict) -> "FrictionStatistics":
-        out = cls(float(state["friction_increase_limit"]))
-        out.edges = np.array(state["edges"], dtype=float)
-        for name in cls.FIELDS:
-            value = np.asarray(state[name])
-            setattr(out, name, value.copy() if value.ndim else value[()])
-        return out
-
-    # ---------------------------------------------------------------------------------------
-    def column_mean(self, name) -> float:
-        """Mean of a column over the resolved assemblies (NaN with none)."""
-        return float(self.mean[COLUMNS.index(name)]) if self.count else float("nan")
-
-    def column_std(self, name) -> float:
-        """Sample standard deviation of a column (NaN below 2 resolved assemblies)."""
-        n = int(self.count)
-        return (float(np.sqrt(self.m2[COLUMNS.index(name)] / (n - 1))) if n > 1
-                else float("nan"))
-
-    def quantiles(self, name, levels=QUANTILES) -> np.ndarray:
-        """Quantiles of a histogram column from its histogram (within one bin; 0 in the first
-        bin, "no force"), clipped to the exact [min, max] [N]."""
-        h = HISTOGRAM_COLUMNS.index(name)
-        q = histogram_quantiles(self.histogram[h], self.edges, levels, self.underflow[h],
-                                self.overflow[h])
-        q = np.where((q >= 0) & (q < self.edges[1]), 0.0, q)
-        c = COLUMNS.index(name)
-        return np.clip(q, self.minimum[c], self.maximum[c]) if self.count else q
-
-    def exceedance_probability(self, confidence: float = 0.95):
-        """P(increase > limit) over the assemblies whose outcome is known, k / (N - u), and
-        its Clopper-Pearson interval; NaN without a limit."""
-        if not self.friction_increase_limit > 0:
-            return float("nan"), float("nan"), float("nan")
-        known = int(self.n_assemblies) - int(self.n_unresolved)
-        return clopper_pearson(int(self.n_exceed), known, confidence)
-
-    def exceedance_bounds(self, confidence: float = 0.95):
-        """(k / N, (k + u) / N, CP lower end of k of N, CP upper end of k + u of N)."""
-        if not self.friction_increase_limit > 0:
-            return (float("nan"),) * 4
-        n, k, u = int(self.n_assemblies), int(self.n_exceed), int(self.n_unresolved)
-        low, ci_low, _ = clopper_pearson(k, n, confidence)
-        high, _, ci_high = clopper_pearson(k + u, n, confidence)
-        return low, high, ci_low, ci_high
-
-
-class FrictionAccumulator(Accumulator):
-    """:class:`~tolsim.study.statistics.accumulator.Accumulator` with the friction statistics
-    of a study
-    with ``[contact]`` in :attr:`friction` (a :class:`FrictionStatistics`), merged and
-    checkpointed with it (state keys ``friction_*``)."""
-
-    def __init__(self, *args, friction=None, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.friction = friction
-
-    @classmethod
-    def for_config(cls, config):
-        acc = super().for_config(config)
-        acc.friction = FrictionStatistics.for_config(config)
-        return acc
-
-    def add_friction(self, figures: FrictionState):
-        """Add the friction figures of the block's assemblies."""
-        self.friction.add(figures)
-
-    def merge(self, other):
-        super().merge(other)
-        extra = getattr(other, "friction", None)
-        if extra is not None:
-            self.friction.merge(extra)
-
-    def state(self) -> dict:
-        out = super().state()
-        out.update({f"friction_{k}": v for k, v in self.friction.state().items()})
-        return out
-
-    @classmethod
-    def from_state(cls, state: dict):
-        acc = super().from_state(state)
-        acc.friction = FrictionStatistics.from_state(
-            {k[len("friction_"):]: v for k, v in state.items() if k.startswith("friction_")})
-        return acc
-
-
-def study_accumulator(config) -> Accumulator:
-    """An empty accumulator for a study: with friction statistics when it has ``[contact]``
-    (either propagation)."""
-    if config.contact is None:
-        return Accumulator.for_config(config)
-    return FrictionAccumulator.for_config(config)
-
-
-def accumulator_from_state(state: dict) -> Accumulator:
-    """The accumulator saved in ``state`` (a checkpoint), with or without friction."""
-    cls = FrictionAccumulator if "friction_n_assemblies" in state else Accumulator
-    return cls.from_state(state)
-
-
-# --------------------------------------------------------------------------------------------
-# Examples
-# --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class FrictionExamples:
-    """Example trajectories of the worst track of a few assemblies (module docstring).
-
-    Shapes: k examples, S travel points, n balls per track.
-
-    Attributes
-    ----------
-    assembly, track : ndarray of int (k,)
-        Which assembly of the study (its index) and which of its tracks.
-    travel : ndarray (S,)
-        Carriage travel v t [m], 0 to the stroke.
-    baseline : ndarray (k,)
-        The track's friction force without ball-to-ball contact [N].
-    friction_force : ndarray (k, S)
-        The track's carriage friction force [N].
-    contact_force : ndarray (k, S, n - 1)
-        Ball-to-ball forces Q_j [N].
-    ball_position : ndarray (k, S, n)
-        Ball centres along the rail less the nominal travel v t / 2 of a free ball [m]
-        (the train's centroid at 0 at the start; ball 0 trailing).
-    """
-
-    assembly: np.ndarray
-    track: np.ndarray
-    travel: np.ndarray
-    baseline: np.ndarray
-    friction_force: np.ndarray
-    contact_force: np.ndarray
-    ball_position: np.ndarray
-
-
-def _evaluate_assemblies(config, block):
-    """The balls of a block, as :func:`tolsim.study.execution.runner.run_chunk` evaluates them."""
-    from tolsim.study.pipeline.carriage import evaluate_carriage
-    from tolsim.study.pipeline.evaluate import evaluate_balls, loads_per_ball
-    from tolsim.study.sampling import error_values
-
-    values = error_values(config, block)
-    if config.carriage is not None:
-        return evaluate_carriage(config, values)[0]
-    nx, ny = loads_per_ball(config, (block.size, config.balls))
-    return evaluate_balls(config, values, nx, ny)
-
-
-#: Assemblies of the first block looked at first for the examples (all of it if too few touch).
-EXAMPLE_WINDOW = 128
-
-
-@contextmanager
-def _one_thread():
-    """Run the kernels on one thread (a few thousand balls: the thread pool costs more)."""
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(threads)
-
-
-def _first_assemblies(block, count):
-    """The first ``count`` assemblies of a block (with its rail fields and entering balls)."""
-    fields = {k: replace(f, values=f.values[:count * f.tracks])
-              for k, f in block.fields.items()}
-    entering_gap = None if block.entering_gap is None else block.entering_gap[:count]
-    return replace(block, size=count, normals={k: v[:count] for k, v in block.normals.items()},
-                   fields=fields, initial_gap=block.initial_gap[:count],
-                   initial_position=block.initial_position[:count],
-                   entering_gap=entering_gap,
-                   entering={k: v[:count] for k, v in block.entering.items()})
-
-
-def choose_examples(figures: FrictionState, count: int) -> np.ndarray:
-    """Indices of the example assemblies: the first resolved ones with a contact in their
-    worst track, in order, then the first resolved ones without."""
-    resolved = np.asarray(figures.resolved, dtype=bool)
-    touched = resolved & (np.nan_to_num(figures.contact_fraction) > 0)
-    order = np.concatenate([np.flatnonzero(touched), np.flatnonzero(resolved & ~touched)])
-    return order[:max(int(count), 0)]
-
-
-def friction_examples(config) -> FrictionExamples | None:
-    """The example trajectories of a study with ``[contact]`` (None with ``examples = 0``).
-
-    From the first random block of the study (module docstring); each example's worst track
-    is followed again on a grid of ``travel_points`` carriage positions.
-    """
-    from tolsim.study.sampling import sample_block
-
-    count = config.contact.examples
-    if count == 0:
-        return None
-    whole = sample_block(config, 0)
-    along = config.study.propagation == "along_track"
-    with _one_thread():
-        # the first assemblies of the block, then all of it if too few of them touch: the
-        # examples are the same either way (choose_examples takes them in order)
-        for size in sorted({min(EXAMPLE_WINDOW, whole.size), whole.size}):
-            block = _first_assemblies(whole, size)
-            if along:
-                trains = follow_along_track(config, block, record=True)[-1]
-                figures = trains.figures()
-            else:
-                state = _evaluate_assemblies(config, block)
-                figures, trains = _follow_trains(config, block.initial_gap, state)
-            chosen = choose_examples(figures, count)
-            if np.count_nonzero(figures.contact_fraction[chosen] > 0) == count:
-                break
-        if along:
-            return _track_examples(config, block, figures, trains, chosen)
-        return _example_trajectories(config, block, figures, trains, chosen)
-
-
-def _track_examples(config, block, figures, friction, chosen):
-    """:class:`FrictionExamples` of the assemblies ``chosen`` of ``block`` from the steps
-    of their along-track integration (``friction``, a recording :class:`TrackFriction`):
-    the forces of the step holding each travel point, the positions interpolated linearly
-    within it. With a carriage the balls are the track's initial balls (ids 0 to n - 1) while
-    they are in its loaded zone (NaN after they left it; the balls that entered since count
-    in the friction force, not in the positions and pair forces)."""
-    tracks, n = config.n_tracks, config.train.balls
-    rows = chosen * tracks + figures.worst_track[chosen]
-    motion, trace, steps = config.motion, friction.trace, friction.steps
-    points = config.contact.travel_points
-    time = motion.duration * np.arange(points) / (points - 1)
-    time[-1] = motion.duration
-    dt = motion.duration / steps
-    step = np.minimum(np.floor(time / dt).astype(np.int64), steps - 1)
-    theta = np.clip(time / dt - step, 0.0, 1.0)[None, :, None]
-
-    def along(name):
-        return np.stack([trace[name][k][rows] for k in step], axis=1)
-
-    position = (1.0 - theta) * along("start") + theta * along("end")
-    shift = (0.5 if friction.carriage_frame else -0.5) * motion.groove_velocity * time
-    force = along("force")
-    if trace["ids"] and trace["ids"][0] is not None:  # slots of a carriage track: by ball id
-        ids = along("ids")
-        slots = ids.shape[2]
-        ball_position = np.full(ids.shape[:2] + (n,), np.nan)
-        contact_force = np.full(ids.shape[:2] + (max(n - 1, 0),), np.nan)
-        for j in range(n):
-            here = ids == j
-            has = here.any(axis=2)
-            slot = np.argmax(here, axis=2)[..., None]
-            ball_position[..., j] = np.where(
-                has, np.take_along_axis(position, slot, 2)[..., 0] + shift, np.nan)
-            if j < n - 1:
-                ahead = np.take_along_axis(ids, np.minimum(slot + 1, slots - 1), 2)[..., 0]
-                pair = has & (slot[..., 0] < slots - 1) & (ahead == j + 1)
-                q = np.take_along_axis(force, np.minimum(slot, slots - 2), 2)[..., 0]
-                contact_force[..., j] = np.where(pair, q, np.nan)
-    else:
-        ball_position = position + shift[None, :, None]
-        contact_force = force
-    return FrictionExamples(
-        assembly=(block.start + chosen).astype(np.int64),
-        track=figures.worst_track[chosen].astype(np.int64),
-        travel=motion.groove_velocity * time,
-        baseline=figures.baseline[chosen],
-        friction_force=along("friction").reshape(len(rows), points),
-        contact_force=contact_force,
-        ball_position=ball_position,
-    )
-
-
-def _example_trajectories(config, block, figures, trains, chosen):
-    """:class:`FrictionExamples` of the assemblies ``chosen`` of ``block``."""
-    tracks, n = config.n_tracks, config.train.balls
-    rows = chosen * tracks + figures.worst_track[chosen]
-    gap = np.asarray(block.initial_gap).reshape(-1, max(n - 1, 0))[rows]
-    result = train_contact_constant(gap, trains.velocity_deviation[rows],
-                                    trains.stiffness[rows], config.motion.groove_velocity,
-                                    config.motion.duration,
-                                    braking_sensitivity=trains.braking[rows],
-                                    samples=config.contact.travel_points)
-    load = trains.load[rows]
-    coefficient = ((load[:, 1:, _A] - load[:, :-1, _A]) + (load[:, :-1, _B] + load[:, 1:, _B]))
-    baseline = figures.baseline[chosen]
-    force = baseline[:, None] + np.einsum("ksj,kj->ks", result.grid_contact_force, coefficient)
-    start = np.asarray(block.initial_position).reshape(-1, n)[rows]
-    return FrictionExamples(
-        assembly=(block.start + chosen).astype(np.int64),
-        track=figures.worst_track[chosen].astype(np.int64),
-        travel=result.travel,
-        baseline=baseline,
-        friction_force=force,
-        contact_force=result.grid_contact_force,
-        ball_position=start[:, None, :] + result.grid_displacement,
-    )
-
-
-__all__ = ["COLUMNS", "CREEP_MODELS", "FORCE_EDGES", "HISTOGRAM_COLUMNS", "STEP_TOLERANCE",
-           "FrictionAccumulator", "FrictionExamples",
-           "FrictionState", "FrictionStatistics", "TrackFriction", "accumulator_from_state",
-           "ball_creep_coefficients", "choose_examples", "evaluate_friction",
-           "follow_along_track", "friction_examples",
-           "step_friction_kernel", "stroke_friction_kernel", "study_accumulator"]
+__all__ = ["CREEP_MODELS", "STEP_TOLERANCE", "FrictionState", "TrackFriction",
+           "ball_creep_coefficients", "evaluate_friction", "follow_along_track", "follow_trains",
+           "step_friction_kernel", "stroke_friction_kernel"]

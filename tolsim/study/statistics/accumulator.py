@@ -42,6 +42,7 @@ import copy
 
 import numpy as np
 
+from tolsim.physics.velocity.models import MODEL_FULL
 from tolsim.study.statistics.intervals import (
     ClusterMoments,
     assembly_totals,
@@ -220,7 +221,7 @@ class Accumulator:
             Extra validity of the train (along-track propagation: every ball resolved at
             every step).
         """
-        from tolsim.study.pipeline.evaluate import MODEL_FULL
+        # statistics sit below the pipeline, whose package imports this module
 
         eps, valid = state.velocity_deviation, state.valid
         block = self._empty_like()

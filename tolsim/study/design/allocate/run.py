@@ -18,6 +18,7 @@ from tolsim.study.design.allocate.targets import (
     resolve_sources,
 )
 from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.block import has_contact
 
 
 # --------------------------------------------------------------------------------------------
@@ -40,7 +41,7 @@ def evaluation_config(config, target: Target, samples: int, seed: int):
                     estimator="monte_carlo")
     if target.epsilon_limit is not None:
         study = replace(study, velocity_deviation_limit=target.epsilon_limit)
-    contact = config.contact if config.contact is None else replace(config.contact, examples=0)
+    contact = replace(config.contact, examples=0) if has_contact(config) else None
     return replace(config, study=study, contact=contact)
 
 

@@ -6,6 +6,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from tolsim.study.pipeline.block import has_contact
 from tolsim.study.spec import SOURCES
 from tolsim.study.statistics.intervals import clopper_pearson_interval, cluster_proportion
 
@@ -118,7 +119,7 @@ def _out_of_spec(statistics, target, confidence) -> Evaluation:
 
 
 def _needs_friction_limit(config, target):
-    if config.contact is None or not config.contact.friction_increase_limit > 0:
+    if not has_contact(config) or not config.contact.friction_increase_limit > 0:
         return ("needs a config with [contact] and a friction_increase_limit_N (the "
                 "friction increase whose exceedance it bounds)")
     return None
