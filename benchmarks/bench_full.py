@@ -8,7 +8,7 @@ Prints, measured in this run:
 * Newton iterations (median, max) and the converged fraction;
 * the same ball solved by a straightforward SciPy reference (scipy.integrate.cubature of
   the friction over each ellipse, scipy.optimize.root on the equilibrium; the twin of
-  tests/test_friction.py) and the speed ratio.
+  tests/physics/test_full.py) and the speed ratio.
 
 Run: ``python benchmarks/bench_full.py [--balls N]``.
 """
@@ -25,7 +25,7 @@ from tolsim.physics.geometry import paired_forces
 from tolsim.physics.velocity.full import full
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
-from test_friction import reference_solve  # noqa: E402  (the SciPy twin lives with the tests)
+from test_full import reference_solve  # noqa: E402  (the SciPy twin lives with the tests)
 
 
 def random_balls(n, seed=2018):

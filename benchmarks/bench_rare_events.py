@@ -1,7 +1,7 @@
 """Coverage and cost of the rare-event estimators (tolsim.study.analyses.rare_events), issue 15.
 
 The closed-form case of the issue: two balls with constant epsilon, linear in six independent
-normal tolerance errors, and a fixed gap (``tests/test_rare_events.py``): the limit state is
+normal tolerance errors, and a fixed gap (``tests/study/test_rare_events.py``): the limit state is
 linear in standard normals and the exact P(contact within the horizon) is Phi(-beta). At
 P = 1e-3, 1e-5 and 1e-7, R seeded repeats (default 50, the issue's count) of
 
@@ -60,7 +60,7 @@ TARGET_CV = 0.2
 REQUIRED_COVERAGE = 0.90
 REQUIRED_RATIO = 100.0
 
-# the two-ball case of tests/test_rare_events.py
+# the two-ball case of tests/study/test_rare_events.py
 ERROR_STD = np.array([2e-6, 2e-6, 1e-6, 1e-6, 3e-6, 3e-6])                    # [m]
 SENSITIVITY = np.array([[300.0, -150.0, 80.0, 0.0, 40.0, 0.0],
                         [-100.0, 200.0, 0.0, 60.0, 0.0, 40.0]])                # [1/m]

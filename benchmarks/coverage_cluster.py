@@ -1,6 +1,6 @@
 """Coverage of the cluster (assembly-as-sampling-unit) intervals on a correlated train.
 
-The synthetic train of ``tests/test_estimators.py``: equicorrelated standard normals
+The synthetic train of ``tests/study/test_estimators.py``: equicorrelated standard normals
 x_ab = sqrt(rho) z_a + sqrt(1 - rho) e_ab, rho = 0.9, trains of 10 balls; with
 L = -Phi^-1(p / 2) the true fraction out of spec is p and the true Cpk = Cp = L / 3. A second
 Cpk case shifts every ball by mu = 0.5 (true Cpk = (L - 0.5) / 3).

@@ -6,7 +6,7 @@ Here the seed comes from the integer bit pattern (dividing the exponent by three
 the classic "magic constant" trick), refined by three Halley steps
 y <- y (y^3 + 2x) / (2 y^3 + x) (cubic convergence: ~3e-2 -> ~1e-5 -> ~1e-15 -> round-off).
 Written as the ratio form so that nothing overflows or underflows for any normal double.
-Accuracy against ``np.cbrt``: a few ulp (tests/test_fastmath.py).
+Accuracy against ``np.cbrt``: a few ulp (tests/physics/test_fastmath.py).
 
 The seed pass reads the input through an int64 view. It is a separate kernel from the
 refinement because Numba assumes distinct arrays do not alias, and the float and int views of

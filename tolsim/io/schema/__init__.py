@@ -36,7 +36,7 @@ worded for any estimator (its method in their ``interval`` attribute); files wri
 keep their "Clopper-Pearson" long names, which :func:`validate` still accepts.
 
 The file passes the CF checker (``compliance-checker --test=cf:1.10``, see
-``tests/test_cf_compliance.py``): coordinate variables are numeric, strictly monotonic and
+``tests/io/test_cf_compliance.py``): coordinate variables are numeric, strictly monotonic and
 without ``_FillValue`` (:func:`tolsim.io.netcdf.write_dataset`); the names along ``contact``
 (BL, BR, TR, TL) and ``factor`` are string label variables ``contact_name`` / ``factor_name``
 (CF 6.1 labels, auxiliary coordinates listed in the ``coordinates`` attribute of the variables

@@ -264,7 +264,7 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
     **How carriage loads map to the balls' side-force ratio**
 
     Small-displacement rigid-body kinematics, linearised at the ball; each step is tested in
-    ``tests/test_carriage.py`` (numbers for the [Lin2018] Table 1 ball, K = 2.345e10 N/m^1.5,
+    ``tests/physics/test_carriage.py`` (numbers for the [Lin2018] Table 1 ball, K = 2.345e10 N/m^1.5,
     d = R_G - R_B = 0.4 mm).
 
     1. *Which DOF a load excites.* By d(p) = B(p) q a yaw theta_y moves the grooves sideways by
@@ -442,7 +442,7 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
     assemblies in parallel (:func:`carriage_batch_kernel`). The results agree with
     :func:`solve_carriage` to about 1e-11 of their scale (forces, stiffness, angles) and
     1e-10 in displacement (up to 1e-9 on a badly conditioned carriage; tested to 1e-9 in
-    ``tests/test_carriage_batch.py``), except the contact angles of loose balls, whose
+    ``tests/physics/test_carriage_batch.py``), except the contact angles of loose balls, whose
     position is not unique. Every
     assembly starts from the solution q0 of the nominal assembly (no groove errors,
     ``nominal_oversize``) by :func:`solve_carriage`, or from q = 0 if that one lifts off.

@@ -182,7 +182,7 @@ def linearised_static(sensitivity: StaticSensitivity, side_load=None, normal_loa
     dbeta = dbeta_nom + S_beta (x - x_nom), F = F_nom + S_F (x - x_nom), with x the 17
     inputs of the sensitivity columns. No flank unloading and no convergence check: use only
     where the full solution stays in four-point contact (its error against
-    :func:`solve_static` is measured in ``tests/test_static.py`` and
+    :func:`solve_static` is measured in ``tests/physics/test_static.py`` and
     ``benchmarks/bench_static.py``).
 
     Parameters

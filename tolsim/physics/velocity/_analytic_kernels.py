@@ -373,7 +373,7 @@ def creep_coefficients_kernel(dbeta, force, force_cbrt, nominal_angle, ball_radi
     The columns of :func:`analytic_loaded_kernel` (``LOAD_COLUMNS``)
     with push and neighbour forces zero, written into ``out_load`` (n, 9): the free, unit-push
     and unit-braking solves with the same arithmetic (so epsilon, K, c, F_0, a, b agree with
-    it to round-off, tests/test_friction_study.py), the rolling axis and the stall moment of
+    it to round-off, tests/study/test_friction_study.py), the rolling axis and the stall moment of
     :mod:`tolsim.physics.velocity.ball_loads` from the same sines and cosines. What it leaves out is
     what a study does not need and what costs most there (the vertex search of
     :func:`tolsim.physics.velocity.ball_loads.point_traction_capacity`, Eq. 22, dgamma, validity):
@@ -391,7 +391,7 @@ def creep_coefficients_kernel(dbeta, force, force_cbrt, nominal_angle, ball_radi
     capacity, mu sum F_i. Otherwise it is the optimum of the dual whenever an optimal lambda
     has its two free entries on one pair and +1 elsewhere; on 20 000 random balls (dbeta ~
     0.6 deg, forces 0.3-1.7 x 141 N, far from equilibrium) it equalled the vertex search to
-    1e-15 (tests/test_friction_study.py), 1/3 of its cost.
+    1e-15 (tests/study/test_friction_study.py), 1/3 of its cost.
 
     ``dbeta``, ``force``, ``force_cbrt`` (:func:`tolsim.physics._fastmath.cbrt_nonnegative` of
     ``force``): C-contiguous (n, 4) float64; ``out_load`` (n, 9). Called by

@@ -95,7 +95,7 @@ from tolsim.physics.velocity.ball_loads import DEFAULT_BALL_FRICTION, BallLoadFi
 #   eq24:     q >= 0.24, |dbeta| <= 1.5 deg, pairing asymmetry P <= 0.015, |eps| <= 0.29 %;
 #             max error inside 1.96e-4 on the grid (2.8 %), 1.93e-4 on the fresh balls;
 #             keeps 97.9 % of the realistic population (max error there 8.1e-5).
-# tests/test_validity_budget.py checks the budget on fresh random balls of another seed.
+# tests/physics/test_validity_budget.py checks the budget on fresh random balls of another seed.
 # Table 2 case (a) (theta = 2 deg, rho = +-0.6) is outside for both (|dbeta| = 2 deg, and its
 # error is 3.5e-4: eps 0.754 % against 0.789 % from full), so a study re-solves those balls
 # with full.

@@ -122,7 +122,7 @@ class BallLoadFields:
     704.6 N for Table 1 at N_y = 200 N (F = 141.4 N, a = 0.554 mm): 7.05 N per percent of
     epsilon. The full model's slope at c/a = 0 is steeper than k_f (ERRATA 7), so its K is a few
     percent larger (746.4 N for this ball; 2.6-5.7 % over |rho| <= 0.6, |theta| <= 2 deg,
-    tests/test_ball_push.py).
+    tests/physics/test_ball_push.py).
 
     **Gross sliding and the traction capacity**
 

@@ -36,7 +36,7 @@ from tolsim.physics.velocity.analytic import VelocityResult, as_ball_arrays
 from tolsim.physics.velocity.ball_loads import DEFAULT_BALL_FRICTION, BallLoadFields, as_ball_loads
 
 #: Default number of angular nodes per contact (full circle; see the convergence study in
-#: ``tests/test_friction.py::test_grid_convergence`` and the Notes of :func:`full`).
+#: ``tests/physics/test_full.py::test_grid_convergence`` and the Notes of :func:`full`).
 DEFAULT_ANGULAR_NODES = 32
 #: Default number of radial nodes per ray for the curved surface.
 DEFAULT_RADIAL_NODES = 8

@@ -137,7 +137,7 @@ def _after_contact_readme(after) -> list:
         f"+{fo['increase']:.2f} N.",
         "",
         "The same numbers come out of `tolsim run` on that config with a `[contact]` section "
-        "(tests/test_cli_paper.py).",
+        "(tests/cli/test_cli_paper.py).",
         "",
     ]
 

@@ -30,7 +30,7 @@ same; g does not depend on it). The marginal maps, correlations (Cholesky of the
 independent xi, :func:`tolsim.study.sampling.error_values`) and the AR(1) recursion of the
 fields are those of :func:`tolsim.study.sampling.sample_block`, applied row by row, so a row
 of U drawn the sampler's way gives the sampler's assembly bit for bit
-(``tests/test_rare_study.py``). With ``sampling = "sobol"`` or ``"lhs"`` the plain run's
+(``tests/study/test_rare_study.py``). With ``sampling = "sobol"`` or ``"lhs"`` the plain run's
 per-assembly factors come from a quasi-random design; the rare-event estimators draw every
 column as an independent standard normal (the same distribution).
 

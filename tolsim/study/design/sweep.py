@@ -21,7 +21,7 @@ Every point runs with the study's seed, so its random blocks are drawn from the 
 ball are the same at every point, and only their mapping to values (a scaled spread, a
 shifted load) changes. Differences between points are then differences of the same
 assemblies, which removes most of the sampling noise from a curve and from a difference
-between points (``tests/test_sweep.py`` measures the variance reduction on the paired
+between points (``tests/io/test_sweep.py`` measures the variance reduction on the paired
 outcomes). This holds when the swept key leaves the *structure* of the draws alone: keys that
 change which variates are drawn (the number of balls, a distribution's kind) get independent
 streams in effect.

@@ -37,7 +37,7 @@ Example, the two balls of [Lin2018] Sec. 3.2 case (a) (configs/paper_case_study.
 ``[contact]``; epsilon +-0.789 % from the full model, K = 673 N each from the analytic one):
 they touch at 6.34 s and then push with Q = K epsilon_1 = 5.31 N; with a = -0.504, -0.496
 and b = 0.0707, k = 0.149 and the track's friction rises by 0.79 N over its 2.82 N baseline
-(+28 %) for the rest of the stroke (tests/test_friction_study.py).
+(+28 %) for the rest of the stroke (tests/study/test_friction_study.py).
 
 With constant epsilon the contact forces are piecewise constant between events
 (:func:`tolsim.physics.trains.train_contact_constant` with ``segments=True``), so (1) is too,
@@ -89,7 +89,7 @@ zero and the gap opens. Per step k, with the coefficients at the midpoint,
 *Error of the step.* For constant epsilon and K the step is exact whatever dt (derivation in
 :mod:`tolsim.physics.trains`): the positions at step ends and the step-mean forces are the
 event-driven ones, so the baseline, ``increase_mean`` and ``contact_fraction`` agree with
-the exact figures above to rounding (1e-8 relative, tests/test_friction_along_track.py).
+the exact figures above to rounding (1e-8 relative, tests/study/test_friction_along_track.py).
 Maxima and minima are taken over step means, so a contact that forms inside the last step
 (for the minimum of the ripple, the first) is averaged away: O(1) in a fraction O(dt / T)
 of the assemblies; two merges of one cluster inside one step count once. With varying
@@ -160,7 +160,7 @@ from the study's static model; :func:`tolsim.physics.velocity.analytic.creep_coe
 one
 vectorised call per chunk, about 7 M balls/s on 2 cores), for every ball, also those whose
 epsilon the study took from the full model (K is a smooth property of the contact state: the
-analytic K is 2.6-5.7 % below the full model's on the paper's ball, tests/test_ball_push.py).
+analytic K is 2.6-5.7 % below the full model's on the paper's ball, tests/physics/test_ball_push.py).
 ``"full"``: K, c, F_0 and the traction and braking capacities from
 :func:`tolsim.physics.velocity.full.full` at zero load (slow: about 1e4 balls/s); the carriage-force
 slopes a, b stay the analytic ones (the full model gives the force at a load, not its slopes).

@@ -1,0 +1,346 @@
+"""``tolsim run``: output file, summary, exit codes, bad configs, resuming."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from test_config import BAD, MINIMAL
+
+from tolsim.cli import main
+from tolsim.io.netcdf import read_result
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def test_run_writes_file_and_summary(tmp_path, capsys):
+    out = tmp_path / "case.nc"
+    rc = main(["run", str(CONFIGS / "paper_case_study.toml"), "-o", str(out)])
+    assert rc == 0
+    ds = read_result(out)
+    assert int(ds.n_contact) == 16
+    text = capsys.readouterr().out
+    assert "P(contact" in text and "95 % CI" in text and "spot checks" in text
+    assert "epsilon" in text and str(out) in text
+    assert not Path(f"{out}.partial").exists()
+
+
+def test_overrides_and_quiet(tmp_path, capsys):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL)
+    out = tmp_path / "s.nc"
+    rc = main(["run", str(cfg), "-o", str(out), "--samples", "50", "--seed", "3", "--quiet"])
+    assert rc == 0
+    assert capsys.readouterr().out == ""
+    ds = read_result(out)
+    assert int(ds.n_assemblies) == 50 and ds.attrs["seed"] == 3
+    # the stored config is the effective one: the overrides are in it (issue 17, item 2)
+    from tolsim.io.config import parse_config
+
+    stored = parse_config(ds.attrs["config"])
+    assert stored.study.samples == 50 and stored.study.seed == 3
+    assert ds.attrs["config"] != MINIMAL
+
+
+def test_default_output_name(tmp_path, monkeypatch):
+    cfg = tmp_path / "mystudy.toml"
+    cfg.write_text(MINIMAL)
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", str(cfg), "--quiet", "--samples", "10"]) == 0
+    assert (tmp_path / "mystudy.nc").exists()
+
+
+@pytest.mark.parametrize("replace_, key", [(b[1], b[2]) for b in BAD], ids=[b[0] for b in BAD])
+def test_bad_config_exit_2_one_line_no_file(tmp_path, capsys, replace_, key):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(MINIMAL.replace(*replace_, 1))
+    out = tmp_path / "bad.nc"
+    rc = main(["run", str(cfg), "-o", str(out)])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("tolsim run: error: ")
+    assert key in err
+    assert sorted(os.listdir(tmp_path)) == ["bad.toml"]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--samples", "0"], "positive integer"),
+    (["--seed", "-4"], "--seed"),
+    (["--workers", "x"], "positive integer"),
+    (["-o", "/nonexistent-folder/x.nc"], "does not exist"),
+    (["--resume"], "no checkpoint"),
+])
+def test_bad_flags(tmp_path, capsys, argv, message):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL)
+    if "-o" not in argv:
+        argv = argv + ["-o", str(tmp_path / "s.nc")]
+    assert main(["run", str(cfg)] + argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert sorted(os.listdir(tmp_path)) == ["s.toml"]
+
+
+def test_rerun_resumes_from_checkpoint(tmp_path, capsys):
+    # Interrupt a run after 3 blocks (through the Python API, as a crash would leave it), then
+    # the same command picks the checkpoint up and gives the same data as a fresh run.
+    from tolsim.io.config import load_config
+    from tolsim.study.execution.runner import StudyInterrupted, run_study
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL.replace("samples = 100", "samples = 1000\nblock_size = 100"))
+    out = tmp_path / "s.nc"
+    with pytest.raises(StudyInterrupted):
+        run_study(load_config(cfg), chunk_blocks=1, checkpoint_path=f"{out}.partial",
+                  max_blocks=3)
+    assert main(["run", str(cfg), "-o", str(out), "--resume", "--quiet"]) == 0
+    assert not Path(f"{out}.partial").exists()
+    fresh = tmp_path / "fresh.nc"
+    assert main(["run", str(cfg), "-o", str(fresh), "--quiet"]) == 0
+    a, b = xr.open_dataset(out), xr.open_dataset(fresh)
+    for name in a.data_vars:
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    a.close()
+    b.close()
+
+
+def test_console_script_process(tmp_path):
+    # The real process: exit codes and stderr as a user sees them (not a TTY: no progress bar).
+    out = tmp_path / "m.nc"
+    env = dict(os.environ, PYTHONWARNINGS="ignore")
+    ok = subprocess.run([sys.executable, "-m", "tolsim", "run",
+                         str(CONFIGS / "paper_mitigated.toml"), "-o", str(out)],
+                        capture_output=True, text=True, env=env, timeout=300)
+    assert ok.returncode == 0, ok.stderr
+    assert "P(contact" in ok.stdout and out.exists()
+    bad = subprocess.run([sys.executable, "-m", "tolsim", "run", str(tmp_path / "none.toml")],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert bad.returncode == 2
+    assert bad.stderr.count("\n") == 1 and "none.toml" in bad.stderr
+
+
+# --- issue 17: output checked first, what a long run says, precision target -------------------
+def _no_sampling(monkeypatch):
+    """Make any study fail: the checks below must come before the work."""
+    import tolsim.study.execution.runner
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the study ran")
+
+    monkeypatch.setattr(tolsim.study.execution.runner, "run_study", refuse)
+
+
+def _as_root():
+    return hasattr(os, "geteuid") and os.geteuid() == 0
+
+
+@pytest.mark.parametrize("case", ["parent_is_a_file", "output_is_a_folder",
+                                  "read_only_file_system", "read_only_folder",
+                                  "write_protected_output"])
+def test_unwritable_output_fails_before_any_work(tmp_path, capsys, monkeypatch, case):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL)
+    if case == "parent_is_a_file":  # unwritable for root too
+        (tmp_path / "notes.txt").write_text("")
+        out, message = tmp_path / "notes.txt" / "s.nc", "is not a folder"
+    elif case == "output_is_a_folder":
+        out, message = tmp_path / "s.nc", "is a folder"
+        out.mkdir()
+    elif case == "read_only_file_system":  # as a read-only mount answers, root or not
+        import errno
+        import tempfile
+
+        def refuse(*args, **kwargs):
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+
+        monkeypatch.setattr(tempfile, "mkstemp", refuse)
+        out, message = tmp_path / "s.nc", "cannot write to output folder"
+    else:
+        if _as_root():
+            pytest.skip("permissions do not stop root")
+        folder = tmp_path / "results"
+        folder.mkdir()
+        out = folder / "s.nc"
+        if case == "read_only_folder":
+            folder.chmod(0o555)
+            message = "cannot write to output folder"
+        else:
+            out.write_text("an earlier result")
+            out.chmod(0o444)
+            message = "write-protected"
+    _no_sampling(monkeypatch)
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    try:
+        rc = main(["run", str(cfg), "-o", str(out)])
+    finally:
+        if case == "read_only_folder":
+            folder.chmod(0o755)
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert err.count("\n") == 1 and err.startswith("tolsim run: error: ")
+    assert message in err and str(out.parent if "folder" in message else out) in err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before  # no probe, no partial
+
+
+def test_checkpoint_interval_flag(tmp_path, capsys, monkeypatch):
+    from tolsim.cli import build_parser
+    from tolsim.study.execution import runner
+
+    args = build_parser(["run"]).parse_args(["run"])
+    assert args.checkpoint_interval == 30.0
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    help_text = capsys.readouterr().out
+    assert "--checkpoint-interval SECONDS" in help_text and "Default: 30" in help_text
+    assert "every 30 s" in help_text  # the description says it too
+    saves = []
+    save = runner._save_checkpoint
+    monkeypatch.setattr(runner, "_save_checkpoint", lambda *a: saves.append(1) or save(*a))
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL.replace("samples = 100", "samples = 1000\nblock_size = 100"))
+    out = tmp_path / "s.nc"
+    common = ["run", str(cfg), "-o", str(out), "--chunk-blocks", "1", "--quiet"]
+    assert main(common + ["--checkpoint-interval", "0"]) == 0
+    assert len(saves) == 9  # after every chunk but the last
+    saves.clear()
+    assert main(common + ["--checkpoint-interval", "1e6"]) == 0
+    assert saves == []
+    assert main(common + ["--checkpoint-interval", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "--checkpoint-interval" in err and err.count("\n") == 1
+
+
+def test_resume_says_what_was_resumed(tmp_path, capsys):
+    from tolsim.io.config import load_config
+    from tolsim.study.execution.runner import StudyInterrupted, run_study
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL.replace("samples = 100", "samples = 1000\nblock_size = 100"))
+    out = tmp_path / "s.nc"
+    with pytest.raises(StudyInterrupted):
+        run_study(load_config(cfg), chunk_blocks=1, checkpoint_path=f"{out}.partial",
+                  max_blocks=3)
+    assert main(["run", str(cfg), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"resumed from {out}.partial: 300 of 1 000 assemblies already done" in err
+
+
+def _compiling_once(monkeypatch):
+    """Make the next study compile a new kernel, as with a cold Numba cache."""
+    import numba
+
+    from tolsim.study.execution import chunks
+
+    run_chunk = chunks.run_chunk
+    pending = [True]
+
+    def compile_then_run(*args, **kwargs):
+        if pending:
+            pending.clear()
+            numba.njit(lambda x: x + 1)(1)  # new code: Numba compiles
+        return run_chunk(*args, **kwargs)
+
+    monkeypatch.setattr(chunks, "run_chunk", compile_then_run)
+
+
+def test_compiling_is_said_once_and_only_when_it_happens(tmp_path, capsys, monkeypatch):
+    from tolsim.study.execution.runner import COMPILING_MESSAGE
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL)
+    argv = ["run", str(cfg), "-o", str(tmp_path / "s.nc"), "--chunk-blocks", "1"]
+    assert main(argv) == 0  # kernels loaded from the cache (or compiled: not checked here)
+    capsys.readouterr()
+    _compiling_once(monkeypatch)
+    assert main(argv) == 0
+    assert capsys.readouterr().err.count(COMPILING_MESSAGE) == 1
+    assert main(argv) == 0  # nothing left to compile: nothing said
+    assert COMPILING_MESSAGE not in capsys.readouterr().err
+    _compiling_once(monkeypatch)
+    assert main(argv + ["--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.slow
+def test_cold_kernel_cache_is_said_in_a_real_process(tmp_path):
+    # An empty Numba cache (NUMBA_CACHE_DIR): the first run compiles and says so, the second
+    # loads the kernels from the cache and says nothing. (Small tolerances: no ball needs the
+    # full model, whose kernels would double the compile time.)
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL.replace("std_deg = 0.5", "std_deg = 0.02"))
+    env = dict(os.environ, PYTHONWARNINGS="ignore", NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    argv = [sys.executable, "-m", "tolsim", "run", str(cfg), "-o", str(tmp_path / "s.nc")]
+    first = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=600)
+    assert first.returncode == 0, first.stderr
+    assert "compiling kernels (first run only)" in first.stderr
+    second = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=600)
+    assert second.returncode == 0, second.stderr
+    assert "compiling" not in second.stderr
+
+
+def test_target_ci_width_stops_and_says_so(tmp_path, capsys):
+    from test_study import STUDY
+
+    text = (STUDY.replace("{static}", "paired").replace("{propagation}", "constant")
+            .replace("{sampling}", "random"))
+    cfg = tmp_path / "t.toml"
+    cfg.write_text(text)
+    out = tmp_path / "t.nc"
+    assert main(["run", str(cfg), "-o", str(out), "--target-ci-width", "0.05"]) == 0
+    text_out = capsys.readouterr().out
+    ds = read_result(out)
+    n_done = int(ds.n_assemblies)
+    assert 0 < n_done < 3000 and ds.attrs["samples"] == n_done
+    assert ds.attrs["samples_maximum"] == 3000 and ds.attrs["target_ci_width"] == "0.05"
+    assert f"stopped at the target after {n_done:,} of at most 3,000".replace(",", " ") in \
+        text_out
+    assert "--target-ci-width 0.05" in ds.attrs["history"]
+    # the same study run to that fixed size gives the same data
+    fixed = tmp_path / "fixed.nc"
+    assert main(["run", str(cfg), "-o", str(fixed), "--samples", str(n_done), "--quiet"]) == 0
+    a = read_result(fixed)
+    for name in a.data_vars:
+        np.testing.assert_array_equal(a[name].values, ds[name].values, err_msg=name)
+
+
+@pytest.mark.parametrize("value", ["0", "abc", "-5%", "1.5"])
+def test_bad_target_ci_width(tmp_path, capsys, value):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL)
+    out = tmp_path / "s.nc"
+    assert main(["run", str(cfg), "-o", str(out), f"--target-ci-width={value}"]) == 2
+    err = capsys.readouterr().err
+    assert "--target-ci-width" in err and "10%" in err and err.count("\n") == 1
+    assert sorted(os.listdir(tmp_path)) == ["s.toml"]
+
+
+def test_summary_warns_when_balls_are_unresolved(tmp_path, capsys):
+    # Issue 17, item 4: a study in which many balls have no epsilon must say so next to its
+    # ppm and Cpk. The third ball (rho = 1.5) loses a contact in every assembly (paired
+    # forces put one flank in tension), so a third of the balls and every train without a
+    # certain contact are unresolved.
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "configs" / "known_answer.toml").read_text()
+    text = text.replace("balls = 2", "balls = 3").replace(
+        "side_force_ratio = [-0.6, 0.6]", "side_force_ratio = [-0.6, 0.6, 1.5]")
+    cfg = tmp_path / "lossy.toml"
+    cfg.write_text(text)
+    assert main(["run", str(cfg), "-o", str(tmp_path / "l.nc"), "--samples", "2048"]) == 0
+    out = capsys.readouterr().out
+    assert "warning: 2048 of 6144 balls (33 %) have no epsilon from any model" in out
+    assert "are unresolved; P(contact) is known only within the bounds" in out
+
+
+def test_summary_splits_the_spot_checks_by_stratum(tmp_path, capsys):
+    # The spot checks are stratified (half near the spec limit on |epsilon|); the summary
+    # gives the agreement with the full model per stratum, not only mixed.
+    import re
+
+    assert main(["run", "-o", str(tmp_path / "d.nc"), "--samples", "2048"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("spot checks"))
+    m = re.search(r"uniform (\d+): RMS [\d.]+ %, max [\d.]+ %; near the limit (\d+): RMS", line)
+    assert m and int(m.group(1)) + int(m.group(2)) == 20, line

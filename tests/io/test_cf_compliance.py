@@ -1,0 +1,159 @@
+"""Every result file passes the IOOS compliance checker, ``compliance-checker --test=cf:1.10``.
+
+For the packaged default and every config in configs/ (small, fast runs; the Sobol' indices
+stay on where the config asks for them, with few samples, so the ``factor`` variables are
+checked too), the file written by :func:`tolsim.io.netcdf.write_result` must give no checker
+exception and no failed check of high (3) or medium (2) priority. (With ``-c strict`` the
+files pass every check; the only remark, in a passed check, is CF 7.1's "the bin edges might
+be cell bounds": no ``bounds`` attribute on purpose, see tolsim.io.schema.apply_attributes.)
+The negative controls show that the check can fail.
+"""
+
+import json
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+pytest.importorskip("compliance_checker", reason="compliance-checker is not installed")
+from compliance_checker.runner import CheckSuite, ComplianceChecker  # noqa: E402
+
+from tolsim.io.config import load_config  # noqa: E402
+from tolsim.io.netcdf import result_to_dataset, write_result  # noqa: E402
+from tolsim.study.execution.runner import run_study  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+#: (configs with a [carriage] included: their files add the ``track`` and carriage variables)
+CONFIG_FILES = [ROOT / "tolsim" / "data" / "default.toml",
+                *sorted((ROOT / "configs").glob("*.toml"))]
+CHECKER = "cf:1.10"
+#: small runs: assemblies per propagation model (along-track is ~100x dearer per assembly),
+#: Sobol' base samples (each costs d + 2 assemblies) and spot checks
+SAMPLES = {"constant": 64, "along_track": 8}
+SENSITIVITY_SAMPLES = 16
+SPOT_CHECKS = 3
+#: a rare-event estimator (configs/rare_contact.toml): the fewest samples per level of subset
+#: simulation at p0 = 0.1 (10 chains), and few importance samples
+SAMPLES_PER_LEVEL = 100
+IMPORTANCE_SAMPLES = 100
+#: a config without random tolerances, run with the indices on: an empty ``factor`` dimension
+EMPTY_FACTORS = "paper_mitigated.toml"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def checkers():
+    with warnings.catch_warnings():  # its deprecated ioos_sos checker warns on loading
+        warnings.simplefilter("ignore", DeprecationWarning)
+        CheckSuite.load_all_available_checkers()
+
+
+def check(path, tmp_path):
+    """The checker's report of ``path``: (exceptions occurred, {weight: [failed checks]})."""
+    report = tmp_path / f"{Path(path).name}.json"
+    _, errors = ComplianceChecker.run_checker(
+        str(path), [CHECKER], verbose=0, criteria="strict", output_filename=str(report),
+        output_format="json")
+    out = json.loads(report.read_text())[CHECKER]
+    failed = {}
+    for weight, key in ((3, "high_priorities"), (2, "medium_priorities"),
+                        (1, "low_priorities")):
+        failed[weight] = [f"{r['name']}: {r['msgs']}" for r in out[key]
+                          if r["value"][0] < r["value"][1]]
+    return errors, failed
+
+
+def small(path):
+    config = replace(load_config(path), sweep=None)  # a sweep's base study (its file: below)
+    st = config.study
+    study = replace(st, samples=SAMPLES[st.propagation],
+                    spot_checks=min(st.spot_checks, SPOT_CHECKS),
+                    sensitivity_samples=SENSITIVITY_SAMPLES if path.name == EMPTY_FACTORS
+                    else min(st.sensitivity_samples, SENSITIVITY_SAMPLES),
+                    samples_per_level=SAMPLES_PER_LEVEL, p0=0.1,
+                    importance_samples=IMPORTANCE_SAMPLES)
+    return replace(config, study=study)
+
+
+def test_configs_are_covered_with_sensitivity():
+    assert len(CONFIG_FILES) >= 3
+    with_sensitivity = [p.name for p in CONFIG_FILES
+                        if p.name != EMPTY_FACTORS and small(p).study.sensitivity_samples]
+    assert with_sensitivity, "no config checks the sensitivity (factor) variables"
+    # and one the variables of a rare-event estimator (the importance sampling file with its
+    # design point is checked in tests/study/test_rare_study.py)
+    assert [p.name for p in CONFIG_FILES if small(p).study.estimator != "monte_carlo"]
+
+
+@pytest.mark.slow  # the checker takes a few seconds per file
+@pytest.mark.parametrize("path", CONFIG_FILES, ids=lambda p: p.name)
+def test_result_file_passes_cf_checker(path, tmp_path, capsys):
+    result = run_study(small(path))
+    out = tmp_path / "result.nc"
+    ds = write_result(result, out, history="test")
+    if result.sensitivity is not None:
+        assert ds.sizes["factor"] == len(result.sensitivity.factors)
+    errors, failed = check(out, tmp_path)
+    assert not errors, capsys.readouterr().err  # a checker exception hides a check
+    assert failed[3] == [] and failed[2] == [], failed
+
+
+def test_negative_control_fill_value_on_coordinates(tmp_path):
+    # a part of a result written by xarray's defaults, without write_dataset's encoding, has
+    # _FillValue on its float coordinates (CF 2.5.1 forbids it): the check must see that
+    ds = result_to_dataset(run_study(small(CONFIG_FILES[0])), history="test")
+    part = ds[["velocity_deviation_quantile", "survival_probability"]]
+    out = tmp_path / "default_encoding.nc"
+    part.to_netcdf(out, engine="netcdf4")
+    errors, failed = check(out, tmp_path)
+    assert not errors
+    flagged = " ".join(failed[3])
+    assert "'quantile' must not have the _FillValue" in flagged, failed
+    assert "'elapsed_time' must not have the _FillValue" in flagged, failed
+
+
+def test_negative_control_string_coordinate_and_time(tmp_path):
+    # a string coordinate variable (CF coordinate variables are strictly monotonic numbers;
+    # checker 6.1 raises on it) and a coordinate named time in plain seconds (not a CF time
+    # coordinate: units "<unit> since <epoch>") are both caught
+    ds = xr.Dataset({"y": (("contact", "time"), np.zeros((2, 3)), {"units": "1"})},
+                    coords={"contact": ("contact", ["BL", "BR"]),
+                            "time": ("time", [0.0, 1.0, 2.0], {"units": "s"})},
+                    attrs={"Conventions": "CF-1.10"})
+    out = tmp_path / "bad.nc"
+    ds.to_netcdf(out, engine="netcdf4", encoding={"time": {"_FillValue": None}})
+    errors, failed = check(out, tmp_path)
+    assert errors or any("contact" in f for f in failed[3]), failed
+    assert any("time" in f for f in failed[3]), failed
+
+
+@pytest.mark.slow
+def test_result_file_with_saved_samples_passes_cf_checker(tmp_path, capsys):
+    # issue 17: the per-assembly export (a ``sample`` dimension beside ``ball``, ``pair`` and
+    # ``contact``, flags on ``sample_model``, missing contact times) and the worst-case / RSS
+    # variables keep the file CF-clean
+    result = run_study(small(CONFIG_FILES[0]), save_samples=SAMPLES["constant"] // 2)
+    out = tmp_path / "samples.nc"
+    ds = write_result(result, out, history="test")
+    assert ds.sizes["sample"] == SAMPLES["constant"] // 2
+    assert "velocity_deviation_rss" in ds and "gap_closure_worst_case" in ds
+    errors, failed = check(out, tmp_path)
+    assert not errors, capsys.readouterr().err
+    assert failed[3] == [] and failed[2] == [], failed
+
+
+def test_sweep_file(tmp_path):
+    """A sweep's file (issue 14; tolsim.io.sweep): every variable with the sweep dimension
+    in front, the swept key as a coordinate with UDUNITS units, padded spot checks."""
+    from tolsim.io.config import parse_config
+    from tolsim.io.sweep import run_sweep
+
+    text = (ROOT / "configs" / "known_answer.toml").read_text().replace(
+        "samples = 20000", "samples = 256").replace("spot_checks = 10", "spot_checks = 2")
+    text += '\n[sweep]\n"tolerances.bottom_rotation.std_deg" = [1.0, 2.0]\n'
+    run_sweep(parse_config(text), tmp_path / "sweep.nc")
+    errors, failed = check(tmp_path / "sweep.nc", tmp_path)
+    assert not errors
+    assert not failed[3] and not failed[2], failed

@@ -1,0 +1,650 @@
+"""Along-track propagation with a carriage (tolsim issue 12, point 4).
+
+Balls roll through the carriage's loaded zone at -(1 - epsilon) v / 2, leave at its trailing
+end, new ones enter at its leading end, the carriage is re-solved at every evaluation
+(:mod:`tolsim.study.pipeline.carriage_track`), with the carriage solve taking each ball at its own z
+(:func:`tolsim.physics.carriage.solve_carriage_batch` with ``ball_z`` and ``loaded``) and an
+optional end relief of the carriage grooves. Each test names its reference and tolerance.
+"""
+
+from dataclasses import replace
+
+import numba
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from tolsim.io.config import ConfigError, parse_config
+from tolsim.io.netcdf import result_to_dataset
+from tolsim.physics.carriage import (
+    STATUS_CONVERGED,
+    CarriageLayout,
+    CarriageLoad,
+    end_relief,
+    solve_carriage_batch,
+)
+from tolsim.physics.geometry import TABLE1
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.static import GrooveErrors
+from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.carriage_track import (
+    TrackTrace,
+    advance_kernel,
+    first_contact_carriage_track,
+    slot_capacity,
+)
+from tolsim.study.pipeline.propagation import first_contact_tracks
+from tolsim.study.sampling import (
+    _ar1,
+    block_generator,
+    entering_capacity,
+    error_values,
+    field_grid,
+    moving_ball_values,
+    sample_block,
+)
+
+K = hertz_constants(TABLE1.ball_radius, TABLE1.conformity, TABLE1.youngs_modulus,
+                    TABLE1.poisson_ratio).load_deflection_constant
+#: Agreement of two carriage solves of the same balls that stop at the solver's tolerances
+#: (tests/physics/test_carriage_batch.py: 1e-9 of the largest force).
+AGREEMENT = 1e-9
+
+BASE = """\
+[bearing]
+ball_diameter_mm = 10.0
+conformity = 0.54
+nominal_contact_angle_deg = 45.0
+[motion]
+groove_velocity_mm_per_s = 200.0
+stroke_mm = {stroke}
+[carriage]
+balls_per_track = {n}
+ball_pitch_mm = 10.05
+preload_oversize_um = {preload}
+{relief}
+[carriage.load]
+vertical_N = {vertical}
+[[carriage.track]]
+x_mm = -20.0
+orientation_deg = 90.0
+[[carriage.track]]
+x_mm = 20.0
+orientation_deg = -90.0
+[train]
+balls = {n}
+initial_gap = {gap}
+{zone}
+{tolerances}
+[study]
+samples = {samples}
+seed = 3
+block_size = {block}
+propagation = "along_track"
+time_steps = {steps}
+"""
+FIXED_GAP = '{ distribution = "fixed", value_um = 50.0 }'
+#: Per-ball tangential offsets of both carriage flanks (made equal per ball in the test that
+#: needs the ball's force unchanged), a rail field per track, ball sizes.
+TOP_FLANKS = """\
+[tolerances.arc_centre_offset_tangential_TR]
+distribution = "normal"
+std_um = 1.0
+scope = "ball"
+[tolerances.arc_centre_offset_tangential_TL]
+distribution = "normal"
+std_um = 1.0
+scope = "ball"
+"""
+ALL_KINDS = TOP_FLANKS + """\
+[tolerances.bottom_rotation]
+distribution = "normal"
+std_deg = 0.1
+scope = "rail"
+correlation_length_mm = 30.0
+[tolerances.arc_centre_offset_tangential_BL]
+distribution = "normal"
+std_um = 1.0
+scope = "rail"
+[tolerances.top_rotation]
+distribution = "normal"
+std_deg = 0.05
+[tolerances.ball_oversize]
+distribution = "truncated_normal"
+std_um = 0.1
+low_um = -0.25
+high_um = 0.25
+"""
+
+
+def config(n=6, stroke=100.0, preload=2.0, vertical=0.0, gap=FIXED_GAP, zone="",
+           tolerances="", samples=8, block=None, steps=40, relief=""):
+    text = BASE.format(n=n, stroke=stroke, preload=preload, vertical=vertical, gap=gap,
+                       zone=zone, tolerances=tolerances, samples=samples,
+                       block=block or samples, steps=steps, relief=relief)
+    return parse_config(text, "along.toml")
+
+
+def wrapped(n=6, pitch=0.0125):
+    """The two-row wrapped guide of tests/physics/test_carriage.py ([Lin2018] Table 1 balls)."""
+    return CarriageLayout([-0.025, 0.025], [0.0, 0.0], np.deg2rad([90.0, -90.0]), n, pitch)
+
+
+# --------------------------------------------------------------------------------------------
+# The carriage solve with balls at their own z, in or out of the loaded zone
+# --------------------------------------------------------------------------------------------
+def sampled_errors(rng, shape, size=1e-6):
+    return GrooveErrors(
+        arc_centre_offset_normal=rng.normal(0.0, size, shape + (4,)),
+        arc_centre_offset_tangential=rng.normal(0.0, size, shape + (4,)),
+        bottom_rotation=rng.normal(0.0, 1.75e-3, shape),
+        top_rotation=rng.normal(0.0, 1.75e-3, shape),
+        bottom_offset=rng.normal(0.0, 2 * size, shape + (2,)),
+        top_offset=rng.normal(0.0, 2 * size, shape + (2,)),
+        ball_oversize=rng.normal(0.0, 0.5 * size, shape),
+    )
+
+
+FIELDS = ("contact_angle_deviation", "normal_force", "side_load", "normal_load",
+          "contact_count", "ball_converged", "displacement", "stiffness", "residual",
+          "status", "iterations", "fallback")
+
+
+@pytest.mark.parametrize("joint", [True, False])
+def test_nominal_ball_z_is_the_fixed_path_bit_for_bit(joint):
+    # The same equations by the per-assembly groove maps: with every ball at its nominal z
+    # and loaded, every output is bit-identical to the default path (measured: 0 difference).
+    layout, load = wrapped(), CarriageLoad(120.0, 600.0, 4.0, -2.0, 1.5)
+    shape = (12, layout.n_tracks, layout.balls_per_track)
+    errors = sampled_errors(np.random.default_rng([12, int(joint)]), shape)
+    a = solve_carriage_batch(layout, load, oversize=2e-6, groove_errors=errors, joint=joint)
+    b = solve_carriage_batch(layout, load, oversize=2e-6, groove_errors=errors, joint=joint,
+                             ball_z=np.broadcast_to(layout.ball_z, shape),
+                             loaded=np.ones(shape, bool))
+    for name in FIELDS:
+        assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+
+
+@pytest.mark.parametrize("joint", [True, False])
+def test_an_unloaded_ball_is_a_ball_removed(joint):
+    # Twin: the same carriage without the last ball of each track (a layout of n - 1 balls at
+    # the same z). Forces agree to AGREEMENT of the largest force and the displacement to
+    # 1e-15 m, 1e-13 rad (both solves stop at the solver tolerances; measured 2.3e-14 of the
+    # force, 7e-20 m and 3e-18 rad); the unloaded ball carries nothing.
+    layout, load = wrapped(), CarriageLoad(-80.0, 900.0, 3.0, 1.0, -1.0)
+    n = layout.balls_per_track
+    shape = (10, layout.n_tracks, n)
+    errors = sampled_errors(np.random.default_rng(5), shape)
+    z = np.broadcast_to(layout.ball_z + 0.003, shape)  # the balls moved along the carriage
+    mask = np.ones(shape, bool)
+    mask[:, :, -1] = False
+    out = solve_carriage_batch(layout, load, oversize=2e-6, groove_errors=errors, ball_z=z,
+                               loaded=mask, joint=joint)
+    small = CarriageLayout(layout.track_x, layout.track_y, layout.track_orientation, n - 1,
+                           layout.ball_pitch)
+    less = GrooveErrors(**{k: np.asarray(getattr(errors, k))[:, :, :-1]
+                           for k in GrooveErrors.__dataclass_fields__})
+    ref = solve_carriage_batch(small, load, oversize=2e-6, groove_errors=less,
+                               ball_z=z[:, :, :-1], joint=joint)
+    assert (out.status == STATUS_CONVERGED).all() and (ref.status == STATUS_CONVERGED).all()
+    fmax = ref.normal_force.max()
+    assert_allclose(out.normal_force[:, :, :-1], ref.normal_force, rtol=0,
+                    atol=AGREEMENT * fmax)
+    assert_allclose(out.displacement[:, :2], ref.displacement[:, :2], rtol=0, atol=1e-15)
+    assert_allclose(out.displacement[:, 2:], ref.displacement[:, 2:], rtol=0, atol=1e-13)
+    assert_array_equal(out.normal_force[:, :, -1], 0.0)
+    assert_array_equal(out.contact_count[:, :, -1], 0)
+    assert out.ball_converged[:, :, -1].all()
+    assert np.isnan(out.contact_angle_deviation[:, :, -1]).all()
+    assert np.isnan(out.normal_load[:, :, -1]).all()
+
+
+def test_ball_z_and_loaded_are_validated():
+    layout = wrapped()
+    with pytest.raises(ValueError, match="ball_z"):
+        solve_carriage_batch(layout, CarriageLoad(vertical_force=100.0), oversize=2e-6,
+                             ball_z=np.zeros((3, 4)))
+    with pytest.raises(ValueError, match="loaded must be an array of bool"):
+        solve_carriage_batch(layout, CarriageLoad(vertical_force=100.0), oversize=2e-6,
+                             loaded=np.ones((2, 6)))
+    with pytest.raises(ValueError, match="start"):
+        solve_carriage_batch(layout, CarriageLoad(vertical_force=100.0), oversize=2e-6,
+                             ball_z=layout.ball_z, start=np.zeros(4))
+
+
+# --------------------------------------------------------------------------------------------
+# End relief
+# --------------------------------------------------------------------------------------------
+def test_end_relief_profile():
+    # h(z) = depth ((|z| - (L/2 - l)) / l)^2 beyond L/2 - l (Notes of
+    # tolsim.physics.carriage.end_relief): 0 inside, depth at the ends, continuous with a
+    # continuous slope (0 at L/2 - l), even in z; exact arithmetic up to round-off (1e-15 relative).
+    zone, depth, length = 0.1, 3e-6, 0.02
+    z = np.array([0.0, 0.029, 0.03, 0.035, 0.04, 0.05, -0.04, 0.06])
+    h = end_relief(z, zone, depth, length)
+    assert_allclose(h, [0, 0, 0, depth / 16, depth / 4, depth, depth / 4, depth],
+                    rtol=1e-15, atol=0)
+    eps = 1e-7
+    assert end_relief(0.03 + eps, zone, depth, length) == pytest.approx(
+        depth * (eps / length) ** 2, rel=1e-6)
+    assert_array_equal(end_relief(z, zone, 0.0, length), 0.0)
+
+
+def test_end_relief_unloads_the_end_balls_gradually():
+    # Wrapped guide, preload o = 3 um, no load: by the mirror symmetry of the tracks the
+    # carriage does not move and each ball is alone in its module. Both carriage flanks
+    # receding by h re-centre the ball to approaches (o - h)/2 (Notes of
+    # tolsim.physics.carriage.end_relief): F = K ((o - h)/2)^1.5, to second order in h/d
+    # (measured 7.7e-4 of the unrelieved force; tolerance 2e-3). As a ball rolls towards the
+    # end its force falls monotonically; before the relief it is exactly the unrelieved one.
+    layout = wrapped()
+    zone, o, depth, length = 6 * 0.0125, 3e-6, 2e-6, 0.02
+    shift = np.linspace(0.0, 0.0312, 53)  # ball 3 from z = 6.25 mm to the end (37.45 mm)
+    shape = (len(shift), 2, 6)
+    z = np.broadcast_to(layout.ball_z + shift[:, None, None], shape)
+    loaded = np.abs(z) <= 0.5 * zone
+    h = end_relief(z, zone, depth, length)
+    offset = np.zeros(shape + (4,))
+    offset[..., 2:] = h[..., None]
+    out = solve_carriage_batch(layout, CarriageLoad(), oversize=o, ball_z=z, loaded=loaded,
+                               groove_errors=GrooveErrors(arc_centre_offset_normal=offset))
+    plain = solve_carriage_batch(layout, CarriageLoad(), oversize=o, ball_z=z, loaded=loaded,
+                                 groove_errors=GrooveErrors(
+                                     arc_centre_offset_normal=np.zeros(shape + (4,))))
+    assert (out.status == STATUS_CONVERGED).all()
+    f = out.normal_force[:, 0, 3, 2]  # F_TR of ball 3 of the left track
+    f0 = plain.normal_force[:, 0, 3, 2]
+    zb = z[:, 0, 3]
+    inside = zb <= 0.5 * zone - length
+    relieved = ~inside
+    assert inside.sum() >= 5 and relieved.sum() >= 20
+    assert_allclose(f[inside], f0[inside], rtol=1e-14)  # (round-off of q ~ 1e-20)
+    assert np.all(np.diff(f[relieved]) < 0)
+    assert_allclose(f, K * ((o - h[:, 0, 3]) / 2) ** 1.5, rtol=0, atol=2e-3 * f0.max())
+    # h = 1.99 um of o = 3 um at the last position: ((3 - 1.99) / 3)^1.5 = 0.195
+    assert 0.18 * f0[-1] < f[-1] < 0.21 * f0[-1]
+    # zero relief changes nothing, bit for bit
+    zero = np.zeros(shape + (4,))
+    zero[..., 2:] = end_relief(z, zone, 0.0, length)[..., None]
+    none = solve_carriage_batch(layout, CarriageLoad(), oversize=o, ball_z=z, loaded=loaded,
+                                groove_errors=GrooveErrors(arc_centre_offset_normal=zero))
+    for name in FIELDS:
+        assert_array_equal(getattr(none, name), getattr(plain, name), err_msg=name)
+
+
+def test_end_relief_in_the_study_unloads_a_ball_on_its_way_out():
+    # The same in the study (trace of N_y): a perfect ball leaving at the trailing end carries
+    # its full preload load until -(L/2 - l) and then less at every step (no load, preload
+    # 3 um, relief 2 um over 20 mm; the identical mirrored tracks keep the carriage still).
+    c = config(preload=3.0, relief="end_relief_depth_um = 2.0\nend_relief_length_mm = 20.0",
+               samples=2, steps=50)
+    trace = TrackTrace()
+    first_contact_carriage_track(c, sample_block(c, 0), trace)
+    half, start = 0.5 * c.train.loaded_zone_length, 0.5 * c.train.loaded_zone_length - 0.02
+    zs, ny = [], []
+    for k in range(len(trace.time)):  # ball 2, from z = -5.025 mm to its exit
+        slot = np.flatnonzero(trace.ball_id[k][0, 0] == 2)
+        if slot.size:
+            zs.append(trace.ball_z[k][0, 0, slot[0]])
+            ny.append(trace.normal_load[k][0, 0, slot[0]])
+    zs, ny = np.array(zs), np.array(ny)
+    inside = zs >= -start
+    relieved = (zs < -start) & (zs >= -half)
+    assert inside.sum() >= 3 and relieved.sum() >= 3
+    assert_allclose(ny[inside], ny[0], rtol=1e-9)
+    assert np.all(np.diff(ny[relieved]) < 0) and ny[relieved][0] < ny[0]
+
+
+# --------------------------------------------------------------------------------------------
+# Propagation
+# --------------------------------------------------------------------------------------------
+def test_perfect_balls_under_a_symmetric_load_never_touch():
+    # No tolerances, no relief, a vertical load on the wrapped guide: every ball is the
+    # perfect module, whose epsilon is 0 under any load ([Lin2018] Sec. 2.4, insight (1)
+    # after Eq. 24); while balls leave and enter and the carriage pitches with them, all balls keep
+    # the same epsilon (|epsilon| <= 1e-12; measured 1.1e-16) and no pair closes.
+    c = config(vertical=300.0, gap='{ distribution = "uniform", low_um = 0.0, high_um = 100.0 }',
+               samples=8, steps=40)
+    trace = TrackTrace()
+    time, pair, valid, _, state, carriage = first_contact_carriage_track(
+        c, sample_block(c, 0), trace)
+    assert np.isinf(time).all() and (pair == -1).all() and valid.all()
+    eps = np.concatenate([e.ravel() for e in trace.velocity_deviation])
+    assert np.nanmax(np.abs(eps)) <= 1e-12
+    assert len(trace.exits) >= 8 and len(trace.entries) >= 8
+    assert state.valid.all() and (carriage.status == 0).all()
+
+
+def test_exit_and_entry_times_by_hand():
+    # Four perfect balls (epsilon = 0, so each drifts at -v/2 = -0.1 m/s relative to the
+    # carriage), fixed gap g = 50 um, D = 10 mm, zone L = 50 mm, stroke 100 mm (0.5 s).
+    # At t = 0 the train is centred: z_j = (j - 1.5)(D + g) = -15.075, -5.025, 5.025, 15.075 mm.
+    # Exit of ball j when z_j - 0.1 t = -L/2: t = (z_j + 0.025) / 0.1 = 0.09925, 0.19975,
+    # 0.30025, 0.40075 s. Entering ball k enters when the ball ahead is at L/2 - D - g =
+    # 14.95 mm: the first at (15.075 - 14.95) / 0.1 = 0.00125 s, then every (D + g) / 0.1 =
+    # 0.1005 s: 0.00125, 0.10175, 0.20225, 0.30275, 0.40325 s (the next at 0.50375 s is
+    # beyond the stroke); each enters at L/2 and sits D + g behind the ball ahead. Linear
+    # interpolation within a step is exact here: tolerance 1e-12 s.
+    c = config(n=4, zone="loaded_zone_length_mm = 50.0", samples=2, steps=100)
+    trace = TrackTrace()
+    first_contact_carriage_track(c, sample_block(c, 0), trace)
+    exits, entries = trace.events("exits"), trace.events("entries")
+    for a in range(2):
+        for track in range(2):
+            mine = exits[(exits[:, 0] == a) & (exits[:, 1] == track)]
+            assert_array_equal(mine[:, 2], [0, 1, 2, 3])
+            assert_allclose(mine[:, 3], [0.09925, 0.19975, 0.30025, 0.40075], rtol=0,
+                            atol=1e-12)
+            mine = entries[(entries[:, 0] == a) & (entries[:, 1] == track)]
+            assert_array_equal(mine[:, 2], [4, 5, 6, 7, 8])
+            assert_allclose(mine[:, 3], 0.00125 + 0.1005 * np.arange(5), rtol=0, atol=1e-12)
+    # after every step the balls are D + g apart (the entering ones too), and 4 or 5 are in
+    # the zone
+    for z in trace.ball_z:
+        gaps = np.diff(z, axis=2) - 0.01
+        assert_allclose(gaps[np.isfinite(gaps)], 50e-6, rtol=0, atol=1e-12)
+        count = np.isfinite(z).sum(axis=2)
+        assert np.all((count == 4) | (count == 5))
+
+
+def test_along_track_agrees_with_constant_propagation_before_any_ball_moves_on():
+    # Construction: preload only, no load, every ball with equal tangential offsets of both
+    # carriage flanks (TR = TL: by the mirror symmetry of the module its forces change only to
+    # second order, (e_t/d)^2 ~ 6e-6, so the carriage stays put and each ball's epsilon is
+    # its own, ~ e_t / (2 d)); no rail fields; a stroke of 8 mm, so that the balls drift 4 mm
+    # and none leaves or enters (the train fills the zone with about 5 mm to spare at each
+    # end). Then epsilon is constant along the track and the contact time is the constant
+    # propagation's closed form with the t = 0 epsilon (tolsim.study.pipeline.propagation, mode a).
+    # Measured agreement 5.9e-7 relative (the small changes of epsilon as the train moves
+    # under the carriage's yaw and pitch from the balls' own errors); tolerance 5e-6. With the
+    # drift of a ball of the wrong sign, -(1 + epsilon) v / 2, the other pairs would close.
+    c = config(stroke=8.0, gap='{ distribution = "uniform", low_um = 0.0, high_um = 40.0 }',
+               tolerances=TOP_FLANKS, samples=48, steps=40)
+    block = sample_block(c, 0)
+    block.normals["arc_centre_offset_tangential_TL"] = block.normals[
+        "arc_centre_offset_tangential_TR"]
+    trace = TrackTrace()
+    time, pair, valid, _, state, _ = first_contact_carriage_track(c, block, trace)
+    assert not trace.exits and not trace.entries
+    assert valid.all() and state.valid.all()
+    t_ref, pair_ref = first_contact_tracks(block.initial_gap, state.velocity_deviation,
+                                           c.motion.groove_velocity, c.motion.duration,
+                                           c.n_tracks)
+    hit = np.isfinite(t_ref)
+    assert 5 <= hit.sum() <= len(hit) - 5  # both outcomes exercised
+    assert_array_equal(np.isfinite(time), hit)
+    assert_array_equal(pair, pair_ref)
+    assert_allclose(time[hit], t_ref[hit], rtol=5e-6)
+
+
+def test_results_do_not_depend_on_batching_or_threads():
+    # Each assembly's Newton starts from its own previous solution and every kernel solves an
+    # assembly by the same operations in any batch and on any number of threads
+    # (solve_carriage_batch Notes, "Many assemblies at once"): the first block alone, as part of
+    # two blocks drawn together, and on one thread give bit-identical results.
+    c = config(vertical=300.0, gap='{ distribution = "uniform", low_um = 0.0, high_um = 30.0 }',
+               tolerances=ALL_KINDS, relief="end_relief_depth_um = 1.0\n"
+               "end_relief_length_mm = 15.0", samples=24, block=12, steps=30)
+    alone = first_contact_carriage_track(c, sample_block(c, 0))
+    both = first_contact_carriage_track(c, sample_block(c, 0, 2))
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        serial = first_contact_carriage_track(c, sample_block(c, 0))
+    finally:
+        numba.set_num_threads(threads)
+    assert np.isfinite(alone[0]).sum() >= 2  # contacts happen
+    for other, rows in ((both, slice(0, 12)), (serial, slice(None))):
+        for k in range(3):
+            assert_array_equal(other[k][rows], alone[k])
+        assert_array_equal(other[4].velocity_deviation[rows], alone[4].velocity_deviation)
+        assert_array_equal(other[5].displacement[rows], alone[5].displacement)
+
+
+def test_run_study_with_a_carriage_along_track():
+    # The runner's along_track branch: per block the carriage integration, the t = 0 balls
+    # into the epsilon statistics and the t = 0 carriages into the carriage statistics; the
+    # result does not depend on the chunking (blocks merged in order) and writes a dataset.
+    c = config(vertical=300.0, gap='{ distribution = "uniform", low_um = 0.0, high_um = 60.0 }',
+               tolerances=ALL_KINDS, samples=24, block=8, steps=20)
+    one = run_study(c, chunk_blocks=1)
+    three = run_study(c, chunk_blocks=3)
+    a, b = one.statistics, three.statistics
+    assert int(a.n_assemblies) == 24 and int(a.carriage_count) == 24
+    for name in ("n_contact", "n_unresolved", "time_histogram", "pair_count", "eps_histogram",
+                 "carriage_mean", "carriage_max"):
+        assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+    assert a.eps_mean == b.eps_mean
+    hits = sum(int(np.isfinite(first_contact_carriage_track(c, sample_block(c, k))[0]).sum())
+               for k in range(3))
+    assert hits == int(a.n_contact) > 0
+    assert len(a.pair_count) == c.n_tracks * (c.train.balls - 1)
+    ds = result_to_dataset(one)
+    assert "contact_probability" in ds
+
+
+# --------------------------------------------------------------------------------------------
+# Sampling: entering balls and rail fields per track
+# --------------------------------------------------------------------------------------------
+def test_entering_draws_come_after_the_others():
+    # sampling.py module docstring, draw 5: the entering balls are drawn after everything
+    # else, so the per-assembly, ball and gap draws of a carriage study are those of the
+    # same study with constant propagation (whose draw 4, the gaps, precedes the fields).
+    c = config(tolerances=ALL_KINDS, gap='{ distribution = "uniform", low_um = 0.0, '
+               'high_um = 60.0 }', samples=16)
+    constant = replace(c, study=replace(c.study, propagation="constant"))
+    a, b = sample_block(c, 0), sample_block(constant, 0)
+    assert_array_equal(a.initial_gap, b.initial_gap)
+    for t in c.tolerances:
+        if t.correlation_length == 0:
+            assert_array_equal(a.normals[t.source], b.normals[t.source])
+    capacity = entering_capacity(c)
+    assert capacity == int(np.floor(1.05 * 0.1 / 0.02)) + 2
+    assert a.entering_gap.shape == (16, 2 * capacity) and b.entering_gap is None
+    assert set(a.entering) == {t.source for t in c.tolerances if t.scope == "ball"}
+
+
+def test_rail_fields_per_track_twin():
+    # Twin of the documented recipe (sampling.py draws 1-5): one generator per block, the
+    # draws in order, a field per track by the stationary AR(1) recursion on its grid
+    # (phi = exp(-spacing / l)); the two tracks' fields are those rows, independent.
+    c = config(tolerances=ALL_KINDS, gap='{ distribution = "uniform", low_um = 0.0, '
+               'high_um = 60.0 }', samples=16)
+    block = sample_block(c, 0)
+    rng = block_generator(c.study.seed, 0)
+    tracks, n = 2, c.train.balls
+    origin, spacing, points = field_grid(c)["bottom_rotation"]
+    rng.standard_normal((16, tracks * 2))  # factors: BL and top_rotation, per track
+    for _ in range(3):  # ball sources: TR, TL, ball_oversize
+        rng.standard_normal((16, tracks * n))
+    rng.standard_normal((16, tracks * (n - 1)))  # gaps
+    innovations = rng.standard_normal((16, tracks * points)).reshape(32, points)
+    phi = np.full((1, points - 1), np.exp(-spacing / 0.03))
+    ref = _ar1(phi, np.sqrt(1.0 - phi * phi), innovations)
+    field = block.fields["bottom_rotation"]
+    assert field.tracks == 2
+    assert_array_equal(field.values, ref)
+    gaps = rng.standard_normal((16, tracks * entering_capacity(c)))
+    assert_array_equal(block.entering_gap,
+                       np.maximum(c.train.initial_gap.from_normal(gaps), 0.0))
+    # track t of assembly a reads row a * tracks + t
+    s = np.array([[origin + 3 * spacing, origin + 7.5 * spacing]])
+    pos = np.repeat(s, 16, axis=0)  # track 0 at one position, track 1 at another
+    at = field.at(pos)
+    assert_allclose(at[:, 0], ref[0::2, 3], rtol=1e-13)  # (round-off of the grid index)
+    assert_allclose(at[:, 1], 0.5 * (ref[1::2, 7] + ref[1::2, 8]), rtol=1e-13)
+
+
+def test_moving_ball_values_at_the_start_are_the_study_values():
+    # The initial balls at their t = 0 rail positions: the values of error_values (every
+    # source, correlated or not), bit for bit.
+    c = config(tolerances=ALL_KINDS, gap='{ distribution = "uniform", low_um = 0.0, '
+               'high_um = 60.0 }', samples=16)
+    block = sample_block(c, 0)
+    ref = error_values(c, block)
+    n, slots = c.train.balls, slot_capacity(c)
+    ids = np.full((16, 2, slots), -1)
+    ids[:, :, :n] = np.arange(n)
+    pos = np.zeros((16, 2, slots))
+    pos[:, :, :n] = block.initial_position.reshape(16, 2, n)
+    values = moving_ball_values(c, block, ids, pos)
+    for source, v in ref.items():
+        assert_array_equal(values[source][:, :, :n].reshape(16, 2 * n),
+                           np.broadcast_to(v, (16, 2 * n)), err_msg=source)
+
+
+def advance_twin(z0, z1, ids, ok, count, entered, gap, half, d, balls, t0, dt):
+    """Plain-Python twin of advance_kernel
+    (module docstring of tolsim.study.pipeline.carriage_track):
+    returns the new slots, the exits and entries [(a, track, id, time)] and the overflow."""
+    m, tracks, slots = z1.shape
+    out_z, out_id = np.full(z1.shape, np.nan), np.full(z1.shape, -1)
+    out_ok, out_count = np.ones(z1.shape, bool), count.copy()
+    out_entered, overflow = entered.copy(), np.zeros(m, bool)
+    exits, entries = [], []
+    for a in range(m):
+        for t in range(tracks):
+            balls_in = []
+            for j in range(count[a, t]):
+                if z1[a, t, j] < -half:
+                    frac = (z0[a, t, j] + half) / (z0[a, t, j] - z1[a, t, j])
+                    exits.append((a, t, ids[a, t, j], t0 + min(max(frac, 0), 1) * dt))
+                else:
+                    balls_in.append([z0[a, t, j], z1[a, t, j], ids[a, t, j], ok[a, t, j]])
+            if not balls_in:
+                overflow[a] = True
+            else:
+                drift = balls_in[-1][0] - balls_in[-1][1]
+                while True:
+                    k = out_entered[a, t]
+                    if k >= gap.shape[2]:
+                        overflow[a] = True
+                        break
+                    new = balls_in[-1][1] + d + gap[a, t, k]
+                    if new > half:
+                        break
+                    if len(balls_in) >= slots:
+                        overflow[a] = True
+                        break
+                    when = t0 + dt - (half - new) / drift * dt
+                    if when < t0:
+                        when, new = t0, half - drift
+                    balls_in.append([new + drift, new, balls + k, True])
+                    entries.append((a, t, balls + k, when))
+                    out_entered[a, t] = k + 1
+            for j, (_, z, ident, good) in enumerate(balls_in):
+                out_z[a, t, j], out_id[a, t, j], out_ok[a, t, j] = z, ident, good
+            out_count[a, t] = len(balls_in)
+    return out_z, out_id, out_ok, out_count, out_entered, overflow, exits, entries
+
+
+def test_advance_kernel_matches_its_twin():
+    # Random trains from near the trailing end of a 60 mm zone, ball drift up to 3 mm per
+    # step: exits, entries (within the step and, with room before it, at its start), full
+    # slots and exhausted draws all occur.
+    rng = np.random.default_rng(11)
+    m, tracks, slots, balls, cap = 400, 2, 6, 4, 3
+    half, d, t0, dt = 0.03, 0.01, 0.3, 0.01
+    count = rng.integers(1, slots + 1, (m, tracks))
+    z0 = np.full((m, tracks, slots), np.nan)
+    ids = np.full((m, tracks, slots), -1, dtype=np.int64)
+    for a in range(m):
+        for t in range(tracks):
+            c = count[a, t]
+            start = rng.uniform(-half - 0.014, -half - 0.004)
+            z0[a, t, :c] = start + np.cumsum(rng.uniform(d, d + 0.002, c))
+            ids[a, t, :c] = np.arange(c)
+    z1 = z0 - rng.uniform(0.0, 0.003, (m, tracks, 1))
+    ok = rng.random((m, tracks, slots)) < 0.9
+    entered = rng.integers(0, cap + 1, (m, tracks))
+    gap = rng.uniform(0.0, 0.003, (m, tracks, cap))
+    ref = advance_twin(z0, z1, ids, ok, count, entered, gap, half, d, balls, t0, dt)
+    a0, a1, aid, aok = z0.copy(), z1.copy(), ids.copy(), ok.copy()
+    acount, aentered = count.astype(np.int64), entered.astype(np.int64)
+    overflow = np.zeros(m, bool)
+    events = [np.empty(z0.shape, np.int64), np.empty(z0.shape), np.empty(z0.shape, np.int64),
+              np.empty(z0.shape)]
+    advance_kernel(a0, a1, aid, aok, acount, aentered, gap, half, d, balls, t0, dt,
+                   overflow, *events)
+    assert_allclose(a1, ref[0], rtol=0, atol=1e-17)
+    assert_array_equal(aid, ref[1])
+    assert_array_equal(aok, ref[2])
+    assert_array_equal(acount, ref[3])
+    assert_array_equal(aentered, ref[4])
+    assert_array_equal(overflow, ref[5])
+    for (ident, when), rows in (((events[0], events[1]), ref[6]),
+                                ((events[2], events[3]), ref[7])):
+        got = sorted((a, t, ident[a, t, j], when[a, t, j])
+                     for a, t, j in zip(*np.nonzero(ident >= 0), strict=True))
+        want = sorted(rows)
+        assert len(got) == len(want) > 50
+        assert_array_equal([g[:3] for g in got], [w[:3] for w in want])
+        assert_allclose([g[3] for g in got], [w[3] for w in want], rtol=0, atol=1e-15)
+    assert overflow.any() and (aentered > entered).any()
+
+
+# --------------------------------------------------------------------------------------------
+# Config
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("relief, study, message", [
+    ("end_relief_depth_um = -1.0\nend_relief_length_mm = 10.0", "",
+     r"along\.toml:\d+: carriage\.end_relief_depth_um = -1\.0 must be >= 0"),
+    ("end_relief_depth_um = 1.0", "",
+     r"carriage\.end_relief_depth_um needs end_relief_length_<unit>"),
+    ("end_relief_length_mm = 10.0", "",
+     r"carriage\.end_relief_length_mm has no effect without end_relief_depth"),
+    ("end_relief_depth_um = 1.0\nend_relief_length_mm = 40.0", "",
+     r"carriage\.end_relief_length_mm = 40\.0 is longer than half the loaded zone "
+     r"\(30\.15 mm"),
+    ("end_relief_depth_mm = 1.0\nend_relief_length_mm = 10.0", "",
+     r"carriage\.end_relief_depth_mm = 1\.0 is beyond 100 um"),
+    ("end_relief_depth_um = 1.0\nend_relief_length_mm = 10.0", "constant",
+     r"carriage\.end_relief_depth_um acts on balls rolling through the carriage: it needs "
+     r"study\.propagation = 'along_track'"),
+    ("ball_oversize_deviation_um = [0.0, 0.1, 0.0, 0.1, 0.0, 0.1, 0.0, 0.1, 0.0, 0.1, 0.0, "
+     "0.1]", "", r"carriage\.ball_oversize_deviation_um fixes the size of the balls"),
+    ("", "one ball", r"carriage\.balls_per_track = 1: with propagation = 'along_track' a "
+     r"track needs at least 2 balls"),
+])
+def test_config_errors_are_one_line(relief, study, message):
+    text = BASE.format(n=6, stroke=100.0, preload=2.0, vertical=0.0, gap=FIXED_GAP, zone="",
+                       tolerances="", samples=8, block=8, steps=10, relief=relief)
+    if study == "constant":
+        text = text.replace('propagation = "along_track"', 'propagation = "constant"')
+    elif study == "one ball":
+        text = text.replace("balls_per_track = 6", "balls_per_track = 1").replace(
+            "balls = 6", "balls = 1")
+    with pytest.raises(ConfigError, match=message) as err:
+        parse_config(text, "along.toml")
+    assert "\n" not in str(err.value)
+
+
+def test_config_end_relief_is_stored_in_si():
+    c = config(relief="end_relief_depth_um = 1.5\nend_relief_length_mm = 12.0")
+    assert c.carriage.end_relief_depth == pytest.approx(1.5e-6, rel=1e-15)
+    assert c.carriage.end_relief_length == pytest.approx(0.012, rel=1e-15)
+    assert config().carriage.end_relief_depth == 0.0
+    with pytest.raises(ValueError, match="give both"):
+        replace(c.carriage, end_relief_length=0.0)
+
+
+def test_sobol_indices_of_an_along_track_carriage_study():
+    # The sensitivity design swaps a factor between blocks A and B; a ball source carries the
+    # entering balls' values with it and the initial gap the entering gaps, so the indices of
+    # an along-track carriage study are those of its whole stroke. With a fixed gap and one
+    # random ball source, that source is the only factor: AB = B, so its total index is 1 up
+    # to the sampling noise of the estimator (16 base samples: measured 0.92), and the run is
+    # seeded (bit-identical when repeated).
+    from tolsim.study.analyses.sensitivity import study_sensitivity
+
+    tolerances = ('[tolerances.arc_centre_offset_tangential_BL]\ndistribution = "normal"\n'
+                  'std_um = 2.0\nscope = "ball"\n')
+    text = BASE.format(n=6, stroke=100.0, preload=2.0, vertical=0.0, gap=FIXED_GAP, zone="",
+                       tolerances=tolerances, samples=8, block=8, steps=10, relief="")
+    c = parse_config(text, "along.toml")
+    first = study_sensitivity(c, samples=16, n_resamples=20)
+    again = study_sensitivity(c, samples=16, n_resamples=20)
+    assert first.factors == ("arc_centre_offset_tangential_BL",)
+    np.testing.assert_array_equal(first.total, again.total)
+    eps = first.outputs.index("velocity_deviation")
+    assert first.total[eps, 0] == pytest.approx(1.0, abs=0.3)

@@ -1,0 +1,478 @@
+"""Rare-event estimators wired into studies (issue 15): tolsim.study.analyses.limit_state and
+the runner.
+
+Where the numbers come from:
+
+* **U -> Block** is the inverse of the draw layout of tolsim.study.sampling: the rows of U
+  drawn the sampler's way (block k's generator, its draws in order, concatenated) must give
+  the sampler's own block, and so the same epsilon, bit for bit.
+* **The limit states' signs** are checked against the plain run's own indicators (the
+  runner's pieces: first_contact_tracks / first_contact_along_track, the friction of the
+  trains, |epsilon| against the limit), unresolved included, on a few hundred assemblies.
+* **configs/rare_contact.toml** (the packaged yaw study with 80-180 um gaps): P(contact) =
+  1.175e-3, the reference from plain Monte Carlo over 3 million trains
+  (``python benchmarks/bench_rare_events.py --study``, 95 % interval 1.14e-3 to 1.22e-3).
+  The test runs the study's plain run of 20 000 trains, subset simulation at 1000 per
+  level and importance sampling (2000 samples around the pairs' design points), and asks
+  that their 95 % intervals agree (overlap pairwise).
+"""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from tolsim.io.config import ConfigError, load_config, parse_config
+from tolsim.io.netcdf import read_result, result_to_dataset, write_result
+from tolsim.io.schema import rare_events
+from tolsim.study.analyses import limit_state
+from tolsim.study.analyses.rare_events import RARE_EVENT_STREAM, STATUS_NO_FAILURE
+from tolsim.study.execution.runner import PrecisionTarget, run_study
+from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
+from tolsim.study.pipeline.track_friction import evaluate_friction
+from tolsim.study.sampling import (
+    block_generator,
+    draw_widths,
+    error_values,
+    field_grid,
+    per_assembly_sources,
+    sample_block,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIGS = ROOT / "configs"
+RARE = CONFIGS / "rare_contact.toml"
+#: P(contact) of rare_contact.toml: plain Monte Carlo over 3e6 trains (module docstring).
+RARE_CONTACT_REFERENCE = 1.175e-3
+
+#: the correlation groups of tests/study/test_correlation.py, on the yaw study's sources
+CORRELATIONS = """
+[[correlation]]
+sources = ["top_rotation", "arc_centre_offset_tangential_TR", "arc_centre_offset_tangential_TL"]
+matrix = [[1.0, 0.6, -0.3],
+          [0.6, 1.0, 0.5],
+          [-0.3, 0.5, 1.0]]
+
+[[correlation]]
+sources = ["arc_centre_offset_tangential_BL", "arc_centre_offset_tangential_BR"]
+coefficient = 0.8
+"""
+
+
+def study(name, *, text_change=None, **settings):
+    """A packaged config, with ``[study]`` settings replaced (random sampling by default)."""
+    path = CONFIGS / name
+    if text_change is None:
+        config = load_config(path)
+    else:
+        config = parse_config(text_change(path.read_text()), name)
+    settings.setdefault("sampling", "random")
+    return dataclasses.replace(config, study=dataclasses.replace(config.study, **settings))
+
+
+def normals_of_block(config, index):
+    """U of block ``index`` drawn the sampler's way: its generator, each draw in order."""
+    st = config.study
+    rng = block_generator(st.seed, index)
+    parts = [rng.standard_normal((st.block_size, width))
+             for width in draw_widths(config, field_grid(config)).values()]
+    size = min(st.block_size, st.samples - index * st.block_size)
+    return np.concatenate(parts, axis=1)[:size]
+
+
+def assert_same_block(a, b):
+    assert a.size == b.size
+    assert a.normals.keys() == b.normals.keys() and a.fields.keys() == b.fields.keys()
+    for name in a.normals:
+        assert_array_equal(a.normals[name], b.normals[name], err_msg=name)
+    for name in a.fields:
+        assert_array_equal(a.fields[name].values, b.fields[name].values, err_msg=name)
+        assert (a.fields[name].origin, a.fields[name].spacing) == (
+            b.fields[name].origin, b.fields[name].spacing)
+    assert_array_equal(a.initial_gap, b.initial_gap)
+    assert_array_equal(a.initial_position, b.initial_position)
+    if a.entering_gap is None:
+        assert b.entering_gap is None
+    else:
+        assert_array_equal(a.entering_gap, b.entering_gap)
+        for name in a.entering:
+            assert_array_equal(a.entering[name], b.entering[name], err_msg=name)
+
+
+# --- the standard-normal space ---------------------------------------------------------------
+BLOCK_CASES = {
+    # rail fields at the ball centres, ball and per-assembly sources, one track
+    "yaw": dict(name="yaw_moment_tolerances.toml"),
+    # Gaussian copula of per-assembly sources and of two rail fields
+    "yaw_correlated": dict(name="yaw_moment_tolerances.toml",
+                           text_change=lambda text: text + CORRELATIONS),
+    # two tracks: per-track factors and trains
+    "carriage": dict(name="carriage_preload.toml"),
+    # rail fields on a grid along the rail
+    "along_track": dict(name="whatif_along_track.toml"),
+    # a carriage with along_track: the entering balls' draws (draw 5)
+    "carriage_along_track": dict(name="carriage_preload.toml", propagation="along_track"),
+}
+
+
+@pytest.mark.parametrize("case", BLOCK_CASES, ids=str)
+def test_normals_to_block_reproduce_the_sampler(case):
+    # block 1 of a study whose last block is partial: the rows of U drawn as the sampler
+    # draws them give its block, and the same error values and epsilon, bit for bit
+    kwargs = dict(BLOCK_CASES[case])
+    config = study(kwargs.pop("name"), samples=300, block_size=256, **kwargs)
+    u = normals_of_block(config, 1)
+    assert u.shape == (44, limit_state.dimension(config))
+    mine = limit_state.block_from_normals(config, u)
+    theirs = sample_block(config, 1)
+    assert_same_block(mine, theirs)
+    a, b = error_values(config, mine), error_values(config, theirs)
+    for name in a:
+        assert_array_equal(a[name], b[name], err_msg=name)
+    if config.carriage is None or config.study.propagation == "constant":
+        eps_a = limit_state._balls(config, mine).velocity_deviation
+        eps_b = limit_state._balls(config, theirs).velocity_deviation
+        assert_array_equal(eps_a, eps_b)
+
+
+def test_column_layout_is_the_draw_order():
+    config = study("yaw_moment_tolerances.toml")
+    layout = limit_state.column_layout(config)
+    assert list(layout) == ["factors", "ball_oversize", "gap", "bottom_rotation",
+                            "arc_centre_offset_tangential_BL",
+                            "arc_centre_offset_tangential_BR"]
+    # 3 per-assembly sources, 10 balls, 9 gaps, 3 rail fields at the 10 ball centres
+    assert [s.stop - s.start for s in layout.values()] == [3, 10, 9, 10, 10, 10]
+    assert limit_state.dimension(config) == 52
+    with pytest.raises(ValueError, match=r"expected \(rows, 52\)"):
+        limit_state.block_from_normals(config, np.zeros((2, 51)))
+
+
+# --- limit states against the plain run --------------------------------------------------------
+def plain_indicators(config, block):
+    """The plain run's per-assembly outcomes: 1 failure, 0 none, NaN unresolved."""
+    state = limit_state._balls(config, block)
+    resolved = state.valid.all(axis=1)
+    if config.study.propagation == "constant":
+        t, _ = first_contact_tracks(block.initial_gap, state.velocity_deviation,
+                                    config.motion.groove_velocity, config.motion.duration,
+                                    config.n_tracks)
+    else:
+        t, _, ok, _ = first_contact_along_track(config, block, state)
+        resolved &= ok
+    hit = np.isfinite(t)
+    out = {"contact": np.where(hit, 1.0, np.where(resolved, 0.0, np.nan))}
+    if config.study.velocity_deviation_limit > 0:
+        beyond = np.abs(state.velocity_deviation) > config.study.velocity_deviation_limit
+        over = beyond.any(axis=1)
+        out["velocity_deviation_exceedance"] = np.where(
+            over, 1.0, np.where(resolved, 0.0, np.nan))
+    if config.contact is not None and config.contact.friction_increase_limit > 0:
+        figures = evaluate_friction(config, block.initial_gap, state)
+        out["friction_exceedance"] = np.where(
+            figures.exceeds, 1.0, np.where(figures.resolved, 0.0, np.nan))
+    return out
+
+
+SIGN_CASES = {
+    "yaw": ("yaw_moment_tolerances.toml", 400, {"velocity_deviation_limit": 0.002}),
+    # contact, |epsilon| and friction; a tight |epsilon| limit so that it is exceeded often
+    "friction": ("friction_yaw.toml", 300, {"velocity_deviation_limit": 0.002}),
+    "carriage": ("carriage_preload.toml", 100, {}),
+    "along_track": ("whatif_along_track.toml", 40, {}),
+}
+
+
+@pytest.mark.parametrize("case", SIGN_CASES, ids=str)
+def test_limit_state_sign_is_the_plain_indicator(case):
+    name, n, extra = SIGN_CASES[case]
+    config = study(name, samples=n, block_size=n, **extra)
+    block = sample_block(config, 0)
+    g = limit_state.event_values(config, block)
+    plain = plain_indicators(config, block)
+    assert set(g) == set(plain) == set(limit_state.study_events(config))
+    u = normals_of_block(config, 0)
+    for event, indicator in plain.items():
+        assert_array_equal(np.isnan(g[event]), np.isnan(indicator), err_msg=event)
+        # the estimators' callable on U: the same values (through the components, if any)
+        assert_array_equal(limit_state.LimitState(config, event)(u), g[event], err_msg=event)
+        known = ~np.isnan(indicator)
+        assert_array_equal(g[event][known] <= 0, indicator[known] == 1, err_msg=event)
+        # both outcomes occur, so the comparison says something
+        assert 0 < np.sum(indicator == 1) < known.sum(), event
+
+
+def test_unresolved_assemblies_give_nan():
+    # an assembly pushed beyond the static model's range (a far FORM step) is unresolved,
+    # not an error; its neighbours in the call keep their values
+    config = study("rare_contact.toml")
+    g = limit_state.LimitState(config, "contact")
+    u = np.random.default_rng(3).standard_normal((3, g.dimension))
+    far = u.copy()
+    far[1, limit_state.column_layout(config)["arc_centre_offset_tangential_BL"]] = 1e5
+    values = g(far)
+    assert np.isnan(values[1]) and np.all(np.isfinite(values[[0, 2]]))
+    assert_array_equal(values[[0, 2]], g(u)[[0, 2]])
+
+
+@pytest.mark.parametrize("event", ["contact", "velocity_deviation_exceedance"])
+def test_limit_state_rows_are_independent(event):
+    # the estimators' results do not depend on the batch size only if a row's g does not
+    # depend on the other rows of the call
+    config = study("rare_contact.toml")
+    g = limit_state.LimitState(config, event)
+    u = np.random.default_rng(5).standard_normal((9, g.dimension))
+    together = g(u)
+    alone = np.array([g(u[i:i + 1])[0] for i in range(len(u))])
+    assert_array_equal(together, alone)
+    assert_array_equal(limit_state.series(g.components(u)), together)
+
+
+# --- the three estimators on the scaled yaw study -----------------------------------------------
+@pytest.fixture(scope="module")
+def rare_results():
+    base = load_config(RARE)
+    subset = run_study(base)
+    importance = run_study(dataclasses.replace(base, study=dataclasses.replace(
+        base.study, estimator="importance")))
+    return subset, importance
+
+
+def intervals_overlap(a, b):
+    return a[0] <= b[1] and b[0] <= a[1]
+
+
+def test_three_estimators_agree_on_the_scaled_yaw_study(rare_results):
+    subset, importance = rare_results
+    plain = subset.statistics.contact_probability()   # the study's own plain run, 20 000
+    sub = subset.rare_events["contact"].result
+    imp = importance.rare_events["contact"].result
+    assert sub.estimator == "subset" and sub.ok
+    assert imp.estimator == "importance" and imp.ok, imp.message
+    intervals = {"monte_carlo": plain[1:], "subset": (sub.ci_lower, sub.ci_upper),
+                 "importance": (imp.ci_lower, imp.ci_upper)}
+    names = list(intervals)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            assert intervals_overlap(intervals[a], intervals[b]), (a, b, intervals)
+    # the plain run of the rare study is that of the same study with the default estimator
+    assert int(subset.statistics.n_assemblies) == 20_000
+    # P ~ 1e-3, as the config says: within a factor of 2 of the 3e6-train reference
+    for p in (plain[0], sub.probability, imp.probability):
+        assert RARE_CONTACT_REFERENCE / 2 < p < 2 * RARE_CONTACT_REFERENCE
+    # the cost: a few thousand model calls where plain Monte Carlo needs 25 / P for CV 0.2
+    assert sub.evaluations <= 4 * 1000 and sub.coefficient_of_variation < 0.4
+    assert imp.coefficient_of_variation < 0.1
+
+
+def test_importance_design_point_in_physical_units(rare_results):
+    _, importance = rare_results
+    config = importance.config
+    estimate = importance.rare_events["contact"]
+    design = estimate.design_point
+    u_star = estimate.result.design_point
+    # beta is the smallest of the pairs' (one design point per pair of the train)
+    assert estimate.components.names == tuple(f"pair {j}" for j in range(9))
+    assert estimate.result.beta == pytest.approx(float(np.min(estimate.components.betas)))
+    assert design.component == f"pair {estimate.components.most_probable}"
+    # every column belongs to a factor (all sources random): the shares add up to 1
+    assert_allclose(np.sum(design.importance_factor), 1.0, rtol=1e-12)
+    # a per-assembly source: its value at u* is its distribution at that u
+    k = design.factors.index("top_rotation")
+    column = limit_state.column_layout(config)["factors"].start + [
+        t.source for t in per_assembly_sources(config)].index("top_rotation")
+    tolerance = next(t for t in config.tolerances if t.source == "top_rotation")
+    assert design.standard_normal[k] == u_star[column]
+    assert_allclose(design.value[k], tolerance.distribution.from_normal(u_star[column]))
+    # the gap at the design point is that of the failing pair, and the pair does fail
+    k = design.factors.index("initial_gap")
+    pair = design.element[k]
+    assert f"pair {pair}" == design.component
+    assert 80e-6 <= design.value[k] <= 180e-6
+    # on the pair's limit state: FORM accepts a distance of 1e-3 in u, some 1e-8 m here
+    g = limit_state.LimitState(config, "contact")
+    assert abs(g.components(u_star[None])[0, pair]) < 1e-7
+
+
+def test_rare_event_result_file(rare_results, tmp_path):
+    subset, importance = rare_results
+    for result in (subset, importance):
+        path = tmp_path / f"{result.config.study.estimator}.nc"
+        ds = write_result(result, path, history="test")
+        back = read_result(path)
+        est = result.rare_events["contact"].result
+        assert back.contact_probability.attrs["estimator"] == est.estimator
+        assert float(back.contact_probability) == est.probability
+        assert float(back.contact_probability_coefficient_of_variation) == \
+            est.coefficient_of_variation
+        assert int(back.contact_probability_evaluations) == est.evaluations
+        assert back.contact_probability_ci_upper.attrs["interval"] == est.interval
+        assert "velocity_deviation_exceedance_probability" in back
+        assert back.attrs["estimator"] == est.estimator
+        # the plain run's counts stay
+        assert int(back.n_contact) == int(result.statistics.n_contact)
+        assert set(ds.data_vars) == set(back.data_vars)
+    ds = read_result(tmp_path / "importance.nc")
+    design = importance.rare_events["contact"].design_point
+    assert list(ds.factor_name.values) == list(design.factors)
+    length = np.array([k == "length" for k in design.kinds])
+    assert_array_equal(ds.contact_design_point_length.values[length], design.value[length])
+    assert np.all(np.isnan(ds.contact_design_point_angle.values[length]))
+    assert float(ds.contact_reliability_index) == importance.rare_events["contact"].result.beta
+    assert "contact_reliability_index" not in read_result(tmp_path / "subset.nc")
+
+
+@pytest.mark.slow  # the checker takes a few seconds
+def test_importance_result_file_passes_cf_checker(rare_results, tmp_path, capsys):
+    # the design point along ``factor`` (without the sensitivity variables that usually make
+    # that dimension) keeps the file CF-clean; tests/io/test_cf_compliance.py checks the subset
+    # file of configs/rare_contact.toml
+    pytest.importorskip("compliance_checker", reason="compliance-checker is not installed")
+    import json
+    import warnings
+
+    from compliance_checker.runner import CheckSuite, ComplianceChecker
+
+    with warnings.catch_warnings():  # its deprecated ioos_sos checker warns on loading
+        warnings.simplefilter("ignore", DeprecationWarning)
+        CheckSuite.load_all_available_checkers()
+    path, report = tmp_path / "importance.nc", tmp_path / "report.json"
+    write_result(rare_results[1], path, history="test")
+    _, errors = ComplianceChecker.run_checker(str(path), ["cf:1.10"], verbose=0,
+                                              criteria="strict", output_filename=str(report),
+                                              output_format="json")
+    assert not errors, capsys.readouterr().err
+    out = json.loads(report.read_text())["cf:1.10"]
+    failed = [f"{r['name']}: {r['msgs']}" for key in ("high_priorities", "medium_priorities")
+              for r in out[key] if r["value"][0] < r["value"][1]]
+    assert failed == []
+
+
+def test_summary_says_which_estimator(rare_results, tmp_path):
+    from tolsim.cli.run import summary
+
+    subset, importance = rare_results
+    text = summary(result_to_dataset(subset, history="t"), "x.nc", 1.0)
+    assert "P(contact within 0.5 s, stroke 100 mm) = " in text
+    assert "by subset simulation: CV " in text and "evaluations" in text
+    assert "plain run: " in text and " contacts in 20000 trains" in text
+    assert "P(an assembly has |epsilon| > 0.5 %) = " in text
+    text = summary(result_to_dataset(importance, history="t"), "x.nc", 1.0)
+    assert "by importance sampling: CV " in text
+    line = next(x for x in text.splitlines() if "design point" in x)
+    top = importance.rare_events["contact"].design_point.top(1)[0][0]
+    assert f"): {top} " in line and "beta 3." in line
+
+
+# --- settings, fallbacks, flags ------------------------------------------------------------------
+def test_monte_carlo_estimator_is_the_plain_run(tmp_path):
+    # estimator = "monte_carlo" (explicit or default) runs exactly the plain study; the
+    # plain run of a subset study is the same too (the estimator runs after it, on its own
+    # streams)
+    text = (CONFIGS / "yaw_moment_tolerances.toml").read_text().replace(
+        "samples = 20000", "samples = 1500").replace("sensitivity_samples = 1024",
+                                                     "sensitivity_samples = 0")
+    default = run_study(parse_config(text, "a.toml"))
+    explicit = run_study(parse_config(text.replace("[study]", '[study]\nestimator = '
+                                                              '"monte_carlo"'), "a.toml"))
+    rare = run_study(parse_config(text.replace("[study]", '[study]\nestimator = "subset"\n'
+                                                          "samples_per_level = 100"),
+                                  "a.toml"))
+    assert default.rare_events is None and explicit.rare_events is None
+    for other in (explicit, rare):
+        state_a, state_b = default.statistics.state(), other.statistics.state()
+        assert state_a.keys() == state_b.keys()
+        for key in state_a:
+            assert_array_equal(state_a[key], state_b[key], err_msg=key)
+    ds = result_to_dataset(default, history="t")
+    assert ds.contact_probability.attrs["estimator"] == "monte_carlo"
+    assert ds.contact_probability_ci_lower.attrs["interval"] == "Clopper-Pearson"
+    assert not [name for name in ds.variables if name in rare_events.RARE_EVENT_VARIABLES]
+    assert "estimator" not in ds.attrs
+
+
+BAD_KEYS = {
+    'estimator = "sobol"': "study.estimator = 'sobol' is not one of monte_carlo, subset, "
+                           "importance",
+    "p0 = 0.1": "study.p0 has no effect with estimator = 'monte_carlo'",
+    'estimator = "subset"\nimportance_samples = 100': "study.importance_samples has no "
+                                                      "effect with estimator = 'subset'",
+    'estimator = "subset"\np0 = 0.6': "study.p0 = 0.6 must be in (0, 0.5]",
+    'estimator = "subset"\nsamples_per_level = 50': "study.samples_per_level = 50 gives 5 "
+                                                    "chains at p0 = 0.1; at least 10",
+    'estimator = "subset"\nsamples_per_level = 250\np0 = 0.3': "samples_per_level * p0 = 75 "
+                                                               "must be a whole number",
+    'estimator = "importance"\nimportance_samples = 1': "study.importance_samples = 1 must "
+                                                        "be >= 2",
+    'estimator = "subset"\nmax_levels = 0': "study.max_levels = 0 must be >= 1",
+    'estimator = "subset"\nsamples_per_level = "1000"': "study.samples_per_level = '1000' "
+                                                        "must be an integer",
+}
+
+
+@pytest.mark.parametrize("lines", BAD_KEYS, ids=range(len(BAD_KEYS)))
+def test_bad_estimator_settings_are_one_line_errors(lines):
+    text = (CONFIGS / "yaw_moment_tolerances.toml").read_text().replace(
+        "[study]", "[study]\n" + lines)
+    with pytest.raises(ConfigError) as info:
+        parse_config(text, "s.toml")
+    message = str(info.value)
+    assert "\n" not in message and message.startswith("s.toml:")
+    assert BAD_KEYS[lines] in message
+
+
+def test_unsupported_studies_are_refused():
+    text = (CONFIGS / "carriage_preload.toml").read_text().replace(
+        "[study]", '[study]\npropagation = "along_track"\nestimator = "subset"')
+    with pytest.raises(ConfigError, match="estimator = 'subset' is not available for a "
+                                          "carriage with along_track propagation"):
+        parse_config(text, "c.toml")
+    config = load_config(RARE)
+    with pytest.raises(ValueError, match="a precision target applies to plain Monte Carlo"):
+        run_study(config, target=PrecisionTarget(0.01))
+
+
+def test_importance_falls_back_to_subset_where_the_limit_state_is_not_smooth():
+    config = study("friction_yaw.toml", samples=64, estimator="importance",
+                   samples_per_level=100, importance_samples=200)
+    estimate = limit_state.estimate_event(config, "friction_exceedance")
+    assert estimate.result.estimator == "subset" and estimate.result.ok
+    assert estimate.note.startswith("importance sampling not attempted: the friction limit "
+                                    "state jumps")
+    assert estimate.design_point is None
+    assert "[importance sampling not attempted" in estimate.describe()
+
+
+def test_no_number_without_backing(tmp_path):
+    # one level of 100 samples cannot reach P ~ 1e-3: the estimate is flagged, the file
+    # holds NaN with the reason, and the summary prints the reason, not a number
+    from tolsim.cli.run import summary
+
+    config = study("rare_contact.toml", samples=256, samples_per_level=100, max_levels=1,
+                   sampling="random")
+    result = run_study(config)
+    estimate = result.rare_events["contact"].result
+    assert estimate.status == STATUS_NO_FAILURE and np.isnan(estimate.probability)
+    ds = result_to_dataset(result, history="t")
+    assert np.isnan(float(ds.contact_probability))
+    assert ds.contact_probability.attrs["estimator_message"] == estimate.message
+    text = summary(ds, "x.nc", 1.0)
+    line = next(x for x in text.splitlines() if x.startswith("P(contact"))
+    assert "no estimate (subset simulation, 100 evaluations): no failure" in line
+    assert "nan" not in line.lower()
+
+
+def test_estimates_are_seeded_and_do_not_depend_on_batch_size():
+    config = study("rare_contact.toml", samples_per_level=100)
+    a = limit_state.estimate_event(config, "contact")
+    b = limit_state.estimate_event(config, "contact", batch_size=37)
+    assert a.result.probability == b.result.probability
+    assert a.result.thresholds == b.result.thresholds
+    seed = limit_state.event_seed(config, "contact")
+    assert seed.spawn_key == (limit_state.RARE_EVENT_SPAWN_KEY, 0)
+    assert RARE_EVENT_STREAM not in seed.spawn_key  # added below it by rare_events
+    other = study("rare_contact.toml", samples_per_level=100, seed=config.study.seed + 1)
+    assert limit_state.estimate_event(other, "contact").result.probability != \
+        a.result.probability
