@@ -4,7 +4,8 @@ Solves the load-controlled static problem (:func:`tolsim.physics.static.solve_st
 many balls with tolerance-sized random errors and loads, and prints balls per second on all
 Numba threads and on one (and with the vectorised path switched off), the Newton iterations,
 the memory of the result, and the ratio to a plain SciPy baseline (``scipy.optimize.root``
-ball by ball on the same equations, as in ``tests/physics/test_static.py``) measured in the same run.
+ball by ball on the same equations, as in ``tests/physics/test_static.py``) measured in the same
+run.
 
 Like ``tolsim run`` (:func:`tolsim.study.execution.chunks.retain_freed_memory`), the benchmark lets
 glibc keep freed memory: otherwise each call's fresh output arrays are paid for in page

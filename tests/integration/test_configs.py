@@ -20,7 +20,7 @@ SAMPLES = {
     "whatif_along_track.toml": 200,
     "known_answer.toml": 4096,  # the closed-form checks are in tests/study/test_known_answer.py
     "friction_yaw.toml": 1024,  # its checks are in tests/study/test_friction_study.py
-    "rare_contact.toml": 1024,  # subset simulation after; its checks: tests/study/test_rare_study.py
+    "rare_contact.toml": 1024,  # subset simulation after; checks: tests/study/test_rare_study.py
     "allocate_example.toml": 1024,  # its allocation (tolsim allocate): tests/study/test_allocate.py
 }
 #: Configs with a [carriage] (issue 12): their studies are checked in

@@ -422,7 +422,8 @@ def eq24_valid_twin(dbeta, force, res):
 
 def test_validity_flags_are_the_documented_criteria(rng):
     # The kernels' valid flags are exactly the module's error-budget criteria (the thresholds
-    # themselves are checked against the full model in tests/physics/test_validity_budget.py). Inputs
+    # themselves are checked against the full model in tests/physics/test_validity_budget.py).
+    # Inputs
     # straddle every threshold: |dbeta| up to 0.3 deg (|eps| around 0.1-0.15 %), forces
     # paired to within +-2 % (P around 0.01) over 20-400 N (q from 0.05 to 1).
     n = 4000

@@ -160,7 +160,8 @@ def test_bit_identical_alone_in_any_batch_and_thread_count():
 
 @pytest.mark.parametrize("oversize", [1e-6, 4e-6])
 def test_preload_only_wrapped_guide_closed_form(oversize):
-    # Closed form (tests/physics/test_carriage.py): at zero displacement every flank has delta = o/2,
+    # Closed form (tests/physics/test_carriage.py): at zero displacement every flank has delta =
+    # o/2,
     # F = K (o/2)^1.5 at beta_0, and the two tracks' preloads cancel. 1e-9 relative.
     batch = solve_carriage_batch(wrapped(n=12), CarriageLoad(),
                                  oversize=np.full((3, 2, 12), oversize))

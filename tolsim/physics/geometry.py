@@ -10,7 +10,8 @@ Contact i sits on the ball surface at
 +y axis (top). The local frame of contact i has y_i pointing from the contact centre to the
 ball centre, z_i along the rail, and x_i = y_i x z_i.
 
-Sign conventions derived here (ERRATA items 6 and 8) and checked in ``tests/physics/test_geometry.py``:
+Sign conventions derived here (ERRATA items 6 and 8) and checked in
+``tests/physics/test_geometry.py``:
 
 * ``ZERO_VELOCITY_SIGN`` s_i.  d(contact point)/d(beta_i) = s_i R x_i, so a zero-velocity point
   offset by dgamma_i (positive towards increasing beta_i, ERRATA 6) sits at local

@@ -264,7 +264,8 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
     **How carriage loads map to the balls' side-force ratio**
 
     Small-displacement rigid-body kinematics, linearised at the ball; each step is tested in
-    ``tests/physics/test_carriage.py`` (numbers for the [Lin2018] Table 1 ball, K = 2.345e10 N/m^1.5,
+    ``tests/physics/test_carriage.py`` (numbers for the [Lin2018] Table 1 ball, K = 2.345e10
+    N/m^1.5,
     d = R_G - R_B = 0.4 mm).
 
     1. *Which DOF a load excites.* By d(p) = B(p) q a yaw theta_y moves the grooves sideways by

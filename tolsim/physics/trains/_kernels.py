@@ -185,7 +185,8 @@ def step_clusters_kernel(eps, stiffness, braking, loaded, member, closed, active
     misses an event inside the last step, a minimum one inside the first, and two merges of one
     cluster in one step count as one formation. With epsilon varying along the track the
     midpoint rule adds its own error, O(dt^2) per step between contacts and O(dt) over the
-    stroke from the steps in which a contact starts or ends (tests/study/test_friction_along_track.py).
+    stroke from the steps in which a contact starts or ends
+    (tests/study/test_friction_along_track.py).
     """
     rows, slots = eps.shape
     for chunk in prange((rows + CHUNK - 1) // CHUNK):

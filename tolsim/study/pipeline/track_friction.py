@@ -160,7 +160,8 @@ from the study's static model; :func:`tolsim.physics.velocity.analytic.creep_coe
 one
 vectorised call per chunk, about 7 M balls/s on 2 cores), for every ball, also those whose
 epsilon the study took from the full model (K is a smooth property of the contact state: the
-analytic K is 2.6-5.7 % below the full model's on the paper's ball, tests/physics/test_ball_push.py).
+analytic K is 2.6-5.7 % below the full model's on the paper's ball,
+tests/physics/test_ball_push.py).
 ``"full"``: K, c, F_0 and the traction and braking capacities from
 :func:`tolsim.physics.velocity.full.full` at zero load (slow: about 1e4 balls/s); the carriage-force
 slopes a, b stay the analytic ones (the full model gives the force at a load, not its slopes).
