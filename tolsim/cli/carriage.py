@@ -190,7 +190,7 @@ def run(args) -> int:
         config = load_config(args.config)
     except ConfigError as exc:
         raise UsageError(str(exc)) from None
-    if config.carriage is None:
+    if not config.has_carriage:
         raise UsageError(f"{args.config}: has no [carriage] section (tolsim carriage needs "
                          "one; see configs/carriage_preload.toml)")
     if args.seed is not None and args.seed < 0:

@@ -217,7 +217,7 @@ def _track_text(ds, config) -> str:
     if "track_x" in ds.variables:
         x, y, phi = (np.asarray(ds[n], dtype=float) for n in (
             "track_x", "track_y", "track_orientation"))
-    elif config is not None and config.carriage is not None:
+    elif config is not None and config.has_carriage:
         layout = config.carriage.layout
         x, y, phi = layout.track_x, layout.track_y, layout.track_orientation
     else:
@@ -424,7 +424,7 @@ def friction_assumptions(ds, config, data) -> list:
         or "default: 0.1 (steel on steel, boundary lubrication)")
     beta = (config.bearing.nominal_contact_angle if config is not None
             else TABLE1.nominal_contact_angle)
-    if config is not None and config.contact is not None:
+    if config is not None and config.has_contact:
         model = config.contact.creep_model
     creep_text = {
         "analytic": "the loaded analytic model (Eqs. 17, 18, 21 with the push and the "
@@ -517,7 +517,7 @@ def assumption_table(ds, config=None) -> list:
             config_key(data, "motion", "stroke") or config_key(data, "motion", "duration")
             or "config")
         tr = config.train
-        no_train = config.carriage is not None and "train" not in data
+        no_train = config.has_carriage and "train" not in data
         add("train", "balls per track (loaded zone)", tr.balls,
             config_key(data, "carriage", "balls_per_track") if no_train
             else _source(data, "train", "balls", "config"))
@@ -526,7 +526,7 @@ def assumption_table(ds, config=None) -> list:
             or ("default without [train]: balls × ball pitch" if no_train
                 else "default: balls × (D + mean initial gap)"))
         lo = config.loads
-        if config.carriage is not None:
+        if config.has_carriage:
             for row in carriage_assumptions(ds, config, data):
                 rows.append(row)
         if lo is not None:
@@ -549,7 +549,7 @@ def assumption_table(ds, config=None) -> list:
                     "clipped at 0; balls start at pitch D + gap, the train centred on the "
                     "carriage")
         gap_key = config_key(data, "train", "initial_gap") or "[train] initial_gap"
-        if config.carriage is not None:
+        if config.has_carriage:
             gap_text += "; one train per track, the gaps of each track drawn on their own"
             if "train" not in data:
                 gap_key = "default without [train]: the ball pitch − D ([carriage] ball_pitch)"

@@ -194,8 +194,8 @@ def field_extent(config, initial_span):
     With a carriage (``along_track``) the balls stay in its loaded zone, which travels the
     whole stroke: a ball entering at the end of the stroke is at L/2 + stroke.
     """
-    travel = 0.5 * config.motion.stroke * 1.05 if config.study.propagation == "along_track" else 0
-    if travel and config.carriage is not None:
+    travel = 0.5 * config.motion.stroke * 1.05 if config.is_along_track else 0
+    if travel and config.has_carriage:
         travel = config.motion.stroke
     pad = 2.0 * config.bearing.ball_radius
     return -initial_span - pad, initial_span + travel + pad
@@ -256,8 +256,8 @@ def draw_widths(config, grid):
     widths.update({t.source: tracks * balls for t in config.tolerances if t.scope == "ball"})
     widths["gap"] = tracks * max(balls - 1, 0)
     for source, (_, _, points) in grid.items():
-        widths[source] = tracks * (balls if config.study.propagation == "constant" else points)
-    if config.carriage is not None and config.study.propagation == "along_track":
+        widths[source] = tracks * (points if config.is_along_track else balls)
+    if config.has_carriage and config.is_along_track:
         entering = tracks * entering_capacity(config)
         widths["entering_gap"] = entering
         widths.update({f"entering_{t.source}": entering for t in config.tolerances
@@ -332,7 +332,6 @@ def block_from_draws(config, index: int, start: int, raw: dict) -> Block:
     width), the columns of :func:`draw_widths`): per-track factors, gaps and ball positions,
     rail fields by their AR(1) recursion, the entering balls. The one transform behind
     :func:`sample_block` and :func:`tolsim.study.analyses.limit_state.block_from_normals`."""
-    st = config.study
     grid = field_grid(config)
     size = len(raw["gap"])
     tracks, balls = config.n_tracks, config.train.balls
@@ -355,7 +354,7 @@ def block_from_draws(config, index: int, start: int, raw: dict) -> Block:
             continue
         innovations = np.ascontiguousarray(raw[t.source])  # no copy when already
         ell = t.correlation_length
-        if st.propagation == "constant":
+        if not config.is_along_track:
             # Exact: the Ornstein-Uhlenbeck process sampled at the ball centres themselves
             # (Markov, so each ball conditions on the one behind it); one field per track.
             along = position.reshape(size * tracks, balls)

@@ -567,9 +567,33 @@ class StudyConfig:
     sweep: object = None  # tolsim.study.design.sweep.Sweep ([sweep]): the points to run
 
     @property
+    def mounting(self) -> str:
+        """How the balls are held: ``"free"`` (one train, no ``[carriage]``) or
+        ``"carriage"``. With ``study.propagation`` it is the variant of the study, which
+        :mod:`tolsim.study.pipeline` dispatches on (its registries), and which every other
+        module reads through the properties below."""
+        return "free" if self.carriage is None else "carriage"
+
+    @property
+    def has_carriage(self) -> bool:
+        """Whether the balls are those of a carriage (``[carriage]``)."""
+        return self.mounting == "carriage"
+
+    @property
+    def is_along_track(self) -> bool:
+        """Whether epsilon is re-evaluated along the track (``propagation = "along_track"``),
+        rather than held constant over the stroke."""
+        return self.study.propagation == "along_track"
+
+    @property
+    def has_contact(self) -> bool:
+        """Whether the trains are followed after contact (``[contact]``)."""
+        return self.contact is not None
+
+    @property
     def n_tracks(self) -> int:
         """Tracks (trains) per assembly: the carriage's rows of balls, or 1."""
-        return 1 if self.carriage is None else self.carriage.layout.n_tracks
+        return self.carriage.layout.n_tracks if self.has_carriage else 1
 
     @property
     def balls(self) -> int:

@@ -211,8 +211,8 @@ def _result_axes(config) -> dict:
                t.source for t in config.tolerances),
            "the Sobol' indices (study.sensitivity_samples)": bool(st.sensitivity_samples),
            "the estimator ([study] estimator)": st.estimator,
-           "[contact]": config.contact is not None}
-    if config.contact is not None:  # the friction examples' grid
+           "[contact]": config.has_contact}
+    if config.has_contact:  # the friction examples' grid
         out["the friction examples' travel grid (stroke, contact.travel_points, "
             "contact.examples)"] = (config.motion.stroke, config.contact.travel_points,
                                     config.contact.examples)

@@ -140,7 +140,7 @@ def _hertz_constant(bearing) -> float:
 def collect(result, history=None) -> tuple:
     """(coordinates, data variables, no attributes) of a study with a carriage."""
     cfg = result.config
-    if cfg.carriage is None:
+    if not cfg.has_carriage:
         return {}, {}, {}
     coords, data = carriage_variables(cfg, result.statistics,
                                       getattr(result, "carriage_nominal", None))

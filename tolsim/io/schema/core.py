@@ -239,7 +239,7 @@ def collect(result, history=None) -> tuple:
     diff = sc.velocity_deviation_analytic[both] - sc.velocity_deviation_full[both]
     balls = cfg.train.balls  # per track
     tracks = cfg.n_tracks
-    carriage = cfg.carriage is not None
+    carriage = cfg.has_carriage
     ball_dims = ("track", "ball") if carriage else ("ball",)
     pair_dims = ("track", "pair") if carriage else ("pair",)
 

@@ -188,7 +188,7 @@ def friction_variables(result) -> tuple:
             "example_contact_force": (("example", "travel", "pair"), examples.contact_force),
         })
     attrs = {"friction_assumptions": (FRICTION_ASSUMPTIONS_ALONG_TRACK
-                                      if config.study.propagation == "along_track"
+                                      if config.is_along_track
                                       else FRICTION_ASSUMPTIONS),
              "contact_creep_model": config.contact.creep_model}
     return coords, data, attrs

@@ -44,7 +44,7 @@ def dataset_variables(config, samples: dict) -> dict:
             continue
         values = np.array(values)
         dims = SAMPLE_VARIABLES[name][0]
-        if config.carriage is not None and {"ball", "pair"} & set(dims):
+        if config.has_carriage and {"ball", "pair"} & set(dims):
             # (sample, tracks * k, ...) -> (sample, track, k, ...)
             values = values.reshape((len(values), config.n_tracks, -1) + values.shape[2:])
             dims = dims[:1] + ("track",) + dims[1:]

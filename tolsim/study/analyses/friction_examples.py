@@ -112,7 +112,7 @@ def friction_examples(config) -> FrictionExamples | None:
     if count == 0:
         return None
     whole = sample_block(config, 0)
-    along = config.study.propagation == "along_track"
+    along = config.is_along_track
     with _one_thread():
         # the first assemblies of the block, then all of it if too few of them touch: the
         # examples are the same either way (choose_examples takes them in order)

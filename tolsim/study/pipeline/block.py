@@ -20,28 +20,26 @@ from tolsim.study.pipeline.propagation import first_contact_along_track, first_c
 from tolsim.study.pipeline.track_friction import FrictionState, TrackFriction, evaluate_friction
 from tolsim.study.sampling import error_values
 
-#: The mounting of a config's balls: ``free`` (no ``[carriage]``) or ``carriage``.
-MOUNTINGS = {True: "free", False: "carriage"}
-
 
 def variant(config) -> tuple:
-    """(mounting, propagation) of a config: the key of :data:`BLOCK_EVALUATIONS`."""
-    return MOUNTINGS[config.carriage is None], config.study.propagation
+    """(mounting, propagation) of a config (:attr:`tolsim.study.spec.StudyConfig.mounting`):
+    the key of :data:`BLOCK_EVALUATIONS`."""
+    return config.mounting, config.study.propagation
 
 
 def has_carriage(config) -> bool:
     """Whether the config's balls are those of a carriage (``[carriage]``)."""
-    return variant(config)[0] == "carriage"
+    return config.has_carriage
 
 
 def is_along_track(config) -> bool:
     """Whether the config's epsilon is re-evaluated along the track."""
-    return variant(config)[1] == "along_track"
+    return config.is_along_track
 
 
 def has_contact(config) -> bool:
     """Whether the config follows the trains after contact (``[contact]``)."""
-    return config.contact is not None
+    return config.has_contact
 
 
 #: Whether a chunk's blocks are evaluated together as one block (the same rows as each

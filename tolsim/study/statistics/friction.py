@@ -204,9 +204,7 @@ class FrictionAccumulator(Accumulator):
 def study_accumulator(config) -> Accumulator:
     """An empty accumulator for a study: with friction statistics when it has ``[contact]``
     (either propagation)."""
-    if config.contact is None:
-        return Accumulator.for_config(config)
-    return FrictionAccumulator.for_config(config)
+    return (FrictionAccumulator if config.has_contact else Accumulator).for_config(config)
 
 
 def accumulator_from_state(state: dict) -> Accumulator:
