@@ -1,0 +1,264 @@
+"""Importance sampling around FORM design points ([Melchers1989]) over a standard-normal space
+(:mod:`tolsim.study.analyses.rare_events`).
+
+the tolerances in "the most likely way to fail"; the caller maps u* to physical units).
+
+Importance sampling draws v ~ N(u*, I) (blocks as above) and averages
+1{g(v) <= 0} w(v), w = phi(v) / phi(v - u*) = exp(-v . u* + beta^2 / 2). The standard error
+is the sample standard deviation over sqrt(n); the 95 % interval the normal one,
+P -+ z se (lower end clipped at 0). It is unbiased for any limit state, but efficient only
+when the failure domain lies around u*: with several design points (or a failure domain
+around the origin) the samples miss the other regions and the estimate is low with a
+standard error that does not show it. FORM finds one design point; it can not tell. With
+few failing samples (a strongly curved limit state) the normal interval is too short on the
+high side: on the ball of ``benchmarks/bench_rare_events.py`` (about 2 % of 4000 samples
+fail) it covers 93.2 % (1000 repeats), against 94-96 % on the linear case.
+
+References
+----------
+.. [Melchers1989] R. E. Melchers, "Importance sampling in structural systems", Structural
+   Safety 6 (1989) 3-10, doi:10.1016/0167-4730(89)90003-9.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import log_ndtr, logsumexp, ndtr
+
+from tolsim.study.analyses.rare_events.common import (
+    check_batch_size,
+    check_confidence,
+    check_count,
+    check_dimension,
+    child_sequence,
+    cv_of,
+    evaluate,
+    normal_blocks,
+    seed_sequence,
+    weighted_mean,
+)
+from tolsim.study.analyses.rare_events.form import GRADIENT_STEP, find_design_point
+from tolsim.study.analyses.rare_events.result import (
+    INTERVAL_NORMAL,
+    STATUS_FORM_FAILED,
+    STATUS_NO_FAILURE,
+    RareEventResult,
+    flagged,
+)
+
+
+def importance_sampling(limit_state, dimension, seed, *, samples=2000, design_point=None,
+                        gradient=None, step=GRADIENT_STEP, batch_size=None,
+                        confidence_level=0.95) -> RareEventResult:
+    """FORM, then importance sampling from N(u*, I) ([Melchers1989]); see the module docstring.
+
+    Parameters
+    ----------
+    limit_state : callable
+        g(u) for u of shape (rows, d) -> (rows,); failure where g <= 0, NaN unresolved.
+    dimension : int
+        d.
+    seed : numpy.random.SeedSequence or int
+    samples : int
+        n importance samples.
+    design_point : DesignPoint, optional
+        A converged design point from :func:`find_design_point` (then its evaluations are
+        not counted again); by default it is searched here.
+    gradient, step : optional
+        Of :func:`find_design_point`.
+    batch_size : int, optional
+        Most rows per call of ``limit_state``; the result does not depend on it.
+    confidence_level : float
+
+    Returns
+    -------
+    RareEventResult
+        P, its standard error and the normal interval, with ``design_point``, ``beta``,
+        ``form_probability`` and ``importance_factors``. Flagged ``"form_failed"`` (no
+        probability; use :func:`subset_simulation`) when FORM gives no design point, and
+        ``"no_failure"`` when no importance sample fails.
+    """
+    d = check_dimension(dimension)
+    n = check_count("samples", samples, 2)
+    check_batch_size(batch_size)
+    z = check_confidence(confidence_level)
+    root = seed_sequence(seed)
+    if design_point is None:
+        design_point = find_design_point(limit_state, d, gradient=gradient, step=step,
+                                         batch_size=batch_size)
+        evaluations = design_point.evaluations
+    else:
+        if np.shape(design_point.point) != (d,):
+            raise ValueError(f"design point of shape {np.shape(design_point.point)} for "
+                             f"dimension {d}")
+        evaluations = 0
+    common = dict(estimator="importance", confidence_level=confidence_level, dimension=d,
+                  samples_per_level=n, design_point=design_point.point,
+                  beta=design_point.beta, form_probability=design_point.form_probability,
+                  importance_factors=design_point.importance_factors)
+    if not design_point.converged:
+        return flagged(STATUS_FORM_FAILED, f"FORM found no design point: "
+                                            f"{design_point.message}; no probability "
+                                            "estimated, use subset simulation",
+                        evaluations, 0, common)
+    shift = np.asarray(design_point.point, dtype=float)
+    beta2 = float(shift @ shift)
+    failures, unevaluable, weights = [], [], []
+    for normal in normal_blocks(root, (0,), n, d):
+        v = shift + normal
+        g = evaluate(limit_state, v, batch_size)
+        failures.append(g <= 0)
+        unevaluable.append(np.isnan(g))
+        # phi(v) / phi(v - u*) = exp(-v.u* + beta^2 / 2) = exp(-z.u* - beta^2 / 2)
+        weights.append(np.exp(-(normal @ shift) - 0.5 * beta2))
+    failed, unevaluable, w = (np.concatenate(x) for x in (failures, unevaluable, weights))
+    evaluations += n
+    unresolved = int(np.count_nonzero(unevaluable))
+    if not np.any(failed | unevaluable):
+        return flagged(STATUS_NO_FAILURE, f"no failure among the {n} samples around the "
+                                           f"design point (beta {design_point.beta:.4g}): no "
+                                           "probability estimated; check the design point or "
+                                           "use subset simulation",
+                        evaluations, unresolved, common)
+    lower, se_lower = weighted_mean(np.where(failed, w, 0.0))
+    upper, se_upper = weighted_mean(np.where(failed | unevaluable, w, 0.0))
+    resolved = 1.0 - (upper - lower)
+    p = lower / resolved
+    se = se_lower / resolved
+    return RareEventResult(
+        probability=p, standard_error=se, coefficient_of_variation=cv_of(p, se),
+        ci_lower=max(p - z * se, 0.0), ci_upper=p + z * se, interval=INTERVAL_NORMAL,
+        evaluations=evaluations, unresolved=unresolved,
+        failures=int(np.count_nonzero(failed)), bound_lower=lower, bound_upper=upper,
+        bounds_ci_lower=max(lower - z * se_lower, 0.0), bounds_ci_upper=upper + z * se_upper,
+        **common)
+
+
+
+@dataclass(frozen=True, eq=False)
+class SeriesDesignPoints:
+    """FORM on each component of a series event (:func:`series_importance_sampling`).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The components (``limit_state.component_names``).
+    points : ndarray (k, d)
+        Their design points u*_k [-].
+    betas : ndarray (k,)
+        |u*_k| [-].
+    evaluations : int
+        Rows evaluated by the k searches.
+    """
+
+    names: tuple
+    points: np.ndarray
+    betas: np.ndarray
+    evaluations: int
+
+    @property
+    def most_probable(self) -> int:
+        """The component with the smallest beta."""
+        return int(np.argmin(self.betas))
+
+
+def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=None,
+                               confidence_level=0.95):
+    """FORM on every component, then importance sampling from the mixture of N(u*_k, I).
+
+    ``limit_state`` is a limit state of a series event with ``dimension``,
+    ``component_names`` and ``component(k)`` (a limit state of component k alone; e.g.
+    :class:`tolsim.study.analyses.limit_state.LimitState`). A series event (the union of its
+    components: any pair touches, any ball beyond the limit) has a design point per
+    component, often several of similar beta (the pairs of a train). Importance sampling
+    around one of them misses the others' failure domains and is low by a factor of up to
+    their number, with a standard error that does not show it (module docstring). Here each
+    component's design point u*_k is found (:func:`find_design_point` on the component
+    alone), and the samples are drawn from the mixture q(v) = sum_k pi_k phi(v - u*_k), pi_k
+    proportional to Phi(-beta_k), with the weight phi(v) / q(v) = 1 / sum_k pi_k
+    exp(v . u*_k - beta_k^2 / 2) ([Melchers1989]'s
+    multi-modal sampling density for systems). The estimate is unbiased whatever the
+    mixture (it has full support); the mixture only makes it efficient. Standard error,
+    interval and unresolved bounds as :func:`importance_sampling`.
+
+    Randomness: the normals in blocks from the children (RARE_EVENT_STREAM, 0, b) of
+    ``seed`` (as the other estimators here), the mixture components
+    from the child (RARE_EVENT_STREAM, 1).
+
+    Parameters
+    ----------
+    limit_state : object
+        A smooth series event (see above).
+    seed : numpy.random.SeedSequence or int
+    samples : int
+        n importance samples.
+    batch_size : int, optional
+        Most rows per model call; no effect on the result.
+    confidence_level : float
+
+    Returns
+    -------
+    (RareEventResult, SeriesDesignPoints or None)
+        The result's ``design_point``, ``beta`` and ``importance_factors`` are those of the
+        most probable component; ``form_probability`` is the first-order series bound
+        min(1, sum_k Phi(-beta_k)) (each component's FORM estimate, added). Flagged
+        ``form_failed`` when FORM gives no design point for some component (its message
+        names it), ``no_failure`` when no sample fails.
+    """
+    d = limit_state.dimension
+    n = int(samples)
+    if n < 2:
+        raise ValueError(f"samples = {samples!r} must be >= 2")
+    z = check_confidence(confidence_level)
+    root = seed_sequence(seed)
+    names = limit_state.component_names
+    common = dict(estimator="importance", confidence_level=confidence_level, dimension=d,
+                  samples_per_level=n)
+    points, betas, evaluations = [], [], 0
+    for k, name in enumerate(names):
+        found = find_design_point(limit_state.component(k), d, batch_size=batch_size)
+        evaluations += found.evaluations
+        if not found.converged:
+            return flagged(STATUS_FORM_FAILED, f"FORM found no design point for {name}: "
+                                                f"{found.message}", evaluations, 0,
+                            common), None
+        points.append(found.point)
+        betas.append(found.beta)
+    design = SeriesDesignPoints(tuple(names), np.array(points), np.array(betas), evaluations)
+    best = design.most_probable
+    shifts, beta = design.points, design.betas
+    log_weight = log_ndtr(-beta)
+    log_weight = log_weight - logsumexp(log_weight)
+    star = shifts[best]
+    common.update(design_point=star, beta=float(beta[best]),
+                  form_probability=float(min(1.0, np.sum(ndtr(-beta)))),
+                  importance_factors=(star / beta[best]) ** 2)
+    labels = np.random.default_rng(child_sequence(root, 1)).choice(len(names), size=n,
+                                                           p=np.exp(log_weight))
+    v = np.concatenate(list(normal_blocks(root, (0,), n, d))) + shifts[labels]
+    # log q(v) / phi(v), row by row
+    log_ratio = logsumexp(log_weight + v @ shifts.T - 0.5 * beta * beta, axis=1)
+    w = np.exp(-log_ratio)
+    g = evaluate(limit_state, v, batch_size)
+    evaluations += n
+    failed, unevaluable = g <= 0, np.isnan(g)
+    unresolved = int(np.count_nonzero(unevaluable))
+    if not np.any(failed | unevaluable):
+        return flagged(STATUS_NO_FAILURE, f"no failure among the {n} samples around the "
+                                           f"{len(names)} design points: no probability "
+                                           "estimated", evaluations, unresolved,
+                        common), design
+    lower, se_lower = weighted_mean(np.where(failed, w, 0.0))
+    upper, se_upper = weighted_mean(np.where(failed | unevaluable, w, 0.0))
+    resolved = 1.0 - (upper - lower)
+    p = lower / resolved
+    se = se_lower / resolved
+    return RareEventResult(
+        probability=p, standard_error=se, coefficient_of_variation=cv_of(p, se),
+        ci_lower=max(p - z * se, 0.0), ci_upper=p + z * se, interval=INTERVAL_NORMAL,
+        evaluations=evaluations, unresolved=unresolved,
+        failures=int(np.count_nonzero(failed)), bound_lower=lower, bound_upper=upper,
+        bounds_ci_lower=max(lower - z * se_lower, 0.0), bounds_ci_upper=upper + z * se_upper,
+        **common), design
+
+
