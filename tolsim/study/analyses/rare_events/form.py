@@ -1,8 +1,8 @@
 """FORM: the design point (most probable failure point) of a limit state in standard-normal
 space (:mod:`tolsim.study.analyses.rare_events`).
 
-FORM and importance sampling
-----------------------------
+FORM
+----
 :func:`find_design_point` minimises |u|^2 / 2 subject to g(u) = 0 with SLSQP
 (:func:`scipy.optimize.minimize`, [Kraft1988]) from u = 0, the constraint scaled by
 |grad g(0)|. The gradient is the caller's (``gradient=``) or central differences of step h,
@@ -15,6 +15,8 @@ the 2 d rows evaluated as one batch. The point is accepted only if
   |grad_forward - grad_backward| <= 0.05 |grad_central| (a kink or a noisy model fails it),
 
 and is flagged otherwise (``converged`` False, ``message`` one line). beta = |u*|, the FORM
+estimate Phi(-beta), and the importance factors alpha_k^2, alpha = u* / beta (the shares of
+the tolerances in "the most likely way to fail"; the caller maps u* to physical units).
 
 References
 ----------

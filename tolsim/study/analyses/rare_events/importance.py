@@ -1,8 +1,6 @@
 """Importance sampling around FORM design points ([Melchers1989]) over a standard-normal space
 (:mod:`tolsim.study.analyses.rare_events`).
 
-the tolerances in "the most likely way to fail"; the caller maps u* to physical units).
-
 Importance sampling draws v ~ N(u*, I) (blocks as above) and averages
 1{g(v) <= 0} w(v), w = phi(v) / phi(v - u*) = exp(-v . u* + beta^2 / 2). The standard error
 is the sample standard deviation over sqrt(n); the 95 % interval the normal one,
