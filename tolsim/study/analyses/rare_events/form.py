@@ -13,10 +13,28 @@ the 2 d rows evaluated as one batch. The point is accepted only if
 * it is a stationary point of the Lagrangian: u* parallel to -grad g(u*) (1 - cos <= 1e-3),
 * the limit state is smooth there: the one-sided difference quotients at step h agree,
   |grad_forward - grad_backward| <= 0.05 |grad_central| (a kink or a noisy model fails it),
+* it is a local *minimum* of |u| on g = 0 (second-order check, ``second_order=True``): the
+  Hessian of the Lagrangian L = |u|^2 / 2 + lambda g, lambda = beta / |grad g(u*)|, projected
+  on the tangent space of g = 0, A = I + lambda T' H_g T (T an orthonormal basis of the
+  tangent space), is positive definite: its smallest eigenvalue is >= 0.05. A saddle or a
+  maximum of |u| along g = 0 (e.g. (0, 8) on g = 8 - u_1^2 - u_2, where |u| decreases along
+  the parabola) is rejected. H_g is taken by central second differences of step 0.01 along
+  the tangent directions (2 (d - 1) rows for the diagonal, 4 per pair for the off-diagonal
+  entries) when d - 1 <= :data:`FULL_HESSIAN_DIMENSION`; in higher dimension only the
+  diagonal, in the tangent directions closest to the coordinate axes (a necessary
+  condition: a saddle whose negative direction is oblique to every axis can pass). The
+  eigenvalues 1 - beta kappa_i give the main curvatures kappa_i and Breitung's SORM estimate
+  Phi(-beta) / sqrt(det A) ([Breitung1984]).
 
 and is flagged otherwise (``converged`` False, ``message`` one line). beta = |u*|, the FORM
 estimate Phi(-beta), and the importance factors alpha_k^2, alpha = u* / beta (the shares of
 the tolerances in "the most likely way to fail"; the caller maps u* to physical units).
+
+One search finds one local design point: the one whose basin holds the start. A limit state
+with several (a series system, a parabola bent towards the origin, |u_1| >= b) has more, and
+the one found from the origin need not be the global one. :func:`find_design_points`
+restarts the search from seeded points and keeps every distinct design point accepted
+(:class:`DesignPointSet`); importance sampling then samples around all of them.
 
 References
 ----------
@@ -27,6 +45,8 @@ References
    doi:10.1016/0045-7949(78)90046-9.
 .. [Kraft1988] D. Kraft, "A software package for sequential quadratic programming",
    DFVLR-FB 88-28, 1988.
+.. [Breitung1984] K. Breitung, "Asymptotic approximations for multinormal integrals",
+   J. Eng. Mech. 110 (1984) 357-366, doi:10.1061/(ASCE)0733-9399(1984)110:3(357).
 """
 
 from dataclasses import dataclass
@@ -39,7 +59,9 @@ from tolsim.study.analyses.rare_events.common import (
     check_batch_size,
     check_count,
     check_dimension,
+    child_sequence,
     evaluate,
+    seed_sequence,
 )
 
 #: Design-point acceptance (module docstring): distance to g = 0 in u, 1 - cos of the angle
@@ -49,6 +71,25 @@ FORM_ALIGNMENT_TOLERANCE = 1e-3
 SMOOTHNESS_TOLERANCE = 0.05
 #: Default finite-difference step of the design-point search, in standard-normal units.
 GRADIENT_STEP = 1e-4
+#: Second-order check: smallest eigenvalue of the projected Hessian of the Lagrangian accepted
+#: (1 for a plane; 0 where |u| is constant along g = 0 to second order, e.g. a sphere about
+#: the origin, where no design point is isolated), and the step of its second differences.
+SECOND_ORDER_TOLERANCE = 0.05
+HESSIAN_STEP = 1e-2
+#: Largest tangent dimension d - 1 with the full projected Hessian (above it, its diagonal).
+FULL_HESSIAN_DIMENSION = 12
+#: Searches of :func:`find_design_points` besides the one from the origin; after them it
+#: goes on while one of the last RESTART_PATIENCE searches found a new point, up to
+#: MAX_RESTART_FACTOR times as many.
+DEFAULT_RESTARTS = 12
+RESTART_PATIENCE = 4
+MAX_RESTART_FACTOR = 3
+#: Two accepted design points are the same when their directions differ by less than this
+#: (1 - cos) and their betas by less than this share.
+DISTINCT_DIRECTION = 1e-3
+DISTINCT_BETA = 1e-2
+#: Stream key (under RARE_EVENT_STREAM) of the restart points ('form' in ASCII).
+RESTART_STREAM = 0x666F726D
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,6 +112,12 @@ class DesignPoint:
         One line: why it was not accepted ("" when converged).
     evaluations : int
         Rows on which the limit state was evaluated.
+    curvature_eigenvalues : ndarray or None
+        Eigenvalues 1 - beta kappa_i of the projected Hessian of the Lagrangian (ascending;
+        in high dimension its diagonal entries); None when not checked.
+    sorm_probability : float
+        Breitung's Phi(-beta) / sqrt(prod(eigenvalues)) [-] (NaN when not computed or when
+        only the diagonal was taken).
     """
 
     point: np.ndarray
@@ -80,6 +127,8 @@ class DesignPoint:
     converged: bool
     message: str
     evaluations: int
+    curvature_eigenvalues: np.ndarray | None = None
+    sorm_probability: float = float("nan")
 
     @property
     def importance_factors(self) -> np.ndarray:
@@ -95,11 +144,13 @@ class _Unevaluable(Exception):
 
 
 def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_STEP,
-                      max_iterations=100, batch_size=None) -> DesignPoint:
+                      max_iterations=100, batch_size=None, start=None,
+                      second_order=True) -> DesignPoint:
     """The most probable failure point u* by SLSQP, with the checks of the module docstring.
 
     Minimises |u|^2 / 2 subject to g(u) = 0 ([HasoferLind1974]) with
-    :func:`scipy.optimize.minimize` (method ``"SLSQP"``, [Kraft1988]) from u = 0.
+    :func:`scipy.optimize.minimize` (method ``"SLSQP"``, [Kraft1988]) from u = 0 (or
+    ``start``).
 
     Parameters
     ----------
@@ -117,6 +168,10 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         SLSQP iterations.
     batch_size : int, optional
         Most rows per call of ``limit_state``.
+    start : array_like (d,), optional
+        First iterate (default the origin); the origin is checked (g(0) > 0) either way.
+    second_order : bool
+        Reject a point that is not a local minimum of |u| on g = 0 (module docstring).
 
     Returns
     -------
@@ -178,8 +233,9 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
                                "the search")
         return grad / scale
 
+    first = origin if start is None else np.asarray(start, dtype=float).reshape(d)
     try:
-        result = minimize(lambda u: 0.5 * float(u @ u), origin, jac=lambda u: u,
+        result = minimize(lambda u: 0.5 * float(u @ u), first, jac=lambda u: u,
                           method="SLSQP",
                           constraints=[{"type": "eq", "fun": constraint,
                                         "jac": constraint_gradient}],
@@ -217,7 +273,179 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         return fail(point, central_user, f"the limit state is not smooth at the design point "
                                          f"(one-sided slopes differ by {100 * kink:.3g} % at "
                                          f"step {step:g})")
-    return DesignPoint(point, beta, float(ndtr(-beta)), central_user, True, "", calls[0])
+    eigenvalues, sorm = None, float("nan")
+    if second_order and d > 1:
+        eigenvalues, full = _projected_hessian(values, point, g_star, central_user, beta / norm)
+        smallest = float(eigenvalues[0])
+        if not smallest >= SECOND_ORDER_TOLERANCE:
+            kind = "a maximum" if eigenvalues[-1] < SECOND_ORDER_TOLERANCE else "a saddle"
+            if np.isfinite(smallest) and smallest > 0:
+                kind = "almost flat (no isolated minimum)"
+            elif not np.isfinite(smallest):
+                kind = "not finite around it"
+            return fail(point, central_user, f"the point found (beta {beta:.4g}) is not a "
+                                             f"minimum of |u| on g = 0: it is {kind} along "
+                                             f"the limit state (smallest eigenvalue of the "
+                                             f"projected Hessian {smallest:.3g} < "
+                                             f"{SECOND_ORDER_TOLERANCE:g})")
+        if full:
+            sorm = float(ndtr(-beta) / np.sqrt(np.prod(eigenvalues)))
+    return DesignPoint(point, beta, float(ndtr(-beta)), central_user, True, "", calls[0],
+                       eigenvalues, sorm)
+
+
+def tangent_directions(normal, full) -> np.ndarray:
+    """Directions (rows) of the tangent space of the plane with unit normal ``normal``.
+
+    ``full``: an orthonormal basis (d - 1 rows, from a QR factorisation of [normal, I]);
+    else the coordinate axes projected on the plane and normalised, without the axis most
+    aligned with the normal (d - 1 rows, not orthogonal).
+    """
+    d = normal.size
+    if full:
+        q, _ = np.linalg.qr(np.column_stack([normal, np.eye(d)]))
+        return q[:, 1:d].T
+    keep = np.delete(np.arange(d), int(np.argmax(np.abs(normal))))
+    axes = np.eye(d)[keep] - np.outer(normal[keep], normal)
+    return axes / np.linalg.norm(axes, axis=1, keepdims=True)
+
+
+def _projected_hessian(values, point, g_star, gradient, multiplier):
+    """Eigenvalues of A = I + lambda T' H_g T at u* (ascending) and whether A was taken
+    whole (module docstring); second differences of step :data:`HESSIAN_STEP`."""
+    d = point.size
+    normal = gradient / float(np.linalg.norm(gradient))
+    full = d - 1 <= FULL_HESSIAN_DIMENSION
+    t = tangent_directions(normal, full)
+    h = HESSIAN_STEP
+    k = t.shape[0]
+    rows = [point + h * t, point - h * t]
+    pairs = [(i, j) for i in range(k) for j in range(i + 1, k)] if full else []
+    for i, j in pairs:
+        rows += [point[None] + h * (t[i] + t[j]), point[None] - h * (t[i] + t[j]),
+                 point[None] + h * (t[i] - t[j]), point[None] - h * (t[i] - t[j])]
+    g = values(np.concatenate(rows))
+    hessian = np.zeros((k, k))
+    hessian[np.diag_indices(k)] = (g[:k] + g[k:2 * k] - 2.0 * g_star) / (h * h)
+    for n, (i, j) in enumerate(pairs):
+        a, b, c, e = g[2 * k + 4 * n:2 * k + 4 * n + 4]
+        hessian[i, j] = hessian[j, i] = ((a + b) - (c + e)) / (4.0 * h * h)
+    a = np.eye(k) + multiplier * hessian
+    if not np.all(np.isfinite(a)):
+        return np.full(k, np.nan), full
+    return (np.linalg.eigvalsh(a) if full else np.sort(np.diag(a))), full
+
+
+@dataclass(frozen=True, eq=False)
+class DesignPointSet:
+    """The distinct design points of :func:`find_design_points`.
+
+    Attributes
+    ----------
+    points : tuple of DesignPoint
+        The accepted, distinct design points, by increasing beta (may be empty).
+    evaluations : int
+        Rows evaluated by all searches.
+    searches : int
+        Searches run (the one from the origin and the restarts).
+    message : str
+        Why the search from the origin was not accepted ("" when it was); with no point,
+        why there is none.
+    """
+
+    points: tuple
+    evaluations: int
+    searches: int
+    message: str = ""
+
+    @property
+    def betas(self) -> np.ndarray:
+        """beta of each design point [-]."""
+        return np.array([p.beta for p in self.points])
+
+    @property
+    def form_probability(self) -> float:
+        """The first-order series estimate min(1, sum_k Phi(-beta_k)) [-] (NaN without a
+        point): the union of the half-spaces beyond each design point, their overlaps
+        counted twice (an upper bound of the FORM probability of the union)."""
+        if not self.points:
+            return float("nan")
+        return float(min(1.0, np.sum(ndtr(-self.betas))))
+
+
+def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTARTS,
+                       max_evaluations=None, gradient=None, step=GRADIENT_STEP,
+                       max_iterations=100, batch_size=None,
+                       second_order=True) -> DesignPointSet:
+    """Every distinct design point found from the origin and ``restarts`` seeded starts.
+
+    The first search starts at the origin (:func:`find_design_point`). The restarts begin at
+    -u*_0 (the mirror image of the first point found: symmetric limit states such as
+    |u_1| >= b have a second design point there) and at points r s_i, s_i uniform on the unit
+    sphere in antithetic pairs (s, -s; drawn from the child (RARE_EVENT_STREAM,
+    RESTART_STREAM) of ``seed``), r the smallest beta found so far (3 when none): SLSQP from
+    there ends in the design point of that start's basin. After ``restarts`` searches it
+    goes on while one of the last :data:`RESTART_PATIENCE` found a new point (at most
+    :data:`MAX_RESTART_FACTOR` ``restarts``). Accepted points that differ in direction
+    (1 - cos > 1e-3) or beta (relative 1e-2) are kept. No finite number of starts is sure to
+    find every design point: importance sampling's diagnostics and the cross-check with
+    subset simulation (:func:`tolsim.rare_events.estimate`, ``method="rare"``) are the
+    safety net.
+
+    Parameters
+    ----------
+    limit_state, dimension, gradient, step, max_iterations, batch_size, second_order
+        As :func:`find_design_point`.
+    seed : numpy.random.SeedSequence or int
+    restarts : int
+        Searches besides the one from the origin (0: FORM as before).
+    max_evaluations : int, optional
+        No restart begins once the searches have evaluated this many rows (the cost bound
+        of :func:`~tolsim.study.analyses.rare_events.importance.importance_sampling`).
+
+    Returns
+    -------
+    DesignPointSet
+    """
+    d = check_dimension(dimension)
+    restarts = check_count("restarts", restarts, 0)
+    root = seed_sequence(seed)
+    options = dict(gradient=gradient, step=step, max_iterations=max_iterations,
+                   batch_size=batch_size, second_order=second_order)
+    first = find_design_point(limit_state, d, **options)
+    evaluations, searches = first.evaluations, 1
+    message = "" if first.converged else first.message
+    if not first.converged and ("origin" in first.message and "fails" in first.message):
+        return DesignPointSet((), evaluations, searches, message)
+    found = [first] if first.converged else []
+    # antithetic pairs of directions, drawn for the longest run of restarts
+    half = np.random.default_rng(child_sequence(root, RESTART_STREAM)).standard_normal(
+        (MAX_RESTART_FACTOR * restarts // 2 + 1, d))
+    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    directions = np.stack([half, -half], axis=1).reshape(-1, d)
+    last_new, k = 0, 0
+    budget = np.inf if max_evaluations is None else max_evaluations
+    while (k < restarts or (k - last_new < RESTART_PATIENCE
+                            and k < MAX_RESTART_FACTOR * restarts)) and evaluations < budget:
+        radius = min((p.beta for p in found), default=3.0)
+        start = -first.point if (k == 0 and first.converged) else radius * directions[k]
+        point = find_design_point(limit_state, d, start=start, **options)
+        evaluations += point.evaluations
+        searches += 1
+        k += 1
+        if point.converged and not any(_same(point, p) for p in found):
+            found.append(point)
+            last_new = k
+    found.sort(key=lambda p: p.beta)
+    if not found and not message:
+        message = "no search ended in an accepted design point"
+    return DesignPointSet(tuple(found), evaluations, searches, message)
+
+
+def _same(a, b) -> bool:
+    cos = float(a.point @ b.point) / (a.beta * b.beta)
+    return 1.0 - cos <= DISTINCT_DIRECTION and abs(a.beta - b.beta) <= DISTINCT_BETA * max(
+        a.beta, b.beta)
 
 
 def _user_gradient(gradient, u):

@@ -30,6 +30,20 @@ STATUS_NO_FAILURE = "no_failure"
 STATUS_PLATEAU = "plateau"
 STATUS_FORM_FAILED = "form_failed"
 STATUS_UNRESOLVED = "unresolved"
+STATUS_DIAGNOSTIC_FAILED = "diagnostic_failed"
+STATUS_ESTIMATORS_DISAGREE = "estimators_disagree"
+#: Every status and what it means (the docstring of :class:`RareEventResult`).
+STATUSES = {
+    STATUS_OK: "the estimator backs its number and interval",
+    STATUS_NO_FAILURE: "no sample failed: no probability estimated",
+    STATUS_PLATEAU: "subset simulation: the limit state is flat at a level's quantile",
+    STATUS_FORM_FAILED: "FORM found no accepted design point: no probability estimated",
+    STATUS_UNRESOLVED: "every sample unresolved (g NaN): P only known to lie in [0, 1]",
+    STATUS_DIAGNOSTIC_FAILED: "a number was computed but a diagnostic says not to trust it "
+                              "(message: which one)",
+    STATUS_ESTIMATORS_DISAGREE: "two estimators (or FORM and an estimator) disagree beyond "
+                                "their intervals",
+}
 
 INTERVAL_CLOPPER_PEARSON = "Clopper-Pearson"
 INTERVAL_LOGNORMAL = "lognormal with the CV and a Student-t quantile (approximate)"
@@ -61,7 +75,28 @@ class RareEventResult:
         Rows on which the limit state was evaluated (model calls), FORM included.
     dimension : int
     status : str
-        ``"ok"`` or why there is no number (:meth:`raise_for_status`).
+        One of :data:`STATUSES` (:meth:`raise_for_status` raises unless ``"ok"``):
+
+        ``"ok"``
+            The estimator backs its number and interval.
+        ``"no_failure"``
+            No sample failed (subset: within ``max_levels``); probability NaN.
+        ``"plateau"``
+            Subset: the limit state is flat at a level's p0-quantile; probability NaN.
+        ``"form_failed"``
+            Importance sampling: FORM found no accepted design point; probability NaN.
+        ``"unresolved"``
+            Monte Carlo: every sample unresolved; probability NaN, bounds [0, 1].
+        ``"diagnostic_failed"``
+            A number was computed (``probability`` and its interval are kept, for
+            inspection) but a diagnostic says it may be wrong: importance sampling with too
+            few effective samples or one dominating weight, or a FORM/IS ratio far from 1;
+            subset simulation whose failures descend from too few level-0 samples. The
+            message names the diagnostic and its threshold.
+        ``"estimators_disagree"``
+            Two estimators (subset simulation and importance sampling, or subset simulation
+            and FORM's design points) disagree beyond their intervals; both numbers are in
+            the message, ``probability`` is the first estimator's.
     message : str
         One line: why the estimator is flagged ("" when ok).
     unresolved : int
@@ -96,6 +131,24 @@ class RareEventResult:
         Importance sampling: |u*| and Phi(-beta).
     importance_factors : ndarray (d,) or None
         Importance sampling: alpha_k^2, alpha = u* / beta.
+    design_points : ndarray (k, d) or None
+        Importance sampling: every design point sampled around (the mixture components),
+        by increasing beta; ``design_point`` is the first.
+    betas : tuple of float
+        Their reliability indices.
+    effective_sample_size : float
+        Importance sampling: Kish's effective number of the failing samples' weights,
+        (sum w_i)^2 / sum w_i^2 over the failing samples.
+    largest_weight_share : float
+        Importance sampling: the largest failing weight over their sum.
+    form_ratio : float
+        Importance sampling: ``form_probability`` / ``probability`` (first-order estimate
+        over the importance-sampling estimate).
+    ancestors : int
+        Subset: distinct level-0 samples that the last level's failing samples descend from.
+    level_independent_cv : float
+        Subset: the CV with the levels taken as independent (the family estimate of each
+        level), for comparison with ``coefficient_of_variation``.
     """
 
     estimator: str
@@ -127,6 +180,13 @@ class RareEventResult:
     beta: float = float("nan")
     form_probability: float = float("nan")
     importance_factors: np.ndarray | None = field(default=None, repr=False)
+    design_points: np.ndarray | None = field(default=None, repr=False)
+    betas: tuple = ()
+    effective_sample_size: float = float("nan")
+    largest_weight_share: float = float("nan")
+    form_ratio: float = float("nan")
+    ancestors: int = 0
+    level_independent_cv: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -147,7 +207,7 @@ class RareEventResult:
     def describe(self) -> str:
         """One line: the estimate, its interval and the cost, or why there is none."""
         name = ESTIMATOR_TITLES.get(self.estimator, self.estimator)
-        if not self.ok:
+        if not self.ok and not np.isfinite(self.probability):
             return f"{name}: {self.message}"
         head = name
         if self.estimator == "importance":
@@ -171,13 +231,15 @@ class RareEventResult:
             line += (f"; {self.unresolved:,} unresolved rows: P between {self.bound_lower:.3g} "
                      f"(as safe) and {self.bound_upper:.3g} (as failures), {level} "
                      f"{self.bounds_ci_lower:.3g} to {self.bounds_ci_upper:.3g}")
+        if not self.ok:
+            line += f"; NOT OK ({self.status}): {self.message}"
         return line
-
 
 
 #: How :meth:`RareEventResult.describe` names them.
 ESTIMATOR_TITLES = {"monte_carlo": "Monte Carlo", "subset": "subset simulation",
-                    "importance": "importance sampling"}
+                    "importance": "importance sampling",
+                    "rare": "subset simulation and importance sampling"}
 
 
 def flagged(status, message, evaluations, unresolved, common=None, **extra):

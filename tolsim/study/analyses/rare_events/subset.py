@@ -111,7 +111,9 @@ from tolsim.study.analyses.rare_events.common import (
 )
 from tolsim.study.analyses.rare_events.result import (
     INTERVAL_LOGNORMAL,
+    STATUS_DIAGNOSTIC_FAILED,
     STATUS_NO_FAILURE,
+    STATUS_OK,
     STATUS_PLATEAU,
     RareEventResult,
     flagged,
@@ -119,6 +121,9 @@ from tolsim.study.analyses.rare_events.result import (
 
 #: Fewest chains (n p0) of subset simulation.
 MIN_CHAINS = 10
+#: Fewest distinct level-0 ancestors of the last level's failures before the result is
+#: flagged (module docstring).
+MIN_ANCESTORS = 3
 #: Adaptive conditional sampling ([Papaioannou2015]): initial scale and target acceptance.
 INITIAL_SCALE = 0.6
 TARGET_ACCEPTANCE = 0.44
@@ -188,6 +193,7 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
     evaluations = n
     unresolved = int(np.count_nonzero(np.isnan(g)))
     levels = _Levels()
+    eve = np.arange(n)              # the level-0 sample each sample descends from
     scale = INITIAL_SCALE
     families = None                 # level 0: independent samples
     common = dict(estimator="subset", confidence_level=confidence_level, dimension=d,
@@ -198,7 +204,7 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
         failed = g <= 0
         if np.count_nonzero(failed | unevaluable) >= chains:
             return _subset_result(failed, unevaluable, structure, levels, evaluations,
-                                  unresolved, confidence_level, common)
+                                  unresolved, confidence_level, common, eve)
         key = np.where(unevaluable, -np.inf, g)
         order = np.argsort(key, kind="stable")
         below, above = key[order[chains - 1]], key[order[chains]]
@@ -219,7 +225,8 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
                             "progress towards g <= 0; no probability estimated",
                             evaluations, unresolved, common, **levels.fields())
         # N_c rows inside, more at a tie
-        levels.add(threshold, level_statistics(key <= threshold, structure))
+        levels.add(threshold, level_statistics(key <= threshold, structure), key <= threshold,
+                   eve)
         seeds = np.sort(order[:chains])              # the N_c lowest, in sample order
         # the family of a chain: the chain of the level before that holds its seed
         families = seeds if level == 0 else seeds // chain_length
@@ -228,6 +235,7 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
             limit_state, u[seeds], g[seeds], threshold, chain_length, chain_seeds, scale,
             batch_size)
         levels.acceptance.append(rate)
+        eve = np.repeat(eve[seeds], chain_length)
         evaluations += calls
         unresolved += nan_calls
     raise AssertionError("unreachable")  # the loop returns at its last level
@@ -240,10 +248,15 @@ class _Levels:
     thresholds: list = field(default_factory=list)
     statistics: list = field(default_factory=list)
     acceptance: list = field(default_factory=list)
+    indicators: list = field(default_factory=list)
+    eves: list = field(default_factory=list)
 
-    def add(self, threshold, statistics):
+    def add(self, threshold, statistics, indicator=None, eve=None):
         self.thresholds.append(float(threshold))
         self.statistics.append(statistics)
+        if indicator is not None:
+            self.indicators.append(indicator)
+            self.eves.append(eve)
 
     def fields(self):
         return dict(thresholds=tuple(self.thresholds),
@@ -256,27 +269,77 @@ class _Levels:
 
 
 def _subset_result(failed, unevaluable, structure, levels, evaluations, unresolved,
-                   confidence_level, common):
-    """The last level: P_m with and without the unresolved rows, CVs, intervals."""
+                   confidence_level, common, eve):
+    """The last level: P_m with and without the unresolved rows, CVs, intervals, ancestors."""
     prefix = float(np.prod([x.probability for x in levels.statistics]))
     last_upper = level_statistics(failed | unevaluable, structure)
     last_lower = level_statistics(failed, structure)
     upper = prefix * last_upper.probability
     lower = prefix * last_lower.probability
-    up_hi = _lognormal_interval(upper, [*levels.statistics, last_upper], confidence_level)[1]
+    up_hi = _lognormal_interval(
+        upper, [*levels.statistics, last_upper], confidence_level,
+        ancestral_log_variance([*levels.indicators, failed | unevaluable],
+                               [*levels.eves, eve]))[1]
+    independent_cv = _lognormal_interval(lower, [*levels.statistics, last_lower],
+                                         confidence_level)[2]
     lo_lo, lo_hi, cv_lower, df = _lognormal_interval(
-        lower, [*levels.statistics, last_lower], confidence_level)
+        lower, [*levels.statistics, last_lower], confidence_level,
+        ancestral_log_variance([*levels.indicators, failed], [*levels.eves, eve]))
     resolved = 1.0 - (upper - lower)                               # 1 - P(N), estimated
     p = lower / resolved
     levels.add(0.0, last_upper)
+    ancestors = int(np.unique(eve[failed]).size)
+    status, message = STATUS_OK, ""
+    if levels.indicators and 0 < ancestors < MIN_ANCESTORS:
+        status = STATUS_DIAGNOSTIC_FAILED
+        message = (f"the {int(np.count_nonzero(failed))} failing samples descend from only "
+                   f"{ancestors} level-0 sample(s) (< {MIN_ANCESTORS}): the chains may have "
+                   "lost a failure mode; raise samples_per_level or cross-check with "
+                   "importance sampling")
     return RareEventResult(
         probability=p, standard_error=p * cv_lower if lower > 0 else float("nan"),
         coefficient_of_variation=cv_lower, ci_lower=lo_lo / resolved,
         ci_upper=lo_hi / resolved, interval=INTERVAL_LOGNORMAL, evaluations=evaluations,
         unresolved=unresolved, failures=int(np.count_nonzero(failed)), bound_lower=lower,
         bound_upper=upper, bounds_ci_lower=lo_lo, bounds_ci_upper=up_hi,
-        degrees_of_freedom=df, **levels.fields(), **common)
+        degrees_of_freedom=df, ancestors=ancestors, level_independent_cv=independent_cv,
+        status=status, message=message, **levels.fields(), **common)
 
+
+def ancestral_log_variance(indicators, eves):
+    """Variance of ln P over the genealogy of the samples, and its degrees of freedom.
+
+    ln P = sum_j ln P_j, linearised: the error of ln P is sum_j (P_j_hat - P_j) / P_j, a sum
+    over all samples of all levels. Grouping its terms by the level-0 sample ("Eve") each
+    sample descends from, e_r = sum_j sum_{i in level j, eve(i) = r} (I_ji - P_j) / (n P_j),
+    and taking the Eve trees as the independent clusters ([ChanLai2013], [LeeWhiteley2018]
+    for particle filters), v = K / (K - 1) sum_r e_r^2 with K = n Eves, and Kish's effective
+    number of clusters (sum e_r^2)^2 / sum e_r^4 minus 1 as degrees of freedom. Unlike the
+    per-level variance it holds the correlation along the chains of all generations and
+    between the levels (a level's samples descend from the level before).
+
+    Parameters
+    ----------
+    indicators : list of ndarray of bool
+        Per level, the samples inside its domain (the last level: the failures).
+    eves : list of ndarray of int
+        Per level, the Eve of each sample.
+
+    Returns
+    -------
+    (variance of ln P, degrees of freedom); (inf, nan) when some P_j is 0.
+    """
+    n = indicators[0].size
+    e = np.zeros(n)
+    for indicator, eve in zip(indicators, eves, strict=True):
+        p = float(np.count_nonzero(indicator)) / indicator.size
+        if p <= 0:
+            return float("inf"), float("nan")
+        e += np.bincount(eve, weights=(indicator - p) / (indicator.size * p), minlength=n)
+    square = float(np.sum(e ** 2))
+    if square <= 0:
+        return 0.0, float("inf")
+    return n / (n - 1.0) * square, max(square ** 2 / float(np.sum(e ** 4)) - 1.0, 1.0)
 
 
 def chain_correlation_factor(indicator) -> float:
@@ -376,22 +439,25 @@ def level_statistics(indicator, structure=None) -> LevelStatistics:
     return LevelStatistics(p, delta, max(effective - 1.0, 1.0), gamma)
 
 
-def _lognormal_interval(p, statistics, confidence_level):
+def _lognormal_interval(p, statistics, confidence_level, ancestral=None):
     """Lognormal interval of a product of level estimates (module docstring).
 
     s^2 = sum_j ln(1 + delta_j^2), delta = sqrt(exp(s^2) - 1), df by Satterthwaite from the
-    levels' df; the interval p exp(-+ t s). Returns (lower, upper, delta, df);
-    (0, NaN, inf, NaN) for p = 0.
+    levels' df; with ``ancestral`` (variance of ln P, df) of :func:`ancestral_log_variance`
+    the larger of the two variances and its df. The interval p exp(-+ t s). Returns
+    (lower, upper, delta, df); (0, NaN, inf, NaN) for p = 0.
     """
     if not p > 0:
         return 0.0, float("nan"), float("inf"), float("nan")
     parts = np.log1p(np.square([x.coefficient_of_variation for x in statistics]))
     dfs = np.array([x.degrees_of_freedom for x in statistics])
     total = float(np.sum(parts))
-    if total <= 0:
-        return p, p, 0.0, float("inf")
     spread = float(np.sum(parts ** 2 / dfs))                # 0 when every df is inf
     df = total ** 2 / spread if spread > 0 else float("inf")
+    if ancestral is not None and ancestral[0] > total:
+        total, df = ancestral
+    if total <= 0:
+        return p, p, 0.0, float("inf")
     quantile = float(t_distribution.ppf(0.5 + confidence_level / 2, df)) if np.isfinite(df) \
         else float(ndtri(0.5 + confidence_level / 2))
     s = math.sqrt(total)
