@@ -81,13 +81,15 @@ FULL_HESSIAN_DIMENSION = 12
 #: Searches of :func:`find_design_points` besides the one from the origin; after them it
 #: goes on while one of the last RESTART_PATIENCE searches found a new point, up to
 #: MAX_RESTART_FACTOR times as many.
-DEFAULT_RESTARTS = 12
-RESTART_PATIENCE = 4
+DEFAULT_RESTARTS = 16
+RESTART_PATIENCE = 8
 MAX_RESTART_FACTOR = 3
 #: Two accepted design points are the same when their directions differ by less than this
 #: (1 - cos) and their betas by less than this share.
 DISTINCT_DIRECTION = 1e-3
 DISTINCT_BETA = 1e-2
+#: Points of the line search along each restart direction.
+RAY_POINTS = 16
 #: Stream key (under RARE_EVENT_STREAM) of the restart points ('form' in ASCII).
 RESTART_STREAM = 0x666F726D
 
@@ -211,6 +213,9 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         return fail(origin, grad0, f"the origin (nominal design) fails, g(0) = {g0:.3g} <= 0: "
                                    "not a rare event; use Monte Carlo")
     scale = float(np.linalg.norm(grad0))
+    if start is not None and not scale > 0:       # e.g. |u_1| >= b: flat at the origin only
+        scale = float(np.linalg.norm(value_and_gradient(
+            np.asarray(start, dtype=float).reshape(d))[1]))
     if not (np.isfinite(scale) and scale > 0):
         return fail(origin, grad0, "the gradient of the limit state vanishes at the origin: "
                                    "FORM can not start (several or no design points)")
@@ -383,8 +388,10 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     -u*_0 (the mirror image of the first point found: symmetric limit states such as
     |u_1| >= b have a second design point there) and at points r s_i, s_i uniform on the unit
     sphere in antithetic pairs (s, -s; drawn from the child (RARE_EVENT_STREAM,
-    RESTART_STREAM) of ``seed``), r the smallest beta found so far (3 when none): SLSQP from
-    there ends in the design point of that start's basin. After ``restarts`` searches it
+    RESTART_STREAM) of ``seed``): where the ray t s first reaches g <= 0 for t between r / 2
+    and 2 r (16 points, one batch, linear interpolation; r the smallest beta found so far, 3
+    when none), else r s. A start on the limit state ends in the design point nearest to it
+    along g = 0, which finds the small basins that points r s miss. After ``restarts`` searches it
     goes on while one of the last :data:`RESTART_PATIENCE` found a new point (at most
     :data:`MAX_RESTART_FACTOR` ``restarts``). Accepted points that differ in direction
     (1 - cos > 1e-3) or beta (relative 1e-2) are kept. No finite number of starts is sure to
@@ -428,7 +435,11 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     while (k < restarts or (k - last_new < RESTART_PATIENCE
                             and k < MAX_RESTART_FACTOR * restarts)) and evaluations < budget:
         radius = min((p.beta for p in found), default=3.0)
-        start = -first.point if (k == 0 and first.converged) else radius * directions[k]
+        if k == 0 and first.converged:
+            start = -first.point
+        else:
+            start, cost = _ray_start(limit_state, directions[k], radius, batch_size)
+            evaluations += cost
         point = find_design_point(limit_state, d, start=start, **options)
         evaluations += point.evaluations
         searches += 1
@@ -440,6 +451,21 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     if not found and not message:
         message = "no search ended in an accepted design point"
     return DesignPointSet(tuple(found), evaluations, searches, message)
+
+
+def _ray_start(limit_state, direction, radius, batch_size):
+    """Where the ray t s, t in [0.5 r, 2 r], first reaches g <= 0 (linear interpolation
+    between the grid points of RAY_POINTS), else r s; and the rows evaluated."""
+    t = np.linspace(0.5 * radius, 2.0 * radius, RAY_POINTS)
+    g = evaluate(limit_state, t[:, None] * direction[None], batch_size)
+    inside = np.flatnonzero(g <= 0)
+    if not inside.size:
+        return radius * direction, t.size
+    i = int(inside[0])
+    if i == 0 or not np.isfinite(g[i - 1]):
+        return t[i] * direction, t.size
+    crossing = t[i - 1] + (t[i] - t[i - 1]) * g[i - 1] / (g[i - 1] - g[i])
+    return crossing * direction, t.size
 
 
 def _same(a, b) -> bool:

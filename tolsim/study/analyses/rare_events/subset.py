@@ -444,7 +444,9 @@ def _lognormal_interval(p, statistics, confidence_level, ancestral=None):
 
     s^2 = sum_j ln(1 + delta_j^2), delta = sqrt(exp(s^2) - 1), df by Satterthwaite from the
     levels' df; with ``ancestral`` (variance of ln P, df) of :func:`ancestral_log_variance`
-    the larger of the two variances and its df. The interval p exp(-+ t s). Returns
+    the larger of the two variances, with the levels' df (the Eve clusters' own effective
+    number is often 1-3, one tree dominating the sum of e_r^4, and its t quantile would blow
+    the interval up by a factor of 10 or more). The interval p exp(-+ t s). Returns
     (lower, upper, delta, df); (0, NaN, inf, NaN) for p = 0.
     """
     if not p > 0:
@@ -455,7 +457,7 @@ def _lognormal_interval(p, statistics, confidence_level, ancestral=None):
     spread = float(np.sum(parts ** 2 / dfs))                # 0 when every df is inf
     df = total ** 2 / spread if spread > 0 else float("inf")
     if ancestral is not None and ancestral[0] > total:
-        total, df = ancestral
+        total = ancestral[0]           # with the levels' df: Kish's over Eves can be ~1
     if total <= 0:
         return p, p, 0.0, float("inf")
     quantile = float(t_distribution.ppf(0.5 + confidence_level / 2, df)) if np.isfinite(df) \
