@@ -120,6 +120,8 @@ class DesignPoint:
     sorm_probability : float
         Breitung's Phi(-beta) / sqrt(prod(eigenvalues)) [-] (NaN when not computed or when
         only the diagonal was taken).
+    unresolved : int
+        Of the evaluated rows, those where g was NaN.
     """
 
     point: np.ndarray
@@ -131,6 +133,7 @@ class DesignPoint:
     evaluations: int
     curvature_eigenvalues: np.ndarray | None = None
     sorm_probability: float = float("nan")
+    unresolved: int = 0
 
     @property
     def importance_factors(self) -> np.ndarray:
@@ -186,11 +189,13 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         raise ValueError(f"step = {step!r} must be > 0")
     max_iterations = check_count("max_iterations", max_iterations, 1)
     check_batch_size(batch_size)
-    calls = [0]
+    calls = [0, 0]
 
     def values(rows):
         calls[0] += rows.shape[0]
-        return evaluate(limit_state, rows, batch_size)
+        out = evaluate(limit_state, rows, batch_size)
+        calls[1] += int(np.count_nonzero(np.isnan(out)))
+        return out
 
     def value_and_gradient(u):
         """g(u) and its gradient: the caller's, or central differences (one batch
@@ -202,7 +207,8 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
 
     def fail(u, g_grad, why):
         beta = float(np.linalg.norm(u))
-        return DesignPoint(u, beta, float(ndtr(-beta)), g_grad, False, why, calls[0])
+        return DesignPoint(u, beta, float(ndtr(-beta)), g_grad, False, why, calls[0],
+                           unresolved=calls[1])
 
     origin = np.zeros(d)
     g_rows, grad0 = value_and_gradient(origin)
@@ -296,7 +302,7 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         if full:
             sorm = float(ndtr(-beta) / np.sqrt(np.prod(eigenvalues)))
     return DesignPoint(point, beta, float(ndtr(-beta)), central_user, True, "", calls[0],
-                       eigenvalues, sorm)
+                       eigenvalues, sorm, calls[1])
 
 
 def tangent_directions(normal, full) -> np.ndarray:
@@ -356,12 +362,15 @@ class DesignPointSet:
     message : str
         Why the search from the origin was not accepted ("" when it was); with no point,
         why there is none.
+    unresolved : int
+        Of the evaluated rows, those where g was NaN.
     """
 
     points: tuple
     evaluations: int
     searches: int
     message: str = ""
+    unresolved: int = 0
 
     @property
     def betas(self) -> np.ndarray:
@@ -420,10 +429,10 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     options = dict(gradient=gradient, step=step, max_iterations=max_iterations,
                    batch_size=batch_size, second_order=second_order)
     first = find_design_point(limit_state, d, **options)
-    evaluations, searches = first.evaluations, 1
+    evaluations, searches, unresolved = first.evaluations, 1, first.unresolved
     message = "" if first.converged else first.message
     if not first.converged and ("origin" in first.message and "fails" in first.message):
-        return DesignPointSet((), evaluations, searches, message)
+        return DesignPointSet((), evaluations, searches, message, unresolved)
     found = [first] if first.converged else []
     # antithetic pairs of directions, drawn for the longest run of restarts
     half = np.random.default_rng(child_sequence(root, RESTART_STREAM)).standard_normal(
@@ -438,10 +447,12 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
         if k == 0 and first.converged:
             start = -first.point
         else:
-            start, cost = _ray_start(limit_state, directions[k], radius, batch_size)
+            start, cost, nans = _ray_start(limit_state, directions[k], radius, batch_size)
             evaluations += cost
+            unresolved += nans
         point = find_design_point(limit_state, d, start=start, **options)
         evaluations += point.evaluations
+        unresolved += point.unresolved
         searches += 1
         k += 1
         if point.converged and not any(_same(point, p) for p in found):
@@ -450,22 +461,23 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     found.sort(key=lambda p: p.beta)
     if not found and not message:
         message = "no search ended in an accepted design point"
-    return DesignPointSet(tuple(found), evaluations, searches, message)
+    return DesignPointSet(tuple(found), evaluations, searches, message, unresolved)
 
 
 def _ray_start(limit_state, direction, radius, batch_size):
     """Where the ray t s, t in [0.5 r, 2 r], first reaches g <= 0 (linear interpolation
-    between the grid points of RAY_POINTS), else r s; and the rows evaluated."""
+    between the grid points of RAY_POINTS), else r s; the rows evaluated and the NaN ones."""
     t = np.linspace(0.5 * radius, 2.0 * radius, RAY_POINTS)
     g = evaluate(limit_state, t[:, None] * direction[None], batch_size)
     inside = np.flatnonzero(g <= 0)
+    nans = int(np.count_nonzero(np.isnan(g)))
     if not inside.size:
-        return radius * direction, t.size
+        return radius * direction, t.size, nans
     i = int(inside[0])
     if i == 0 or not np.isfinite(g[i - 1]):
-        return t[i] * direction, t.size
+        return t[i] * direction, t.size, nans
     crossing = t[i - 1] + (t[i] - t[i - 1]) * g[i - 1] / (g[i - 1] - g[i])
-    return crossing * direction, t.size
+    return crossing * direction, t.size, nans
 
 
 def _same(a, b) -> bool:

@@ -118,12 +118,12 @@ def importance_sampling(limit_state, dimension, seed, *, samples=2000, design_po
         found = DesignPointSet((design_point,) if design_point.converged else (), 0, 1,
                                design_point.message)
     elif design_points is not None:
-        found = design_points
-        found = DesignPointSet(found.points, 0, found.searches, found.message)
+        found = DesignPointSet(design_points.points, 0, design_points.searches,
+                               design_points.message)
     else:
         found = find_design_points(limit_state, d, root, restarts=restarts, max_evaluations=n,
                                    gradient=gradient, step=step, batch_size=batch_size)
-    evaluations = found.evaluations
+    evaluations, form_unresolved = found.evaluations, found.unresolved
     common = dict(estimator="importance", confidence_level=confidence_level, dimension=d,
                   samples_per_level=n)
     if not found.points:
@@ -134,7 +134,7 @@ def importance_sampling(limit_state, dimension, seed, *, samples=2000, design_po
                           importance_factors=point.importance_factors)
         return flagged(STATUS_FORM_FAILED, f"FORM found no design point: {found.message}; no "
                                            "probability estimated, use subset simulation",
-                       evaluations, 0, common)
+                       evaluations, form_unresolved, common)
     best = found.points[0]
     shifts = np.array([p.point for p in found.points])
     beta = found.betas
@@ -160,7 +160,7 @@ def importance_sampling(limit_state, dimension, seed, *, samples=2000, design_po
         failed, unevaluable, w = mixture_samples(limit_state, root, shifts, share, n,
                                                  batch_size)
     evaluations += n
-    unresolved = int(np.count_nonzero(unevaluable))
+    unresolved = form_unresolved + int(np.count_nonzero(unevaluable))
     if not np.any(failed | unevaluable):
         return flagged(STATUS_NO_FAILURE, f"no failure among the {n} samples around the "
                                           f"{len(shifts)} design point(s) (smallest beta "

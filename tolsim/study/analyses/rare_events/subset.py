@@ -276,15 +276,17 @@ def _subset_result(failed, unevaluable, structure, levels, evaluations, unresolv
     last_lower = level_statistics(failed, structure)
     upper = prefix * last_upper.probability
     lower = prefix * last_lower.probability
+    chained = bool(levels.indicators)          # level 0 alone: binomial, nothing to add
     up_hi = _lognormal_interval(
         upper, [*levels.statistics, last_upper], confidence_level,
         ancestral_log_variance([*levels.indicators, failed | unevaluable],
-                               [*levels.eves, eve]))[1]
+                               [*levels.eves, eve]) if chained else None)[1]
     independent_cv = _lognormal_interval(lower, [*levels.statistics, last_lower],
                                          confidence_level)[2]
     lo_lo, lo_hi, cv_lower, df = _lognormal_interval(
         lower, [*levels.statistics, last_lower], confidence_level,
-        ancestral_log_variance([*levels.indicators, failed], [*levels.eves, eve]))
+        ancestral_log_variance([*levels.indicators, failed], [*levels.eves, eve])
+        if chained else None)
     resolved = 1.0 - (upper - lower)                               # 1 - P(N), estimated
     p = lower / resolved
     levels.add(0.0, last_upper)
