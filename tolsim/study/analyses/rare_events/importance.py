@@ -1,16 +1,35 @@
 """Importance sampling around FORM design points ([Melchers1989]) over a standard-normal space
 (:mod:`tolsim.study.analyses.rare_events`).
 
-Importance sampling draws v ~ N(u*, I) (blocks as above) and averages
-1{g(v) <= 0} w(v), w = phi(v) / phi(v - u*) = exp(-v . u* + beta^2 / 2). The standard error
-is the sample standard deviation over sqrt(n); the 95 % interval the normal one,
-P -+ z se (lower end clipped at 0). It is unbiased for any limit state, but efficient only
-when the failure domain lies around u*: with several design points (or a failure domain
-around the origin) the samples miss the other regions and the estimate is low with a
-standard error that does not show it. FORM finds one design point; it can not tell. With
-few failing samples (a strongly curved limit state) the normal interval is too short on the
-high side: on the ball of ``benchmarks/bench_rare_events.py`` (about 2 % of 4000 samples
-fail) it covers 93.2 % (1000 repeats), against 94-96 % on the linear case.
+Importance sampling draws v from the mixture q(v) = sum_k pi_k phi(v - u*_k) over every
+design point u*_k that :func:`~tolsim.study.analyses.rare_events.form.find_design_points`
+found (blocks as in :mod:`~tolsim.study.analyses.rare_events.common`), pi_k = 0.9 Phi(-beta_k) /
+sum_j Phi(-beta_j) + 0.1 / K (a defensive share, so that a point whose FORM estimate is too
+low still gets samples), and averages 1{g(v) <= 0} w(v), w = phi(v) / q(v) =
+1 / sum_k pi_k exp(v . u*_k - beta_k^2 / 2) ([Melchers1989]); with one design point that is
+N(u*, I) and w = exp(-v . u* + beta^2 / 2). The standard error is the sample standard
+deviation over sqrt(n); the 95 % interval the normal one, P -+ z se (lower end clipped at 0).
+It is unbiased for any limit state, but efficient only when the failure domain lies around
+the design points: a design point that no search found gets no samples, and the estimate is
+low with a standard error that does not show it. Hence the restarts, and three diagnostics
+(result fields; a failing one makes the status ``"diagnostic_failed"``, the number kept):
+
+* ``effective_sample_size`` (Kish's, of the failing samples' weights) >= 30
+  (:data:`MIN_EFFECTIVE_SAMPLES`): below it the normal interval rests on too few effective
+  samples (on the sound benchmark problems it is 150-500 at n = 2000);
+* ``largest_weight_share`` <= 10 % (:data:`MAX_WEIGHT_SHARE`): a sample in a failure region
+  far from every design point has a weight orders of magnitude above the others (RP89 with
+  FORM's local design point alone: 20-100 %; the sound problems: below 5 %);
+* ``form_ratio`` = P_FORM / P_IS within 1/30 to 30 (:data:`FORM_RATIO_LIMIT`), P_FORM =
+  min(1, sum_k Phi(-beta_k)): on the sound problems of issue 23 it was 0.11-1.12, on RP89
+  with the local design point 5e-5.
+
+With few failing samples (a strongly curved limit state) the normal interval is too short on
+the high side: on the ball of ``benchmarks/bench_rare_events.py`` (about 2 % of 4000 samples
+fail) it covers 93.2 % (1000 repeats), against 94-96 % on the linear case. RP35 of RPRepo has
+three design points at beta = 3, one of them in a small basin: the restarts find all three in
+about two runs of three, and IS covers 86 % of 100 runs (cross-check with subset simulation,
+``method="rare"``, for a number to sign).
 
 References
 ----------
