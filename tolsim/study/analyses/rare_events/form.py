@@ -81,8 +81,8 @@ FULL_HESSIAN_DIMENSION = 12
 #: Searches of :func:`find_design_points` besides the one from the origin; after them it
 #: goes on while one of the last RESTART_PATIENCE searches found a new point, up to
 #: MAX_RESTART_FACTOR times as many.
-DEFAULT_RESTARTS = 16
-RESTART_PATIENCE = 8
+DEFAULT_RESTARTS = 8
+RESTART_PATIENCE = 4
 MAX_RESTART_FACTOR = 3
 #: Two accepted design points are the same when their directions differ by less than this
 #: (1 - cos) and their betas by less than this share.
@@ -90,6 +90,10 @@ DISTINCT_DIRECTION = 1e-3
 DISTINCT_BETA = 1e-2
 #: Points of the line search along each restart direction.
 RAY_POINTS = 16
+#: The scan of :func:`find_design_points`: rays, points along each, neighbours compared.
+SCAN_DIRECTIONS = 32
+SCAN_POINTS = 16
+SCAN_NEIGHBOURS = 4
 #: Stream key (under RARE_EVENT_STREAM) of the restart points ('form' in ASCII).
 RESTART_STREAM = 0x666F726D
 
@@ -395,7 +399,11 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
 
     The first search starts at the origin (:func:`find_design_point`). The restarts begin at
     -u*_0 (the mirror image of the first point found: symmetric limit states such as
-    |u_1| >= b have a second design point there) and at points r s_i, s_i uniform on the unit
+    |u_1| >= b have a second design point there), then at the crossings of g = 0 of a scan
+    of :data:`SCAN_DIRECTIONS` rays (antithetic pairs; 16 points each from r / 2 to 2 r and a
+    regula-falsi step) that lie nearer to the origin than those of their 4 nearest rays (a local
+    design point lies below each such crossing; starts close to it end in it, where SLSQP
+    from farther away jumps to a larger basin), then at points r s_i, s_i uniform on the unit
     sphere in antithetic pairs (s, -s; drawn from the child (RARE_EVENT_STREAM,
     RESTART_STREAM) of ``seed``): where the ray t s first reaches g <= 0 for t between r / 2
     and 2 r (16 points, one batch, linear interpolation; r the smallest beta found so far, 3
@@ -434,20 +442,31 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     if not first.converged and ("origin" in first.message and "fails" in first.message):
         return DesignPointSet((), evaluations, searches, message, unresolved)
     found = [first] if first.converged else []
+    budget = np.inf if max_evaluations is None else max_evaluations
+    # scan: the rays whose crossing of g = 0 is nearer than their neighbours' point at the
+    # local design points; their crossings are the first starts
+    scan = []
+    if restarts:
+        radius = min((p.beta for p in found), default=3.0)
+        scan, cost, nans = _ray_scan(limit_state, child_sequence(root, RESTART_STREAM, 1), d,
+                                     radius, batch_size)
+        evaluations += cost
+        unresolved += nans
     # antithetic pairs of directions, drawn for the longest run of restarts
     half = np.random.default_rng(child_sequence(root, RESTART_STREAM)).standard_normal(
         (MAX_RESTART_FACTOR * restarts // 2 + 1, d))
     half /= np.linalg.norm(half, axis=1, keepdims=True)
     directions = np.stack([half, -half], axis=1).reshape(-1, d)
+    starts = ([-first.point] if first.converged else []) + list(scan)
     last_new, k = 0, 0
-    budget = np.inf if max_evaluations is None else max_evaluations
     while (k < restarts or (k - last_new < RESTART_PATIENCE
                             and k < MAX_RESTART_FACTOR * restarts)) and evaluations < budget:
         radius = min((p.beta for p in found), default=3.0)
-        if k == 0 and first.converged:
-            start = -first.point
+        if k < len(starts):
+            start = starts[k]
         else:
-            start, cost, nans = _ray_start(limit_state, directions[k], radius, batch_size)
+            start, cost, nans = _ray_start(limit_state, directions[k - len(starts)], radius,
+                                           batch_size)
             evaluations += cost
             unresolved += nans
         point = find_design_point(limit_state, d, start=start, **options)
@@ -462,6 +481,57 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     if not found and not message:
         message = "no search ended in an accepted design point"
     return DesignPointSet(tuple(found), evaluations, searches, message, unresolved)
+
+
+def _ray_scan(limit_state, sequence, d, radius, batch_size):
+    """Starts near the local design points from SCAN_DIRECTIONS rays (antithetic pairs from
+    ``sequence``; in the plane evenly spaced with a random phase): the crossing t_i s_i of g = 0
+    along each ray (t from r / 2 to 2 r, SCAN_POINTS points, one batch, then one regula-falsi
+    step), kept where t_i is no larger than that of the SCAN_NEIGHBOURS nearest rays (by angle),
+    nearest first. Returns (starts, rows evaluated, NaN rows)."""
+    rng = np.random.default_rng(sequence)
+    if d == 2:                        # evenly spaced, a random phase: no gap between rays
+        angle = rng.uniform(0.0, 2.0 * np.pi) + 2.0 * np.pi * np.arange(SCAN_DIRECTIONS) \
+            / SCAN_DIRECTIONS
+        rays = np.column_stack([np.cos(angle), np.sin(angle)])
+    else:
+        half = rng.standard_normal((SCAN_DIRECTIONS // 2, d))
+        half /= np.linalg.norm(half, axis=1, keepdims=True)
+        rays = np.concatenate([half, -half])
+    t = np.linspace(0.5 * radius, 2.0 * radius, SCAN_POINTS)
+    g = evaluate(limit_state, (t[None, :, None] * rays[:, None, :]).reshape(-1, d),
+                 batch_size).reshape(len(rays), t.size)
+    nans = int(np.count_nonzero(np.isnan(g)))
+    crossing = np.full(len(rays), np.inf)
+    bracket = np.zeros((len(rays), 4))                   # t_lo, g_lo, t_hi, g_hi
+    for i, row in enumerate(g):
+        inside = np.flatnonzero(row <= 0)
+        if inside.size:
+            j = int(inside[0])
+            if j == 0 or not np.isfinite(row[j - 1]):
+                crossing[i] = t[j]
+            else:
+                bracket[i] = t[j - 1], row[j - 1], t[j], row[j]
+                crossing[i] = t[j - 1] + (t[j] - t[j - 1]) * row[j - 1] / (row[j - 1] - row[j])
+    # one secant (regula falsi) step on the bracketed rays, one batch
+    refine = np.flatnonzero(bracket[:, 2] > 0)
+    if refine.size:
+        g_mid = evaluate(limit_state, crossing[refine, None] * rays[refine], batch_size)
+        nans += int(np.count_nonzero(np.isnan(g_mid)))
+        for i, value in zip(refine, g_mid, strict=True):
+            t_lo, g_lo, t_hi, g_hi = bracket[i]
+            if not np.isfinite(value):
+                continue
+            if value > 0:
+                t_lo, g_lo = crossing[i], value
+            else:
+                t_hi, g_hi = crossing[i], value
+            crossing[i] = t_lo + (t_hi - t_lo) * g_lo / (g_lo - g_hi) if g_lo != g_hi else t_hi
+    rows = g.size + refine.size
+    near = np.argsort(-(rays @ rays.T), axis=1)[:, 1:SCAN_NEIGHBOURS + 1]
+    local = [i for i in np.argsort(crossing) if np.isfinite(crossing[i])
+             and crossing[i] <= crossing[near[i]].min()]
+    return [crossing[i] * rays[i] for i in local], rows, nans
 
 
 def _ray_start(limit_state, direction, radius, batch_size):
