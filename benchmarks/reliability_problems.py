@@ -3,7 +3,7 @@
 Each :class:`Problem` is a limit state over independent standard normals u (failure where
 g <= 0), its exact failure probability computed here (closed form, or one-dimensional
 quadrature with :func:`scipy.integrate.quad` to 1e-10 relative), and, where it is a published
-problem, the published value and its source. Used by ``tests/test_rare_benchmarks.py``
+problem, the published value and its source. Used by ``tests/study/test_rare_benchmarks.py``
 (CI-sized) and ``benchmarks/rare_event_coverage.py`` (full-sized).
 
 Sources

@@ -23,7 +23,7 @@ from tolsim.rare_events import (
 from tolsim.study.analyses.rare_events import STATUS_DIAGNOSTIC_FAILED, STATUS_FORM_FAILED
 
 _spec = importlib.util.spec_from_file_location(
-    "reliability_problems", Path(__file__).resolve().parents[1] / "benchmarks"
+    "reliability_problems", Path(__file__).resolve().parents[2] / "benchmarks"
     / "reliability_problems.py")
 problems = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(problems)
