@@ -232,21 +232,6 @@ def run_allocation(config, settings: AllocationSettings | None = None, *, worker
 
     References
     ----------
-    .. [Chase1990] K. W. Chase, W. H. Greenwood, B. G. Loosli, L. F. Hauglund, "Least cost
-       tolerance allocation for mechanical assemblies with automated process selection",
-       Manufacturing Review 3(1) (1990) 49-59. Reciprocal power cost C = A + B / T^k per
-       process, allocation by Lagrange multipliers.
-    .. [ChaseGreenwood1988] K. W. Chase, W. H. Greenwood, "Design issues in mechanical tolerance
-       analysis", Manufacturing Review 1(1) (1988) 50-59. Review of tolerance analysis and of
-       least-cost allocation with cost-tolerance curves.
-    .. [Spotts1973] M. F. Spotts, "Allocation of tolerances to minimize cost of assembly", ASME
-       Journal of Engineering for Industry 95(3) (1973) 762-764. Reciprocal square cost
-       C = A + B / T^2.
-    .. [Speckhart1972] F. H. Speckhart, "Calculation of tolerance based on a minimum cost
-       approach", ASME Journal of Engineering for Industry 94(2) (1972) 447-453. Exponential
-       cost C = A exp(-B T).
-    .. [Law2015] A. M. Law, Simulation Modeling and Analysis, 5th ed., McGraw-Hill, 2015,
-       Sec. 11.2 (common random numbers).
     .. [Luedtke2008] J. Luedtke, S. Ahmed, "A sample approximation approach for optimization with
        probabilistic constraints", SIAM Journal on Optimization 19(2) (2008) 674-699,
        doi:10.1137/070702928.
