@@ -459,7 +459,7 @@ def test_examples_do_not_depend_on_the_window(monkeypatch, window):
     # 1000: the whole block at once).
     c = friction_yaw(samples=256, block=128)
     reference = fx.friction_examples(c)
-    monkeypatch.setattr(fr, "EXAMPLE_WINDOW", window)
+    monkeypatch.setattr(fx, "EXAMPLE_WINDOW", window)
     again = fx.friction_examples(c)
     for name in ("assembly", "track", "travel", "baseline", "friction_force", "contact_force",
                  "ball_position"):
