@@ -220,8 +220,8 @@ def cluster_velocities(velocity_deviation, creep_stiffness, touching,
     solution, balls entering or leaving the loaded zone during the stroke (the set of balls is fixed
     over the horizon). With a carriage and ``along_track`` propagation balls do enter and leave
     (Notes of :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`, "After
-    contact"): a ball leaving the zone drops
-    its contacts, one entering it joins its train with an open gap.
+    contact"): a ball leaving the zone drops its contacts, one entering it joins its train with
+    an open gap.
     """
     eps, stiffness, braking, shape = _train_arrays(velocity_deviation, creep_stiffness,
                                                    braking_sensitivity)
