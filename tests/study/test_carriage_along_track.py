@@ -495,7 +495,7 @@ def test_moving_ball_values_at_the_start_are_the_study_values():
 
 def advance_twin(z0, z1, ids, ok, count, entered, gap, half, d, balls, t0, dt):
     """Plain-Python twin of advance_kernel
-    (module docstring of tolsim.study.pipeline.carriage_track):
+    (Notes of tolsim.study.pipeline.carriage_track.first_contact_carriage_track):
     returns the new slots, the exits and entries [(a, track, id, time)] and the overflow."""
     m, tracks, slots = z1.shape
     out_z, out_id = np.full(z1.shape, np.nan), np.full(z1.shape, -1)

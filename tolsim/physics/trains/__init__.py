@@ -219,8 +219,9 @@ def cluster_velocities(velocity_deviation, creep_stiffness, touching,
     Not modelled: an end seal or retainer that would press on the end balls; with the event-driven
     solution, balls entering or leaving the loaded zone during the stroke (the set of balls is fixed
     over the horizon). With a carriage and ``along_track`` propagation balls do enter and leave
-    (:mod:`tolsim.study.pipeline.carriage_track`, "After contact"): a ball leaving the zone drops
-    its contacts, one entering it joins its train with an open gap.
+    (Notes of :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`, "After
+    contact"): a ball leaving the zone drops its contacts, one entering it joins its train with
+    an open gap.
     """
     eps, stiffness, braking, shape = _train_arrays(velocity_deviation, creep_stiffness,
                                                    braking_sensitivity)

@@ -103,6 +103,33 @@ def compare_runs(paths, folder, *, progress=None,
         If a file is missing, not a tolsim result, or the file of a sweep.
     ValueError
         If fewer than two files are given.
+
+    Notes
+    -----
+    :func:`compare_runs` reads two or more result files of ``tolsim run``
+    (:func:`tolsim.io.netcdf.read_result`) and writes, into a folder:
+
+    * ``compare.html``: one self-contained page (figures embedded as data URIs): the runs, how
+      their random numbers relate, the config keys that differ, the key statistics of every run
+      with their 95 % intervals and the difference of each to the first run (the reference) with
+      its own interval, and the figures below;
+    * ``compare.csv``: one row per statistic and run: estimate, ci_lower, ci_upper, units, and the
+      difference to the reference with its interval (empty for the reference itself);
+    * ``contact_probability.png``: P(contact) of every run with its interval, and the difference
+      to the reference (a forest plot);
+    * ``velocity_deviation.png``: the epsilon histograms overlaid (densities);
+    * ``survival.png``: the survival curves P(no contact by t) overlaid.
+
+    Everything but the reading and writing is pure:
+    :func:`~tolsim.reports.compare.statistics.run_statistics` takes the statistics out of a
+    Dataset, :func:`~tolsim.reports.compare.comparison.compare_datasets` compares Datasets held in
+    memory, and the interval functions
+    (:func:`~tolsim.study.statistics.intervals.newcombe_difference`,
+    :func:`~tolsim.study.statistics.intervals.welch_difference`,
+    :func:`~tolsim.study.statistics.intervals.mover_difference`,
+    :func:`~tolsim.study.statistics.intervals.histogram_quantile_interval`,
+    :func:`~tolsim.study.statistics.intervals.cluster_mean_and_std`, in
+    :mod:`tolsim.study.statistics.intervals`) take plain numbers.
     """
     say = progress or (lambda msg: None)
     paths = [os.fspath(p) for p in paths]

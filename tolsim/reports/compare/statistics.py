@@ -254,7 +254,7 @@ def _carriage_statistics(ds, confidence_level):
 
 
 def run_statistics(ds, *, bounds=None, confidence_level=CONFIDENCE_LEVEL) -> list:
-    """The key statistics of a result with their intervals (see the module docstring).
+    """The key statistics of a result with their intervals (Notes).
 
     Parameters
     ----------
@@ -272,6 +272,40 @@ def run_statistics(ds, *, bounds=None, confidence_level=CONFIDENCE_LEVEL) -> lis
         P(contact) (and its bounds), epsilon mean, std and quantiles, the fraction out of
         spec and Cpk where the file has them, the time-to-contact quantiles, and the
         carriage stiffness of a carriage study.
+
+    Notes
+    -----
+    **Statistics and their intervals (95 %).**
+
+    * **P(contact)** per train (per assembly in a carriage study): k of the n trains whose outcome
+      is known, with the file's Clopper-Pearson interval. When a run has unresolved trains, also
+      the partial-identification bounds k/N and (k + u)/N over all N trains, each with its
+      Clopper-Pearson interval.
+    * **epsilon mean and standard deviation**: the file's estimates; their standard errors by the
+      delta method over assemblies (the balls of an assembly are correlated, the assemblies are
+      independent: ratio estimator, [Cochran1977] Sec. 6.3-6.4) from the per-assembly moments the
+      file stores (:mod:`tolsim.study.statistics.intervals`), interval estimate -+ t(A - 1) se.
+    * **epsilon quantiles** (:data:`VELOCITY_DEVIATION_LEVELS`): read off the histogram; interval
+      by Woodruff's method ([Woodruff1952]): a Wilson interval for the level, turned into values
+      through the histogram, at the effective sample size N^2 / sum n_a^2 (each assembly one
+      trial), the smallest any correlation of the balls of an assembly allows
+      (Var k_a <= n_a^2 p (1 - p)), and widened to the edges of the histogram bins they fall in.
+      An end beyond the smallest or largest value is not bounded by the data: NaN ("n/a").
+    * **fraction out of spec and Cpk** (with a limit on |epsilon|): the file's values and
+      intervals (Korn-Graubard effective sample size; delta method over assemblies,
+      :mod:`tolsim.study.statistics.quality`).
+    * **time-to-contact quantiles** (:data:`TIME_TO_CONTACT_LEVELS`, given contact): Woodruff's
+      interval on the histogram of the first-contact times, one per assembly with contact
+      (independent, so n is their number).
+    * **carriage stiffness** (a study with a ``[carriage]``): the mean over the solved carriages
+      with a t interval (mean -+ t(n - 1) std / sqrt(n)), and the stiffness of the nominal
+      assembly, which has no sampling error.
+
+    References
+    ----------
+    .. [Woodruff1952] R. S. Woodruff, "Confidence intervals for medians and other position
+       measures", J. Am. Stat. Assoc. 47 (1952) 635-646.
+    .. [Cochran1977] W. G. Cochran, Sampling Techniques, 3rd ed., Wiley, 1977.
     """
     if bounds is None:
         bounds = integer(ds, "n_assemblies_unresolved") > 0
@@ -333,6 +367,48 @@ def difference(run: Statistic, reference: Statistic, pairing=PAIRING_INDEPENDENT
     Returns
     -------
     Difference
+
+    Notes
+    -----
+    **Differences to the reference: paired or unpaired?**
+    Runs with the same ``seed``, ``block_size`` and ``sampling`` draw their assemblies from common
+    random numbers ([Law2015] Sec. 11.2): assembly i of one run uses the random numbers of
+    assembly i of the other, so their outcomes are correlated, positively when a change moves the
+    outcome the same way in every assembly. A paired interval would use that, but it needs
+    per-assembly data (for P(contact), the joint counts: contact in both runs, in one only); the
+    files hold aggregates only, and re-running the studies from their stored configs to get them
+    costs as much as the runs. So every difference here is **unpaired**: the two estimates are
+    taken as independent. For independent runs (different seeds) that is exact; for runs with
+    common random numbers it overstates the variance of the difference by 2 Cov, so the interval
+    is wider than a paired one (conservative) as long as the runs are positively correlated. The
+    report says which runs share random numbers with the reference. (A cheap paired interval would
+    need per-block totals in the files, the contact count of each block of ``block_size``
+    assemblies, say: with common random numbers block b of both runs uses the same stream, so the
+    per-block differences are independent across blocks and a t interval over them is paired.)
+
+    * P(contact) and its bounds: Newcombe's hybrid score interval ([Newcombe1998] method 10),
+      from the Wilson intervals of the two proportions
+      (:func:`~tolsim.study.statistics.intervals.newcombe_difference`).
+    * means and standard deviations (epsilon, carriage stiffness): Welch's interval with the
+      Welch-Satterthwaite degrees of freedom ([Welch1947], [Satterthwaite1946];
+      :func:`~tolsim.study.statistics.intervals.welch_difference`).
+    * quantiles, fraction out of spec, Cpk: the MOVER ([ZouDonner2008]; "method of variance
+      estimates recovery", :func:`~tolsim.study.statistics.intervals.mover_difference`) from the
+      two runs' own intervals, of which Newcombe's method 10 is the case with Wilson intervals;
+      with symmetric intervals it is the Wald interval of the difference.
+    * nominal carriage stiffness: exact (no sampling error).
+
+    References
+    ----------
+    .. [Newcombe1998] R. G. Newcombe, "Interval estimation for the difference between
+       independent proportions: comparison of eleven methods", Stat. Med. 17 (1998) 873-890.
+    .. [ZouDonner2008] G. Y. Zou, A. Donner, "Construction of confidence limits about effect
+       measures: a general approach", Stat. Med. 27 (2008) 1693-1702.
+    .. [Welch1947] B. L. Welch, "The generalization of 'Student's' problem when several different
+       population variances are involved", Biometrika 34 (1947) 28-35.
+    .. [Satterthwaite1946] F. E. Satterthwaite, "An approximate distribution of estimates of
+       variance components", Biometrics Bulletin 2 (1946) 110-114.
+    .. [Law2015] A. M. Law, Simulation Modeling and Analysis, 5th ed., McGraw-Hill, 2015.
     """
     if run.name != reference.name or run.kind != reference.kind:
         raise ValueError(f"cannot take the difference of {run.name!r} ({run.kind}) and "

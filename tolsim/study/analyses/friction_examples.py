@@ -29,7 +29,8 @@ NEIGHBOUR_COLUMN = LOAD_COLUMNS.index("carriage_force_per_neighbour_force")
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class FrictionExamples:
-    """Example trajectories of the worst track of a few assemblies (module docstring).
+    """Example trajectories of the worst track of a few assemblies (Notes of
+    :func:`friction_examples`).
 
     Shapes: k examples, S travel points, n balls per track.
 
@@ -105,8 +106,23 @@ def choose_examples(figures: FrictionState, count: int) -> np.ndarray:
 def friction_examples(config) -> FrictionExamples | None:
     """The example trajectories of a study with ``[contact]`` (None with ``examples = 0``).
 
-    From the first random block of the study (module docstring); each example's worst track
+    From the first random block of the study (Notes); each example's worst track
     is followed again on a grid of ``travel_points`` carriage positions.
+
+    Notes
+    -----
+    **Examples.**
+    :func:`friction_examples` stores ``examples`` trajectories for plots: the friction force of
+    the worst track, its ball positions and contact forces on a grid of ``travel_points``
+    carriage positions. They are taken from the first random block of the study (so they depend
+    on the seed only, not on the chunking or the number of samples): the first assemblies, in
+    order, whose worst track has a ball-to-ball contact, then, if there are too few, the first
+    resolved ones without. With ``along_track`` they come from the integration of those
+    assemblies with :class:`~tolsim.study.pipeline.track_friction.TrackFriction` recording its
+    steps: at a travel point the forces and the friction force of the step that holds it, the
+    positions interpolated linearly within the step. With a carriage the ``ball`` columns are the
+    track's initial balls while they are in the loaded zone (NaN once they have left it); the balls
+    that entered since are in the friction force, not in the positions and pair forces.
     """
     count = config.contact.examples
     if count == 0:

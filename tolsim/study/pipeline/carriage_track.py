@@ -6,118 +6,8 @@ they move, balls leave the zone at its trailing end and new ones enter at its le
 :func:`first_contact_carriage_track` integrates a block of assemblies and finds the first
 ball-to-ball contact of each, as :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
 does for single trains.
-
-Frames and sign convention
---------------------------
-Rail frame s (fixed) and carriage frame z = s - v t: the carriage's reference point is at
-s = v t, so at t = 0 the two coincide. The carriage moves towards +z; its leading end is at
-z = +L/2 and its trailing end at -L/2, L = ``train.loaded_zone_length`` (ball 0, the
-trailing ball, has the smallest z).
-
-A ball's centre moves along the rail at v_B = (1 + epsilon) v / 2 ([Lin2018] Eq. 23; the
-convention of :mod:`tolsim.study.pipeline.propagation`, whose rail positions advance at that speed),
-so relative to the carriage
-
-    dz/dt = v_B - v = -(1 - epsilon) v / 2.
-
-Every ball drifts backwards through the carriage at about v/2; a ball with a larger epsilon
-(faster along the rail) drifts more slowly. (Written as -(1 + epsilon') v / 2, epsilon' =
--epsilon.) The gap of pair j (trailing ball j, leading ball j + 1) changes at dg_j/dt =
--(epsilon_j - epsilon_{j+1}) v / 2 in either frame: it closes when the trailing ball is the
-faster, as in the constant propagation.
-
-Loaded zone, exit and entry
----------------------------
-A ball is loaded only while its centre is inside the loaded zone [-L/2, L/2]: the carriage is
-solved with the balls inside, each at its own z (:func:`tolsim.physics.carriage.
-solve_carriage_batch` with ``ball_z`` and ``loaded``; a ball outside carries nothing).
-
-* *Exit.* Drifting backwards, a ball leaves at the trailing end: when its centre passes
-  -L/2 (the time interpolated linearly within the step, exact for a constant epsilon).
-* *Entry.* A new ball enters at the leading end with a gap g_k drawn from the train's gap
-  distribution (draw 5 of :mod:`tolsim.study.sampling`, one independent gap per entering
-  ball, in order of entry): the k-th ball to enter a track enters when the ball ahead of it
-  (the zone's leading ball) has drifted to L/2 - D - g_k, so that it sits at L/2 with the gap
-  g_k: as soon as there is room for it. At the end of the step it is placed at
-  z_ahead + D + g_k (it is taken to move with the ball ahead during the part of the step
-  after its entry: a position error of at most |epsilon_k - epsilon_ahead| v dt / 2), and
-  its entry time is interpolated as the exit's. In a zone longer than the initial train the
-  balls enter one by one at the start of a step in which there is room, each at L/2.
-  It brings its own ``ball`` tolerances (draw 5), its track's rail and carriage values, and
-  reads the rail fields at its rail position.
-
-*The return path.* A ball that has left the zone runs through the end cap's turnaround and
-the return channel back to the leading end. There it is unloaded: no groove carries load on
-it, so it exerts nothing on the carriage and has no velocity deviation of its own (it is
-pushed along by the balls behind). Its contacts with other balls are contacts of free balls,
-which can spin and give way, not the contacts of loaded balls whose opposed surface
-velocities cost friction ([Lin2018] Sec. 3.2): they are not counted. Its order in the
-circuit is preserved (balls cannot pass each other in a channel), but it is not tracked
-further within the horizon: the balls that enter are new, independent draws. A ball could
-only come round again if the balls' drift over the stroke, about stroke/2, exceeds the
-length of the return path and the turnarounds (more than L): for such long strokes the
-re-entering balls are modelled as independent of the ones that left. The ones that left
-bring back the same tolerances (and so the same neighbours' epsilon differences) in their
-order; independent balls give every new pair a fresh epsilon difference, more chances of a
-fast-closing pair, so P(contact) is if anything overestimated (conservative). With
-stroke/2 <= L (``configs/carriage_preload.toml``: 50 mm against 120.6 mm) no ball comes
-round and the question does not arise.
-
-Integration
------------
-The explicit midpoint rule of :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
-over
-``study.time_steps`` steps of dt: epsilon_1 of every loaded ball with the carriage solved at
-the balls' positions at the start of the step, the positions at the midpoint, epsilon_2 with
-the carriage solved again there (a ball outside the zone at the midpoint keeps epsilon_1),
-then the step with epsilon_2. Each evaluation is one batched carriage solve over the
-assemblies still being followed, and every Newton starts from the assembly's own solution of
-its previous evaluation (so an assembly's results depend only on its own history, not on the
-batch, chunking or threads). Exits and entries are applied at the end of each step. Contacts
-are counted between loaded balls: adjacent balls of a track (in z order), both inside the
-zone at the time of contact and both resolved at every evaluation so far; the contact time is
-the linear interpolation of the gap within the step. An assembly's first contact is the
-earliest over its tracks; it is not followed after it.
-
-Unresolved balls (no velocity model takes them, :mod:`tolsim.study.pipeline.evaluate`; every loaded
-ball of an assembly whose carriage did not converge or lifted off) are treated as in the
-single-train propagation: such a ball moves at the nominal -v/2 (epsilon = 0), closes no gap,
-and its assembly is invalid (``train_valid`` False) if a loaded ball was unresolved at any
-evaluation before the assembly's first contact. A ball in the loaded zone whose four contacts
-have opened (under an end relief deeper than the ball's approach, for one) is unresolved in
-this sense, as a ball that lost contact in the constant propagation: keep the relief depth
-below the preload oversize (Notes of :func:`tolsim.physics.carriage.end_relief`) to unload
-the end balls gradually while they stay in four-point contact. An assembly is invalid, too,
-if it needs more entering balls than were drawn (:func:`tolsim.study.sampling.
-entering_capacity`) or more balls in its zone than it has slots (:func:`slot_capacity`).
-
-After contact
--------------
-With ``[contact]`` (a :class:`tolsim.study.pipeline.track_friction.TrackFriction` passed as
-``friction``)
-every assembly is followed over the whole stroke, and the loaded balls of each track move as
-a train (:mod:`tolsim.physics.trains`, "Varying epsilon"): at every step the cluster rule on
-the closed pairs with each ball's epsilon and creep coefficients from its own loaded state
-(the carriage solved at the balls' positions), then the projection of the closing gaps. A
-ball belongs to its track's train for a step when it is in the zone at the step's start,
-midpoint and (free motion) end, so a ball leaving at the trailing end drops its contacts in
-the step in which it leaves, and an entering ball joins from the next step with its drawn
-gap open; the pair flags follow the balls through the exits and entries
-(:func:`carry_pairs_kernel`). Unloaded balls are in no train and pass through as above. The
-first contact, its pair and ``train_valid`` are located on the free motion of each step and
-counted only up to the first contact, so they are those of the run without ``[contact]``,
-bit for bit. The friction figures: :mod:`tolsim.study.pipeline.track_friction`, "With along_track".
-
-Cost: two batched carriage solves per step (each about 10 us of CPU per assembly of
-``configs/carriage_preload.toml``, 2 x 13 ball slots) plus the velocity model of the loaded
-balls and the bookkeeping; an assembly is followed until its first contact (with
-``[contact]``: over the whole stroke, plus the creep coefficients of its loaded balls).
-``benchmarks/bench_carriage.py --along-track`` measures the study path.
-
-The balls at t = 0 are the block's trains at their sampled positions (each train's centroid
-at z = 0), not the nominal slots z_j of the constant propagation. A ball of a train longer
-than the zone that starts outside it is unloaded; in the t = 0 ball statistics it counts as a
-ball that lost contact.
+The theory (frames, the loaded zone with its exits and entries, the integration, the trains
+after contact) is in the Notes of :func:`first_contact_carriage_track`.
 
 References
 ----------
@@ -203,7 +93,8 @@ def advance_kernel(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_
     rest of the step (at its start if there was room before it: a zone longer than the
     train). ``overflow`` is set where the slots or the drawn entering balls run out, or
     the zone is empty. Events: ``exit_id``/``exit_time`` at the slot the ball left,
-    ``entry_id``/``entry_time`` at the slot it took (-1 / NaN elsewhere).
+    ``entry_id``/``entry_time`` at the slot it took (-1 / NaN elsewhere). The model: Notes of
+    :func:`first_contact_carriage_track`, "Loaded zone, exit and entry".
     """
     m, tracks, slots = z1.shape
     capacity = entering_gap.shape[2]
@@ -392,9 +283,9 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
         Filled with the positions, epsilon and events of every step.
     friction : tolsim.study.pipeline.track_friction.TrackFriction, optional
         With it (a study with ``[contact]``) every assembly is followed over the whole stroke
-        and its loaded balls move as trains after they touch (module docstring, "After
-        contact"); the friction figures are accumulated in ``friction``. The first contact
-        and ``train_valid`` are the same as without it.
+        and its loaded balls move as trains after they touch (Notes, "After contact"); the friction
+        figures are accumulated in ``friction``. The first contact and ``train_valid`` are the same
+        as without it.
 
     Returns
     -------
@@ -407,7 +298,7 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
         the index balls - 2); -1 if none.
     train_valid : ndarray of bool (size,)
         False where a loaded ball was unresolved before the first contact, or the drawn
-        entering balls or the slots ran out (module docstring).
+        entering balls or the slots ran out (Notes).
     resolve_seconds : float
         Full-model re-solves after the start of the stroke [s] (those at t = 0 are in the
         BallState).
@@ -415,6 +306,117 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
         The initial balls at t = 0, shape (size, tracks * balls), for the epsilon statistics.
     carriage : tolsim.study.pipeline.carriage.CarriageState
         The carriages at t = 0.
+
+    Notes
+    -----
+    **Frames and sign convention.**
+    Rail frame s (fixed) and carriage frame z = s - v t: the carriage's reference point is at
+    s = v t, so at t = 0 the two coincide. The carriage moves towards +z; its leading end is at
+    z = +L/2 and its trailing end at -L/2, L = ``train.loaded_zone_length`` (ball 0, the
+    trailing ball, has the smallest z).
+
+    A ball's centre moves along the rail at v_B = (1 + epsilon) v / 2 ([Lin2018] Eq. 23; the
+    convention of :mod:`tolsim.study.pipeline.propagation`, whose rail positions advance at that
+    speed), so relative to the carriage
+
+        dz/dt = v_B - v = -(1 - epsilon) v / 2.
+
+    Every ball drifts backwards through the carriage at about v/2; a ball with a larger epsilon
+    (faster along the rail) drifts more slowly. (Written as -(1 + epsilon') v / 2, epsilon' =
+    -epsilon.) The gap of pair j (trailing ball j, leading ball j + 1) changes at dg_j/dt =
+    -(epsilon_j - epsilon_{j+1}) v / 2 in either frame: it closes when the trailing ball is the
+    faster, as in the constant propagation.
+
+    **Loaded zone, exit and entry.**
+    A ball is loaded only while its centre is inside the loaded zone [-L/2, L/2]: the carriage is
+    solved with the balls inside, each at its own z (:func:`tolsim.physics.carriage.
+    solve_carriage_batch` with ``ball_z`` and ``loaded``; a ball outside carries nothing).
+
+    * *Exit.* Drifting backwards, a ball leaves at the trailing end: when its centre passes
+      -L/2 (the time interpolated linearly within the step, exact for a constant epsilon).
+    * *Entry.* A new ball enters at the leading end with a gap g_k drawn from the train's gap
+      distribution (draw 5 of :mod:`tolsim.study.sampling`, one independent gap per entering
+      ball, in order of entry): the k-th ball to enter a track enters when the ball ahead of it
+      (the zone's leading ball) has drifted to L/2 - D - g_k, so that it sits at L/2 with the gap
+      g_k: as soon as there is room for it. At the end of the step it is placed at
+      z_ahead + D + g_k (it is taken to move with the ball ahead during the part of the step
+      after its entry: a position error of at most |epsilon_k - epsilon_ahead| v dt / 2), and
+      its entry time is interpolated as the exit's. In a zone longer than the initial train the
+      balls enter one by one at the start of a step in which there is room, each at L/2.
+      It brings its own ``ball`` tolerances (draw 5), its track's rail and carriage values, and
+      reads the rail fields at its rail position.
+
+    *The return path.* A ball that has left the zone runs through the end cap's turnaround and
+    the return channel back to the leading end. There it is unloaded: no groove carries load on
+    it, so it exerts nothing on the carriage and has no velocity deviation of its own (it is
+    pushed along by the balls behind). Its contacts with other balls are contacts of free balls,
+    which can spin and give way, not the contacts of loaded balls whose opposed surface
+    velocities cost friction ([Lin2018] Sec. 3.2): they are not counted. Its order in the
+    circuit is preserved (balls cannot pass each other in a channel), but it is not tracked
+    further within the horizon: the balls that enter are new, independent draws. A ball could
+    only come round again if the balls' drift over the stroke, about stroke/2, exceeds the
+    length of the return path and the turnarounds (more than L): for such long strokes the
+    re-entering balls are modelled as independent of the ones that left. The ones that left
+    bring back the same tolerances (and so the same neighbours' epsilon differences) in their
+    order; independent balls give every new pair a fresh epsilon difference, more chances of a
+    fast-closing pair, so P(contact) is if anything overestimated (conservative). With
+    stroke/2 <= L (``configs/carriage_preload.toml``: 50 mm against 120.6 mm) no ball comes
+    round and the question does not arise.
+
+    **Integration.**
+    The explicit midpoint rule of
+    :func:`tolsim.study.pipeline.propagation.first_contact_along_track` over
+    ``study.time_steps`` steps of dt: epsilon_1 of every loaded ball with the carriage solved at
+    the balls' positions at the start of the step, the positions at the midpoint, epsilon_2 with
+    the carriage solved again there (a ball outside the zone at the midpoint keeps epsilon_1),
+    then the step with epsilon_2. Each evaluation is one batched carriage solve over the
+    assemblies still being followed, and every Newton starts from the assembly's own solution of
+    its previous evaluation (so an assembly's results depend only on its own history, not on the
+    batch, chunking or threads). Exits and entries are applied at the end of each step. Contacts
+    are counted between loaded balls: adjacent balls of a track (in z order), both inside the
+    zone at the time of contact and both resolved at every evaluation so far; the contact time is
+    the linear interpolation of the gap within the step. An assembly's first contact is the
+    earliest over its tracks; it is not followed after it.
+
+    Unresolved balls (no velocity model takes them, :mod:`tolsim.study.pipeline.evaluate`; every
+    loaded ball of an assembly whose carriage did not converge or lifted off) are treated as in the
+    single-train propagation: such a ball moves at the nominal -v/2 (epsilon = 0), closes no gap,
+    and its assembly is invalid (``train_valid`` False) if a loaded ball was unresolved at any
+    evaluation before the assembly's first contact. A ball in the loaded zone whose four contacts
+    have opened (under an end relief deeper than the ball's approach, for one) is unresolved in
+    this sense, as a ball that lost contact in the constant propagation: keep the relief depth
+    below the preload oversize (Notes of :func:`tolsim.physics.carriage.end_relief`) to unload
+    the end balls gradually while they stay in four-point contact. An assembly is invalid, too,
+    if it needs more entering balls than were drawn (:func:`tolsim.study.sampling.
+    entering_capacity`) or more balls in its zone than it has slots (:func:`slot_capacity`).
+
+    **After contact.**
+    With ``[contact]`` (a :class:`tolsim.study.pipeline.track_friction.TrackFriction` passed as
+    ``friction``)
+    every assembly is followed over the whole stroke, and the loaded balls of each track move as
+    a train (:mod:`tolsim.physics.trains`, "Varying epsilon"): at every step the cluster rule on
+    the closed pairs with each ball's epsilon and creep coefficients from its own loaded state
+    (the carriage solved at the balls' positions), then the projection of the closing gaps. A
+    ball belongs to its track's train for a step when it is in the zone at the step's start,
+    midpoint and (free motion) end, so a ball leaving at the trailing end drops its contacts in
+    the step in which it leaves, and an entering ball joins from the next step with its drawn
+    gap open; the pair flags follow the balls through the exits and entries
+    (:func:`carry_pairs_kernel`). Unloaded balls are in no train and pass through as above. The
+    first contact, its pair and ``train_valid`` are located on the free motion of each step and
+    counted only up to the first contact, so they are those of the run without ``[contact]``,
+    bit for bit. The friction figures: Notes of
+    :class:`tolsim.study.pipeline.track_friction.TrackFriction`.
+
+    Cost: two batched carriage solves per step (each about 10 us of CPU per assembly of
+    ``configs/carriage_preload.toml``, 2 x 13 ball slots) plus the velocity model of the loaded
+    balls and the bookkeeping; an assembly is followed until its first contact (with
+    ``[contact]``: over the whole stroke, plus the creep coefficients of its loaded balls).
+    ``benchmarks/bench_carriage.py --along-track`` measures the study path.
+
+    The balls at t = 0 are the block's trains at their sampled positions (each train's centroid
+    at z = 0), not the nominal slots z_j of the constant propagation. A ball of a train longer
+    than the zone that starts outside it is unloaded; in the t = 0 ball statistics it counts as a
+    ball that lost contact.
     """
     if config.carriage is None or config.study.propagation != "along_track":
         raise ValueError("first_contact_carriage_track needs a config with [carriage] and "

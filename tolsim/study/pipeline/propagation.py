@@ -361,8 +361,8 @@ def first_contact_along_track(config, block, initial_state=None, *, friction=Non
         With it (a study with ``[contact]``) the balls move as trains after they touch: the
         step rule of :mod:`tolsim.physics.trains` at every step, each ball's creep
         coefficients from its loaded state at its position, and the friction figures
-        accumulated in ``friction`` (module docstring of
-        :mod:`tolsim.study.pipeline.track_friction`). The
+        accumulated in ``friction`` (Notes of
+        :class:`tolsim.study.pipeline.track_friction.TrackFriction`). The
         first contact is the same as without it (it is located on the free motion of the
         step, which is the motion up to it).
 

@@ -2,184 +2,10 @@ r"""What contact costs: the carriage friction of ball trains in a study (issue 1
 
 A study with ``[contact]`` (:class:`tolsim.study.spec.ContactSettings`) follows every train of
 every sampled assembly over the stroke after its balls touch and records what the carriage pays
-for it. Each ball's creep coefficients come from the single-ball physics (the loaded analytic
-model, :mod:`tolsim.physics.velocity.ball_loads`, through
-:func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`, its fast path at zero load; or
-:func:`tolsim.physics.velocity.full.full`), the trains from :mod:`tolsim.physics.trains`; what is
-added here is the carriage friction force of a track over the stroke, its reduction to one row
-per assembly, the streamed statistics (:class:`FrictionStatistics`); the result-file
-variables are :mod:`tolsim.io.schema.friction`'s.
-
-Nomenclature: F_c,i -> ``carriage_force`` of ball i [N] (> 0 opposes the carriage motion);
-F_0,i -> ``free_rolling_carriage_force``; a_i = dF_c/dP -> ``carriage_force_per_push``;
-b_i = dF_c/d(Q_back + Q_front) -> ``carriage_force_per_neighbour_force``; Q_j -> contact
-force of pair j (balls j, j + 1) [N]; F_track -> the track's carriage friction force [N].
-
-The friction force of a track
------------------------------
-The loaded analytic model is linear in the loads (:mod:`tolsim.physics.velocity.ball_loads`): a ball
-with net push P_i = Q_{i-1} - Q_i and neighbour-force sum S_i = Q_{i-1} + Q_i carries
-
-    F_c,i = F_0,i + a_i P_i + b_i S_i.
-
-The track's carriage friction force is the sum over its balls. Each contact force Q_j
-enters P and S of its two balls (P_{j+1} += Q_j, P_j -= Q_j, S_j += Q_j, S_{j+1} += Q_j),
-so the increase over the baseline F_0 = sum_i F_0,i is a sum over the pairs
-
-    F_track(t) - F_0 = sum_j k_j Q_j(t),   k_j = (a_{j+1} - a_j) + (b_j + b_{j+1}).     (1)
-
-For the nominal ball a_i = -1/2 and b_i = mu_bb / (2 cos beta_0), so k_j = mu_bb / cos beta_0
-(0.141 for mu_bb = 0.1 at 45 deg): the push itself costs nothing on net (both balls of a
-pair share it between the grooves alike, and a cluster's pushes sum to zero), while the
-Coulomb friction at the ball-ball contact brakes both balls, and the grooves pay for that
-couple. Deviations from the nominal ball add (a_{j+1} - a_j) Q_j, 1e-3 to 1e-2 Q_j.
-Example, the two balls of [Lin2018] Sec. 3.2 case (a) (configs/paper_case_study.toml with
-``[contact]``; epsilon +-0.789 % from the full model, K = 673 N each from the analytic one):
-they touch at 6.34 s and then push with Q = K epsilon_1 = 5.31 N; with a = -0.504, -0.496
-and b = 0.0707, k = 0.149 and the track's friction rises by 0.79 N over its 2.82 N baseline
-(+28 %) for the rest of the stroke (tests/study/test_friction_study.py).
-
-With constant epsilon the contact forces are piecewise constant between events
-(:func:`tolsim.physics.trains.train_contact_constant` with ``segments=True``), so (1) is too,
-and every figure over the stroke is exact (no time step): the time mean of the increase
-(the segment durations as weights), its maximum and minimum, the ripple of F_track
-(max - min over the stroke; the baseline is constant), the largest ball-to-ball force, the
-fraction of the stroke with any contact, and the multi-ball clusters formed.
-
-With ``along_track`` propagation
---------------------------------
-Epsilon, K and the other creep coefficients of a ball change as it rolls past the rail errors
-and through the carriage's load distribution, and with a carriage balls leave and enter its
-loaded zone. The trains are then followed step by step, inside the propagation's midpoint
-integration (:class:`TrackFriction`, driven by :func:`tolsim.study.pipeline.propagation.
-first_contact_along_track` and :func:`tolsim.study.pipeline.carriage_track.
-first_contact_carriage_track`). At every step of dt = T / ``study.time_steps`` each ball's
-epsilon and creep coefficients come from its loaded state at its position, at the start of
-the step (predictor, only for trains with a closed pair) and at its midpoint; the cluster rule
-(:func:`tolsim.physics.trains.cluster_velocities`, touching = the closed pairs) gives the loaded
-velocities w_i, the balls advance at (1 + w_i) v / 2, and a gap that closes inside the step
-is closed by the kappa-weighted projection of the end positions, whose multipliers give the
-step-mean forces Qbar_j (eqs. 7, 8 of :mod:`tolsim.physics.trains`, "Varying epsilon", with the
-derivation). A contact ends when the cluster rule leaves its balls apart: its force returns to
-zero and the gap opens. Per step k, with the coefficients at the midpoint,
-
-    F_track,k = B_k + I_k,   B_k = sum_i F_0,i,   I_k = sum_j k_j Qbar_j  (eq. 1 per step)
-
-(i over the loaded balls, j over the pairs of the train). The figures of a train:
-
-* **baseline**: the time mean of B_k over the stroke (it varies now: loads, rail errors,
-  which balls are in the zone);
-* **increase**: I_k = F_track,k - B_k, the friction over the step's own baseline, i.e. what
-  the contacts add; ``increase_max`` its maximum over the steps, ``increase_mean`` its time
-  mean;
-* **ripple**: max_k F_track,k - min_k F_track,k, the ripple of the friction force itself
-  (with the variation of the baseline, e.g. balls passing through the load zone);
-* ``contact_force_max``: the largest Qbar_j; ``contact_fraction``: the time with a contact
-  force (a step counts whole when a cluster pushes through it, else from its earliest
-  closing, interpolated as the first contact is, to its end); ``clusters_formed``: clusters
-  at the end of a step that hold a pair not in contact at its start (a cluster that splits
-  and forms again counts again);
-* sliding is checked at every step with the step's forces against the capacities at zero
-  neighbour force, as for constant epsilon. A train is unresolved from the step at which a
-  ball slides, at which one of its loaded balls has no epsilon or no usable creep
-  coefficients, or (a carriage) at which its assembly runs out of entering balls or slots;
-  its balls then move freely, as without ``[contact]``, and its largest increase before that
-  step is a lower bound of its maximum (certain exceedance, below).
-
-*Error of the step.* For constant epsilon and K the step is exact whatever dt (derivation in
-:mod:`tolsim.physics.trains`): the positions at step ends and the step-mean forces are the
-event-driven ones, so the baseline, ``increase_mean`` and ``contact_fraction`` agree with
-the exact figures above to rounding (1e-8 relative, tests/study/test_friction_along_track.py).
-Maxima and minima are taken over step means, so a contact that forms inside the last step
-(for the minimum of the ripple, the first) is averaged away: O(1) in a fraction O(dt / T)
-of the assemblies; two merges of one cluster inside one step count once. With varying
-epsilon the midpoint rule adds O(dt) over the stroke, mostly from the steps in which a
-contact starts or ends; a force that peaks at contact is underestimated by the step mean
-(the paper's pair with a 20 um gap: the largest force 4.35 N at 100 steps, 4.44 N at 400).
-
-*First contact.* It is located on the free motion of each step, as without ``[contact]``:
-up to the first contact the balls are free and the trajectories are the same to the last
-bit, so P(contact) and the time to contact do not change when ``[contact]`` is added. (With
-free balls the train's validity also counts the evaluations after its first contact,
-which are now those of the trajectory with trains: an assembly whose ball is unresolved
-only on one of the two after contact is valid in one run and not in the other. Its contact
-is counted either way.)
-
-*With a carriage* the train of a track is its loaded balls. A ball is in its train for a
-step when it is in the loaded zone at the step's start, midpoint and end: a ball leaving at
-the trailing end drops its contacts in the step in which it leaves, a ball entering at the
-leading end joins from the step after, with an open gap. Beyond the ends of the train no
-force acts (Q = 0, :mod:`tolsim.physics.trains`, "Ends of the loaded zone"). Unloaded balls
-(in the return path, or of a train longer than the zone at t = 0) are in no train and are
-passed through as by the first-contact propagation. K comes from each ball's own loaded
-state in the carriage solved at its position. Every assembly is followed over the whole
-stroke (without ``[contact]``: up to its first contact).
-
-*Cost.* Per step the creep coefficients of every loaded ball at the midpoint and, for the
-trains with a closed pair, at the start; two O(n) passes per train. The propagation's two
-evaluations per step still dominate (benchmarks/bench_study.py ``--along-track``).
-
-One row per assembly: the worst track
--------------------------------------
-An assembly with a carriage has several tracks (trains). Its row is that of its **worst
-track: the one with the largest maximum increase** (ties, e.g. no contact anywhere: the larger
-baseline, then the first track). All figures of the row (baseline, mean increase, ripple,
-largest contact force, contact fraction, clusters) belong to that one track, so they stay
-consistent with each other. Without a carriage the assembly is its train.
-
-Unresolved and sliding trains (counted, bounded, never dropped)
----------------------------------------------------------------
-* A ball without epsilon (unresolved in :mod:`tolsim.study.pipeline.evaluate`), or whose creep
-  coefficients are not finite (K <= 0, |c K| >= 1 where the train model does not apply, a
-  ``full`` creep solve that failed), leaves its train unresolved: the train is not followed.
-* **Sliding.** The linear creep law holds while each ball rolls. It stops when the push on a
-  ball reaches its traction capacity, |P_i| >= P_cap,i, or the neighbour forces stall its
-  rotation, S_i >= braking capacity (:mod:`tolsim.physics.velocity.ball_loads`). Every segment of a
-  train is checked against the capacities at zero neighbour force (the traction capacity
-  through a lower bound, :func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`). The
-  braking only raises the traction capacity (it adds a non-negative term to the function whose
-  minimum is P_cap), so this check is conservative: it may flag a ball that would still roll,
-  never miss one. A train with a sliding ball is **unresolved from the onset of sliding**: the
-  quasi-static creep model says nothing about a sliding ball's speed, and capping its force
-  would invent a result. Up to the onset the figures are exact, so the largest increase before
-  it is a lower bound of the train's maximum.
-* An assembly is resolved when all its tracks are. Its friction figures enter the
-  histograms, quantiles and moments only then (estimates over the resolved assemblies, as for
-  the time to contact). The exceedance of the spec limit L (``friction_increase_limit_N``)
-  is counted like P(contact) in :mod:`tolsim.study.statistics.accumulator`: an assembly *certainly*
-  exceeds when a resolved track, or a sliding track before its onset, has an increase above
-  L; with k such assemblies, u unresolved ones without a certain exceedance and N in all,
-  P(increase > L) is k / (N - u) with its Clopper-Pearson interval, and the
-  partial-identification bounds [k / N, (k + u) / N] hold whatever the unresolved ones did.
-
-Which creep model
------------------
-``creep_model = "analytic"`` (default): K, the braking sensitivity c, F_0, a, b and the
-capacities from the loaded analytic model at the ball's own loaded contact state (dbeta_i, F_i
-from the study's static model; :func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`,
-one
-vectorised call per chunk, about 7 M balls/s on 2 cores), for every ball, also those whose
-epsilon the study took from the full model (K is a smooth property of the contact state: the
-analytic K is 2.6-5.7 % below the full model's on the paper's ball,
-tests/physics/test_ball_push.py).
-``"full"``: K, c, F_0 and the traction and braking capacities from
-:func:`tolsim.physics.velocity.full.full` at zero load (slow: about 1e4 balls/s); the carriage-force
-slopes a, b stay the analytic ones (the full model gives the force at a load, not its slopes).
-The train's epsilon is always the study's epsilon of the ball.
-
-Examples
---------
-:func:`friction_examples` stores ``examples`` trajectories for plots: the friction force of
-the worst track, its ball positions and contact forces on a grid of ``travel_points``
-carriage positions. They are taken from the first random block of the study (so they depend
-on the seed only, not on the chunking or the number of samples): the first assemblies, in
-order, whose worst track has a ball-to-ball contact, then, if there are too few, the first
-resolved ones without. With ``along_track`` they come from the integration of those
-assemblies with :class:`TrackFriction` recording its steps: at a travel point the forces and
-the friction force of the step that holds it, the positions interpolated linearly within
-the step. With a carriage the ``ball`` columns are the track's initial balls while they are
-in the loaded zone (NaN once they have left it); the balls that entered since are in the
-friction force, not in the positions and pair forces.
+for it. :func:`evaluate_friction` gives one row per assembly (:class:`FrictionState`): with
+constant epsilon from :func:`follow_trains`, with ``along_track`` propagation from
+:class:`TrackFriction` (:func:`follow_along_track`); :func:`ball_creep_coefficients` gives the
+balls' creep coefficients. The theory is in the Notes of those.
 """
 
 from dataclasses import dataclass
@@ -285,6 +111,22 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
         The columns of :data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS` at zero load (K [N],
         c [1/N], F_0 [N], a, b [-], P_cap, braking capacity [N]); NaN for an unresolved ball
         (``state.valid`` False: its contact state may be missing or partial).
+
+    Notes
+    -----
+    **Which creep model.**
+    ``creep_model = "analytic"`` (default): K, the braking sensitivity c, F_0, a, b and the
+    capacities from the loaded analytic model at the ball's own loaded contact state (dbeta_i, F_i
+    from the study's static model;
+    :func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`, one
+    vectorised call per chunk, about 7 M balls/s on 2 cores), for every ball, also those whose
+    epsilon the study took from the full model (K is a smooth property of the contact state: the
+    analytic K is 2.6-5.7 % below the full model's on the paper's ball,
+    tests/physics/test_ball_push.py).
+    ``"full"``: K, c, F_0 and the traction and braking capacities from
+    :func:`tolsim.physics.velocity.full.full` at zero load (slow: about 1e4 balls/s); the
+    carriage-force slopes a, b stay the analytic ones (the full model gives the force at a load, not
+    its slopes). The train's epsilon is always the study's epsilon of the ball.
     """
     dbeta = np.ascontiguousarray(state.contact_angle_deviation.reshape(-1, 4))
     force = np.ascontiguousarray(state.normal_force.reshape(-1, 4))
@@ -308,8 +150,8 @@ def stroke_friction_kernel(segment_start, segment_force, valid, load, horizon, o
     [N], ``valid`` (trains,), ``load`` (trains, n, len(LOAD_COLUMNS)). Writes per train the
     baseline sum_i F_0,i [N], the time mean, maximum and minimum over [0, horizon] of the
     increase (1) [N] (NaN for an invalid train), whether a ball slides in some segment (the
-    capacities at zero neighbour force, module docstring) and the largest increase before
-    the first sliding segment (-inf if it slides from the start).
+    capacities at zero neighbour force, Notes of :func:`evaluate_friction`) and the largest
+    increase before the first sliding segment (-inf if it slides from the start).
     """
     trains, segments = segment_start.shape
     n = load.shape[1]
@@ -366,8 +208,8 @@ def stroke_friction_kernel(segment_start, segment_force, valid, load, horizon, o
 @pjit
 def train_inputs_kernel(eps, load, out_stiffness, out_braking):
     """K and c of the balls for :func:`tolsim.physics.trains.train_contact_constant`: NaN K
-    (and c = 0) for a ball that leaves its train unresolved (module docstring): epsilon, K,
-    c, F_0, a or b not finite, K <= 0 or |c K| >= 1."""
+    (and c = 0) for a ball that leaves its train unresolved (Notes of :func:`evaluate_friction`):
+    epsilon, K, c, F_0, a or b not finite, K <= 0 or |c K| >= 1."""
     for t in prange(eps.shape[0]):
         for i in range(eps.shape[1]):
             k = load[t, i, _K]
@@ -445,8 +287,8 @@ def _worst_tracks(config, m, *, track_ok, baseline, increase_max, increase_mean,
                   contact_force_max, contact_fraction, clusters_formed, bounded, rolling,
                   sliding) -> FrictionState:
     """One row per assembly from per-train figures (m * tracks trains): its worst track
-    (module docstring). ``track_ok``: the train was followed over the whole stroke;
-    ``bounded``: it was not, and ``rolling`` is its largest increase before the onset (a
+    (Notes of :func:`evaluate_friction`). ``track_ok``: the train was followed over the whole
+    stroke; ``bounded``: it was not, and ``rolling`` is its largest increase before the onset (a
     lower bound of its maximum, for the certain exceedances); ``sliding``: it slid."""
     tracks = config.n_tracks
     limit = config.contact.friction_increase_limit
@@ -513,7 +355,7 @@ def follow_trains(config, initial_gap, state):
 
 
 def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
-    """Friction figures of assemblies over the stroke (module docstring).
+    """Friction figures of assemblies over the stroke (Notes).
 
     Parameters
     ----------
@@ -536,6 +378,83 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
     ------
     ValueError
         With ``along_track`` propagation and no ``block``.
+
+    Notes
+    -----
+    Each ball's creep coefficients come from the single-ball physics (the loaded analytic
+    model, :mod:`tolsim.physics.velocity.ball_loads`, through
+    :func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`, its fast path at zero load;
+    or :func:`tolsim.physics.velocity.full.full`), the trains from :mod:`tolsim.physics.trains`;
+    what is added here is the carriage friction force of a track over the stroke, its reduction to
+    one row per assembly, the streamed statistics (:class:`FrictionStatistics`); the result-file
+    variables are :mod:`tolsim.io.schema.friction`'s.
+
+    Nomenclature: F_c,i -> ``carriage_force`` of ball i [N] (> 0 opposes the carriage motion);
+    F_0,i -> ``free_rolling_carriage_force``; a_i = dF_c/dP -> ``carriage_force_per_push``;
+    b_i = dF_c/d(Q_back + Q_front) -> ``carriage_force_per_neighbour_force``; Q_j -> contact
+    force of pair j (balls j, j + 1) [N]; F_track -> the track's carriage friction force [N].
+
+    **The friction force of a track.**
+    The loaded analytic model is linear in the loads (:mod:`tolsim.physics.velocity.ball_loads`): a
+    ball with net push P_i = Q_{i-1} - Q_i and neighbour-force sum S_i = Q_{i-1} + Q_i carries
+
+        F_c,i = F_0,i + a_i P_i + b_i S_i.
+
+    The track's carriage friction force is the sum over its balls. Each contact force Q_j
+    enters P and S of its two balls (P_{j+1} += Q_j, P_j -= Q_j, S_j += Q_j, S_{j+1} += Q_j),
+    so the increase over the baseline F_0 = sum_i F_0,i is a sum over the pairs
+
+        F_track(t) - F_0 = sum_j k_j Q_j(t),   k_j = (a_{j+1} - a_j) + (b_j + b_{j+1}).     (1)
+
+    For the nominal ball a_i = -1/2 and b_i = mu_bb / (2 cos beta_0), so k_j = mu_bb / cos beta_0
+    (0.141 for mu_bb = 0.1 at 45 deg): the push itself costs nothing on net (both balls of a
+    pair share it between the grooves alike, and a cluster's pushes sum to zero), while the
+    Coulomb friction at the ball-ball contact brakes both balls, and the grooves pay for that
+    couple. Deviations from the nominal ball add (a_{j+1} - a_j) Q_j, 1e-3 to 1e-2 Q_j.
+    Example, the two balls of [Lin2018] Sec. 3.2 case (a) (configs/paper_case_study.toml with
+    ``[contact]``; epsilon +-0.789 % from the full model, K = 673 N each from the analytic one):
+    they touch at 6.34 s and then push with Q = K epsilon_1 = 5.31 N; with a = -0.504, -0.496
+    and b = 0.0707, k = 0.149 and the track's friction rises by 0.79 N over its 2.82 N baseline
+    (+28 %) for the rest of the stroke (tests/study/test_friction_study.py).
+
+    With constant epsilon the contact forces are piecewise constant between events
+    (:func:`tolsim.physics.trains.train_contact_constant` with ``segments=True``), so (1) is too,
+    and every figure over the stroke is exact (no time step): the time mean of the increase
+    (the segment durations as weights), its maximum and minimum, the ripple of F_track
+    (max - min over the stroke; the baseline is constant), the largest ball-to-ball force, the
+    fraction of the stroke with any contact, and the multi-ball clusters formed.
+
+    **One row per assembly: the worst track.**
+    An assembly with a carriage has several tracks (trains). Its row is that of its **worst
+    track: the one with the largest maximum increase** (ties, e.g. no contact anywhere: the larger
+    baseline, then the first track). All figures of the row (baseline, mean increase, ripple,
+    largest contact force, contact fraction, clusters) belong to that one track, so they stay
+    consistent with each other. Without a carriage the assembly is its train.
+
+    **Unresolved and sliding trains (counted, bounded, never dropped).**
+
+    * A ball without epsilon (unresolved in :mod:`tolsim.study.pipeline.evaluate`), or whose creep
+      coefficients are not finite (K <= 0, |c K| >= 1 where the train model does not apply, a
+      ``full`` creep solve that failed), leaves its train unresolved: the train is not followed.
+    * **Sliding.** The linear creep law holds while each ball rolls. It stops when the push on a
+      ball reaches its traction capacity, |P_i| >= P_cap,i, or the neighbour forces stall its
+      rotation, S_i >= braking capacity (:mod:`tolsim.physics.velocity.ball_loads`). Every segment
+      of a train is checked against the capacities at zero neighbour force (the traction capacity
+      through a lower bound, :func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`).
+      The braking only raises the traction capacity (it adds a non-negative term to the function
+      whose minimum is P_cap), so this check is conservative: it may flag a ball that would still
+      roll, never miss one. A train with a sliding ball is **unresolved from the onset of sliding**:
+      the quasi-static creep model says nothing about a sliding ball's speed, and capping its force
+      would invent a result. Up to the onset the figures are exact, so the largest increase before
+      it is a lower bound of the train's maximum.
+    * An assembly is resolved when all its tracks are. Its friction figures enter the
+      histograms, quantiles and moments only then (estimates over the resolved assemblies, as for
+      the time to contact). The exceedance of the spec limit L (``friction_increase_limit_N``)
+      is counted like P(contact) in :mod:`tolsim.study.statistics.accumulator`: an assembly
+      *certainly* exceeds when a resolved track, or a sliding track before its onset, has an
+      increase above L; with k such assemblies, u unresolved ones without a certain exceedance and N
+      in all, P(increase > L) is k / (N - u) with its Clopper-Pearson interval, and the
+      partial-identification bounds [k / N, (k + u) / N] hold whatever the unresolved ones did.
     """
     if config.study.propagation == "along_track":
         if block is None:
@@ -547,7 +466,7 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
 
 
 # --------------------------------------------------------------------------------------------
-# along_track: the trains followed step by step (module docstring, "along_track")
+# along_track: the trains followed step by step (Notes of TrackFriction)
 # --------------------------------------------------------------------------------------------
 #: Overlap below which the step rule leaves a pair alone, as a fraction of the ball diameter
 #: (1e-14 m for a 10 mm ball, some 700 ulps of a position of 0.1 m: rounding, not contact).
@@ -654,6 +573,82 @@ class TrackFriction:
         With ``contact`` settings and ``along_track`` propagation.
     record : bool
         Keep every step's positions, forces and friction for :func:`friction_examples`.
+
+    Notes
+    -----
+    **With along_track propagation.**
+    Epsilon, K and the other creep coefficients of a ball change as it rolls past the rail errors
+    and through the carriage's load distribution, and with a carriage balls leave and enter its
+    loaded zone. The trains are then followed step by step, inside the propagation's midpoint
+    integration (:class:`TrackFriction`, driven by :func:`tolsim.study.pipeline.propagation.
+    first_contact_along_track` and :func:`tolsim.study.pipeline.carriage_track.
+    first_contact_carriage_track`). At every step of dt = T / ``study.time_steps`` each ball's
+    epsilon and creep coefficients come from its loaded state at its position, at the start of
+    the step (predictor, only for trains with a closed pair) and at its midpoint; the cluster rule
+    (:func:`tolsim.physics.trains.cluster_velocities`, touching = the closed pairs) gives the loaded
+    velocities w_i, the balls advance at (1 + w_i) v / 2, and a gap that closes inside the step
+    is closed by the kappa-weighted projection of the end positions, whose multipliers give the
+    step-mean forces Qbar_j (eqs. 7, 8 of :mod:`tolsim.physics.trains`, "Varying epsilon", with the
+    derivation). A contact ends when the cluster rule leaves its balls apart: its force returns to
+    zero and the gap opens. Per step k, with the coefficients at the midpoint,
+
+        F_track,k = B_k + I_k,   B_k = sum_i F_0,i,   I_k = sum_j k_j Qbar_j  (eq. 1 per step)
+
+    (i over the loaded balls, j over the pairs of the train). The figures of a train:
+
+    * **baseline**: the time mean of B_k over the stroke (it varies now: loads, rail errors,
+      which balls are in the zone);
+    * **increase**: I_k = F_track,k - B_k, the friction over the step's own baseline, i.e. what
+      the contacts add; ``increase_max`` its maximum over the steps, ``increase_mean`` its time
+      mean;
+    * **ripple**: max_k F_track,k - min_k F_track,k, the ripple of the friction force itself
+      (with the variation of the baseline, e.g. balls passing through the load zone);
+    * ``contact_force_max``: the largest Qbar_j; ``contact_fraction``: the time with a contact
+      force (a step counts whole when a cluster pushes through it, else from its earliest
+      closing, interpolated as the first contact is, to its end); ``clusters_formed``: clusters
+      at the end of a step that hold a pair not in contact at its start (a cluster that splits
+      and forms again counts again);
+    * sliding is checked at every step with the step's forces against the capacities at zero
+      neighbour force, as for constant epsilon. A train is unresolved from the step at which a
+      ball slides, at which one of its loaded balls has no epsilon or no usable creep
+      coefficients, or (a carriage) at which its assembly runs out of entering balls or slots;
+      its balls then move freely, as without ``[contact]``, and its largest increase before that
+      step is a lower bound of its maximum (certain exceedance, Notes of
+      :func:`evaluate_friction`).
+
+    *Error of the step.* For constant epsilon and K the step is exact whatever dt (derivation in
+    :mod:`tolsim.physics.trains`): the positions at step ends and the step-mean forces are the
+    event-driven ones, so the baseline, ``increase_mean`` and ``contact_fraction`` agree with
+    the exact figures (Notes of :func:`evaluate_friction`) to rounding (1e-8 relative,
+    tests/study/test_friction_along_track.py). Maxima and minima are taken over step means, so a
+    contact that forms inside the last step (for the minimum of the ripple, the first) is averaged
+    away: O(1) in a fraction O(dt / T) of the assemblies; two merges of one cluster inside one step
+    count once. With varying epsilon the midpoint rule adds O(dt) over the stroke, mostly from the
+    steps in which a contact starts or ends; a force that peaks at contact is underestimated by the
+    step mean (the paper's pair with a 20 um gap: the largest force 4.35 N at 100 steps, 4.44 N at
+    400).
+
+    *First contact.* It is located on the free motion of each step, as without ``[contact]``:
+    up to the first contact the balls are free and the trajectories are the same to the last
+    bit, so P(contact) and the time to contact do not change when ``[contact]`` is added. (With
+    free balls the train's validity also counts the evaluations after its first contact,
+    which are now those of the trajectory with trains: an assembly whose ball is unresolved
+    only on one of the two after contact is valid in one run and not in the other. Its contact
+    is counted either way.)
+
+    *With a carriage* the train of a track is its loaded balls. A ball is in its train for a
+    step when it is in the loaded zone at the step's start, midpoint and end: a ball leaving at
+    the trailing end drops its contacts in the step in which it leaves, a ball entering at the
+    leading end joins from the step after, with an open gap. Beyond the ends of the train no
+    force acts (Q = 0, :mod:`tolsim.physics.trains`, "Ends of the loaded zone"). Unloaded balls
+    (in the return path, or of a train longer than the zone at t = 0) are in no train and are
+    passed through as by the first-contact propagation. K comes from each ball's own loaded
+    state in the carriage solved at its position. Every assembly is followed over the whole
+    stroke (without ``[contact]``: up to its first contact).
+
+    *Cost.* Per step the creep coefficients of every loaded ball at the midpoint and, for the
+    trains with a closed pair, at the start; two O(n) passes per train. The propagation's two
+    evaluations per step still dominate (benchmarks/bench_study.py ``--along-track``).
     """
 
     def __init__(self, config, record=False):
@@ -784,7 +779,7 @@ class TrackFriction:
             setattr(self, name, out)
 
     def figures(self) -> FrictionState:
-        """The per-assembly rows (module docstring: the worst track)."""
+        """The per-assembly rows (the worst track, Notes of :func:`evaluate_friction`)."""
         alive = self.alive.copy()
         nan = np.nan
 

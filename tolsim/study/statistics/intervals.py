@@ -2,111 +2,14 @@
 treat the assembly as the sampling unit. Pure NumPy/SciPy (no other tolsim import), so both
 :mod:`tolsim.study.statistics.quality` and :mod:`tolsim.study.statistics.accumulator` can import it.
 
-Independent trials
-------------------
-* :func:`wilson_interval` ([Wilson1927]) and :func:`clopper_pearson_interval`
-  ([ClopperPearson1934]) of a binomial proportion k / n.
-* :func:`histogram_quantiles`: quantiles read off a fixed-bin histogram.
-
-Correlated balls: the assembly as the sampling unit
----------------------------------------------------
-The balls of one assembly share the rail and carriage errors, so their epsilons are
-correlated (about 0.9 between neighbours in the default study) and the ball-level intervals
-that assume independent balls are too narrow. Assemblies are independent draws, so they are
-the sampling unit (single-stage cluster sampling, clusters of unequal sizes n_a): each
-assembly a contributes its totals ::
-
-    y_a = (n_a, k_a, S_a, Q_a)          (columns :data:`CLUSTER_COLUMNS`)
-
-n_a valid balls, k_a of them with |epsilon| > L, S_a = sum epsilon, Q_a = sum epsilon^2 over
-its valid balls. A ball-level figure is a smooth function of the means over assemblies
-(n, k, S, Q bars), estimated by plugging in the sample means; its variance is the delta
-method's (linearisation) with the covariance of the means taken from the assemblies,
-C / (A (A - 1)), C the co-moment matrix of the y_a and A the number of assemblies. The
-moments stream: :class:`ClusterMoments` keeps (A, mean, C) and merges with the pairwise
-update of Chan, Golub & LeVeque ([Chan1979], for a co-moment matrix instead of M2), so the
-memory does not grow with the number of assemblies and a fixed merge order gives bit-identical
-results.
-
-* **Fraction out of spec** (:func:`cluster_proportion`). The ratio estimator
-  p = sum k_a / sum n_a ([Cochran1977] Sec. 3.12, proportions in cluster sampling; Sec. 6.3,
-  6.4, variance of a ratio estimate and its sample estimate; Ch. 9A, clusters of unequal
-  sizes), with the linearised variance (no finite-population correction: the assemblies are
-  draws from an infinite population) ::
-
-      v(p) = sum_a (k_a - p n_a)^2 / ((A - 1) A nbar^2)
-           = (C_kk - 2 p C_kn + p^2 C_nn) / ((A - 1) A nbar^2).
-
-  A Wald interval p -+ z sqrt(v) undercovers for small p (its lower end goes negative, its
-  upper end is too low), so the interval is Korn & Graubard's ([KornGraubard1998]): a
-  binomial interval at the *effective sample size* ::
-
-      deff  = v(p) / (p (1 - p) / N),          N = sum n_a   (design effect, [Kish1965])
-      n_eff = N / deff * (z / t_df)^2,         x_eff = p n_eff
-
-  where (z / t_df)^2 is their correction for the degrees of freedom of v(p).
-
-  - **Degrees of freedom.** K&G take df from the design (A - 1 here, which makes the
-    correction 1). For a rare fraction v(p) rests on the few assemblies that have a ball
-    out, not on A, and with df = A - 1 the interval undercovers when the expected count is
-    small: 86 % at an expected 10 balls out, 88 % at 20, 93 % at 50, 94 % at 100 (rho =
-    0.9, trains of 10, p = 1e-3, 2000 repeats: ``python benchmarks/coverage_cluster.py
-    --sweep --repeats 2000``), because a sample whose out-of-spec assemblies happen to have
-    one ball out each estimates deff ~ 1 and p too low at once.
-    tolsim uses df = min(A - 1, max(x_eff - 1, 1)) with x_eff = p n_eff before the
-    correction. For small p, x_eff ~ (sum k_a)^2 / sum k_a^2, Kish's effective number of
-    assemblies with a ball out, which is at most their number, so this df errs on the
-    small (wide) side; for large counts it changes little (3 % wider at 200 balls out). This
-    choice is tolsim's, not K&G's.
-  - **Interval: Wilson** ([Wilson1927]) at (x_eff, n_eff) by default. In the same runs it
-    covers 95.3-95.8 % for expected counts 50-500 (96.0 % at p = 1e-2) and 97.5 / 98.7 % at
-    20 / 10; Clopper-Pearson at (x_eff, n_eff) (K&G's choice, ``interval=``) covers
-    95.8-96.6 % (96.7 %) and 98.6 / 99.9 %, ~1 point more conservative and 2-5 % wider.
-    Wilson is the default because it is closest to nominal without falling below it; the
-    old independent-ball Wilson interval of k of N covers 60-65 % in all these cases.
-  - **deff >= 1** (n_eff <= N): a design effect below 1 (negatively correlated balls) is
-    not believed, as in the usual implementations of K&G's method (e.g. SAS PROC
-    SURVEYFREQ's modified intervals); it can only widen the interval.
-  - **n_eff >= N^2 / sum n_a^2** (= A for equal sizes): for 0 <= k_a <= n_a with mean p n_a,
-    Var(k_a) <= n_a^2 p (1 - p) (all balls of an assembly in or out together), so deff
-    can not exceed sum n_a^2 / N; a larger estimate is noise.
-  - **k = 0 or k = N**: the variance estimate is 0 and the design effect unknown. deff = 1
-    would be the optimistic case (independent balls); instead n_eff takes its lower bound
-    N^2 / sum n_a^2, i.e. each assembly counts as one trial, which holds whatever the
-    (non-negative) correlation of the balls of an assembly: with no ball out, the upper end
-    is about z^2 / A (Wilson) rather than z^2 / N. The same bound is used when A < 2.
-* **Capability** (:func:`cluster_capability`). mu = Sbar / nbar,
-  sigma^2 = Qbar / nbar - mu^2 (divisor N), Cp = L / (3 sigma),
-  Cpk = (L - |mu|) / (3 sigma); the delta method over assemblies gives their variances from
-  the gradients ::
-
-      d mu      = (dSbar - mu dnbar) / nbar
-      d sigma^2 = (dQbar - 2 mu dSbar + (2 mu^2 - m2) dnbar) / nbar,   m2 = Qbar / nbar
-      d Cp      = -Cp d sigma^2 / (2 sigma^2)
-      d Cpk     = -sign(mu) d mu / (3 sigma) - Cpk d sigma^2 / (2 sigma^2)
-
-  and the interval is estimate -+ z se (with independent balls of a normal epsilon this is
-  Bissell's [Bissell1990] variance 1/(9n) + Cpk^2/(2n), to first order). At mu = 0, |mu| has
-  no derivative; sign(0) is taken as +1 (either sign gives the same variance to first order
-  when mu and sigma^2 are uncorrelated, as for a symmetric epsilon). There the estimate is
-  biased low by E|mu_hat| ~ 0.8 sd(mu_hat) / (3 sigma), so the misses fall mostly above the
-  interval, but the coverage stays nominal: 94.6-95.9 % for Cp, Cpk at mu = 0 and at
-  mu = 0.5 sigma in the runs above (Bissell's independent-ball interval: 48-51 %).
-
-Differences of two runs, and intervals on the aggregates a result file holds
------------------------------------------------------------------------------
-Used by ``tolsim compare`` (:mod:`tolsim.reports.compare`), whose differences are unpaired:
-the two estimates are taken as independent.
-
-* :func:`mover_difference`: the MOVER of Zou & Donner ([ZouDonner2008]) from the intervals
-  of two estimates; :func:`newcombe_difference`, Newcombe's hybrid score interval of a
-  difference of proportions ([Newcombe1998] method 10), is the case with Wilson intervals.
-* :func:`welch_difference`: Welch's interval with the Welch-Satterthwaite degrees of freedom
-  ([Welch1947], [Satterthwaite1946]).
-* :func:`cluster_mean_and_std`: the mean and standard deviation of epsilon over balls with
-  delta-method standard errors over assemblies ([Cochran1977] Sec. 6.3-6.4).
-* :func:`histogram_quantile_interval`: Woodruff's interval of a quantile read off a
-  histogram ([Woodruff1952]).
+* Independent trials: :func:`wilson_interval`, :func:`clopper_pearson_interval`,
+  :func:`histogram_quantiles`.
+* Correlated balls, the assembly as the sampling unit: :class:`ClusterMoments`,
+  :func:`cluster_proportion`, :func:`cluster_capability` (the theory in their Notes).
+* Differences of two runs, and intervals on the aggregates a result file holds, for
+  ``tolsim compare`` (:mod:`tolsim.reports.compare`), whose differences are unpaired (the two
+  estimates taken as independent): :func:`mover_difference`, :func:`newcombe_difference`,
+  :func:`welch_difference`, :func:`cluster_mean_and_std`, :func:`histogram_quantile_interval`.
 
 References
 ----------
@@ -356,6 +259,27 @@ class ClusterMoments:
         Mean over the assemblies of y_a.
     comoment : ndarray (p, p)
         sum_a (y_a - mean)(y_a - mean)^T; the sample covariance is comoment / (A - 1).
+
+    Notes
+    -----
+    **Correlated balls: the assembly as the sampling unit.**
+    The balls of one assembly share the rail and carriage errors, so their epsilons are
+    correlated (about 0.9 between neighbours in the default study) and the ball-level intervals
+    that assume independent balls are too narrow. Assemblies are independent draws, so they are
+    the sampling unit (single-stage cluster sampling, clusters of unequal sizes n_a): each
+    assembly a contributes its totals ::
+
+        y_a = (n_a, k_a, S_a, Q_a)          (columns :data:`CLUSTER_COLUMNS`)
+
+    n_a valid balls, k_a of them with |epsilon| > L, S_a = sum epsilon, Q_a = sum epsilon^2 over
+    its valid balls. A ball-level figure is a smooth function of the means over assemblies
+    (n, k, S, Q bars), estimated by plugging in the sample means; its variance is the delta
+    method's (linearisation) with the covariance of the means taken from the assemblies,
+    C / (A (A - 1)), C the co-moment matrix of the y_a and A the number of assemblies. The
+    moments stream: :class:`ClusterMoments` keeps (A, mean, C) and merges with the pairwise
+    update of Chan, Golub & LeVeque ([Chan1979], for a co-moment matrix instead of M2), so the
+    memory does not grow with the number of assemblies and a fixed merge order gives bit-identical
+    results.
     """
 
     count: int
@@ -481,8 +405,8 @@ def cluster_proportion(moments: ClusterMoments, confidence_level=0.95, interval=
     """Ball-level fraction out of spec sum k_a / sum n_a with the assembly as sampling unit.
 
     Ratio estimator over clusters with its linearised (delta-method) variance, and the
-    binomial interval at Korn & Graubard's effective sample size (see the module docstring
-    for the formulas, the bounds on the design effect and the k = 0 case).
+    binomial interval at Korn & Graubard's effective sample size (see the Notes for the
+    formulas, the bounds on the design effect and the k = 0 case).
 
     Parameters
     ----------
@@ -493,13 +417,63 @@ def cluster_proportion(moments: ClusterMoments, confidence_level=0.95, interval=
         Binomial interval at (p n_eff, n_eff).
     df_rule : {"effective", "design"}
         Degrees of freedom of the variance: min(A - 1, x_eff - 1) (default) or K&G's design
-        df A - 1 (for comparison; undercovers at small counts, see the module docstring).
+        df A - 1 (for comparison; undercovers at small counts, see the Notes).
 
     Returns
     -------
     Proportion
         ``successes`` and ``trials`` the total counts, ``design_effect`` = trials / n_eff,
         ``effective_trials`` = n_eff, ``clusters`` = A; NaN with no valid ball.
+
+    Notes
+    -----
+    **Fraction out of spec** (:func:`cluster_proportion`). The ratio estimator
+    p = sum k_a / sum n_a ([Cochran1977] Sec. 3.12, proportions in cluster sampling; Sec. 6.3,
+    6.4, variance of a ratio estimate and its sample estimate; Ch. 9A, clusters of unequal
+    sizes), with the linearised variance (no finite-population correction: the assemblies are
+    draws from an infinite population) ::
+
+        v(p) = sum_a (k_a - p n_a)^2 / ((A - 1) A nbar^2)
+             = (C_kk - 2 p C_kn + p^2 C_nn) / ((A - 1) A nbar^2).
+
+    A Wald interval p -+ z sqrt(v) undercovers for small p (its lower end goes negative, its
+    upper end is too low), so the interval is Korn & Graubard's ([KornGraubard1998]): a
+    binomial interval at the *effective sample size* ::
+
+        deff  = v(p) / (p (1 - p) / N),          N = sum n_a   (design effect, [Kish1965])
+        n_eff = N / deff * (z / t_df)^2,         x_eff = p n_eff
+
+    where (z / t_df)^2 is their correction for the degrees of freedom of v(p).
+
+    - **Degrees of freedom.** K&G take df from the design (A - 1 here, which makes the
+      correction 1). For a rare fraction v(p) rests on the few assemblies that have a ball
+      out, not on A, and with df = A - 1 the interval undercovers when the expected count is
+      small: 86 % at an expected 10 balls out, 88 % at 20, 93 % at 50, 94 % at 100 (rho =
+      0.9, trains of 10, p = 1e-3, 2000 repeats: ``python benchmarks/coverage_cluster.py
+      --sweep --repeats 2000``), because a sample whose out-of-spec assemblies happen to have
+      one ball out each estimates deff ~ 1 and p too low at once.
+      tolsim uses df = min(A - 1, max(x_eff - 1, 1)) with x_eff = p n_eff before the
+      correction. For small p, x_eff ~ (sum k_a)^2 / sum k_a^2, Kish's effective number of
+      assemblies with a ball out, which is at most their number, so this df errs on the
+      small (wide) side; for large counts it changes little (3 % wider at 200 balls out). This
+      choice is tolsim's, not K&G's.
+    - **Interval: Wilson** ([Wilson1927]) at (x_eff, n_eff) by default. In the same runs it
+      covers 95.3-95.8 % for expected counts 50-500 (96.0 % at p = 1e-2) and 97.5 / 98.7 % at
+      20 / 10; Clopper-Pearson at (x_eff, n_eff) (K&G's choice, ``interval=``) covers
+      95.8-96.6 % (96.7 %) and 98.6 / 99.9 %, ~1 point more conservative and 2-5 % wider.
+      Wilson is the default because it is closest to nominal without falling below it; the
+      old independent-ball Wilson interval of k of N covers 60-65 % in all these cases.
+    - **deff >= 1** (n_eff <= N): a design effect below 1 (negatively correlated balls) is
+      not believed, as in the usual implementations of K&G's method (e.g. SAS PROC
+      SURVEYFREQ's modified intervals); it can only widen the interval.
+    - **n_eff >= N^2 / sum n_a^2** (= A for equal sizes): for 0 <= k_a <= n_a with mean p n_a,
+      Var(k_a) <= n_a^2 p (1 - p) (all balls of an assembly in or out together), so deff
+      can not exceed sum n_a^2 / N; a larger estimate is noise.
+    - **k = 0 or k = N**: the variance estimate is 0 and the design effect unknown. deff = 1
+      would be the optimistic case (independent balls); instead n_eff takes its lower bound
+      N^2 / sum n_a^2, i.e. each assembly counts as one trial, which holds whatever the
+      (non-negative) correlation of the balls of an assembly: with no ball out, the upper end
+      is about z^2 / A (Wilson) rather than z^2 / N. The same bound is used when A < 2.
     """
     _columns(moments)
     if not 0 < confidence_level < 1:
@@ -529,7 +503,7 @@ def cluster_proportion(moments: ClusterMoments, confidence_level=0.95, interval=
         var = ratio_variance(moments, 1, 0)[1]
         n_eff = float(np.clip(p * (1 - p) / var if var > 0 else np.inf, n_min, trials))
         # degrees of freedom of the variance estimate: the effective number of assemblies
-        # with a ball out, p n_eff - 1, at most A - 1 (module docstring)
+        # with a ball out, p n_eff - 1, at most A - 1 (Notes)
         df = min(a - 1.0, max(p * n_eff - 1.0, 1.0)) if df_rule == "effective" else a - 1.0
         z = float(ndtri(0.5 + confidence_level / 2))
         t = float(t_distribution.ppf(0.5 + confidence_level / 2, df))
@@ -562,6 +536,27 @@ def cluster_capability(moments: ClusterMoments, limit, confidence_level=0.95,
     Capability
         mu, sigma from the pooled sums (sigma with divisor N); intervals NaN for fewer than
         two assemblies or sigma = 0.
+
+    Notes
+    -----
+    **Capability** (:func:`cluster_capability`). mu = Sbar / nbar,
+    sigma^2 = Qbar / nbar - mu^2 (divisor N), Cp = L / (3 sigma),
+    Cpk = (L - |mu|) / (3 sigma); the delta method over assemblies gives their variances from
+    the gradients ::
+
+        d mu      = (dSbar - mu dnbar) / nbar
+        d sigma^2 = (dQbar - 2 mu dSbar + (2 mu^2 - m2) dnbar) / nbar,   m2 = Qbar / nbar
+        d Cp      = -Cp d sigma^2 / (2 sigma^2)
+        d Cpk     = -sign(mu) d mu / (3 sigma) - Cpk d sigma^2 / (2 sigma^2)
+
+    and the interval is estimate -+ z se (with independent balls of a normal epsilon this is
+    Bissell's [Bissell1990] variance 1/(9n) + Cpk^2/(2n), to first order). At mu = 0, |mu| has
+    no derivative; sign(0) is taken as +1 (either sign gives the same variance to first order
+    when mu and sigma^2 are uncorrelated, as for a symmetric epsilon). There the estimate is
+    biased low by E|mu_hat| ~ 0.8 sd(mu_hat) / (3 sigma), so the misses fall mostly above the
+    interval, but the coverage stays nominal: 94.6-95.9 % for Cp, Cpk at mu = 0 and at
+    mu = 0.5 sigma in the runs of the Notes of :func:`cluster_proportion` (Bissell's
+    independent-ball interval: 48-51 %).
     """
     _columns(moments)
     if not (np.isfinite(limit) and limit > 0):
