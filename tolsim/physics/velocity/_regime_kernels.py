@@ -2,7 +2,7 @@
 
 The theory (dissipated power D, its kinks, the stick line and the certificate) is in the Notes
 of :func:`tolsim.physics.velocity.regimes.dissipated_power` and
-:func:`tolsim.physics.velocity.regimes.solve_regimes`.
+:func:`tolsim.physics.velocity.regimes.stick_criterion`.
 """
 
 import numpy as np
@@ -97,6 +97,102 @@ def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
             x2 = lo + g * (hi - lo)
             f2 = _slope(x2, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
     return min(best, f1, f2)
+
+
+@jit
+def _capacity_ratio(phi, pu, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3):
+    u = np.cos(phi)
+    w = np.sin(phi) / a
+    return (stuck_contact_power(u, w, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
+            - pu * u) / w
+
+
+@jit
+def spin_capacity(pu, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
+    """Largest spin moment W a stuck contact carries with the z force component p_u [N m / R].
+
+    W = min over s_w > 0 of (D_k(s) - p_u s_u) / s_w: the subdifferential of D_k at zero is
+    symmetric in each component (D_k(u, w) is even in u and in w), so (p_u, p_w) is in it
+    iff |p_w| <= W(p_u). Negative when |p_u| > F_k (no moment can help).
+    """
+    s3 = np.empty(4)
+    n = CERTIFICATE_DIRECTIONS
+    best = np.inf
+    jbest = 1
+    for j in range(1, n):
+        val = _capacity_ratio(np.pi * j / n, pu, force, a, b, sigma_scale, cin, sin_, win, xo,
+                              wo, s3)
+        if val < best:
+            best = val
+            jbest = j
+    lo = np.pi * (jbest - 1) / n
+    hi = np.pi * (jbest + 1) / n
+    lo = max(lo, 1e-9)
+    hi = min(hi, np.pi - 1e-9)
+    g = 0.5 * (np.sqrt(5.0) - 1.0)
+    x1 = hi - g * (hi - lo)
+    x2 = lo + g * (hi - lo)
+    f1 = _capacity_ratio(x1, pu, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
+    f2 = _capacity_ratio(x2, pu, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
+    for _ in range(40):
+        if f1 < f2:
+            hi = x2
+            x2 = x1
+            f2 = f1
+            x1 = hi - g * (hi - lo)
+            f1 = _capacity_ratio(x1, pu, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
+        else:
+            lo = x1
+            x1 = x2
+            f1 = f2
+            x2 = lo + g * (hi - lo)
+            f2 = _capacity_ratio(x2, pu, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
+    return min(best, f1, f2)
+
+
+@jit
+def double_stick_solve(i, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin, sin_, win,
+                       xo, wo, tr, wr, state, contact):
+    """Both contacts of an opposite pair (i, i + 2) with equal angles stick; the margin.
+
+    The state is fixed, v_B = v/2, Omega = (v / 2R) x_i (:func:`two_point_state`), and D is the
+    other pair's. With g = grad D_others, 0 is in the subdifferential of D iff g + A_i^T p_i +
+    A_j^T p_j = 0 with p_i, p_j in the stuck contacts' sets: with x_j = -x_i, y_j = -y_i this
+    fixes p_iu = (-g_v + g . x_i) / 2, p_ju = (-g_v - g . x_i) / 2 and p_iw - p_jw = -g . y_i,
+    which two contacts can carry iff |g . y_i| <= W_i(p_iu) + W_j(p_ju)
+    (:func:`spin_capacity`). Returns (W_i + W_j - |g . y_i|) [N m / R], >= 0 when certified.
+    """
+    j = i + 2
+    fk0 = force.copy()
+    fk0[i] = 0.0
+    fk0[j] = 0.0
+    loads = np.empty(5)
+    xx = -py[i]
+    xy = px[i]
+    yx = -px[i]
+    yy = -py[i]
+    state[0] = 0.5
+    state[1] = 0.5 * xx
+    state[2] = 0.5 * xy
+    state[3] = 0.0
+    ball_loads_kernel(state, px, py, vgroove, fk0, a, b, sigma_scale, False, rd, hoff, cin,
+                      sin_, win, xo, wo, tr, wr, loads, contact)
+    gv = -loads[0]
+    gx = -(loads[1] * xx + loads[2] * xy)
+    gy = -(loads[1] * yx + loads[2] * yy)
+    piu = 0.5 * (-gv + gx)
+    pju = 0.5 * (-gv - gx)
+    for k in (i, j):
+        contact[k, 0] = 0.0
+        contact[k, 1] = 0.0
+        contact[k, 3] = 0.0
+    contact[i, 2] = -piu
+    contact[j, 2] = -pju
+    contact[i, 4] = 0.5
+    contact[j, 4] = -0.5
+    wi = spin_capacity(piu, force[i], a[i], b[i], sigma_scale, cin, sin_, win, xo, wo)
+    wj = spin_capacity(pju, force[j], a[j], b[j], sigma_scale, cin, sin_, win, xo, wo)
+    return wi + wj - abs(gy)
 
 
 @jit
@@ -205,6 +301,9 @@ def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, x
                 state, contact, info, regime):
     """Regime B: the stick line of least D over the loaded contacts, and its certificate.
 
+    An opposite pair with equal angles (a perfect or case (b) bearing) is tried first with
+    both its contacts stuck (:func:`double_stick_solve`, stuck contact 4 + i).
+
     Writes ``state``, ``contact``, ``info`` = (residual, evaluations, converged) and
     ``regime`` = (code, stuck contact, certificate / sum F); residual is the larger of the
     line slope and the certificate's deficit, both over sum F.
@@ -219,6 +318,21 @@ def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, x
     trial = np.empty(4)
     tcontact = np.empty((4, 5))
     out = np.empty(5)
+    for i in range(2):
+        if (force[i] > 0.0 and force[i + 2] > 0.0
+                and abs(beta[i] - beta[i + 2]) <= TWO_POINT_ANGLE_TOLERANCE):
+            cert = double_stick_solve(i, px, py, vgroove, force, a, b, sigma_scale, rd, hoff,
+                                      cin, sin_, win, xo, wo, tr, wr, trial, tcontact) / total
+            if cert >= -tol:
+                state[:] = trial
+                contact[:, :] = tcontact
+                regime[0] = REGIME_STICK
+                regime[1] = 4 + i
+                regime[2] = cert
+                info[0] = max(0.0, -cert)
+                info[1] = 1.0
+                info[2] = 1.0
+                return True
     best_d = np.inf
     best_k = -1
     best_q = np.zeros(3)

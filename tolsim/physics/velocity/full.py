@@ -124,7 +124,8 @@ class FullResult(VelocityResult):
         sticks (regime B), 3 exactly two-point rolling at v/2
         (:mod:`tolsim.physics.velocity.regimes`).
     stuck_contact : ndarray of int, shape (n,)
-        Index (BL, BR, TR, TL) of the stuck contact in regime B, else -1.
+        Index (BL, BR, TR, TL) of the stuck contact in regime B, 4 (BL and TR) or 5 (BR and
+        TL) when both contacts of an opposite pair with equal angles stick, else -1.
     certificate : ndarray, shape (n,)
         Least directional slope of D over the checked unit directions, over sum F [-]:
         ``-residual`` in regime A, the stuck contact's margin in regime B, 0 when two-point.
@@ -356,7 +357,7 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     ball_friction : float
         mu_bb [-] of the ball-ball contacts.
     nonsmooth : bool
-        Solve every regime (default; :func:`tolsim.physics.velocity.regimes.solve_regimes`):
+        Solve every regime (default; :func:`tolsim.physics.velocity.regimes.stick_criterion`):
         open contacts, a sticking contact (regime B) and exactly two-point balls. False: the
         smooth Newton alone, on balls with four loaded contacts as before issue 25 (the
         baseline of the regime tests). Balls under ``push`` or ``neighbour_force`` are always
@@ -433,7 +434,7 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     one contact of the heavily loaded pair *sticks* (zero spin and zero slip at its centre):
     the minimum of D sits on a kink where the friction is set-valued, and the smooth residual
     cannot vanish. With ``nonsmooth`` (default) such balls are solved on the stick line and
-    certified (regime B, :func:`tolsim.physics.velocity.regimes.solve_regimes`); without it
+    certified (regime B, :func:`tolsim.physics.velocity.regimes.stick_criterion`); without it
     they are returned with ``converged = False`` (residual ~1e-2).
     """
     if surface not in SURFACES:
