@@ -138,10 +138,11 @@ def test_certificate_no_descent_direction_on_random_balls():
     assert (res.certificate >= -1e-10).all()
     rng = np.random.default_rng(3)
     radius = TABLE1.ball_radius
-    for j in np.flatnonzero(res.regime == 2)[:8].tolist() + np.flatnonzero(res.regime == 1)[:4].tolist():
+    picks = np.r_[np.flatnonzero(res.regime == 2)[:8], np.flatnonzero(res.regime == 1)[:4]]
+    for j in picks:
         x = np.array([res.ball_velocity[j], *res.angular_velocity[j, :2] * radius])
-        d0 = friction_loads(x[0], [x[1] / radius, x[2] / radius, 0.0], TABLE1.nominal_contact_angle
-                            + dbeta[j], force[j])[3]
+        d0 = friction_loads(x[0], [x[1] / radius, x[2] / radius, 0.0],
+                            TABLE1.nominal_contact_angle + dbeta[j], force[j])[3]
         for d in rng.normal(size=(200, 3)):
             y = x + 1e-6 * V * d / np.linalg.norm(d)
             dy = friction_loads(y[0], [y[1] / radius, y[2] / radius, 0.0],
