@@ -299,7 +299,7 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
 @jit
 def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, xo, wo, tr, wr,
                 state, contact, info, regime):
-    """Regime B: the stick line of least D over the loaded contacts, and its certificate.
+    """Regime B: the first certified stick line of a loaded contact (else the one of least D).
 
     An opposite pair with equal angles (a perfect or case (b) bearing) is tried first with
     both its contacts stuck (:func:`double_stick_solve`, stuck contact 4 + i).
@@ -333,42 +333,40 @@ def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, x
                 info[1] = 1.0
                 info[2] = 1.0
                 return True
+    # candidates by decreasing force (the heavy diagonal first); a certified line minimum is
+    # the minimum of D, so the search stops there
+    order = np.argsort(-force)
     best_d = np.inf
     best_k = -1
-    best_q = np.zeros(3)
+    best_cert = np.nan
+    best_res = np.inf
     evals = 0.0
-    for k in range(4):
+    for m in range(4):
+        k = order[m]
         if force[k] <= 0.0:
             continue
         stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin, sin_,
                          win, xo, wo, tr, wr, tol, trial, tcontact, out)
         evals += out[2]
-        if out[0] < best_d:
+        cert = stick_certificate(out[3], out[4], force[k], a[k], b[k], sigma_scale, cin, sin_,
+                                 win, xo, wo) / total
+        residual = max(out[1], -cert)
+        if residual <= tol or (best_res > tol and out[0] < best_d):
             best_d = out[0]
             best_k = k
-            best_q[0] = out[1]
-            best_q[1] = out[3]
-            best_q[2] = out[4]
+            best_cert = cert
+            best_res = residual
             state[:] = trial
             contact[:, :] = tcontact
-    regime[0] = REGIME_UNSOLVED
+        if residual <= tol:
+            break
+    ok = best_res <= tol
+    regime[0] = REGIME_STICK if ok else REGIME_UNSOLVED
     regime[1] = best_k
-    if best_k < 0:
-        regime[2] = np.nan
-        info[0] = np.inf
-        info[1] = evals
-        info[2] = 0.0
-        return False
-    cert = stick_certificate(best_q[1], best_q[2], force[best_k], a[best_k], b[best_k],
-                             sigma_scale, cin, sin_, win, xo, wo) / total
-    residual = max(best_q[0], -cert)
-    ok = residual <= tol
-    regime[2] = cert
-    info[0] = residual
+    regime[2] = best_cert
+    info[0] = best_res
     info[1] = evals
     info[2] = 1.0 if ok else 0.0
-    if ok:
-        regime[0] = REGIME_STICK
     return ok
 
 
