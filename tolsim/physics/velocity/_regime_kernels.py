@@ -419,7 +419,8 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
     equal angles: rolling at v/2 (:func:`two_point_state`). Otherwise the smooth Newton
     (:func:`~tolsim.physics.velocity._full_kernels.solve_one`, regime A) and, where it does
     not converge (or first, when chi < ``CHI_STICK_FIRST``), the stick solve
-    (:func:`stick_solve`, regime B; planar surface with omega_z = 0 only). ``out_regime``
+    (:func:`stick_solve`, regime B; planar surface with omega_z = 0 only); where neither is
+    certified, Newton once more from the stick line's minimum. ``out_regime``
     (n, 3) = (regime code, stuck contact or -1, certificate / sum F or NaN).
     """
     sigma_scale = 1.5 / np.pi
@@ -471,12 +472,15 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
             stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, xo, wo, tr,
                         wr, state, contact, info, regime)
         else:
-            tried = False
             done = False
+            tried = False
+            s_state = np.full(4, np.nan)
+            s_contact = np.empty((4, 5))
+            s_info = np.empty(3)
             if nonsmooth and stick_criterion_one(fb, a, ellip) < CHI_STICK_FIRST:
                 tried = True
                 done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win,
-                                   xo, wo, tr, wr, state, contact, info, regime)
+                                   xo, wo, tr, wr, s_state, s_contact, s_info, regime)
             if not done:
                 solve_one(beta, fb, a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
                           max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
@@ -484,20 +488,32 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
                     regime[0] = REGIME_SMOOTH
                     regime[1] = -1.0
                     regime[2] = -info[0]
-                elif nonsmooth and not tried:
-                    s_state = np.empty(4)
-                    s_contact = np.empty((4, 5))
-                    s_info = np.empty(3)
-                    if stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win,
-                                   xo, wo, tr, wr, s_state, s_contact, s_info, regime):
-                        state[:] = s_state
-                        contact[:, :] = s_contact
-                        info[:] = s_info
-                    else:
-                        regime[1] = -1.0
-                else:
-                    regime[0] = REGIME_UNSOLVED
+                    done = True
+            if not done and nonsmooth and not tried:
+                tried = True
+                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win,
+                                   xo, wo, tr, wr, s_state, s_contact, s_info, regime)
+            if done and regime[0] == REGIME_STICK:
+                state[:] = s_state
+                contact[:, :] = s_contact
+                info[:] = s_info
+            elif not done and tried and np.isfinite(s_state[0]):
+                # Newton again from the best stick line's minimum, which is near the minimum
+                # when the smooth start is too far from it
+                solve_one(beta, fb, a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
+                          max_iter, cin, sin_, win, xo, wo, tr, wr, s_state, s_contact,
+                          s_info, 0, 0.0, 0.0, 1.0, True)
+                if s_info[2] > 0.5:
+                    state[:] = s_state
+                    contact[:, :] = s_contact
+                    info[:] = s_info
+                    regime[0] = REGIME_SMOOTH
                     regime[1] = -1.0
+                    regime[2] = -info[0]
+                    done = True
+            if not done:
+                regime[0] = REGIME_UNSOLVED
+                regime[1] = -1.0
         for k in range(4):
             out_state[n, k] = state[k]
             for m in range(5):
