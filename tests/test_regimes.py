@@ -17,6 +17,7 @@ from tolsim.physics.velocity.regimes import (
     dissipated_power,
     minimise_dissipation,
     stick_criterion,
+    two_point_loaded,
 )
 
 THETA = np.deg2rad(2.0)
@@ -193,3 +194,16 @@ def test_mirror_symmetry_and_case_b_in_regime_b():
     assert_allclose(res_b.velocity_deviation, 0.0, atol=1e-12)
     light = np.array([force[0, 1] + force[0, 3], force[1, 0] + force[1, 2]])
     assert_allclose(res_b.drag_force, TABLE1.friction_coefficient * light / 2, rtol=1e-4)
+
+
+def test_two_point_ball_pushed_and_braked():
+    # Issue 25: pushed by 5 N, eps = 0 and the carriage force is -2.5 N; gross sliding sets in
+    # at |P| + mu_bb S = 2 mu F (F = 180 N, mu = mu_bb = 0.1: 36 N). Closed form (exact).
+    res = two_point_loaded(180.0, push=[5.0, -5.0, 0.0, 20.0, 20.0, -36.1],
+                           neighbour_force_sum=[0.0, 0.0, 30.0, 159.0, 161.0, 0.0])
+    assert_array_equal(res.sliding, [False, False, False, False, True, True])
+    assert_array_equal(res.velocity_deviation[:4], 0.0)
+    assert_allclose(res.carriage_force[:4], [-2.5, 2.5, 1.5, (15.9 - 20.0) / 2], rtol=1e-14)
+    assert res.velocity_deviation[4] == np.inf and res.velocity_deviation[5] == -np.inf
+    # the unloaded two-point ball of full() is the P = S = 0 case
+    assert two_point_loaded(180.0).carriage_force == 0.0

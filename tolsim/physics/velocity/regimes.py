@@ -111,6 +111,78 @@ def stick_criterion(normal_force, bearing: Bearing = TABLE1):
         return np.where(heavy > 0, bearing.ball_radius * light / heavy, np.inf)
 
 
+@dataclass(frozen=True)
+class TwoPointLoaded:
+    """Result of :func:`two_point_loaded` (arrays broadcast over the balls).
+
+    Attributes
+    ----------
+    velocity_deviation : ndarray
+        epsilon [-]: 0 while rolling, +-inf (the sign of P) when the push makes it slide,
+        NaN when the braking alone does (its speed is then not set by rolling).
+    carriage_force : ndarray
+        F_c = (mu_bb S - P) / 2 [N] while rolling (positive opposes the carriage motion).
+    sliding : ndarray of bool
+        |P| + mu_bb S > 2 mu F: gross sliding.
+    """
+
+    velocity_deviation: np.ndarray
+    carriage_force: np.ndarray
+    sliding: np.ndarray
+
+
+def two_point_loaded(normal_force, push=0.0, neighbour_force_sum=0.0, bearing: Bearing = TABLE1,
+                     *, ball_friction=0.1):
+    """An exactly two-point ball under a push P and ball-ball braking S (closed form).
+
+    Not yet wired into :func:`tolsim.physics.velocity.full.full` (whose loaded path still
+    needs three loaded contacts).
+
+    Parameters
+    ----------
+    normal_force : array_like
+        F [N], the force of each of the two opposite contacts (equal by statics).
+    push : array_like
+        P [N] along +z.
+    neighbour_force_sum : array_like
+        S = Q_back + Q_front [N] (>= 0).
+    bearing : Bearing
+        Sets mu of the raceways.
+    ball_friction : float
+        mu_bb [-].
+
+    Returns
+    -------
+    TwoPointLoaded
+
+    Notes
+    -----
+    Both contacts stick (the rolling state at v/2 with D = 0 of :func:`stick_criterion`'s
+    Notes), so the loads only change the reactions. With f_b, f_t the friction forces on
+    the ball along z at the bottom and top contact and x_b = -x_t the rolling axis, the force
+    row is f_b + f_t + P = 0 and the moment about the rolling axis -R (f_b - f_t) -
+    mu_bb S R = 0 (the braking opposes the rotation). So
+
+        f_b = -(P + mu_bb S) / 2,   f_t = (mu_bb S - P) / 2 = F_c,
+
+    with no spin moment. A stuck contact carries (f, 0) iff |f| <= mu F (D_k(u, w) >=
+    mu F |u| by Jensen, since the pressure has its centroid at the centre), so the ball keeps
+    epsilon = 0 while |P| + mu_bb S <= 2 mu F (issue 25) and slides beyond.
+    """
+    force = np.asarray(normal_force, dtype=float)
+    p = np.asarray(push, dtype=float)
+    s = np.asarray(neighbour_force_sum, dtype=float)
+    if np.any(s < 0) or np.any(force < 0):
+        raise ValueError("normal_force and neighbour_force_sum must be >= 0")
+    mu = bearing.friction_coefficient
+    braking = ball_friction * s
+    sliding = np.abs(p) + braking > 2.0 * mu * force
+    pushed = sliding & (np.abs(p) > 0)
+    eps = np.where(sliding, np.where(pushed, np.copysign(np.inf, p), np.nan), 0.0)
+    carriage = np.where(sliding, np.nan, 0.5 * (braking - p))
+    return TwoPointLoaded(velocity_deviation=eps, carriage_force=carriage, sliding=sliding)
+
+
 def _contact_points(contact_angle_deviation, normal_force, bearing, nodes):
     """Quadrature points r [R_B], weights [N] and normals p of the four planar ellipses."""
     beta = bearing.nominal_contact_angle + np.asarray(contact_angle_deviation, dtype=float)
