@@ -1,4 +1,4 @@
-"""The comprehensive friction model ("full model") of one ball in four-point contact.
+"""The comprehensive friction model ("full model") of one ball with four, three or two contacts.
 
 One ball between a fixed bottom groove and a top groove moving at v along the rail (z), with
 given contact angles beta_i and normal forces F_i ([Lin2018] Sec. 2, Fig. 2). Unknowns: the
