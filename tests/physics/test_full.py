@@ -382,14 +382,19 @@ def test_grid_convergence():
 def test_batch_shapes_and_flags():
     dbeta = np.zeros((2, 3, 4))
     force = np.full((2, 3, 4), 100.0)
-    force[1, 2, 1] = 0.0  # lost contact: solved on three contacts, flagged invalid
+    force[1, 2, 1] = 0.0  # lost contact: solved on three contacts (issue 25: valid)
     res = full(dbeta, force)
     assert res.velocity_deviation.shape == (2, 3)
     assert res.angular_velocity.shape == (2, 3, 3)
     assert res.contact_offset_ratio.shape == (2, 3, 4)
     assert res.iterations.dtype.kind == "i"
-    assert res.valid[0].all() and not res.valid[1, 2]
-    assert_allclose(res.valid, res.converged & np.all(force > 0, axis=-1))
+    assert res.regime.shape == res.stuck_contact.shape == res.certificate.shape == (2, 3)
+    assert res.valid.all()
+    assert_allclose(res.valid, res.converged)
+    # the smooth Newton alone (before issue 25) flags the three-point ball invalid
+    old = full(dbeta, force, nonsmooth=False)
+    assert old.valid[0].all() and not old.valid[1, 2]
+    assert_allclose(old.valid, old.converged & np.all(force > 0, axis=-1))
 
 
 def test_non_convergence_is_a_flag_not_an_exception():

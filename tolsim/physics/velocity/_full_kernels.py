@@ -327,7 +327,7 @@ def ball_loads_kernel(state, px, py, vgroove, force, semi_major, semi_minor, sig
 
 
 @jit(inline="always")
-def _solve_small(jac, rhs, n, out):
+def solve_small(jac, rhs, n, out):
     """Gaussian elimination with partial pivoting of an n x n system (n <= 4); False if
     singular."""
     a = jac.copy()
@@ -394,7 +394,7 @@ def _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_ma
 
 
 @jit
-def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff, free_spin,
+def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff, free_spin,
                tol, max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
                first=0, push=0.0, braking=0.0, groove_speed=1.0, given_start=False):
     """Damped Newton solve of the equilibrium of one ball (R = 1, v = 1, mu = 1).
@@ -432,7 +432,7 @@ def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hof
                         ata[r, c] += row[r] * row[c]
         x0 = np.zeros(3)
         state[:] = 0.0
-        if _solve_small(ata, atb, 3, x0):
+        if solve_small(ata, atb, 3, x0):
             state[0] = x0[0]
             state[1] = x0[1]
             state[2] = x0[2]
@@ -482,7 +482,7 @@ def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hof
         if first > 0:
             trial[0] = state[0]
         # 1) Newton step with backtracking on the sum of squares
-        if _solve_small(jac, neg, nunk, step):
+        if solve_small(jac, neg, nunk, step):
             t = 1.0
             for _ls in range(8):
                 for c in range(nunk):
@@ -525,7 +525,7 @@ def _solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hof
                     for d in range(nunk):
                         damped[c, d] = jtj[c, d]
                     damped[c, c] += lam * (jtj[c, c] + 1e-12 * big)
-                if _solve_small(damped, jtr, nunk, step):
+                if solve_small(damped, jtr, nunk, step):
                     for c in range(nunk):
                         trial[first + c] = state[first + c] + step[c]
                     if first + nunk < 4:
@@ -597,7 +597,7 @@ def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_
             out_info[n, 1] = 0.0
             out_info[n, 2] = 0.0
             continue
-        _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
+        solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
                    max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
         for k in range(4):
             out_state[n, k] = state[k]
@@ -649,7 +649,7 @@ def _load_sensitivities(beta, force, semi_major, semi_minor, sigma_scale, curved
     sol = np.zeros(4)
     unit[0] = 1.0 / total
     deps_dpush = np.nan
-    if _solve_small(jac, unit, nunk, sol):
+    if solve_small(jac, unit, nunk, sol):
         deps_dpush = -2.0 * sol[0]
     deps_dbraking = np.nan
     spin_perp = np.hypot(state[1], state[2])
@@ -657,7 +657,7 @@ def _load_sensitivities(beta, force, semi_major, semi_minor, sigma_scale, curved
         unit[0] = 0.0
         unit[1] = -state[1] / spin_perp / total
         unit[2] = -state[2] / spin_perp / total
-        if _solve_small(jac, unit, nunk, sol):
+        if solve_small(jac, unit, nunk, sol):
             deps_dbraking = -2.0 * sol[0]
     return deps_dpush, deps_dbraking
 
@@ -747,7 +747,7 @@ def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_co
             state[1] = wx0
             state[2] = wy0
             state[3] = 0.0
-            _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
+            solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
                        max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
                        1, 0.0, brake, 0.0, True)
             capacity = brake * np.hypot(state[1], state[2])
@@ -770,7 +770,7 @@ def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_co
         out_load[n, 5] = 0.0
         # 2) the loaded equilibrium
         state[:] = 0.0
-        _solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
+        solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
                    max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
                    0, load_p, brake, 1.0, False)
         for k in range(4):

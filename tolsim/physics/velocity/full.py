@@ -1,4 +1,4 @@
-"""The comprehensive friction model ("full model") of one ball in four-point contact.
+"""The comprehensive friction model ("full model") of one ball with four, three or two contacts.
 
 One ball between a fixed bottom groove and a top groove moving at v along the rail (z), with
 given contact angles beta_i and normal forces F_i ([Lin2018] Sec. 2, Fig. 2). Unknowns: the
@@ -32,6 +32,7 @@ from tolsim.physics.velocity._full_kernels import (
     full_kernel,
     full_loaded_kernel,
 )
+from tolsim.physics.velocity._regime_kernels import REGIME_SMOOTH, REGIME_UNSOLVED, regime_kernel
 from tolsim.physics.velocity.analytic import VelocityResult, as_ball_arrays
 from tolsim.physics.velocity.ball_loads import DEFAULT_BALL_FRICTION, BallLoadFields, as_ball_loads
 
@@ -117,7 +118,17 @@ class FullResult(VelocityResult):
     converged : ndarray of bool, shape (n,)
         residual <= tol.
     iterations : ndarray of int, shape (n,)
-        Newton iterations.
+        Newton iterations (line-search evaluations in regime B).
+    regime : ndarray of int, shape (n,)
+        0 unsolved, 1 smooth minimum (every loaded contact slips: regime A), 2 one contact
+        sticks (regime B), 3 exactly two-point rolling at v/2
+        (:mod:`tolsim.physics.velocity.regimes`).
+    stuck_contact : ndarray of int, shape (n,)
+        Index (BL, BR, TR, TL) of the stuck contact in regime B, 4 (BL and TR) or 5 (BR and
+        TL) when both contacts of an opposite pair with equal angles stick, else -1.
+    certificate : ndarray, shape (n,)
+        Least directional slope of D over the checked unit directions, over sum F [-]:
+        ``-residual`` in regime A, the stuck contact's margin in regime B, 0 when two-point.
     """
 
     ball_velocity: np.ndarray
@@ -128,6 +139,9 @@ class FullResult(VelocityResult):
     residual: np.ndarray
     converged: np.ndarray
     iterations: np.ndarray
+    regime: np.ndarray
+    stuck_contact: np.ndarray
+    certificate: np.ndarray
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -299,7 +313,7 @@ def deformed_surface_radius(bearing: Bearing = TABLE1):
 def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
          groove_velocity=0.01, surface="planar", free_spin=False, grid=None,
          tol=DEFAULT_TOLERANCE, max_iter=DEFAULT_MAX_ITER, push=None, neighbour_force=None,
-         ball_friction=DEFAULT_BALL_FRICTION) -> FullResult:
+         ball_friction=DEFAULT_BALL_FRICTION, nonsmooth=True) -> FullResult:
     """Velocity and friction of balls from the comprehensive friction model.
 
     Solves the quasi-static equilibrium of each ball (z force, x and y moments, and the z
@@ -318,7 +332,8 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     contact_angle_deviation : array_like, shape (..., 4)
         dbeta_i [rad], BL, BR, TR, TL.
     normal_force : array_like, shape (..., 4)
-        F_i [N] (>= 0; a zero force removes the contact and makes the result invalid).
+        F_i [N] (>= 0; a zero force opens the contact, which is dropped: three- and two-point
+        balls are solved, an unloaded or one-point ball is not).
     bearing : Bearing
         Geometry, material and friction coefficient.
     groove_velocity : float
@@ -341,11 +356,18 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
         (Q_back, Q_front) >= 0 [N]; sets P and the ball-ball braking. Not with ``push``.
     ball_friction : float
         mu_bb [-] of the ball-ball contacts.
+    nonsmooth : bool
+        Solve every regime (default; :func:`tolsim.physics.velocity.regimes.stick_criterion`):
+        open contacts, a sticking contact (regime B) and exactly two-point balls. False: the
+        smooth Newton alone, on balls with four loaded contacts as before issue 25 (the
+        baseline of the regime tests). Balls under ``push`` or ``neighbour_force`` are always
+        solved by the smooth Newton (the loaded regimes are not built yet).
 
     Returns
     -------
     FullResult or LoadedFullResult
-        ``valid`` is ``converged`` and all four forces positive (and, with loads, the free
+        ``valid`` is ``converged`` (the certificate of a minimum of D, see ``regime``; with
+        ``nonsmooth=False`` or loads, also all four forces positive; with loads, the free
         solve converged and the ball not sliding). Non-convergence never raises. Without
         ``push`` and ``neighbour_force``: :class:`FullResult`, exactly as before; with either:
         :class:`LoadedFullResult`, whose epsilon is the unloaded one bit for bit when the loads
@@ -407,10 +429,13 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     also accepted when it decreases D (Armijo). Non-convergence is a flag (``converged``), never
     an exception.
 
-    Known limit: near two-point contact (e.g. |rho| > 0.94 at theta = 3 deg with paired
-    forces) the heavily loaded pair tends to *stick* (zero spin and zero slip at the centre):
-    the minimum of D sits on a kink where the friction is set-valued, the smooth residual cannot
-    vanish, and the ball is returned with ``converged = False`` (residual ~1e-2).
+    Near two-point contact (|rho| above about 0.87-0.90 with paired forces, issue 25; the
+    switch is set by the criterion chi of :func:`tolsim.physics.velocity.regimes.stick_criterion`)
+    one contact of the heavily loaded pair *sticks* (zero spin and zero slip at its centre):
+    the minimum of D sits on a kink where the friction is set-valued, and the smooth residual
+    cannot vanish. With ``nonsmooth`` (default) such balls are solved on the stick line and
+    certified (regime B, :func:`tolsim.physics.velocity.regimes.stick_criterion`); without it
+    they are returned with ``converged = False`` (residual ~1e-2).
     """
     if surface not in SURFACES:
         raise ValueError(f"surface = {surface!r}; choose one of {SURFACES}")
@@ -443,11 +468,19 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     info = np.empty((n, 3))
     options = (surface == "curved", deformed_surface_radius(bearing) / radius, bool(free_spin),
                float(tol), int(max_iter))
+    regime = None
     with np.errstate(divide="ignore", invalid="ignore"):
-        full_kernel(dbeta, force, bearing.nominal_contact_angle,
-                    hc.semi_major_coefficient / radius, hc.semi_minor_coefficient / radius,
-                    *options, *grid_arrays, state, contact, info)
-    free = _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocity)
+        if nonsmooth and not loaded:
+            regime = np.empty((n, 3))
+            regime_kernel(dbeta, force, bearing.nominal_contact_angle,
+                          hc.semi_major_coefficient / radius, hc.semi_minor_coefficient / radius,
+                          hc.elliptic_e, *options, *grid_arrays, state, contact, info, regime)
+        else:
+            full_kernel(dbeta, force, bearing.nominal_contact_angle,
+                        hc.semi_major_coefficient / radius, hc.semi_minor_coefficient / radius,
+                        *options, *grid_arrays, state, contact, info)
+    free = _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocity,
+                        regime)
     if not loaded:
         return FullResult(**free)
     mu = bearing.friction_coefficient
@@ -465,8 +498,12 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
                                groove_velocity, load_p, load_q, float(ball_friction), free)
 
 
-def _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocity):
-    """The fields of :class:`FullResult` from the kernel's internal-unit outputs."""
+def _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocity, regime=None):
+    """The fields of :class:`FullResult` from the kernel's internal-unit outputs.
+
+    ``regime`` (n, 3) from :func:`regime_kernel`; None for the smooth Newton alone (every
+    converged ball is then regime A, and ``valid`` also needs four loaded contacts).
+    """
     radius = bearing.ball_radius
     v = float(groove_velocity)
     mu = bearing.friction_coefficient
@@ -480,7 +517,16 @@ def _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocit
     with np.errstate(divide="ignore", invalid="ignore"):
         spin_to_roll = np.abs(om) / np.hypot(roll, state[:, 3:4])
     drag = mu * (contact[:, 2, 2] + contact[:, 3, 2])
-    valid = converged & np.all(force > 0, axis=1)
+    if regime is None:
+        valid = converged & np.all(force > 0, axis=1)
+        code = np.where(converged, REGIME_SMOOTH, REGIME_UNSOLVED)
+        stuck = np.full(len(state), -1)
+        certificate = -info[:, 0]
+    else:
+        valid = converged
+        code = regime[:, 0].astype(np.int64)
+        stuck = regime[:, 1].astype(np.int64)
+        certificate = regime[:, 2]
     eps = 2.0 * state[:, 0] - 1.0
 
     def shaped(arr, *tail):
@@ -499,6 +545,9 @@ def _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocit
         residual=shaped(info[:, 0]),
         converged=shaped(converged),
         iterations=shaped(info[:, 1].astype(np.int64)),
+        regime=shaped(code),
+        stuck_contact=shaped(stuck),
+        certificate=shaped(certificate),
     )
 
 

@@ -39,7 +39,8 @@ VALIDITY_NOTES = {
                  "with the full model"),
     "point": "point model undetermined: no sliding contact keeps the others inside their "
              "friction cones, or two candidates tie (equal diagonal forces)",
-    "full": "full friction model did not converge (or a contact carries no force)",
+    "full": "full friction model found no certified minimum of the dissipated power (fewer "
+            "than two loaded contacts, two that are not opposite, or the solver failed)",
 }
 
 
