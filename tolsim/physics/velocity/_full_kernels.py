@@ -13,7 +13,7 @@ from tolsim.physics.velocity.ball_loads import (
 )
 
 #: |pole|/a beyond which a contact is treated as pure sliding (uniform slip direction).
-_SLIDING_POLE = 1e7
+SLIDING_POLE = 1e7
 #: Relative step of the central-difference Jacobian (unknowns scaled by v and v/R).
 _FD_STEP = 1e-6
 
@@ -119,7 +119,7 @@ def contact_friction_kernel(offset_ratio, lateral_ratio, semi_major, semi_minor,
         s3 = np.empty(4)
         pt = offset_ratio[k]
         ps = lateral_ratio[k]
-        if np.hypot(pt, ps) > _SLIDING_POLE:
+        if np.hypot(pt, ps) > SLIDING_POLE:
             # pure sliding: slip along (-d, c) direction of the centre, friction opposes it
             # (Eq. 15)
             a = semi_major[k]
@@ -210,7 +210,7 @@ def ball_loads_kernel(state, px, py, vgroove, force, semi_major, semi_minor, sig
             continue
         if not curved:
             # pole (c, d) of the rotation field; pure sliding if it is (nearly) at infinity
-            if abs(om) * _SLIDING_POLE * a > np.hypot(u0, wz):
+            if abs(om) * SLIDING_POLE * a > np.hypot(u0, wz):
                 pt = u0 / om / a
                 ps = -wz / om / b
                 planar_contact_integrals(pt, ps, a, b, cin, sin_, win, xo, wo, s3)

@@ -10,7 +10,7 @@ from numba import prange
 
 from tolsim._jit import jit, pjit
 from tolsim.physics.velocity._full_kernels import (
-    _SLIDING_POLE,
+    SLIDING_POLE,
     ball_loads_kernel,
     planar_contact_integrals,
     solve_one,
@@ -43,7 +43,7 @@ def stuck_contact_power(u, w, force, a, b, sigma_scale, cin, sin_, win, xo, wo, 
     Positively homogeneous of degree one in (u, w): the support function of the set of
     friction (force, spin moment) pairs the stuck contact can carry.
     """
-    if abs(w) * _SLIDING_POLE * a > abs(u):
+    if abs(w) * SLIDING_POLE * a > abs(u):
         planar_contact_integrals(u / w / a, 0.0, a, b, cin, sin_, win, xo, wo, s3)
         return sigma_scale * force * abs(w) * s3[3]
     return force * abs(u)
