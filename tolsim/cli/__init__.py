@@ -110,6 +110,8 @@ def config_warnings(command):
         previous(message, category, filename, lineno, file, line)
 
     with warnings.catch_warnings():  # (which also resets the once-per-place registries)
+        # shown, whatever the filters say (a config's warnings are part of the answer)
+        warnings.filterwarnings("default", category=UserWarning, module=r"tolsim\.io\.config")
         warnings.showwarning = show
         yield
 
