@@ -11,7 +11,10 @@ The sections and their keys are documented in ``tolsim/data/default.toml`` (the 
 default study) and in ``configs/*.toml``. They are read by :mod:`~tolsim.io.config.sections`,
 ``[sweep]`` by :mod:`~tolsim.io.config.sweep` and ``[allocate]`` by
 :mod:`~tolsim.io.config.allocation`, all on :mod:`~tolsim.io.config.reader` (the units, the
-errors and the TOML line scanner); this module puts them together.
+errors and the TOML line scanner); this module puts them together. Every physical key is
+checked against its possible range (an error) and its usual one (a
+:class:`~tolsim.io.config.reader.ConfigWarning`), kept with their sources in
+:mod:`~tolsim.io.config.plausibility`.
 """
 
 import re
@@ -21,7 +24,7 @@ from importlib import resources
 from pathlib import Path
 
 from tolsim.io.config.allocation import parse_allocation
-from tolsim.io.config.reader import UNITS, ConfigError, Source, Table
+from tolsim.io.config.reader import UNITS, ConfigError, ConfigWarning, Source, Table
 from tolsim.io.config.sections import (
     ESTIMATOR_KEYS,
     FRACTION_KEYS,
@@ -41,8 +44,9 @@ from tolsim.io.config.sweep import parse_sweep
 from tolsim.study.analyses.limit_state import check_supported
 from tolsim.study.spec import Distribution, StudyConfig, Train
 
-__all__ = ["ESTIMATOR_KEYS", "FRACTION_KEYS", "MIN_EMPIRICAL_VALUES", "UNITS", "ConfigError",
-           "StudyConfig", "default_config_text", "load_config", "parse_config"]
+__all__ = ["ESTIMATOR_KEYS", "FRACTION_KEYS", "MIN_EMPIRICAL_VALUES", "NO_STUDY", "UNITS",
+           "ConfigError", "ConfigWarning", "StudyConfig", "default_config_text", "load_config",
+           "parse_config"]
 
 
 def parse_config(text: str, path: str = "<string>", *, study: bool = True) -> StudyConfig:

@@ -9,10 +9,11 @@ the line, the key, the value and the interval in the unit the user wrote, e.g.::
     study.toml:3: bearing.ball_diameter_m = 10 is outside the possible range 0.0003 to
     0.105 m (ISO 3290-1 ball sizes ...)
 
-Ranges given per ball diameter (gaps, pitch) are scaled by the config's ball. The spreads of
-the tolerance sources are checked against the static model's range by
-:func:`tolsim.io.config.sections.check_tolerance_range`; the loads against the Hertz
-pressure limit by :func:`check_hertz_pressure` and :func:`check_carriage_load`.
+Ranges given per ball diameter (gaps, pitch) are scaled by the config's ball. The section
+readers (:mod:`tolsim.io.config.sections`) call :func:`check_quantity` on every physical key
+as they read it, and check the spreads of the tolerance sources against the static model's
+range themselves; the loads are checked against the Hertz pressure limit by
+:func:`check_hertz_pressure` (``[loads]``) and :func:`check_carriage_load` (``[carriage]``).
 """
 
 import math
@@ -58,18 +59,21 @@ class Range:
 
     def scaled(self, factor: float) -> "Range":
         """The range in SI for a reference value ``factor`` (a ball diameter, 1 / speed)."""
+
         def f(x):
             return None if x is None else x * factor
         return Range(f(self.low), f(self.high), f(self.usual_low), f(self.usual_high),
                      self.source, self.open_low, self.open_high)
 
     def possible(self, value: float) -> bool:
+        """``value`` (SI) lies in the possible interval."""
         lo_ok = self.low is None or (value > self.low if self.open_low else value >= self.low)
         hi_ok = self.high is None or (value < self.high if self.open_high
                                       else value <= self.high)
         return lo_ok and hi_ok
 
     def usual(self, value: float) -> bool:
+        """``value`` (SI) lies in the usual interval."""
         return ((self.usual_low is None or value >= self.usual_low)
                 and (self.usual_high is None or value <= self.usual_high))
 
