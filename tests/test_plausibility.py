@@ -226,7 +226,7 @@ def test_gap_in_mm_for_um_is_an_error_naming_the_ball():
     # issue 26: low_mm = 0, high_mm = 100 (meant um) changed P(contact) silently
     msg = error(MINIMAL.replace('{ distribution = "fixed", value_mm = 0.5 }',
                                 '{ distribution = "uniform", low_mm = 0.0, high_mm = 100.0 }'))
-    assert msg.startswith("x.toml:11: train.initial_gap.high_mm = 100 mm is outside the "
+    assert msg.startswith("x.toml:11: train.initial_gap.high_mm = 100.0 mm is outside the "
                           "possible range [0, 10] mm (no wider than one ball")
 
 

@@ -106,7 +106,7 @@ def test_bad_sweeps_are_one_line_errors_naming_the_key(sweep, words):
 def test_a_bad_point_names_the_key_its_line_and_the_point():
     message = error(known('"loads.normal_load_N" = [200, -5]'))
     line = KNOWN.splitlines().index("normal_load_N = 200.0") + 1
-    assert message.startswith(f"s.toml:{line}: loads.normal_load_N = -5 must be > 0")
+    assert message.startswith(f"s.toml:{line}: loads.normal_load_N = -5.0 must be > 0")
     assert message.endswith("(sweep point 2 of 2: loads.normal_load_N = -5)")
 
 

@@ -175,11 +175,11 @@ def _message(table, key, kind, value_si, rng: Range, possible: bool) -> str:
     whole = (isinstance(raw, int | float) and not isinstance(raw, bool)
              and math.isclose(raw * factor, value_si, rel_tol=1e-9, abs_tol=0.0))
     if whole:  # the key is the value
-        head = f"= {show(raw)}{unit_text} is"
+        head = f"= {raw!r}{unit_text} is"
     elif isinstance(raw, list):  # one of a list (per ball)
         head = f"has {show(value_si / factor)}{unit_text},"
     else:  # the key sets the value in part (a spread, the end of a band)
-        head = f"= {show(raw)}: the values reach {show(value_si / factor)}{unit_text},"
+        head = f"= {raw!r}: the values reach {show(value_si / factor)}{unit_text},"
     if possible:
         low, high = rng.low, rng.high
         opening, closing = "(" if rng.open_low else "[", ")" if rng.open_high else "]"
@@ -281,8 +281,7 @@ def check_hertz_pressure(table: Table, normal_load, side_load, bearing: Bearing,
     key = max(parts, key=lambda k: abs(np.atleast_1d(parts[k])[ball]) if np.ndim(parts[k])
               else abs(parts[k]))
     raw = table.data[key]
-    shown = "[" + ", ".join(map(show, raw)) + "]" if isinstance(raw, list) else show(raw)
-    raise table.error(key, f"= {shown}: ball {ball} (ball 0 trailing) is pressed with "
+    raise table.error(key, f"= {raw!r}: ball {ball} (ball 0 trailing) is pressed with "
                            f"{show(float(forces[ball, contact]))} N at {CONTACTS[contact]}, a "
                            f"Hertz pressure of {p / 1e6:.0f} MPa above the "
                            f"{MAX_HERTZ_PRESSURE / 1e6:.0f} MPa of ISO 76 / ISO 14728-2 (the "
@@ -319,7 +318,7 @@ def check_carriage_load(table: Table, load, layout, bearing: Bearing):
                                "vertical": "vertical_force"}.get(name, name))
         if abs(value) > capacity[kind]:
             unit, factor = table.unit_of(key, kind)
-            raise table.error(key, f"= {show(table.data[key])} is beyond the "
+            raise table.error(key, f"= {table.data[key]!r} is beyond the "
                                    f"{show(capacity[kind] / factor)} {unit} that the "
                                    f"{arm.size} balls can carry at the "
                                    f"{MAX_HERTZ_PRESSURE / 1e6:.0f} MPa of ISO 76 / ISO "

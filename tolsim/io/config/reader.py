@@ -147,10 +147,10 @@ class Table:
         out = []
         for v in values:
             v = self._number(key, v)
-            if positive and not v > 0:
-                raise self.error(key, f"= {show(v)} must be > 0")
+            if positive and not v > 0:  # v as written (a TOML number has no float noise)
+                raise self.error(key, f"= {v!r} must be > 0")
             if minimum is not None and v < minimum:
-                raise self.error(key, f"= {show(v)} must be >= {show(minimum)}")
+                raise self.error(key, f"= {v!r} must be >= {minimum}")
             out.append(float(v) * factor)
         return tuple(out) if (allow_list and isinstance(raw, list)) else out[0]
 

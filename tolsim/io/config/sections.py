@@ -75,7 +75,7 @@ def _distribution(table: Table, kind: str) -> Distribution:
         mean = q("mean", default=0.5 * (low + high))
         if not low < mean < high:
             mean_key = table.key_for("mean", kind)
-            raise table.error(mean_key, f"= {show(table.data[mean_key])} must lie inside the "
+            raise table.error(mean_key, f"= {table.data[mean_key]!r} must lie inside the "
                                         f"band ({table.key_for('low', kind)} to "
                                         f"{table.key_for('high', kind)})")
         cpk = table.quantity("cpk", "dimensionless", positive=True)
@@ -93,8 +93,8 @@ def _check_order(table: Table, kind: str):
     high = table.quantity("high", kind)
     low = table.quantity("low", kind)
     if not high > low:
-        raise table.error(high_key, f"= {show(table.data[high_key])} must be greater than "
-                                    f"{low_key} = {show(table.data[low_key])}")
+        raise table.error(high_key, f"= {table.data[high_key]!r} must be greater than "
+                                    f"{low_key} = {table.data[low_key]!r}")
 
 
 def _empirical(table: Table, kind: str) -> Distribution:
@@ -254,7 +254,7 @@ def read_train(t: Table, bearing: Bearing) -> Train:
     def gap_error(name, value):
         key = gap_table.key_for(name, "length")
         unit, factor = gap_table.unit_of(key, "length")
-        shown = show(gap_table.data[key])
+        shown = repr(gap_table.data[key])
         if name == "column":
             shown = f"{gap_table.data[key]!r} holds {show(value / factor)} {unit}"
         return gap_table.error(key, f"= {shown}: gaps must be >= 0 (balls cannot overlap)")
@@ -274,7 +274,7 @@ def read_train(t: Table, bearing: Bearing) -> Train:
     length_key = t.key_for("loaded_zone_length", "length")
     if length_key in t.data and length < balls * diameter * (1.0 - 1e-12):
         unit, factor = t.unit_of(length_key, "length")
-        raise t.error(length_key, f"= {show(t.data[length_key])} is shorter than the "
+        raise t.error(length_key, f"= {t.data[length_key]!r} is shorter than the "
                                   f"{balls} balls in it ({show(balls * diameter / factor)} "
                                   f"{unit}): they would overlap")
     t.finish()
@@ -327,10 +327,10 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     pitch = t.quantity("ball_pitch", "length")
     pitch_key = t.key_for("ball_pitch", "length")
     if pitch < 0:
-        raise t.error(pitch_key, f"= {show(t.data[pitch_key])} must be >= 0")
+        raise t.error(pitch_key, f"= {t.data[pitch_key]!r} must be >= 0")
     diameter = 2.0 * bearing.ball_radius
     if n > 1 and pitch < diameter * (1.0 - 1e-12):
-        raise t.error(pitch_key, f"= {show(t.data[pitch_key])} is less than the ball diameter "
+        raise t.error(pitch_key, f"= {t.data[pitch_key]!r} is less than the ball diameter "
                                  f"({diameter * 1e3:g} mm): neighbouring balls would overlap")
     if n > 1:
         check_quantity(t, "ball_pitch", "length", pitch, "carriage.ball_pitch", diameter)
@@ -339,7 +339,7 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     if abs(preload) > limit:
         key = t.key_for("preload_oversize", "length")
         unit, factor = t.unit_of(key, "length")
-        raise t.error(key, f"= {show(t.data[key])} {unit} is outside the possible range "
+        raise t.error(key, f"= {t.data[key]!r} {unit} is outside the possible range "
                            f"[{show(-limit / factor)}, {show(limit / factor)}] {unit} (a "
                            "quarter of the ball-groove centre distance, the static model's "
                            "range): is the unit right?")
@@ -352,7 +352,7 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     length_key = t.key_for("end_relief_length", "length")
     if relief_depth > limit:
         unit, factor = t.unit_of(depth_key, "length")
-        raise t.error(depth_key, f"= {show(t.data[depth_key])} {unit} is outside the possible "
+        raise t.error(depth_key, f"= {t.data[depth_key]!r} {unit} is outside the possible "
                                  f"range [0, {show(limit / factor)}] {unit} (a quarter of the "
                                  "ball-groove centre distance): is the unit right?")
     if relief_depth > 0 and not relief_length > 0:
