@@ -71,7 +71,7 @@ def test_point_model_reports_sliding_contact(capsys):
         (["--forces-n", "nan", "100", "100", "100"], "--forces-n"),
         (["--forces-n", "inf", "100", "100", "100"], "--forces-n"),
         (["--model", "full", "--forces-n", "1e300", "1", "1", "1"], "R_B / 2"),
-        (["--model", "full", "--dbeta-deg", "50", "0", "0", "0"], "--model full"),
+        (["--model", "full", "--dbeta-deg", "50", "0", "0", "0"], "--dbeta-deg 50 is outside"),
     ],
 )
 def test_bad_arguments_one_line_exit_2(args, needle):

@@ -4,14 +4,23 @@ import base64
 import itertools
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import matplotlib
 import numpy as np
 import pytest
+import xarray as xr
 
 from tolsim.reports import paper, style
 from tolsim.reports import study as study_report
+from tolsim.reports.verdict import (
+    cpk_check,
+    judge_lower_limit,
+    judge_upper_limit,
+    out_of_spec_check,
+)
 from tolsim.study.statistics import quality
+from tolsim.study.statistics.intervals import format_fraction
 
 
 def _renderer(fig):
@@ -411,3 +420,36 @@ def test_model_check_heading_names_the_velocity_model(rng, tmp_path, model):
     assert f"<h2>7. Model check: {model} versus the full friction model</h2>" in page
     others = {"eq24", "analytic", "full"} - {model}
     assert not any(f"Model check: {m} versus" in page for m in others)
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 26, item 3: one verdict rule (the displayed interval shows the verdict)
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("upper, status", [(1.32969, "fail"), (1.33032, "undecided")])
+def test_cpk_verdict_agrees_with_the_displayed_interval(upper, status):
+    # two reports showed "1.309 to 1.330" against Cpk >= 1.33: one FAIL, one UNDECIDED
+    cap = SimpleNamespace(cpk=1.3195, cpk_lower=1.30912, cpk_upper=upper, cpk_percentile=1.31)
+    check = cpk_check(xr.Dataset(), {"_capability": cap}, cpk_minimum=1.33)
+    assert check.status == status
+    shown = check.estimate.split("interval ")[1].split(")")[0]  # "1.3091 to 1.3297"
+    lo, hi = (float(x) for x in shown.split(" to "))
+    assert judge_lower_limit(lo, hi, 1.33) == status  # the display gives the verdict
+    assert hi != 1.33  # an end is never shown as the limit unless it is
+    assert f"({shown})" in check.reason
+    other = 1.33032 if upper == 1.32969 else 1.32969
+    cap2 = SimpleNamespace(cpk=1.3195, cpk_lower=1.30912, cpk_upper=other, cpk_percentile=1.31)
+    assert cpk_check(xr.Dataset(), {"_capability": cap2}, cpk_minimum=1.33).estimate \
+        != check.estimate
+
+
+@pytest.mark.parametrize("upper, status", [(0.0019996, "pass"), (0.0020004, "undecided")])
+def test_fraction_verdict_agrees_with_the_displayed_interval(upper, status):
+    ds = xr.Dataset({"velocity_deviation_limit": 0.005})
+    prop = SimpleNamespace(fraction=0.0015, lower=0.001, upper=upper,
+                           text=lambda d=3: format_fraction(0.0015, 0.001, upper, d))
+    check = out_of_spec_check(ds, {"_proportion": prop}, out_of_spec_limit=0.002)
+    assert check.status == status
+    shown = check.reason.split("(")[1].split(")")[0]  # "0.1 % to 0.19996 %"
+    lo, hi = (float(x.split()[0]) / 100 for x in shown.split(" to "))
+    assert judge_upper_limit(lo, hi, 0.002) == status
+    assert hi != 0.002

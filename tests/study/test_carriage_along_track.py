@@ -597,7 +597,7 @@ def test_advance_kernel_matches_its_twin():
      r"carriage\.end_relief_length_mm = 40\.0 is longer than half the loaded zone "
      r"\(30\.15 mm"),
     ("end_relief_depth_mm = 1.0\nend_relief_length_mm = 10.0", "",
-     r"carriage\.end_relief_depth_mm = 1\.0 is beyond 100 um"),
+     r"carriage\.end_relief_depth_mm = 1\.0 mm is outside the possible range \[0, 0\.1\] mm"),
     ("end_relief_depth_um = 1.0\nend_relief_length_mm = 10.0", "constant",
      r"carriage\.end_relief_depth_um acts on balls rolling through the carriage: it needs "
      r"study\.propagation = 'along_track'"),

@@ -200,6 +200,6 @@ def test_measured_gaps(tmp_path):
     assert c.train.initial_gap.expected == pytest.approx(32.5e-6, rel=1e-12)  # symmetric data
     assert list(c.data_files) == ["gaps.csv", "rail_rotation.csv"]
     gaps.write_text("gap\n-1\n" + "".join(f"{g}\n" for g in range(5, 65, 5)))
-    with pytest.raises(ConfigError, match=r"study.toml:9: train.initial_gap.column_um holds "
-                                          r"-1e-06 m: gaps must be >= 0"):
+    with pytest.raises(ConfigError, match=r"study.toml:9: train.initial_gap.column_um = 'gap' "
+                                          r"holds -1 um: gaps must be >= 0"):
         load_config(path)

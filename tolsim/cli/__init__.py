@@ -10,8 +10,10 @@ start in a fraction of a second.
 """
 
 import argparse
+import contextlib
 import importlib
 import sys
+import warnings
 
 #: subcommand -> module (imported lazily so ``tolsim ball`` never imports xarray/matplotlib)
 SUBCOMMANDS = {
@@ -87,6 +89,33 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefa
         return f"{text} (default: %(default)s)"
 
 
+@contextlib.contextmanager
+def config_warnings(command):
+    """Print each config warning issued inside as one line on stderr, once.
+
+    A :class:`tolsim.io.config.reader.ConfigWarning` (an unusual value in a config: a sweep
+    reads the config once per point) becomes ``<command>: warning: <message>``; other
+    warnings go to the previous handler.
+    """
+    shown, previous = set(), warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        reader = sys.modules.get("tolsim.io.config.reader")  # loaded if a config was read
+        if reader is not None and issubclass(category, reader.ConfigWarning):
+            text = " ".join(str(message).split())
+            if text not in shown:
+                shown.add(text)
+                print(f"{command}: warning: {text}", file=sys.stderr)
+            return
+        previous(message, category, filename, lineno, file, line)
+
+    with warnings.catch_warnings():  # (which also resets the once-per-place registries)
+        # shown, whatever the filters say (a config's warnings are part of the answer)
+        warnings.filterwarnings("default", category=UserWarning, module=r"tolsim\.io\.config")
+        warnings.showwarning = show
+        yield
+
+
 def build_parser(argv=()):
     """The top-level parser; only the subcommand named in ``argv`` is imported."""
     from tolsim import __version__  # noqa: PLC0415
@@ -126,7 +155,8 @@ def main(argv=None):
             parser.print_help()
             return 2
         module = importlib.import_module(SUBCOMMANDS[args.command])
-        return module.run(args)
+        with config_warnings(command):
+            return module.run(args)
     except UsageError as exc:
         msg = " ".join(str(exc).split())  # always one line
         print(f"{command}: error: {msg}", file=sys.stderr)

@@ -97,7 +97,7 @@ def add_parser(subparsers, formatter_class=None):
     p.add_argument("--dbeta-deg", nargs=4, type=float, metavar=CONTACTS, default=None,
                    help="contact-angle deviations dbeta_i [deg], BL BR TR TL (default: "
                         f"{' '.join(f'{d:g}' for d in DEFAULT_DBETA_DEG)}, unless geometric "
-                        "errors are given)")
+                        "errors are given); each within +/-22.5 deg")
     loads = p.add_mutually_exclusive_group()
     loads.add_argument("--forces-n", nargs=4, type=float, metavar=CONTACTS,
                        help="normal contact forces F_i [N], BL BR TR TL")
@@ -206,6 +206,12 @@ def _angles_and_forces(args, bearing):
                          dtype=float)
     if not np.all(np.isfinite(dbeta_deg)):
         raise UsageError("--dbeta-deg must be four finite angles in degrees")
+    limit = STATIC_ERROR_OPTIONS["bottom_rotation_deg"][2]
+    if np.any(np.abs(dbeta_deg) > limit):
+        worst = float(dbeta_deg[np.argmax(np.abs(dbeta_deg))])
+        raise UsageError(f"--dbeta-deg {worst:g} is outside the model's range: contact-angle "
+                         f"deviations must lie within +/-{limit:g} deg (pi/8, the range of "
+                         "the static model and of the tolerance sources)")
     if not given and args.static == "paired":
         forces, source = _forces(args, bearing)
         return dbeta_deg, forces, source, {"contact_angle_source": "given"}, []

@@ -14,7 +14,7 @@ Load distribution of one rigid carriage on its preloaded ball tracks (tolsim iss
 a study config with a [carriage] section: the nominal assembly (the config's preload class
 and per-ball oversize deviations; no sampled tolerances), or with --seed N one sampled
 assembly: the first assembly of `tolsim run CONFIG --seed N` (its groove errors per track
-and ball sizes drawn from the config's [tolerances]).
+and ball sizes drawn from the config's [tolerances]). The config needs no [study] section.
 
 Per ball (track t, ball j, ball 0 trailing, at z along the rail): the four contact forces
 F_BL F_BR F_TR F_TL and contact-angle deviations dbeta in the ball's module frame, the
@@ -187,7 +187,7 @@ def run(args) -> int:
     from tolsim.io.config import ConfigError, load_config  # noqa: PLC0415
 
     try:
-        config = load_config(args.config)
+        config = load_config(args.config, study=False)  # a load distribution needs no study
     except ConfigError as exc:
         raise UsageError(str(exc)) from None
     if not config.has_carriage:

@@ -34,6 +34,12 @@ statement below holds with at least 97.5 % confidence):
 The overall verdict is *fail* if any check fails, else *undecided* if any is undecided, else
 *pass* if any passes, else "no spec limit given".
 
+**One verdict rule**: the verdict is decided on the 95 % intervals as computed, and every
+interval end is displayed with as many digits as it takes for the displayed numbers to give
+the same verdict (:func:`decisive_ends`): a Cpk interval ending at 1.32969 against Cpk ≥ 1.33
+shows "1.3297" (a FAIL), one ending at 1.33032 shows "1.3303" (UNDECIDED), never both
+"1.330": an end is never shown equal to the limit unless it is.
+
 In a study with a ``[carriage]`` (a ``track`` dimension in the file) an assembly is a carriage
 with one train per track, and P(contact), its bounds and the unresolved count are per
 assembly (contact in any of its trains): the wording says "assemblies" there
@@ -71,6 +77,9 @@ class SpecCheck:
         :data:`PASS`, :data:`FAIL`, :data:`UNDECIDED` or :data:`NO_LIMIT`.
     reason : str
         One sentence: why this status.
+    digits : int
+        Digits of the interval ends shown (:func:`decisive_ends`), for other tables that
+        show the same interval.
     """
 
     quantity: str
@@ -78,6 +87,7 @@ class SpecCheck:
     estimate: str
     status: str
     reason: str
+    digits: int = 3
 
 
 @dataclass(frozen=True)
@@ -140,6 +150,73 @@ def judge_lower_limit(lower, upper, limit) -> str:
     if np.isfinite(upper) and upper < limit:
         return FAIL
     return UNDECIDED
+
+
+#: Fewest and most digits of an interval end (decimals of a Cpk, significant digits of a
+#: fraction): :func:`decisive_ends` adds digits until the display shows the verdict.
+DISPLAY_DIGITS = (3, 12)
+
+
+def cpk_text(value, digits=3) -> str:
+    """A Cpk with ``digits`` decimals."""
+    return f"{value:.{digits}f}" if np.isfinite(value) else "n/a"
+
+
+def _fraction_value(text) -> float:
+    """The fraction shown by :func:`format_fraction` (``'12.3 ppm'``, ``'1.23 %'``)."""
+    number_text, _, unit = text.partition(" ")
+    try:
+        value = float(number_text)
+    except ValueError:
+        return float("nan")
+    return value / 1e6 if unit == "ppm" else value / 100.0
+
+
+def _cpk_value(text) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")
+
+
+def decisive_ends(judge, lower, upper, limit, kind="fraction") -> tuple:
+    """The interval ends as displayed, with the digits that make them show the verdict.
+
+    Parameters
+    ----------
+    judge : callable
+        :func:`judge_upper_limit` or :func:`judge_lower_limit`.
+    lower, upper : float
+        The interval.
+    limit : float or None
+        The limit.
+    kind : str
+        ``"fraction"`` (:func:`format_fraction`, significant digits) or ``"cpk"``
+        (:func:`cpk_text`, decimals).
+
+    Returns
+    -------
+    (lower_text, upper_text, digits)
+        From :data:`DISPLAY_DIGITS` ``[0]`` digits on, the fewest for which ``judge`` of the
+        displayed numbers equals ``judge`` of the interval and no end is shown equal to the
+        limit unless it is (1.33032 against 1.33 shows "1.3303", not "1.330").
+    """
+    fmt, parse = ((cpk_text, _cpk_value) if kind == "cpk"
+                  else (lambda x, d: format_fraction(x, digits=d), _fraction_value))
+    status = judge(lower, upper, limit)
+    first, last = DISPLAY_DIGITS
+    for digits in range(first, last + 1):
+        lo, hi = fmt(lower, digits), fmt(upper, digits)
+        ties = limit is not None and any(  # an end shown as the limit but not equal to it
+            parse(text) == limit != value for text, value in ((lo, lower), (hi, upper)))
+        if judge(parse(lo), parse(hi), limit) == status and not ties:
+            break
+    return lo, hi, digits
+
+
+def limit_text(limit, kind="fraction") -> str:
+    """A limit as configured (up to 6 significant digits: never rounded to a neighbour)."""
+    return f"{limit:.6g}" if kind == "cpk" else format_fraction(limit, digits=6)
 
 
 def tracks_of(ds) -> int:
@@ -209,11 +286,11 @@ def contact_check(ds) -> SpecCheck:
     one, many = contact_unit(ds)
     kind = (f"interval covering the bounds over all {many}" if covering and number(
         ds, "n_assemblies_unresolved") > 0 else _interval_kind(estimator_label(ds)))
-    estimate = (f"{format_fraction(p)} ({100 * CONFIDENCE:.0f} % {kind}: "
-                f"{format_fraction(lo)} to {format_fraction(hi)})")
-    req = f"P(contact) ≤ {format_fraction(limit)}" if limit else NO_LIMIT
-    reason = _sentence(status, "P(contact)", format_fraction(lo), format_fraction(hi), req,
-                       "max")
+    lo_text, hi_text, digits = decisive_ends(judge_upper_limit, lo, hi, limit)
+    estimate = (f"{format_fraction(p, digits=digits)} ({100 * CONFIDENCE:.0f} % {kind}: "
+                f"{lo_text} to {hi_text})")
+    req = f"P(contact) ≤ {limit_text(limit)}" if limit else NO_LIMIT
+    reason = _sentence(status, "P(contact)", lo_text, hi_text, req, "max")
     unresolved = number(ds, "n_assemblies_unresolved")
     if status == UNDECIDED and covering and unresolved > 0 and judge_upper_limit(
             number(ds, "contact_probability_ci_lower"), number(ds, "contact_probability_ci_upper"),
@@ -222,7 +299,7 @@ def contact_check(ds) -> SpecCheck:
                                 f"the {int(unresolved):,} unresolved {many} leave it open")
     if not np.isfinite(p) and status != NO_LIMIT:
         reason = f"no {one} has a known outcome: " + reason
-    return SpecCheck(contact_quantity(ds), req, estimate, status, reason)
+    return SpecCheck(contact_quantity(ds), req, estimate, status, reason, digits)
 
 
 def out_of_spec_check(ds, q, out_of_spec_limit=None) -> SpecCheck:
@@ -237,28 +314,33 @@ def out_of_spec_check(ds, q, out_of_spec_limit=None) -> SpecCheck:
     limit = _limit(number(ds, "velocity_deviation_out_of_spec_limit")
                    if out_of_spec_limit is None else out_of_spec_limit)
     status = judge_upper_limit(prop.lower, prop.upper, limit)
-    req = f"≤ {format_fraction(limit)}" if limit else NO_LIMIT
-    reason = _sentence(status, "the allowed fraction out of spec", format_fraction(prop.lower),
-                       format_fraction(prop.upper), f"the allowed fraction {req}", "max")
-    return SpecCheck(quantity, req, prop.text(), status, reason)
+    req = f"≤ {limit_text(limit)}" if limit else NO_LIMIT
+    lo_text, hi_text, digits = decisive_ends(judge_upper_limit, prop.lower, prop.upper, limit)
+    reason = _sentence(status, "the allowed fraction out of spec", lo_text, hi_text,
+                       f"the allowed fraction {req}", "max")
+    return SpecCheck(quantity, req, prop.text(digits), status, reason, digits)
+
+
+#: The quantity of the Cpk row.
+CPK_QUANTITY = "process capability Cpk of ε"
 
 
 def cpk_check(ds, q, cpk_minimum=None) -> SpecCheck:
     """Cpk of epsilon against a required minimum."""
     cap = q.get("_capability") if q else None
     if cap is None:
-        return SpecCheck("process capability Cpk of ε", NO_LIMIT,
-                         "no limit L on |ε|: not computed", NO_LIMIT,
+        return SpecCheck(CPK_QUANTITY, NO_LIMIT, "no limit L on |ε|: not computed", NO_LIMIT,
                          "no limit on |ε| in the config")
     limit = _limit(number(ds, "velocity_deviation_cpk_minimum")
                    if cpk_minimum is None else cpk_minimum)
     status = judge_lower_limit(cap.cpk_lower, cap.cpk_upper, limit)
-    req = f"Cpk ≥ {limit:.3g}" if limit else NO_LIMIT
-    estimate = (f"{cap.cpk:.3f} ({100 * CONFIDENCE:.0f} % interval {cap.cpk_lower:.3f} to "
-                f"{cap.cpk_upper:.3f}); percentile Cpk {cap.cpk_percentile:.3f}")
-    reason = _sentence(status, "Cpk", f"{cap.cpk_lower:.3f}", f"{cap.cpk_upper:.3f}", req,
-                       "min")
-    return SpecCheck("process capability Cpk of ε", req, estimate, status, reason)
+    req = f"Cpk ≥ {limit_text(limit, 'cpk')}" if limit else NO_LIMIT
+    lo_text, hi_text, digits = decisive_ends(judge_lower_limit, cap.cpk_lower, cap.cpk_upper,
+                                             limit, "cpk")
+    estimate = (f"{cpk_text(cap.cpk, digits)} ({100 * CONFIDENCE:.0f} % interval {lo_text} to "
+                f"{hi_text}); percentile Cpk {cap.cpk_percentile:.3f}")
+    reason = _sentence(status, "Cpk", lo_text, hi_text, req, "min")
+    return SpecCheck(CPK_QUANTITY, req, estimate, status, reason, digits)
 
 
 def has_friction(ds) -> bool:
@@ -299,12 +381,12 @@ def friction_check(ds, friction_exceedance_limit=None):
                 "carriage friction force over its free-rolling baseline")
     kind = (f"interval covering the bounds over all {many}" if covering
             else _interval_kind(estimator_label(ds, "friction_exceedance_probability")))
-    estimate = (f"{format_fraction(p)} ({100 * CONFIDENCE:.0f} % {kind}: "
-                f"{format_fraction(lo)} to {format_fraction(hi)})")
+    lo_text, hi_text, digits = decisive_ends(judge_upper_limit, lo, hi, allowed)
+    estimate = (f"{format_fraction(p, digits=digits)} ({100 * CONFIDENCE:.0f} % {kind}: "
+                f"{lo_text} to {hi_text})")
     if allowed:
-        req = f"P(increase > {limit_n:.4g} N) ≤ {format_fraction(allowed)}"
-        reason = _sentence(status, "the friction exceedance", format_fraction(lo),
-                           format_fraction(hi), req, "max")
+        req = f"P(increase > {limit_n:.4g} N) ≤ {limit_text(allowed)}"
+        reason = _sentence(status, "the friction exceedance", lo_text, hi_text, req, "max")
     else:
         req = f"increase ≤ {limit_n:.4g} N; no allowed fraction given"
         known = int(n - u) if np.isfinite(n) and np.isfinite(u) else 0
@@ -314,7 +396,7 @@ def friction_check(ds, friction_exceedance_limit=None):
                   "is shown without a verdict")
     if not np.isfinite(p) and status != NO_LIMIT:
         reason = f"no {one} has a known friction outcome: " + reason
-    return SpecCheck(quantity, req, estimate, status, reason)
+    return SpecCheck(quantity, req, estimate, status, reason, digits)
 
 
 def overall(statuses) -> str:

@@ -11,7 +11,10 @@ The sections and their keys are documented in ``tolsim/data/default.toml`` (the 
 default study) and in ``configs/*.toml``. They are read by :mod:`~tolsim.io.config.sections`,
 ``[sweep]`` by :mod:`~tolsim.io.config.sweep` and ``[allocate]`` by
 :mod:`~tolsim.io.config.allocation`, all on :mod:`~tolsim.io.config.reader` (the units, the
-errors and the TOML line scanner); this module puts them together.
+errors and the TOML line scanner); this module puts them together. Every physical key is
+checked against its possible range (an error) and its usual one (a
+:class:`~tolsim.io.config.reader.ConfigWarning`), kept with their sources in
+:mod:`~tolsim.io.config.plausibility`.
 """
 
 import re
@@ -21,7 +24,7 @@ from importlib import resources
 from pathlib import Path
 
 from tolsim.io.config.allocation import parse_allocation
-from tolsim.io.config.reader import UNITS, ConfigError, Source, Table
+from tolsim.io.config.reader import UNITS, ConfigError, ConfigWarning, Source, Table
 from tolsim.io.config.sections import (
     ESTIMATOR_KEYS,
     FRACTION_KEYS,
@@ -41,11 +44,12 @@ from tolsim.io.config.sweep import parse_sweep
 from tolsim.study.analyses.limit_state import check_supported
 from tolsim.study.spec import Distribution, StudyConfig, Train
 
-__all__ = ["ESTIMATOR_KEYS", "FRACTION_KEYS", "MIN_EMPIRICAL_VALUES", "UNITS", "ConfigError",
-           "StudyConfig", "default_config_text", "load_config", "parse_config"]
+__all__ = ["ESTIMATOR_KEYS", "FRACTION_KEYS", "MIN_EMPIRICAL_VALUES", "NO_STUDY", "UNITS",
+           "ConfigError", "ConfigWarning", "StudyConfig", "default_config_text", "load_config",
+           "parse_config"]
 
 
-def parse_config(text: str, path: str = "<string>") -> StudyConfig:
+def parse_config(text: str, path: str = "<string>", *, study: bool = True) -> StudyConfig:
     """Validate a study given as TOML text.
 
     Parameters
@@ -54,6 +58,10 @@ def parse_config(text: str, path: str = "<string>") -> StudyConfig:
         The TOML document.
     path : str
         Name used in error messages.
+    study : bool
+        False accepts a config without ``[study]`` (``tolsim carriage``: a load distribution
+        needs no samples or seed); its settings are then the defaults, with one sample and
+        seed 0 (:data:`NO_STUDY`).
 
     Returns
     -------
@@ -75,16 +83,21 @@ def parse_config(text: str, path: str = "<string>") -> StudyConfig:
             path = f"{path}:{at.group(1)}"
         raise ConfigError(f"{path}: invalid TOML: {message}") from None
     if "sweep" not in data:
-        return _build(data, source, text, path)
+        return _build(data, source, text, path, study)
     # a what-if sweep (issue 14): the base study, then one complete config per point
     base = {key: value for key, value in data.items() if key != "sweep"}
-    config = _build(base, source, text, path)
+    config = _build(base, source, text, path, study)
     sweep = parse_sweep(Table(data["sweep"], "sweep", source), base,
-                        lambda point: _build(point, source, text, path))
+                        lambda point: _build(point, source, text, path, study))
     return replace(config, sweep=sweep)
 
 
-def _build(data: dict, source: "Source", text: str, path: str) -> StudyConfig:
+#: ``[study]`` of a config read without one (``parse_config(..., study=False)``).
+NO_STUDY = {"samples": 1, "seed": 0}
+
+
+def _build(data: dict, source: "Source", text: str, path: str,
+           study_required: bool = True) -> StudyConfig:
     """The StudyConfig of a parsed TOML document (``data``); errors name ``source``'s lines."""
     root = Table(data, "", source)
     bearing = read_bearing(root.table("bearing"))
@@ -113,7 +126,10 @@ def _build(data: dict, source: "Source", text: str, path: str) -> StudyConfig:
         loads = read_loads(root.table("loads"), train, bearing)
     tolerances = read_tolerances(root.table("tolerances", required=False), bearing)
     correlations = read_correlations(root, tolerances)
-    study_table = root.table("study")
+    if study_required or root.has("study"):
+        study_table = root.table("study")
+    else:
+        study_table = Table(dict(NO_STUDY), "study", source)
     study = read_study(study_table)
     if carriage is not None:  # the carriage solve is the static model of its balls
         given = study_table.data.get("static_model")
@@ -153,8 +169,10 @@ def default_config_text() -> str:
     return resources.files("tolsim").joinpath("data/default.toml").read_text(encoding="utf-8")
 
 
-def load_config(path=None) -> StudyConfig:
+def load_config(path=None, *, study: bool = True) -> StudyConfig:
     """Read and validate a study config file (the packaged default when ``path`` is None).
+
+    ``study=False`` accepts a file without ``[study]`` (see :func:`parse_config`).
 
     Raises
     ------
@@ -162,11 +180,11 @@ def load_config(path=None) -> StudyConfig:
         For a missing or unreadable file or any invalid content (one line, names the key).
     """
     if path is None:
-        return parse_config(default_config_text(), "default.toml")
+        return parse_config(default_config_text(), "default.toml", study=study)
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.__class__.__name__}: "
                           f"{getattr(exc, 'strerror', None) or exc}") from None
-    return parse_config(text, str(path))
+    return parse_config(text, str(path), study=study)

@@ -6,6 +6,7 @@ table reader (:class:`Table`). The section readers (:mod:`tolsim.io.config.secti
 
 import math
 import re
+import warnings
 
 #: Unit suffixes of config keys: quantity kind -> {suffix: factor to SI}.
 UNITS = {
@@ -23,6 +24,24 @@ UNITS = {
 
 class ConfigError(ValueError):
     """A bad study configuration; the message is one line naming the key (file:line: key)."""
+
+
+class ConfigWarning(UserWarning):
+    """An unusual but possible value in a study configuration (one line, like ConfigError).
+
+    Issued with :func:`warnings.warn`; the command line prints each one once, as
+    ``tolsim <command>: warning: <message>`` (:func:`tolsim.cli.config_warnings`).
+    """
+
+
+def show(value) -> str:
+    """A number as the user reads it: up to 6 significant digits, no float noise
+    (``-5e-05``, not ``-4.9999999999999996e-05``); other values by their ``repr``."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, int):
+        return str(value)
+    return f"{value:.6g}"
 
 
 # --------------------------------------------------------------------------------------------
@@ -74,6 +93,10 @@ class Source:
         name = f"{table}.{key}" if key else table
         return ConfigError(f"{where}: {name} {message}")
 
+    def warn(self, table, key, message):
+        """Issue a :class:`ConfigWarning` 'file:line: table.key message'."""
+        warnings.warn(ConfigWarning(str(self.error(table, key, message))), stacklevel=3)
+
 
 class Table:
     """One TOML table being read: typed getters with units; unknown keys are errors."""
@@ -86,6 +109,17 @@ class Table:
 
     def error(self, key, message):
         return self.source.error(self.name, key, message)
+
+    def warn(self, key, message):
+        """Issue a :class:`ConfigWarning` naming ``key`` (see :meth:`Source.warn`)."""
+        self.source.warn(self.name, key, message)
+
+    def unit_of(self, key, kind) -> tuple:
+        """(unit suffix, factor to SI) of ``key`` as written (``""`` and 1 without one)."""
+        for unit, factor in sorted(UNITS[kind].items(), key=lambda u: -len(u[0])):
+            if unit and key.endswith(f"_{unit}"):
+                return unit, factor
+        return "", 1.0
 
     def has(self, key):
         return key in self.data
@@ -113,7 +147,7 @@ class Table:
         out = []
         for v in values:
             v = self._number(key, v)
-            if positive and not v > 0:
+            if positive and not v > 0:  # v as written (a TOML number has no float noise)
                 raise self.error(key, f"= {v!r} must be > 0")
             if minimum is not None and v < minimum:
                 raise self.error(key, f"= {v!r} must be >= {minimum}")

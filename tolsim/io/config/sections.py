@@ -13,7 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from tolsim.io.config.reader import UNITS, Table
+from tolsim.io.config.plausibility import (
+    RANGES,
+    check_carriage_load,
+    check_count,
+    check_hertz_pressure,
+    check_quantity,
+    check_value,
+)
+from tolsim.io.config.reader import UNITS, Table, show
 from tolsim.physics.carriage import CarriageLayout, CarriageLoad
 from tolsim.physics.geometry import Bearing
 from tolsim.study.analyses.rare_events import MIN_CHAINS
@@ -54,25 +62,22 @@ def _distribution(table: Table, kind: str) -> Distribution:
         d = Distribution("normal", mean=q("mean", default=0.0), std=q("std", minimum=0.0))
     elif name == "uniform":
         low, high = q("low"), q("high")
-        if not high > low:
-            raise table.error(table.key_for("high", kind),
-                              f"= {high!r} must be greater than low ({low!r}) [SI]")
+        _check_order(table, kind)
         d = Distribution("uniform", low=low, high=high)
     elif name == "truncated_normal":
         mean, std = q("mean", default=0.0), q("std", positive=True)
         low, high = q("low"), q("high")
-        if not high > low:
-            raise table.error(table.key_for("high", kind),
-                              f"= {high!r} must be greater than low ({low!r}) [SI]")
+        _check_order(table, kind)
         d = Distribution("truncated_normal", mean=mean, std=std, low=low, high=high)
     elif name == "cpk":
         low, high = q("low"), q("high")
-        if not high > low:
-            raise table.error(table.key_for("high", kind),
-                              f"= {high!r} must be greater than low ({low!r}) [SI]")
+        _check_order(table, kind)
         mean = q("mean", default=0.5 * (low + high))
         if not low < mean < high:
-            raise table.error(table.key_for("mean", kind), f"= {mean!r} must lie inside the band")
+            mean_key = table.key_for("mean", kind)
+            raise table.error(mean_key, f"= {table.data[mean_key]!r} must lie inside the "
+                                        f"band ({table.key_for('low', kind)} to "
+                                        f"{table.key_for('high', kind)})")
         cpk = table.quantity("cpk", "dimensionless", positive=True)
         std = min(high - mean, mean - low) / (3.0 * cpk)
         d = Distribution("cpk", mean=mean, std=std, low=low, high=high, cpk=cpk,
@@ -80,6 +85,16 @@ def _distribution(table: Table, kind: str) -> Distribution:
     else:  # empirical
         d = _empirical(table, kind)
     return d
+
+
+def _check_order(table: Table, kind: str):
+    """Raise unless the ``high`` of a distribution table exceeds its ``low`` (as written)."""
+    high_key, low_key = table.key_for("high", kind), table.key_for("low", kind)
+    high = table.quantity("high", kind)
+    low = table.quantity("low", kind)
+    if not high > low:
+        raise table.error(high_key, f"= {table.data[high_key]!r} must be greater than "
+                                    f"{low_key} = {table.data[low_key]!r}")
 
 
 def _empirical(table: Table, kind: str) -> Distribution:
@@ -153,16 +168,7 @@ def _check_range(table: Table, source: str, kind: str, dist: Distribution, beari
     if max(abs(low), abs(high)) <= limit:
         return
     edge = "low" if abs(low) >= abs(high) else "high"
-    if dist.kind == "fixed":
-        name = "value"
-    elif dist.kind == "empirical":
-        name = "column"
-    elif dist.kind == "normal":
-        name = "mean" if abs(dist.mean) > limit else "std"
-    elif dist.kind == "cpk" and not dist.truncate:  # the band, or the spread beyond it
-        name = edge if max(abs(dist.low), abs(dist.high)) > limit else "cpk"
-    else:
-        name = edge
+    name = _reach_name(dist, edge, limit)
     key = name if name == "cpk" else table.key_for(name, kind)
     # the unit the user wrote (of this key, or of the table's other keys of this kind)
     suffixes = [k.rpartition("_")[2] for k in (key, *table.data) if "_" in k]
@@ -179,8 +185,25 @@ def _check_range(table: Table, source: str, kind: str, dist: Distribution, beari
                            f"accepts for {source}: is the unit right?")
 
 
+def _reach_name(dist: Distribution, edge: str, limit: float) -> str:
+    """The key (without its unit) that sets how far ``dist`` reaches at its ``edge`` (low
+    or high), for a message about its reach beyond ``limit``."""
+    if dist.kind == "fixed":
+        name = "value"
+    elif dist.kind == "empirical":
+        name = "column"
+    elif dist.kind == "normal":
+        name = "mean" if abs(dist.mean) > limit else "std"
+    elif dist.kind == "cpk" and not dist.truncate:  # the band, or the spread beyond it
+        name = edge if max(abs(dist.low), abs(dist.high)) > limit else "cpk"
+    else:
+        name = edge
+    return name
+
+
 def read_bearing(t: Table) -> Bearing:
     diameter = t.quantity("ball_diameter", "length", positive=True)
+    check_quantity(t, "ball_diameter", "length", diameter, "bearing.ball_diameter")
     values = dict(
         ball_radius=0.5 * diameter,
         conformity=t.quantity("conformity", "dimensionless"),
@@ -192,47 +215,68 @@ def read_bearing(t: Table) -> Bearing:
                                         minimum=0.0),
     )
     t.finish()
+    kinds = {"conformity": "dimensionless", "nominal_contact_angle": "angle",
+             "youngs_modulus": "pressure", "poisson_ratio": "dimensionless",
+             "friction_coefficient": "dimensionless"}
+    for name, kind in kinds.items():  # the ranges hold those of Bearing
+        check_quantity(t, name, kind, values[name], f"bearing.{name}")
     try:
         return Bearing(**values)
-    except ValueError as exc:  # Bearing names the field
-        field_name = str(exc).split(" ", 1)[0]
-        key = {"ball_radius": "ball_diameter"}.get(field_name, field_name)
-        kind = {"nominal_contact_angle": "angle", "youngs_modulus": "pressure",
-                "ball_diameter": "length"}.get(key, "dimensionless")
-        raise t.error(t.key_for(key, kind), f"= {values.get(field_name)!r} [SI] is out of "
-                                            "range") from None
+    except ValueError as exc:  # a default outside Bearing's range cannot happen: say so
+        raise t.error(None, " ".join(str(exc).split())) from None
 
 
 def read_motion(t: Table) -> Motion:
     v = t.quantity("groove_velocity", "velocity", positive=True)
+    check_quantity(t, "groove_velocity", "velocity", v, "motion.groove_velocity")
     has_stroke = any(t.has(f"stroke_{u}") for u in UNITS["length"])
     has_duration = any(t.has(f"duration_{u}") for u in UNITS["time"])
     if has_stroke and has_duration:
         raise t.error(t.key_for("stroke", "length"), "given together with duration: use one")
     if has_stroke:
-        duration = t.quantity("stroke", "length", positive=True) / v
-    else:
+        stroke = t.quantity("stroke", "length", positive=True)
+        check_quantity(t, "stroke", "length", stroke, "motion.stroke")
+        duration = stroke / v
+    else:  # the stroke's range at this speed
         duration = t.quantity("duration", "time", positive=True)
+        check_quantity(t, "duration", "time", duration, "motion.duration", 1.0 / v)
     t.finish()
     return Motion(groove_velocity=v, duration=duration)
 
 
 def read_train(t: Table, bearing: Bearing) -> Train:
     balls = t.integer("balls", minimum=1)
+    check_count(t, "balls", balls, "train.balls")
     gap_table = t.table("initial_gap")
     gap = _distribution(gap_table, "length")
     gap_table.finish()
+
+    def gap_error(name, value):
+        key = gap_table.key_for(name, "length")
+        unit, factor = gap_table.unit_of(key, "length")
+        shown = repr(gap_table.data[key])
+        if name == "column":
+            shown = f"{gap_table.data[key]!r} holds {show(value / factor)} {unit}"
+        return gap_table.error(key, f"= {shown}: gaps must be >= 0 (balls cannot overlap)")
+
     if gap.kind == "fixed" and gap.value < 0:
-        raise gap_table.error(gap_table.key_for("value", "length"),
-                              f"= {gap.value!r} m must be >= 0")
+        raise gap_error("value", gap.value)
     if gap.kind in ("uniform", "truncated_normal") and gap.low < 0:
-        raise gap_table.error(gap_table.key_for("low", "length"),
-                              f"= {gap.low!r} m must be >= 0 (gaps cannot overlap)")
+        raise gap_error("low", gap.low)
     if gap.kind == "empirical" and gap.data[0] < 0:
-        raise gap_table.error(gap_table.key_for("column", "length"),
-                              f"holds {gap.data[0]!r} m: gaps must be >= 0 (cannot overlap)")
-    pitch = 2.0 * bearing.ball_radius + max(gap.expected, 0.0)
+        raise gap_error("column", gap.data[0])
+    diameter = 2.0 * bearing.ball_radius
+    name = _reach_name(gap, "high", diameter * RANGES["train.initial_gap"].usual_high)
+    check_value(gap_table, name if name == "cpk" else gap_table.key_for(name, "length"),
+                "length", gap.support[1], "train.initial_gap", diameter)
+    pitch = diameter + max(gap.expected, 0.0)
     length = t.quantity("loaded_zone_length", "length", default=balls * pitch, positive=True)
+    length_key = t.key_for("loaded_zone_length", "length")
+    if length_key in t.data and length < balls * diameter * (1.0 - 1e-12):
+        unit, factor = t.unit_of(length_key, "length")
+        raise t.error(length_key, f"= {t.data[length_key]!r} is shorter than the "
+                                  f"{balls} balls in it ({show(balls * diameter / factor)} "
+                                  f"{unit}): they would overlap")
     t.finish()
     return Train(balls=balls, initial_gap=gap, loaded_zone_length=length)
 
@@ -253,19 +297,25 @@ def read_loads(t: Table, train: Train, bearing: Bearing) -> Loads:
     has_side = any(t.has(f"side_load_{u}") for u in UNITS["force"])
     if has_ratio and has_side:
         raise t.error("side_force_ratio", "given together with side_load: use one")
+    parts = {t.key_for("normal_load", "force"): normal}  # what drives the ball forces
     if has_ratio:
         ratio = t.quantity("side_force_ratio", "dimensionless", allow_list=True)
         side = normal * per_ball(ratio, "side_force_ratio")
+        parts["side_force_ratio"] = side
     else:
         total = t.quantity("side_load", "force", default=0.0, allow_list=True)
         side = per_ball(total, "side_load_<unit>")
+        if has_side:
+            parts[t.key_for("side_load", "force")] = side
     yaw = t.quantity("yaw_moment", "moment", default=0.0)
     if yaw:
         z = train.slot_positions(2.0 * bearing.ball_radius)
         if n < 2:
             raise t.error("yaw_moment_<unit>", "needs train.balls >= 2")
         side = side + yaw * z / np.sum(z * z)
+        parts[t.key_for("yaw_moment", "moment")] = yaw * z / np.sum(z * z)
     t.finish()
+    check_hertz_pressure(t, normal, side, bearing, parts)
     return Loads(normal_load=tuple(map(float, normal)), side_load=tuple(map(float, side)),
                  yaw_moment=float(yaw))
 
@@ -273,6 +323,7 @@ def read_loads(t: Table, train: Train, bearing: Bearing) -> Loads:
 def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     """``[carriage]``, ``[carriage.load]`` and ``[[carriage.track]]`` (tolsim issue 12)."""
     n = t.integer("balls_per_track", minimum=1)
+    check_count(t, "balls_per_track", n, "carriage.balls_per_track")
     pitch = t.quantity("ball_pitch", "length")
     pitch_key = t.key_for("ball_pitch", "length")
     if pitch < 0:
@@ -281,12 +332,18 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     if n > 1 and pitch < diameter * (1.0 - 1e-12):
         raise t.error(pitch_key, f"= {t.data[pitch_key]!r} is less than the ball diameter "
                                  f"({diameter * 1e3:g} mm): neighbouring balls would overlap")
+    if n > 1:
+        check_quantity(t, "ball_pitch", "length", pitch, "carriage.ball_pitch", diameter)
     preload = t.quantity("preload_oversize", "length", default=0.0)
     limit = 0.25 * (bearing.groove_radius - bearing.ball_radius)
     if abs(preload) > limit:
         key = t.key_for("preload_oversize", "length")
-        raise t.error(key, f"= {t.data[key]!r} is beyond +/- {limit * 1e6:g} um, a quarter of "
-                           "the ball-groove centre distance (a unit slip?)")
+        unit, factor = t.unit_of(key, "length")
+        raise t.error(key, f"= {t.data[key]!r} {unit} is outside the possible range "
+                           f"[{show(-limit / factor)}, {show(limit / factor)}] {unit} (a "
+                           "quarter of the ball-groove centre distance, the static model's "
+                           "range): is the unit right?")
+    check_quantity(t, "preload_oversize", "length", preload, "carriage.preload_oversize")
     # end relief (crowning) of the carriage grooves; the length is checked against the
     # loaded zone in parse_config, once [train] is read
     relief_depth = t.quantity("end_relief_depth", "length", default=0.0, minimum=0.0)
@@ -294,8 +351,10 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     depth_key = t.key_for("end_relief_depth", "length")
     length_key = t.key_for("end_relief_length", "length")
     if relief_depth > limit:
-        raise t.error(depth_key, f"= {t.data[depth_key]!r} is beyond {limit * 1e6:g} um, a "
-                                 "quarter of the ball-groove centre distance (a unit slip?)")
+        unit, factor = t.unit_of(depth_key, "length")
+        raise t.error(depth_key, f"= {t.data[depth_key]!r} {unit} is outside the possible "
+                                 f"range [0, {show(limit / factor)}] {unit} (a quarter of the "
+                                 "ball-groove centre distance): is the unit right?")
     if relief_depth > 0 and not relief_length > 0:
         raise t.error(depth_key, "needs end_relief_length_<unit> > 0 (the relieved length at "
                                  "each end of the loaded zone)")
@@ -327,6 +386,9 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
         xs.append(tr.quantity("x", "length"))
         ys.append(tr.quantity("y", "length", default=0.0))
         phis.append(tr.quantity("orientation", "angle"))
+        for name, kind, value in (("x", "length", xs[-1]), ("y", "length", ys[-1]),
+                                  ("orientation", "angle", phis[-1])):
+            check_quantity(tr, name, kind, value, f"carriage.track.{name}")
         dev = tr.quantity("ball_oversize_deviation", "length", allow_list=True, required=False)
         if dev is not None:
             key = tr.key_for("ball_oversize_deviation", "length")
@@ -360,13 +422,17 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     for value in deviation:
         if abs(preload + value) > limit:
             key = t.key_for("ball_oversize_deviation", "length")
-            raise t.error(key, f"gives a ball oversize of {(preload + value) * 1e6:g} um, "
-                               f"beyond +/- {limit * 1e6:g} um")
+            raise t.error(key, f"gives a ball oversize of {show((preload + value) * 1e6)} um, "
+                               f"outside the possible range [{show(-limit * 1e6)}, "
+                               f"{show(limit * 1e6)}] um (a quarter of the ball-groove centre "
+                               "distance, the static model's range)")
     t.finish()
     try:
         layout = CarriageLayout(np.array(xs), np.array(ys), np.array(phis), n, pitch)
     except ValueError as exc:
         raise t.error(None, " ".join(str(exc).split())) from None
+    if load_table is not None:
+        check_carriage_load(load_table, load, layout, bearing)
     return Carriage(layout=layout, load=load, preload_oversize=preload,
                     ball_oversize_deviation=tuple(map(float, deviation)),
                     end_relief_depth=relief_depth, end_relief_length=relief_length)
@@ -448,6 +514,8 @@ def read_contact(t: Table) -> ContactSettings:
         examples=t.integer("examples", default=4, minimum=0),
         travel_points=t.integer("travel_points", default=201, minimum=2),
     )
+    check_quantity(t, "ball_friction_coefficient", "dimensionless",
+                   s.ball_friction_coefficient, "contact.ball_friction_coefficient")
     t.finish()
     return s
 
@@ -616,6 +684,12 @@ def read_correlations(root: Table, tolerances: tuple) -> tuple:
                     isinstance(row, list) and len(row) == n for row in matrix)):
                 raise t.error(key, f"must be {n} x {n} (one row per source), got {matrix!r}")
             matrix = [[float(t._number(key, v)) for v in row] for row in matrix]
+        asymmetric = next(((i, j) for i in range(n) for j in range(i) if matrix[i][j]
+                           != matrix[j][i]), None)
+        if asymmetric:  # said here with the numbers as written (no numpy reprs)
+            i, j = asymmetric
+            raise t.error(key, f"must be symmetric: [{i}][{j}] = {show(matrix[i][j])} but "
+                               f"[{j}][{i}] = {show(matrix[j][i])}")
         problem = correlation_matrix_problem(matrix)
         if problem:
             raise t.error(key, problem)

@@ -160,6 +160,13 @@ def parse_sweep(t, base: dict, build) -> Sweep:
     if not specs:
         raise t.error(None, "names no key to sweep: add e.g. \"carriage.load.force_z_N\" = "
                             "[100, 200, 400]")
+    for key, _ in specs:  # a plain name is a setting of [sweep]: only mode is one
+        if "." not in key:
+            example = next((k for k, _ in specs if "." in k), "loads.yaw_moment_N_m")
+            modes = " or ".join(repr(m) for m in SWEEP_MODES)
+            raise t.error(key, f"is not a known key: [sweep] takes mode ({modes}) and the "
+                               "dotted paths of the config keys to sweep (such as "
+                               f"\"{example}\")")
     axes, targets = [], []
     for key, spec in specs:
         values, given_unit = _values(t, key, spec)

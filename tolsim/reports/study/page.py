@@ -30,6 +30,7 @@ from tolsim.reports.style import (
     data_uri,
 )
 from tolsim.reports.verdict import (
+    CPK_QUANTITY,
     ESTIMATOR_NAMES,
     FAIL,
     PASS,
@@ -37,6 +38,7 @@ from tolsim.reports.verdict import (
     UNDECIDED,
     any_train,
     contact_unit,
+    cpk_text,
     estimator_label,
     has_friction,
     study_verdict,
@@ -481,8 +483,11 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
                           if np.isfinite(getattr(prop, "design_effect", np.nan)) else "")
                        + ")")]
         if cap is not None:
-            parts += [_row("Cpk = (L − |μ|)/(3σ)", f"{cap.cpk:.3f} (95 % CI {cap.cpk_lower:.3f} "
-                                                   f"to {cap.cpk_upper:.3f}, {cap.method})"),
+            digits = next((c.digits for c in verdict.checks if c.quantity == CPK_QUANTITY), 3)
+            parts += [_row("Cpk = (L − |μ|)/(3σ)",  # with the digits of the verdict's row
+                           f"{cpk_text(cap.cpk, digits)} (95 % CI "
+                           f"{cpk_text(cap.cpk_lower, digits)} to "
+                           f"{cpk_text(cap.cpk_upper, digits)}, {cap.method})"),
                       _row("Cp = L/(3σ)", f"{cap.cp:.3f}"),
                       _row("percentile Cpk (ISO 22514-2)", f"{cap.cpk_percentile:.3f}"),
                       _row("out of spec if ε were normal", format_fraction(
