@@ -23,7 +23,7 @@ from tolsim.io.config.reader import ConfigWarning, show
 from tolsim.physics.geometry import TABLE1
 from tolsim.physics.hertz import hertz_constants
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = ROOT / "configs"
 CARRIAGE_CONFIG = HEAD + CARRIAGE
 SWEEP = '\n[sweep]\n'
