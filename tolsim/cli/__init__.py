@@ -41,8 +41,8 @@ class UsageError(Exception):
     """Bad user input: reported as one line and exit code 2."""
 
 
-def integer_at_least(minimum, what):
-    """An argparse ``type`` accepting whole numbers >= ``minimum``.
+def integer_at_least(minimum, what, maximum=None):
+    """An argparse ``type`` accepting whole numbers >= ``minimum`` (and <= ``maximum``).
 
     A bad value becomes ``argument --flag: expected <what>, got '...'`` (argparse names the
     flag), reported as one line with exit code 2.
@@ -53,11 +53,29 @@ def integer_at_least(minimum, what):
             value = int(text)
         except ValueError:
             value = None
-        if value is None or value < minimum:
+        if value is None or value < minimum or (maximum is not None and value > maximum):
             raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
         return value
 
     return parse
+
+
+@contextlib.contextmanager
+def warnings_as_lines(command, category):
+    """Inside the block, a warning of ``category`` is shown as one line ``<command>: warning:
+    <message>`` on stderr; other warnings as Python shows them."""
+    show = warnings.showwarning
+
+    def one_line(message, kind, filename, lineno, file=None, line=None):
+        if issubclass(kind, category):
+            print(f"{command}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        else:
+            show(message, kind, filename, lineno, file, line)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", category)
+        warnings.showwarning = one_line
+        yield
 
 
 class Parser(argparse.ArgumentParser):

@@ -7,7 +7,7 @@ import os
 import sys
 import time
 
-from tolsim.cli import UsageError
+from tolsim.cli import UsageError, warnings_as_lines
 
 DESCRIPTION = """\
 Put two or more result files of 'tolsim run' side by side. The first file is the reference;
@@ -36,6 +36,11 @@ Welch's for means and standard deviations, the MOVER of Zou & Donner for quantil
 fraction out of spec and Cpk. Runs with the reference's seed, block size and sampling share
 its random numbers; for them the unpaired interval is conservative, and the report says so.
 
+Every file's data are verified against the SHA-256 checksums 'tolsim run' stored in it: a
+file that fails (damaged, or altered after it was written) is refused, naming the file and
+the variable; --no-verify compares anyway, for forensics. A file written before tolsim stored
+checksums is compared with a warning.
+
 The file of a what-if sweep (a config with [sweep]) is refused: 'tolsim report SWEEP.nc'
 puts its points side by side (a table, and curves against the swept key).
 
@@ -55,6 +60,8 @@ def add_parser(subparsers, formatter_class=None):
                    help="two or more result files of 'tolsim run', the reference first")
     p.add_argument("-o", "--out", metavar="DIR", required=True,
                    help="output folder (created if missing)")
+    p.add_argument("--no-verify", action="store_true",
+                   help="do not verify the files' checksums (forensics: a damaged file)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     return p
 
@@ -66,7 +73,9 @@ def run(args) -> int:
     out = args.out
     if os.path.exists(out) and not os.path.isdir(out):
         raise UsageError(f"--out {out} exists and is not a folder")
+    from tolsim.io.checksums import UnverifiedResultWarning  # noqa: PLC0415
     from tolsim.reports.compare import NotAResult, compare_runs  # noqa: PLC0415
+    from tolsim.reports.result_view import FailsChecksum  # noqa: PLC0415
 
     started = time.perf_counter()
 
@@ -75,7 +84,10 @@ def run(args) -> int:
             print(f"[{time.perf_counter() - started:5.1f} s] {msg}", file=sys.stderr)
 
     try:
-        result = compare_runs(args.results, out, progress=say)
+        with warnings_as_lines("tolsim compare", UnverifiedResultWarning):
+            result = compare_runs(args.results, out, progress=say, verify=not args.no_verify)
+    except FailsChecksum as exc:
+        raise UsageError(f"{exc}; --no-verify compares anyway (forensics)") from None
     except NotAResult as exc:
         raise UsageError(str(exc)) from None
     except OSError as exc:

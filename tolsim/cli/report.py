@@ -10,7 +10,7 @@ import os
 import sys
 import time
 
-from tolsim.cli import UsageError, integer_at_least
+from tolsim.cli import UsageError, integer_at_least, warnings_as_lines
 
 DESCRIPTION = """\
 Write an HTML report (report.html, figures embedded, plus the PNGs) and the same report as
@@ -31,6 +31,11 @@ ratio rho along the rail, per track: carriage.png), the carriage displacement an
 (N/um, N m/urad) of the nominal assembly with their mean, std, min and max over the sampled
 carriages, and the carriages not solved. Per-ball and per-pair figures then draw one series
 per track, and P(contact) is per assembly: contact in any of its trains.
+
+The file's data are verified against the SHA-256 checksums 'tolsim run' stored in it: a file
+that fails (damaged, or altered after it was written) is refused, naming the variable;
+--no-verify reports on it anyway, for forensics. A file written before tolsim stored
+checksums is reported on with a warning.
 
 When the file holds no sensitivity indices they are computed from the config stored in the
 file (same seed); --sensitivity-samples sets the cost, --no-sensitivity skips it.
@@ -73,11 +78,21 @@ def add_parser(subparsers, formatter_class=None):
     p.add_argument("--no-sensitivity", action="store_true",
                    help="do not compute sensitivity indices missing from the file")
     p.add_argument("--no-pdf", action="store_true", help="write no report.pdf")
+    p.add_argument("--no-verify", action="store_true",
+                   help="do not verify the file's checksums (forensics: a damaged file)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     return p
 
 
 def run(args) -> int:
+    from tolsim.io.checksums import UnverifiedResultWarning  # noqa: PLC0415
+
+    with warnings_as_lines("tolsim report", UnverifiedResultWarning):
+        return _report(args)
+
+
+def _report(args) -> int:
+    from tolsim.reports.result_view import FailsChecksum  # noqa: PLC0415
     from tolsim.reports.study import NotAResult, make_report  # noqa: PLC0415
 
     out = getattr(args, "out", None) or os.path.splitext(args.result)[0] + "-report"
@@ -96,7 +111,9 @@ def run(args) -> int:
     try:
         result = make_report(args.result, out, sensitivity=not args.no_sensitivity,
                              sensitivity_samples=getattr(args, "sensitivity_samples", None),
-                             progress=say, pdf=not args.no_pdf)
+                             progress=say, pdf=not args.no_pdf, verify=not args.no_verify)
+    except FailsChecksum as exc:
+        raise UsageError(f"{exc}; --no-verify reports on it anyway (forensics)") from None
     except NotAResult as exc:
         raise UsageError(str(exc)) from None
     except OSError as exc:
@@ -109,11 +126,14 @@ def run(args) -> int:
 
 def _sweep_report(args, out, say, started) -> int:
     """``tolsim report`` on a sweep file (:func:`tolsim.reports.sweep.make_sweep_report`)."""
+    from tolsim.reports.result_view import FailsChecksum  # noqa: PLC0415
     from tolsim.reports.study import NotAResult  # noqa: PLC0415
     from tolsim.reports.sweep import NotASweep, make_sweep_report  # noqa: PLC0415
 
     try:
-        result = make_sweep_report(args.result, out, progress=say)
+        result = make_sweep_report(args.result, out, progress=say, verify=not args.no_verify)
+    except FailsChecksum as exc:
+        raise UsageError(f"{exc}; --no-verify reports on it anyway (forensics)") from None
     except (NotAResult, NotASweep) as exc:
         raise UsageError(f"{args.result}: {exc}" if isinstance(exc, NotASweep)
                          else str(exc)) from None

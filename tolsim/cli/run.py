@@ -59,7 +59,10 @@ examples:
 
 
 _positive_int = integer_at_least(1, "a positive integer")
-_seed = integer_at_least(0, "a non-negative integer")
+#: The largest seed: numpy's SeedSequence takes any, the result file stores it as uint64.
+MAX_SEED = 2**64 - 1
+_seed = integer_at_least(0, f"an integer from 0 to {MAX_SEED}", maximum=MAX_SEED)
+_count = integer_at_least(0, "a non-negative integer")
 
 
 def _seconds(text):
@@ -127,7 +130,7 @@ def add_parser(subparsers, formatter_class=None):
                        help="require a matching checkpoint OUT.partial and continue from it")
     group.add_argument("--fresh", action="store_true",
                        help="ignore and delete a checkpoint OUT.partial")
-    p.add_argument("--save-samples", type=_seed, default=0, metavar="N",
+    p.add_argument("--save-samples", type=_count, default=0, metavar="N",
                    help="also store the first N assemblies' inputs and outputs (tolerance "
                         "values, gaps, contact angles and forces, epsilon per ball, first "
                         "contact) along a 'sample' dimension of the result file")
@@ -408,6 +411,16 @@ def _command_line(args, output) -> str:
     return shlex.join(parts)
 
 
+def os_error_line(exc: OSError, path=None) -> str:
+    """One line on an OSError while writing: the file (the error's, else ``path``) and the
+    reason, e.g. ``cannot write out.nc: No space left on device``."""
+    where = exc.filename or path
+    reason = " ".join(str(exc.strerror or exc).split())
+    if reason.startswith("cannot write"):  # the checkpoint's: says what it was writing
+        return f"{where}: {reason}"
+    return f"cannot write {where}: {reason}" if where else f"cannot write: {reason}"
+
+
 def _check_output(output: Path, checkpoint: Path):
     """Fail before any work if the result or its checkpoint cannot be written there.
 
@@ -475,7 +488,11 @@ def run(args) -> int:
     import tqdm  # noqa: PLC0415
 
     from tolsim.io.netcdf import write_result  # noqa: PLC0415
-    from tolsim.study.execution.runner import fingerprint, run_study  # noqa: PLC0415
+    from tolsim.study.execution.runner import (  # noqa: PLC0415
+        DamagedCheckpoint,
+        fingerprint,
+        run_study,
+    )
 
     if args.fresh and checkpoint.exists():
         checkpoint.unlink()
@@ -485,8 +502,12 @@ def run(args) -> int:
         try:
             with np.load(checkpoint) as data:
                 matches = str(data["fingerprint"]) == fingerprint(config)
-        except (OSError, KeyError, ValueError):
+        except FileNotFoundError:
             matches = False
+        except Exception as exc:  # noqa: BLE001 - zipfile, zlib, numpy and OS errors alike
+            raise UsageError(f"--resume: checkpoint {checkpoint} cannot be read, it is damaged "
+                             f"or truncated ({type(exc).__name__}); --fresh discards it"
+                             ) from None
         if not matches:
             raise UsageError(f"--resume: no checkpoint {checkpoint} for this study")
 
@@ -503,9 +524,12 @@ def run(args) -> int:
                            checkpoint_interval=args.checkpoint_interval,
                            target=args.target_ci_width, notify=notify,
                            save_samples=args.save_samples, scheduler=args.scheduler)
+    except DamagedCheckpoint as exc:
+        raise UsageError(f"{exc}; --fresh discards it") from None
     except ValueError as exc:  # also a scheduler that cannot be reached
-
         raise UsageError(str(exc)) from None
+    except OSError as exc:  # a full disk at a checkpoint, say
+        raise UsageError(os_error_line(exc)) from None
     except KeyboardInterrupt:
         if not checkpoint.exists():
             raise
@@ -515,7 +539,10 @@ def run(args) -> int:
         return 130
     finally:
         bar.close()
-    ds = write_result(result, output, history=_command_line(args, output))
+    try:
+        ds = write_result(result, output, history=_command_line(args, output))
+    except OSError as exc:  # a full disk, say: nothing is left half-written
+        raise UsageError(os_error_line(exc, output)) from None
     if checkpoint.exists():
         os.unlink(checkpoint)
     if not args.quiet:
@@ -564,6 +591,7 @@ def _run_sweep(args, config, output) -> int:
     import tqdm  # noqa: PLC0415
 
     from tolsim.io.sweep import parts_folder, run_sweep  # noqa: PLC0415
+    from tolsim.study.execution.runner import DamagedCheckpoint  # noqa: PLC0415
 
     sweep = config.sweep
     folder = parts_folder(output)
@@ -589,8 +617,13 @@ def _run_sweep(args, config, output) -> int:
             chunk_blocks=args.chunk_blocks, checkpoint_interval=args.checkpoint_interval,
             target=args.target_ci_width, save_samples=args.save_samples,
             scheduler=args.scheduler)
+    except DamagedCheckpoint as exc:
+        raise UsageError(f"{exc}; --fresh discards it (and the sweep's finished points)"
+                         ) from None
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    except OSError as exc:  # a full disk at a point, a checkpoint or the result, say
+        raise UsageError(os_error_line(exc, output)) from None
     except KeyboardInterrupt:
         bar.close()
         print(f"tolsim run: interrupted; the finished points and the progress of the running "

@@ -1,6 +1,7 @@
 """I/O layer: the TOML study config (:mod:`~tolsim.io.config`), the declared netCDF schema
-(:mod:`~tolsim.io.schema`), the result writer/reader (:mod:`~tolsim.io.netcdf`) and a
-what-if sweep's run into one result file (:mod:`~tolsim.io.sweep`).
+(:mod:`~tolsim.io.schema`), the result writer/reader (:mod:`~tolsim.io.netcdf`) with the
+SHA-256 checksums of its variables (:mod:`~tolsim.io.checksums`) and a what-if sweep's run
+into one result file (:mod:`~tolsim.io.sweep`).
 
 Typical use, without the command line::
 

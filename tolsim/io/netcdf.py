@@ -2,24 +2,52 @@
 
 :func:`write_result` builds the Dataset, validates it against the schema and writes it to a
 temporary file in the output folder, then renames it over the target (:func:`os.replace`,
-atomic on POSIX), so a crash never leaves a truncated result. :func:`read_result` opens a file
-and checks that it is a tolsim result.
+atomic on POSIX), so a crash or a full disk never leaves a truncated result; before the
+rename every variable gets its SHA-256 checksum (:mod:`tolsim.io.checksums`). :func:`read_result`
+opens a file, verifies the checksums and checks that it is a tolsim result.
 """
 
 import os
 import tempfile
 
+import numpy as np
 import xarray as xr
 
 from tolsim.io import schema
+from tolsim.io.checksums import (
+    IntegrityError,
+    UnverifiedResultWarning,
+    add_checksums,
+    sign_file,
+    verify_file,
+)
+from tolsim.io.schema import SWEEP_COORDINATES, SWEEP_DIMENSIONS
 from tolsim.io.schema.core import (
     PLAIN_PROBABILITY_VARIABLES,
+    PROVENANCE_ATTRIBUTES,
     history_line,
     provenance_attributes,
 )
 
-__all__ = ["PLAIN_PROBABILITY_VARIABLES", "history_line", "provenance_attributes", "read_result",
-           "result_to_dataset", "write_dataset", "write_result"]
+__all__ = ["IntegrityError", "NUMERIC_ATTRIBUTES", "PLAIN_PROBABILITY_VARIABLES",
+           "TEXT_ATTRIBUTES", "UnverifiedResultWarning", "check_attributes", "history_line",
+           "provenance_attributes", "read_result", "result_to_dataset", "verify_checksums",
+           "write_dataset", "write_result"]
+
+#: Global attributes written as numbers (in a sweep's file, one that differs between the
+#: points is text: lines ``point K: value``).
+NUMERIC_ATTRIBUTES = ("seed", "samples", "block_size", "workers", "sensitivity_samples",
+                      "samples_maximum", "elapsed_seconds", "full_model_resolve_seconds",
+                      "velocity_deviation_quantile_resolution",
+                      "time_to_contact_quantile_resolution")
+#: Global attributes written as text.
+TEXT_ATTRIBUTES = (
+    *(a for a in schema.GLOBAL_ATTRIBUTES if a not in NUMERIC_ATTRIBUTES),
+    *PROVENANCE_ATTRIBUTES, "references", "velocity_model", "static_model", "propagation",
+    "sampling", "spot_check_status", "contact_probability_interval", "propagation_assumption",
+    "propagation_caveat", "stopping_rule", "target_ci_width", "estimator", "estimator_settings",
+    "rare_event_seed_streams", "contact_creep_model", "friction_assumptions",
+    SWEEP_DIMENSIONS, SWEEP_COORDINATES, "sweep_mode", "sweep_keys", "checksum_scheme")
 
 
 def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
@@ -58,11 +86,22 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
     return schema.validate(ds)
 
 
-def write_dataset(ds: xr.Dataset, path) -> None:
+def write_dataset(ds: xr.Dataset, path) -> dict:
     """Validate ``ds`` and write it to ``path`` through a temporary file and a rename.
+
+    Every variable gets the SHA-256 checksum of its values as written
+    (:func:`tolsim.io.checksums.sign_file`), replacing any it had. On an error (a full disk,
+    say) the temporary file is removed and the target is left as it was; an OSError names
+    the target.
 
     Coordinates are written without ``_FillValue`` (CF 2.5.1; xarray adds one to every float
     variable by default): they never hold missing values.
+
+    Returns
+    -------
+    dict
+        The checksums written, {variable: hex SHA-256}
+        (:func:`tolsim.io.checksums.add_checksums` puts them on a Dataset).
     """
     schema.validate(ds)
     ds = ds.copy(deep=False)  # shallow: the encodings below do not touch the caller's Dataset
@@ -75,40 +114,97 @@ def write_dataset(ds: xr.Dataset, path) -> None:
     os.close(fd)
     try:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+        sums = sign_file(tmp)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual file mode
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError):  # name the target, not the temporary file
+            raise OSError(exc.errno, exc.strerror or str(exc), path) from None
         raise
+    return sums
 
 
 def write_result(result, path, *, history: str | None = None) -> xr.Dataset:
-    """Write a study result to netCDF (atomic); return the Dataset written."""
+    """Write a study result to netCDF (atomic); return the Dataset written (with its
+    checksums)."""
     ds = result_to_dataset(result, history=history)
-    write_dataset(ds, path)
+    add_checksums(ds, write_dataset(ds, path))
     return ds
 
 
-def read_result(path) -> xr.Dataset:
+def check_attributes(ds, path) -> None:
+    """Raise ValueError when a global attribute tolsim writes has the wrong type.
+
+    :data:`TEXT_ATTRIBUTES` must be text; :data:`NUMERIC_ATTRIBUTES` real numbers (``seed``
+    a whole number >= 0), or text in a sweep's file. Attributes tolsim does not write are
+    not checked.
+    """
+    sweep = bool(ds.attrs.get(SWEEP_DIMENSIONS))
+    for name, value in ds.attrs.items():
+        if name in TEXT_ATTRIBUTES and not isinstance(value, str):
+            raise ValueError(f"{path}: global attribute {name} is {_shown(value)}, expected "
+                             "text (the file was altered or damaged)")
+        if name in NUMERIC_ATTRIBUTES and not (sweep and isinstance(value, str)):
+            number = isinstance(value, int | float | np.integer | np.floating) and not \
+                isinstance(value, bool | np.bool_)
+            if not number or (name == "seed" and not (isinstance(value, int | np.integer)
+                                                      and value >= 0)):
+                raise ValueError(f"{path}: global attribute {name} is {_shown(value)}, "
+                                 f"expected a{' whole' if name == 'seed' else ''} number (the "
+                                 "file was altered or damaged)")
+
+
+def _shown(value) -> str:
+    text = " ".join(repr(value).split())
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def read_result(path, *, verify=True) -> xr.Dataset:
     """Open a tolsim result file (loaded into memory) and check it against the schema.
+
+    Parameters
+    ----------
+    path : str or path
+    verify : bool
+        Verify the variables' checksums (:func:`tolsim.io.checksums.verify_file`); a file
+        written before tolsim stored them is read with an
+        :class:`~tolsim.io.checksums.UnverifiedResultWarning`. False reads a damaged file
+        for forensics.
 
     Raises
     ------
     ValueError
-        If the file cannot be opened or is not a tolsim study result.
+        If the file cannot be opened or is not a tolsim study result (its global attributes
+        of the wrong type included); :class:`~tolsim.io.checksums.IntegrityError` (a
+        ValueError) if a variable fails its checksum.
     """
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
             ds = ds.load()
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: cannot open as netCDF: {exc}") from None
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise ValueError(f"{path}: cannot open as netCDF: {' '.join(str(exc).split())}"
+                         ) from None
     if "tolsim_schema" not in ds.attrs:
         raise ValueError(f"{path}: not a tolsim study result (no tolsim_schema attribute)")
+    if verify:
+        verify_checksums(path)
     try:
         schema.validate(ds)
     except schema.SchemaError as exc:
         raise ValueError(f"{path}: not a valid tolsim study result: {exc}") from None
+    check_attributes(ds, path)
     return ds
+
+
+def verify_checksums(path) -> bool:
+    """:func:`tolsim.io.checksums.verify_file`, with a file netCDF cannot read as a
+    ValueError (one line)."""
+    try:
+        return verify_file(path)
+    except (OSError, RuntimeError) as exc:
+        raise ValueError(f"{path}: cannot read as netCDF: {' '.join(str(exc).split())}"
+                         ) from None

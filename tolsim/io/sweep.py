@@ -6,8 +6,9 @@ Running (:func:`run_sweep`): the points run one after the other, each as a study
 own with the study's seed (common random numbers, :mod:`tolsim.study.design.sweep`), and are
 combined into one Dataset (:func:`combine_points`) whose variables gain the sweep
 dimensions. Each finished point is kept in ``OUT.sweep/point-K.nc`` and the point being run
-checkpoints to ``OUT.sweep/point-K.partial``; a rerun resumes per point. The folder goes when
-the result is written.
+checkpoints to ``OUT.sweep/point-K.partial``; a rerun resumes per point. Every point is
+combined as read back from its part file, so a resumed sweep writes the same file as an
+uninterrupted one. The folder goes when the result is written.
 """
 
 import os
@@ -18,6 +19,7 @@ import numpy as np
 import xarray as xr
 
 from tolsim.io import schema
+from tolsim.io.checksums import add_checksums, without_checksums
 from tolsim.io.netcdf import history_line, read_result, result_to_dataset, write_dataset
 from tolsim.io.schema import SWEEP_COORDINATES, SWEEP_DIMENSIONS, SWEEP_VARIABLES
 from tolsim.study.design.sweep import ZIP_DIMENSION, Sweep
@@ -68,13 +70,23 @@ def _pad_spot_checks(datasets):
     return out, np.asarray(counts, dtype=np.int64)
 
 
+def _same(values) -> bool:
+    """Whether attribute values are equal, whatever their type: ``7`` and ``np.int64(7)``
+    (as read from a file) are the same value."""
+    first = values[0]
+    return all(repr(v) == repr(first) or bool(np.array_equal(np.asarray(v), np.asarray(first)))
+               for v in values[1:])
+
+
 def _merge_attrs(all_attrs):
     """One attribute dict: a value that differs between points becomes the lines
-    ``point K: value``."""
+    ``point K: value``. Checksums (:mod:`tolsim.io.checksums`) are left out: they belong to
+    a point's file, and the combined file gets its own."""
     merged = {}
+    all_attrs = [without_checksums(a) for a in all_attrs]
     for key in all_attrs[0]:
         values = [a.get(key, "") for a in all_attrs]
-        if len({repr(v) for v in values}) > 1:
+        if not _same(values):
             merged[key] = "\n".join(f"point {k + 1}: {v}" for k, v in enumerate(values))
         else:
             merged[key] = all_attrs[0][key]
@@ -199,7 +211,7 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
     combined.attrs.pop("sweep_point_fingerprint", None)
     # the sweep's command once (each part has its own time stamp)
     combined.attrs["history"] = history_line(history)
-    write_dataset(combined, output)
+    add_checksums(combined, write_dataset(combined, output))
     shutil.rmtree(folder, ignore_errors=True)
     return combined, elapsed
 
@@ -236,5 +248,7 @@ def _run_points(config, folder, history, progress, on_point, notify, run_options
         checkpoint = folder / f"point-{k:04d}.partial"
         if checkpoint.exists():
             os.unlink(checkpoint)
-        datasets.append(ds)
+        # every point as read from its part file, whether it ran now or in an earlier,
+        # interrupted run: the combined file is then the same (attribute types included)
+        datasets.append(read_result(part))
     return datasets, elapsed

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from tolsim.reports.style import SERIES_COLOURS, new_figure, styled
+from tolsim.reports.style import SERIES_COLOURS, new_figure, save_png, styled
 
 
 @styled
@@ -17,7 +17,7 @@ def plot_load_distribution(out: dict, path) -> None:
     out : dict
         The result of :func:`tolsim.cli.carriage.evaluate` (the ``--json`` object).
     path : str or path-like
-        PNG file to write.
+        PNG file to write (:func:`tolsim.reports.style.save_png`: nothing half-written).
     """
     fig, (top, bottom) = new_figure(6.4, 5.6, nrows=2, sharex=True)
     tracks = sorted({b["track"] for b in out["balls"]})
@@ -42,7 +42,7 @@ def plot_load_distribution(out: dict, path) -> None:
     for ax in (top, bottom):
         ax.set_ylim(bottom=0)
         ax.legend(loc="best")
-    fig.savefig(path)
+    save_png(fig, path)
 
 
 __all__ = ["plot_load_distribution"]

@@ -337,7 +337,8 @@ def write_pdf(path, **report) -> str:
     Parameters
     ----------
     path : str
-        Output file (written through a temporary file and a rename).
+        Output file (written through a temporary file and a rename; on an error, a full
+        disk say, the temporary file is removed).
     **report
         The arguments of :func:`report_pages`.
 
@@ -346,15 +347,30 @@ def write_pdf(path, **report) -> str:
     str
         ``path``.
     """
-    pages = report_pages(**report)
+    data = render_pdf(**report)
     tmp = f"{path}.tmp"
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return os.fspath(path)
+
+
+def render_pdf(**report) -> bytes:
+    """The PDF report (the pages of :func:`report_pages`, whose arguments ``report`` are)
+    as bytes."""
+    pages = report_pages(**report)
     metadata = {"Title": report["title"], "Author": "tolsim",
                 "Subject": "Monte Carlo tolerance study", "Creator": f"tolsim {__version__}"}
-    with matplotlib.rc_context(RC), PdfPages(tmp, metadata=metadata) as pdf:
+    buf = io.BytesIO()
+    with matplotlib.rc_context(RC), PdfPages(buf, metadata=metadata) as pdf:
         for fig in pages:
             pdf.savefig(fig)
-    os.replace(tmp, path)
-    return os.fspath(path)
+    return buf.getvalue()
 
 
 def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assumptions,
@@ -448,4 +464,4 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
     return [p.fig for p in doc.pages]
 
 
-__all__ = ["file_sha256", "report_pages", "wrap", "write_pdf"]
+__all__ = ["file_sha256", "render_pdf", "report_pages", "wrap", "write_pdf"]

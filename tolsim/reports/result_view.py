@@ -17,7 +17,7 @@ import xarray as xr
 
 from tolsim.io import schema
 from tolsim.io.config import parse_config
-from tolsim.io.netcdf import read_result
+from tolsim.io.netcdf import IntegrityError, check_attributes, read_result, verify_checksums
 
 #: Names of the tolsim result-file variables the study report needs.
 REQUIRED = ("velocity_deviation_histogram", "contact_probability", "survival_probability",
@@ -28,10 +28,14 @@ class NotAResult(ValueError):
     """The file is missing, not netCDF, or not a tolsim study result."""
 
 
+class FailsChecksum(NotAResult):
+    """A variable of the file fails its SHA-256 checksum (:mod:`tolsim.io.checksums`)."""
+
+
 # --------------------------------------------------------------------------------------------
 # Reading
 # --------------------------------------------------------------------------------------------
-def read_result_file(path, *, validate=False):
+def read_result_file(path, *, validate=False, verify=True):
     """Open a tolsim result file, or raise :class:`NotAResult` with a one-line reason.
 
     Parameters
@@ -42,7 +46,12 @@ def read_result_file(path, *, validate=False):
         Read it with :func:`tolsim.io.netcdf.read_result`, which checks it against the whole
         schema (``tolsim compare``). By default only the global attributes and the variables
         :data:`REQUIRED` are checked (the study report and the sweep report), so that older or
-        partial files are read as far as they can be.
+        partial files are read as far as they can be. Global attributes of the wrong type
+        are refused either way (:func:`tolsim.io.netcdf.check_attributes`).
+    verify : bool
+        Verify the variables' SHA-256 checksums (:mod:`tolsim.io.checksums`): a variable that
+        fails is refused, a file without checksums is read with an
+        :class:`~tolsim.io.checksums.UnverifiedResultWarning`. False for forensics.
 
     Returns
     -------
@@ -52,7 +61,8 @@ def read_result_file(path, *, validate=False):
     Raises
     ------
     NotAResult
-        If the file is missing, a folder, not netCDF, or not a (complete) tolsim result.
+        If the file is missing, a folder, not netCDF, not a (complete) tolsim result, or
+        fails its checksums.
     """
     path = os.fspath(path)
     if not os.path.exists(path):
@@ -61,7 +71,9 @@ def read_result_file(path, *, validate=False):
         raise NotAResult(f"{path}: is a folder, not a result file")
     if validate:
         try:
-            return read_result(path)
+            return read_result(path, verify=verify)
+        except IntegrityError as exc:
+            raise FailsChecksum(" ".join(str(exc).split())) from None
         except ValueError as exc:
             raise NotAResult(" ".join(str(exc).split())) from None
     with open(path, "rb") as fh:
@@ -71,7 +83,7 @@ def read_result_file(path, *, validate=False):
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
             ds = ds.load()
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RuntimeError) as exc:
         raise NotAResult(f"{path}: cannot be read as netCDF ({' '.join(str(exc).split())})"
                          ) from None
     missing = [a for a in schema.GLOBAL_ATTRIBUTES if a not in ds.attrs]
@@ -84,6 +96,14 @@ def read_result_file(path, *, validate=False):
                          f"{', '.join(absent)})")
     # The full schema check (tolsim.io.schema.validate) is not applied here: the report
     # needs only the variables above, and reads older or partial files as far as it can.
+    try:
+        if verify:
+            verify_checksums(path)
+        check_attributes(ds, path)
+    except IntegrityError as exc:
+        raise FailsChecksum(" ".join(str(exc).split())) from None
+    except ValueError as exc:
+        raise NotAResult(" ".join(str(exc).split())) from None
     return ds
 
 

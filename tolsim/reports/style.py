@@ -89,12 +89,18 @@ def render_png(fig, dpi=DPI) -> bytes:
 
 
 def save_png(fig, path) -> str:
-    """Write ``fig`` to ``path`` (PNG) and return the path."""
+    """Write ``fig`` to ``path`` (PNG, through a temporary file and a rename: on an error, a
+    full disk say, nothing is left half-written) and return the path."""
     data = render_png(fig)
     tmp = f"{path}.tmp"
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
     return os.fspath(path)
 
 

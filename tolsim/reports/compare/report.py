@@ -11,6 +11,7 @@ from tolsim.reports.compare.comparison import Comparison, compare_datasets, run_
 from tolsim.reports.compare.figures import FIGURES
 from tolsim.reports.compare.page import CSV_NAME, HTML_NAME, comparison_html, csv_text
 from tolsim.reports.compare.statistics import CONFIDENCE_LEVEL
+from tolsim.reports.files import write_files
 from tolsim.reports.result_view import NotAResult, read_result_file
 from tolsim.reports.style import (
     render_png,
@@ -31,16 +32,17 @@ class CompareOutputs:
     comparison: Comparison | None = None
 
 
-def read_runs(paths) -> list:
+def read_runs(paths, *, verify=True) -> list:
     """Read result files (:func:`tolsim.reports.result_view.read_result_file` with the schema
     check of :func:`tolsim.io.netcdf.read_result`), or raise :class:`NotAResult` with a
     one-line reason naming the first bad file. The file of a what-if sweep
     (:func:`tolsim.io.sweep.is_sweep`) is refused: its points are compared by its own report
-    (:mod:`tolsim.reports.sweep`)."""
+    (:mod:`tolsim.reports.sweep`). ``verify`` verifies each file's checksums
+    (:mod:`tolsim.io.checksums`); False for forensics."""
     out = []
     for path in paths:
         path = os.fspath(path)
-        ds = read_result_file(path, validate=True)
+        ds = read_result_file(path, validate=True, verify=verify)
         if is_sweep(ds):  # several studies along sweep dimensions (issue 14)
             dims = str(ds.attrs.get("sweep_dimensions", "")).split()
             points = int(np.prod([ds.sizes[d] for d in dims if d in ds.sizes]))
@@ -52,32 +54,8 @@ def read_runs(paths) -> list:
     return out
 
 
-def write_files(folder, files: dict) -> dict:
-    """Write {name: bytes} into ``folder`` (created if missing), each through a temporary
-    file and a rename; on an error, remove what was written (and the folder if made here)."""
-    created = not os.path.isdir(folder)
-    os.makedirs(folder, exist_ok=True)
-    written = {}
-    try:
-        for name, data in files.items():
-            path = os.path.join(folder, name)
-            tmp = f"{path}.tmp"
-            with open(tmp, "wb") as fh:
-                fh.write(data)
-            os.replace(tmp, path)
-            written[name] = path
-    except BaseException:
-        for path in [*written.values(), *(os.path.join(folder, f"{n}.tmp") for n in files)]:
-            if os.path.exists(path):
-                os.unlink(path)
-        if created and not os.listdir(folder):
-            os.rmdir(folder)
-        raise
-    return written
-
-
-def compare_runs(paths, folder, *, progress=None,
-                 confidence_level=CONFIDENCE_LEVEL) -> CompareOutputs:
+def compare_runs(paths, folder, *, progress=None, confidence_level=CONFIDENCE_LEVEL,
+                 verify=True) -> CompareOutputs:
     """Write ``compare.html``, ``compare.csv`` and the PNGs of two or more result files.
 
     The first file is the reference. Every file is read and every output made in memory
@@ -92,6 +70,8 @@ def compare_runs(paths, folder, *, progress=None,
     progress : callable, optional
         Called with a short message before each step.
     confidence_level : float
+    verify : bool
+        Verify the files' checksums (:func:`read_runs`); False for forensics.
 
     Returns
     -------
@@ -100,7 +80,8 @@ def compare_runs(paths, folder, *, progress=None,
     Raises
     ------
     NotAResult
-        If a file is missing, not a tolsim result, or the file of a sweep.
+        If a file is missing, not a tolsim result, fails its checksums, or is the file of a
+        sweep.
     ValueError
         If fewer than two files are given.
 
@@ -135,7 +116,7 @@ def compare_runs(paths, folder, *, progress=None,
     paths = [os.fspath(p) for p in paths]
     if len(paths) < 2:
         raise ValueError(f"need at least two result files to compare, got {len(paths)}")
-    datasets = read_runs(paths)
+    datasets = read_runs(paths, verify=verify)
     say(f"read {len(datasets)} result files")
     comparison = compare_datasets(datasets, run_labels(paths), paths, confidence_level)
     say("figures")

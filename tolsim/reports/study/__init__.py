@@ -100,6 +100,7 @@ from tolsim.reports.study.report import (
     ReportOutputs,
     make_report,
     pdf_content,
+    render_report_pdf,
     write_report_pdf,
 )
 from tolsim.reports.study.sections import (
@@ -130,5 +131,5 @@ __all__ = [
     "plot_quality", "plot_sensitivity", "plot_spot_checks", "plot_velocity_deviation",
     "rare_events_html", "read_result_file", "report_html", "section_titles",
     "sensitivity_from_file", "study_facts", "table_html", "tolerance_rows", "track_labels",
-    "without_output", "write_report_pdf",
+    "without_output", "render_report_pdf", "write_report_pdf",
 ]

@@ -10,6 +10,7 @@ from tolsim.reports import pdf
 from tolsim.reports.assumptions import (
     assumption_table,
 )
+from tolsim.reports.files import write_files
 from tolsim.reports.result_view import (
     config_or_none,
     read_result_file,
@@ -77,8 +78,13 @@ class ReportOutputs:
 # --------------------------------------------------------------------------------------------
 def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
                 progress=None, pdf=True, out_of_spec_limit=None,
-                cpk_minimum=None, friction_exceedance_limit=None) -> ReportOutputs:
+                cpk_minimum=None, friction_exceedance_limit=None,
+                verify=True) -> ReportOutputs:
     """Write ``report.html``, ``report.pdf`` and the PNGs of a result file into ``folder``.
+
+    Every output is made in memory before anything is written, and then written through
+    temporary files and renames (:func:`tolsim.reports.compare.write_files`): on an error (a
+    full disk, say) no file is left half-written and what this call wrote is removed.
 
     Parameters
     ----------
@@ -100,6 +106,9 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     friction_exceedance_limit : float, optional
         Allowed fraction of assemblies whose friction increase exceeds the config's limit
         (a study with ``[contact]``), for the verdict; the config has no key for it.
+    verify : bool
+        Verify the file's checksums (:func:`tolsim.reports.result_view.read_result_file`);
+        False for forensics.
 
     Returns
     -------
@@ -111,9 +120,9 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
         If ``path`` is not a tolsim result.
     """
     say = progress or (lambda msg: None)
-    ds = read_result_file(path)
-    os.makedirs(folder, exist_ok=True)
-    out = ReportOutputs(os.fspath(folder))
+    ds = read_result_file(path, verify=verify)
+    folder = os.fspath(folder)
+    out = ReportOutputs(folder)
     sens = sensitivity_from_file(ds)
     if sens is not None:
         source = "Sobol' indices stored in the result file by tolsim run."
@@ -155,23 +164,26 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
         figs["quality"] = plot_quality(ds, q)
     if sens is not None and len(sens.factors):
         figs["sensitivity"] = plot_sensitivity(without_output(sens), contact_unit(ds)[0])
-    pngs = {}
-    for name, fig in figs.items():
-        pngs[name] = render_png(fig)
-        p = os.path.join(folder, f"{name}.png")
-        with open(p, "wb") as fh:
-            fh.write(pngs[name])
-        out.figures[name] = p
+    pngs = {name: render_png(fig) for name, fig in figs.items()}
     say("report.html")
-    out.html = os.path.join(folder, "report.html")
-    with open(out.html, "w", encoding="utf-8") as fh:
-        fh.write(report_html(ds, pngs, sens, source, q, os.fspath(path), out.verdict, carriage,
-                       out.friction))
+    files = {f"{name}.png": png for name, png in pngs.items()}
+    files["report.html"] = report_html(ds, pngs, sens, source, q, os.fspath(path), out.verdict,
+                                       carriage, out.friction).encode("utf-8")
     if pdf:
         say("report.pdf")
-        out.pdf = write_report_pdf(ds, figs, sens, out.verdict, path,
-                                   os.path.join(folder, "report.pdf"), carriage, out.friction)
+        files["report.pdf"] = render_report_pdf(ds, figs, sens, out.verdict, path, carriage,
+                                                out.friction)
+    written = write_files(folder, files)
+    out.figures = {name: written[f"{name}.png"] for name in pngs}
+    out.html = written["report.html"]
+    out.pdf = written.get("report.pdf", "")
     return out
+
+
+def render_report_pdf(ds, figs, sens, verdict, path, carriage=None, friction=None) -> bytes:
+    """The PDF of a report as bytes (:func:`tolsim.reports.pdf.render_pdf`; the arguments
+    as for :func:`write_report_pdf`)."""
+    return pdf.render_pdf(**pdf_content(ds, figs, sens, verdict, path, carriage, friction))
 
 
 def write_report_pdf(ds, figs, sens, verdict, path, pdf_path, carriage=None,

@@ -68,7 +68,7 @@ def is_sweep_file(path) -> bool:
     try:
         with xr.open_dataset(os.fspath(path), engine="netcdf4") as ds:
             return is_sweep_dataset(ds)
-    except (OSError, ValueError, TypeError):
+    except (OSError, ValueError, TypeError, RuntimeError):
         return False
 
 

@@ -4,7 +4,7 @@
 import os
 from dataclasses import dataclass, field
 
-from tolsim.reports.compare import write_files
+from tolsim.reports.files import write_files
 from tolsim.reports.result_view import read_result_file
 from tolsim.reports.style import render_png
 from tolsim.reports.sweep.figures import FIGURES
@@ -28,7 +28,7 @@ class SweepReportOutputs:
     points: list = field(default_factory=list)
 
 
-def make_sweep_report(path, folder, *, progress=None) -> SweepReportOutputs:
+def make_sweep_report(path, folder, *, progress=None, verify=True) -> SweepReportOutputs:
     """Write ``report.html``, ``points.csv`` and the PNGs of a sweep file into ``folder``.
 
     Every output is made in memory before anything is written (module docstring).
@@ -41,6 +41,8 @@ def make_sweep_report(path, folder, *, progress=None) -> SweepReportOutputs:
         Output folder (created if missing).
     progress : callable, optional
         Called with a short message before each step.
+    verify : bool
+        Verify the file's checksums (:mod:`tolsim.io.checksums`); False for forensics.
 
     Returns
     -------
@@ -54,7 +56,7 @@ def make_sweep_report(path, folder, *, progress=None) -> SweepReportOutputs:
         If it is the result of a single study (:func:`tolsim.reports.study.make_report`).
     """
     say = progress or (lambda msg: None)
-    ds = read_result_file(path)
+    ds = read_result_file(path, verify=verify)
     layout = sweep_layout(ds)
     say(f"{layout.size} sweep points")
     points = sweep_points(ds, layout)

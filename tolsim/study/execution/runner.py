@@ -278,8 +278,19 @@ class _Progress:
         return self.spot_parts[:self.next_block]
 
 
+class DamagedCheckpoint(ValueError):
+    """A checkpoint file that cannot be read: truncated, damaged, or not a checkpoint."""
+
+
 def _save_checkpoint(path, fp, state: _Progress):
-    """Write ``state`` to ``path`` through a temporary file and a rename (atomic)."""
+    """Write ``state`` to ``path`` through a temporary file and a rename (atomic).
+
+    Raises
+    ------
+    OSError
+        Naming ``path`` (not the temporary file, which is removed), when it cannot be
+        written: a full disk, say. An earlier checkpoint at ``path`` is kept.
+    """
     tmp = f"{path}.tmp-{os.getpid()}"
     acc = state.statistics
     parts = state.spots()
@@ -294,14 +305,23 @@ def _save_checkpoint(path, fp, state: _Progress):
             np.savez(fh, fingerprint=np.array(fp), next_block=np.int64(state.next_block),
                      **arrays)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise OSError(exc.errno, f"cannot write the checkpoint: {exc.strerror or exc}",
+                          os.fspath(path)) from None
         raise
 
 
 def _load_checkpoint(path, fp) -> _Progress | None:
-    """The state saved in ``path``, or None if it is not a checkpoint of this study."""
+    """The state saved in ``path``, or None if it is a checkpoint of another study.
+
+    Raises
+    ------
+    DamagedCheckpoint
+        If ``path`` cannot be read as a checkpoint (truncated, damaged, not one).
+    """
     try:
         with np.load(path, allow_pickle=False) as data:
             if str(data["fingerprint"]) != fp:
@@ -312,10 +332,13 @@ def _load_checkpoint(path, fp) -> _Progress | None:
             next_block = int(data["next_block"])
             lengths = data["part_lengths"]
             spots = {k: data[f"spot_{k}"] for k in SPOT_FIELDS}
-    except (OSError, KeyError, ValueError):
-        return None
+    except Exception as exc:  # noqa: BLE001 - zipfile, zlib, numpy and OS errors alike
+        reason = " ".join(f"{type(exc).__name__}: {exc}".split())
+        raise DamagedCheckpoint(f"checkpoint {path} cannot be read, it is damaged or "
+                                f"truncated ({reason[:120]})") from None
     if lengths.shape != (next_block, len(SPOT_FIELDS)):
-        return None
+        raise DamagedCheckpoint(f"checkpoint {path} is inconsistent (part_lengths "
+                                f"{lengths.shape} for {next_block} blocks)")
     pieces = {k: np.split(v, np.cumsum(lengths[:, j])[:-1]) if next_block else []
               for j, (k, v) in enumerate(spots.items())}
     parts = [{k: pieces[k][i] for k in SPOT_FIELDS} for i in range(next_block)]
