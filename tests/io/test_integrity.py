@@ -26,7 +26,7 @@ from tolsim.io.netcdf import read_result
 from tolsim.io.sweep import parts_folder, run_sweep
 from tolsim.study.execution.runner import StudyInterrupted
 
-CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 #: Attributes that stamp a run (its time), not its result.
 STAMPS = ("history", "date_created", "elapsed_seconds", "full_model_resolve_seconds")
 
