@@ -96,6 +96,10 @@ def test_the_estimators_agree_and_are_combined(rare):
     assert r.standard_error < min(sub.standard_error, imp.standard_error)
     assert r.evaluations == sub.evaluations + imp.evaluations
     assert r.ci_lower < RARE_CONTACT_REFERENCE < r.ci_upper
+    # no unresolved row: the bounds and their interval are the combined estimate's
+    assert r.unresolved == 0
+    assert (r.bound_lower, r.bound_upper) == (r.probability, r.probability)
+    assert (r.bounds_ci_lower, r.bounds_ci_upper) == (r.ci_lower, r.ci_upper)
     # each part is the number the subset or importance study gives (the same seed)
     config = rare.config
     for name, part in estimate.parts.items():
