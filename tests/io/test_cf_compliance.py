@@ -144,6 +144,22 @@ def test_result_file_with_saved_samples_passes_cf_checker(tmp_path, capsys):
     assert failed[3] == [] and failed[2] == [], failed
 
 
+@pytest.mark.slow
+def test_rare_estimator_file_passes_cf_checker(tmp_path, capsys):
+    # issue 23: estimator = "rare": each event's status (a CF flag variable), diagnostics and
+    # both estimators' numbers, with the design point along ``factor``
+    config = small(ROOT / "configs" / "rare_contact.toml")
+    config = replace(config, study=replace(config.study, estimator="rare"))
+    out = tmp_path / "rare.nc"
+    ds = write_result(run_study(config), out, history="test")
+    assert {"contact_probability_status", "contact_probability_subset",
+            "contact_probability_importance_status",
+            "contact_probability_effective_sample_size"} <= set(ds.data_vars)
+    errors, failed = check(out, tmp_path)
+    assert not errors, capsys.readouterr().err
+    assert failed[3] == [] and failed[2] == [], failed
+
+
 def test_sweep_file(tmp_path):
     """A sweep's file (issue 14; tolsim.io.sweep): every variable with the sweep dimension
     in front, the swept key as a coordinate with UDUNITS units, padded spot checks."""

@@ -78,3 +78,87 @@ def test_a_plain_file_has_no_rare_events_section():
 
     c = load_config(CONFIG.parent / "yaw_moment_tolerances.toml").with_overrides(samples=256)
     assert rare_events_html(result_to_dataset(run_study(c))) == []
+
+
+# --- estimator = "rare" (issue 23): status, diagnostics and the verdict -------------------------
+def _rare_file():
+    text = re.sub(r'^estimator = "subset"', 'estimator = "rare"\nimportance_samples = 1000',
+                  CONFIG.read_text(), flags=re.M)
+    text = re.sub(r"samples_per_level = \d+", "samples_per_level = 500", text)
+    return result_to_dataset(run_study(parse_config(text, str(CONFIG)).with_overrides(
+        samples=1000)))
+
+
+def _times_100(*args, **kwargs):
+    import dataclasses
+
+    from tolsim.study.analyses.rare_events import subset_simulation
+
+    r = subset_simulation(*args, **kwargs)
+    return dataclasses.replace(r, probability=100 * r.probability,
+                               standard_error=100 * r.standard_error,
+                               ci_lower=100 * r.ci_lower, ci_upper=100 * r.ci_upper)
+
+
+@pytest.fixture(scope="module")
+def rare_files():
+    from tolsim.study.analyses import limit_state
+
+    agreeing = _rare_file()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(limit_state, "subset_simulation", _times_100)
+        disagreeing = _rare_file()
+    return agreeing, disagreeing
+
+
+def test_the_rare_table_shows_status_and_diagnostics(rare_files):
+    from tolsim.reports.study import rare_events_html
+
+    ds = rare_files[0]
+    page = "".join(rare_events_html(ds))
+    assert "<th>status</th><th>diagnostics</th>" in page
+    assert "subset simulation and importance sampling" in page
+    row = page[page.index("ball-to-ball contact"):].split("</tr>")[0]
+    assert "<td>ok</td>" in row
+    assert "effective failing samples" in row and "level-0 ancestors" in row
+    assert "P_FORM / P_IS" in row and "CV with independent levels" in row
+    assert "subset simulation " in row and "(ok)" in row and "importance sampling " in row
+
+
+def test_agreeing_estimators_can_pass(rare_files):
+    from tolsim.reports.verdict import PASS, contact_check, estimator_flag
+
+    ds = rare_files[0]
+    assert estimator_flag(ds, "contact_probability") is None
+    # P(contact) ~ 1.2e-3 with a CV of about 0.05 against the config's limit of 2e-3
+    assert contact_check(ds).status == PASS
+
+
+def test_disagreeing_estimators_are_undecided(rare_files, tmp_path):
+    from tolsim.reports.study import make_report, rare_events_html
+    from tolsim.reports.verdict import PASS, UNDECIDED, contact_check, study_verdict
+
+    ds = rare_files[1]
+    assert ds.contact_probability.attrs["estimator_status"] == "estimators_disagree"
+    check = contact_check(ds)
+    assert check.status == UNDECIDED
+    assert check.reason.startswith("the estimator does not back the number "
+                                   "(estimators_disagree: ")
+    assert study_verdict(ds).status != PASS
+    page = "".join(rare_events_html(ds))
+    assert "<b>ESTIMATORS_DISAGREE</b>: " in page
+    nc = tmp_path / "disagree.nc"
+    ds.to_netcdf(nc)
+    out = make_report(str(nc), str(tmp_path / "report"), sensitivity=False, pdf=False)
+    html_page = Path(out.html).read_text(encoding="utf-8")
+    assert "UNDECIDED" in html_page and "ESTIMATORS_DISAGREE" in html_page
+
+
+def test_a_failed_diagnostic_is_undecided(subset_file):
+    from tolsim.reports.verdict import UNDECIDED, contact_check
+
+    ds = subset_file.copy()
+    ds["contact_probability"].attrs.update(estimator_status="diagnostic_failed",
+                                           estimator_message="constructed")
+    assert contact_check(ds).status == UNDECIDED
+    assert "(diagnostic_failed: constructed)" in contact_check(ds).reason

@@ -6,6 +6,7 @@ and :func:`tolsim.io.netcdf.write_result`.
 """
 
 import argparse
+import math
 import os
 import shlex
 import sys
@@ -199,9 +200,10 @@ def _estimator_lines(ds, prefix, title) -> list:
     name = ESTIMATOR_TITLES.get(a["estimator"], a["estimator"])
     evaluations = int(ds[f"{prefix}_evaluations"])
     unresolved = int(ds[f"{prefix}_unresolved_evaluations"])
-    if a.get("estimator_status", "ok") != "ok":
+    status = a.get("estimator_status", "ok")
+    if status != "ok" and not math.isfinite(float(var)):
         lines = [f"{title}: no estimate ({name}, {evaluations:,} evaluations): "
-                 f"{a.get('estimator_message', a.get('estimator_status'))}"]
+                 f"{a.get('estimator_message', status)}"]
     else:
         cv = float(ds[f"{prefix}_coefficient_of_variation"])
         interval = a.get("interval", "").split(" (")[0]
@@ -209,6 +211,8 @@ def _estimator_lines(ds, prefix, title) -> list:
                  f"[{float(ds[f'{prefix}_ci_lower']):.3g}, "
                  f"{float(ds[f'{prefix}_ci_upper']):.3g}] ({interval}, approximate), "
                  f"{evaluations:,} evaluations ({float(a.get('estimator_seconds', 0)):.2g} s)"]
+        if status != "ok":  # a number its estimator does not back (issue 23)
+            lines.append(f"  NOT OK ({status}): {a.get('estimator_message', '')}")
         if unresolved:
             lines.append(f"  {unresolved:,} evaluated assemblies unresolved: bounds "
                          f"[{float(ds[f'{prefix}_bound_lower']):.3g}, "
@@ -220,7 +224,7 @@ def _estimator_lines(ds, prefix, title) -> list:
     event = {"contact_probability": "contact", "friction_exceedance_probability":
              "friction_exceedance"}.get(prefix, "velocity_deviation_exceedance")
     beta = f"{event}_reliability_index"
-    if a["estimator"] == "importance" and beta in ds:
+    if beta in ds:
         b = ds[beta].attrs
         form = float(ds[f"{event}_form_probability"])
         lines.append(f"  design point ({b.get('design_point_component', '')}, beta "

@@ -31,6 +31,10 @@ statement below holds with at least 97.5 % confidence):
   without a verdict unless p_max is given (the ``friction_exceedance_limit`` argument of
   :func:`study_verdict`).
 
+A check whose estimate comes from a rare-event estimator that does not back it (status
+``diagnostic_failed`` or ``estimators_disagree``, or no number) is *undecided*, never pass or
+fail (:func:`estimator_flag`).
+
 The overall verdict is *fail* if any check fails, else *undecided* if any is undecided, else
 *pass* if any passes, else "no spec limit given".
 
@@ -105,7 +109,26 @@ class Verdict:
 
 
 
-ESTIMATOR_NAMES = {"subset": "subset simulation", "importance": "importance sampling"}
+ESTIMATOR_NAMES = {"subset": "subset simulation", "importance": "importance sampling",
+                   "rare": "subset simulation and importance sampling"}
+
+
+def estimator_flag(ds, name):
+    """The status of a rare-event estimate that its estimator does not back (``"ok"`` and
+    plain Monte Carlo: None): a check resting on it is undecided, never pass or fail
+    (issue 23)."""
+    attrs = ds[name].attrs if name in ds.variables else {}
+    status = str(attrs.get("estimator_status", "ok"))
+    return None if status == "ok" or attrs.get("estimator") in (None, "monte_carlo") else status
+
+
+def _flagged(status, reason, ds, name):
+    """(status, reason) of a check whose estimate :func:`estimator_flag` flags."""
+    flag = estimator_flag(ds, name)
+    if flag is None or status == NO_LIMIT:
+        return status, reason
+    why = ds[name].attrs.get("estimator_message", flag)
+    return UNDECIDED, f"the estimator does not back the number ({flag}: {why}); " + reason
 
 
 def estimator_label(ds, name="contact_probability"):
@@ -299,6 +322,7 @@ def contact_check(ds) -> SpecCheck:
                                 f"the {int(unresolved):,} unresolved {many} leave it open")
     if not np.isfinite(p) and status != NO_LIMIT:
         reason = f"no {one} has a known outcome: " + reason
+    status, reason = _flagged(status, reason, ds, "contact_probability")
     return SpecCheck(contact_quantity(ds), req, estimate, status, reason, digits)
 
 
@@ -396,6 +420,7 @@ def friction_check(ds, friction_exceedance_limit=None):
                   "is shown without a verdict")
     if not np.isfinite(p) and status != NO_LIMIT:
         reason = f"no {one} has a known friction outcome: " + reason
+    status, reason = _flagged(status, reason, ds, "friction_exceedance_probability")
     return SpecCheck(quantity, req, estimate, status, reason, digits)
 
 

@@ -45,7 +45,7 @@ STATIC_MODELS = ("paired", "rigid", "solved", "linearised")
 PROPAGATIONS = ("constant", "along_track")
 SAMPLINGS = ("random", "sobol", "lhs")
 #: Estimators of the event probabilities (``[study] estimator``; issue 15).
-ESTIMATORS = ("monte_carlo", "subset", "importance")
+ESTIMATORS = ("monte_carlo", "subset", "importance", "rare")
 #: Models that give a ball's creep stiffness in a study with ``[contact]`` (issue 13).
 CREEP_MODELS = ("analytic", "full")
 #: Standard deviations either side of the mean taken as the reach of an unbounded normal
@@ -495,11 +495,12 @@ class StudySettings:
         tolerance sources (:func:`tolsim.study.analyses.sensitivity.study_sensitivity`).
     estimator : str
         Estimator of the event probabilities, a name from :data:`ESTIMATORS`: ``monte_carlo``
-        (the plain run alone), ``subset`` or ``importance`` (run after the plain run on every
-        event the study defines, :mod:`tolsim.study.analyses.limit_state`).
+        (the plain run alone), ``subset``, ``importance`` or ``rare`` (both, cross-checked),
+        run after the plain run on every event the study defines
+        (:mod:`tolsim.study.analyses.limit_state`).
     samples_per_level : int
         Subset simulation: samples per level n (n p0 chains of 1 / p0 states; also the
-        fallback of ``importance``).
+        fallback of ``importance`` and half of ``rare``).
     p0 : float
         Subset simulation: conditional probability of each intermediate level [-].
     max_levels : int

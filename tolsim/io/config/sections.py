@@ -585,9 +585,11 @@ def read_study(t: Table) -> StudySettings:
     return s
 
 
-#: Keys of ``[study]`` read by each rare-event estimator (importance falls back to subset).
+#: Keys of ``[study]`` read by each rare-event estimator (importance falls back to subset;
+#: rare runs both).
 ESTIMATOR_KEYS = {"monte_carlo": (), "subset": ("samples_per_level", "p0", "max_levels"),
-                  "importance": ("samples_per_level", "p0", "max_levels", "importance_samples")}
+                  "importance": ("samples_per_level", "p0", "max_levels", "importance_samples"),
+                  "rare": ("samples_per_level", "p0", "max_levels", "importance_samples")}
 
 
 def _estimator(t: Table, s: StudySettings) -> StudySettings:
@@ -598,7 +600,8 @@ def _estimator(t: Table, s: StudySettings) -> StudySettings:
         if t.has(key) and key not in ESTIMATOR_KEYS[estimator]:
             raise t.error(key, f"has no effect with estimator = {estimator!r}; remove it or "
                                "choose an estimator that uses it (subset: samples_per_level, "
-                               "p0, max_levels; importance: also importance_samples)")
+                               "p0, max_levels; importance and rare: also "
+                               "importance_samples)")
     n = t.integer("samples_per_level", default=1000, minimum=1)
     p0 = t.quantity("p0", "dimensionless", default=0.1)
     if not 0 < p0 <= 0.5:

@@ -1,11 +1,13 @@
 """The result-file variables of a study run with a rare-event estimator (issue 15,
-:mod:`tolsim.study.analyses.limit_state`)."""
+:mod:`tolsim.study.analyses.limit_state`): per event the estimate, its status (a CF flag
+variable) and diagnostics (issue 23), and with ``estimator = "rare"`` both estimators'
+numbers."""
 
 import numpy as np
 
 from tolsim.io.schema.declaration import Section
 from tolsim.study.analyses.limit_state import EVENT_KEYS, EVENT_PROBABILITY
-from tolsim.study.analyses.rare_events import ESTIMATOR_TITLES
+from tolsim.study.analyses.rare_events import ESTIMATOR_TITLES, STATUSES
 
 
 def _probability_declarations(prefix, what):
@@ -87,6 +89,60 @@ for _event, _prefix in EVENT_PROBABILITY.items():
                                                       f"the design point of the {_what}", "f"),
     })
 
+#: The estimator's status as a CF 3.5 flag: value -> :data:`~tolsim.study.analyses.
+#: rare_events.STATUSES` name (``flag_meanings``).
+STATUS_FLAGS = dict(enumerate(STATUSES))
+#: Diagnostics of an estimate: suffix -> (RareEventResult field, kind, long name, the
+#: estimators that compute it).
+DIAGNOSTICS = {
+    "effective_sample_size": ("effective_sample_size", "f", "Kish effective number of the "
+                              "failing importance samples", ("importance", "rare")),
+    "largest_weight_share": ("largest_weight_share", "f", "largest failing importance weight "
+                             "over their sum", ("importance", "rare")),
+    "form_ratio": ("form_ratio", "f", "FORM estimate over the importance-sampling estimate",
+                   ("importance", "rare")),
+    "ancestors": ("ancestors", "i", "level-0 samples of subset simulation that its last "
+                  "level's failing samples descend from", ("subset", "rare")),
+    "level_independent_coefficient_of_variation": (
+        "level_independent_cv", "f", "coefficient of variation of the subset-simulation "
+        "estimate with its levels taken as independent", ("subset", "rare")),
+}
+#: ``estimator = "rare"``: each estimator's own estimate, suffix ``_subset`` /
+#: ``_importance`` after the probability's name and before these.
+PART_VALUES = {"": ("probability", "f", "estimate"),
+               "_ci_lower": ("ci_lower", "f", "lower end of the 95 % interval"),
+               "_ci_upper": ("ci_upper", "f", "upper end of the 95 % interval"),
+               "_coefficient_of_variation": ("coefficient_of_variation", "f",
+                                             "coefficient of variation"),
+               "_evaluations": ("evaluations", "i", "assemblies evaluated"),
+               "_status": ("status", "i", "status (flag_meanings; the message in the "
+                                          "estimator_message attribute)")}
+PART_TITLES = {"subset": "subset simulation", "importance": "importance sampling"}
+for _event, _prefix in EVENT_PROBABILITY.items():
+    _what = _prefix.replace("_", " ")
+    RARE_EVENT_VARIABLES[f"{_prefix}_status"] = (
+        (), "1", f"status of the estimate of the {_what} (flag_meanings; ok: the estimator "
+                 "backs it; the reason in the estimator_message attribute)", "i")
+    for _suffix, (_, _kind, _long, _) in DIAGNOSTICS.items():
+        RARE_EVENT_VARIABLES[f"{_prefix}_{_suffix}"] = (
+            (), "1", f"{_long}, for the {_what}", _kind)
+    for _part, _title in PART_TITLES.items():
+        for _suffix, (_, _kind, _long) in PART_VALUES.items():
+            RARE_EVENT_VARIABLES[f"{_prefix}_{_part}{_suffix}"] = (
+                (), "1", f"{_title}'s {_long} of the {_what} (estimator = rare)", _kind)
+
+
+def status_flag(status) -> np.int8:
+    """The flag value of a status name (:data:`STATUS_FLAGS`)."""
+    return np.int8(list(STATUS_FLAGS.values()).index(status))
+
+
+def flag_attributes() -> dict:
+    """CF 3.5 flag attributes of a ``*_status`` variable."""
+    return {"flag_values": np.array(list(STATUS_FLAGS), dtype=np.int8),
+            "flag_meanings": " ".join(STATUS_FLAGS.values())}
+
+
 #: Where the seeds of the estimators come from, for the result file.
 SEED_STREAMS = ("SeedSequence(seed, spawn_key=(4, k)), k: "
                 + ", ".join(f"{event} {key}" for event, key in EVENT_KEYS.items()))
@@ -99,6 +155,8 @@ def estimator_settings(config) -> str:
             f"{st.max_levels}")
     if st.estimator == "importance":
         text = f"importance_samples {st.importance_samples}; fallback subset: {text}"
+    elif st.estimator == "rare":
+        text = f"importance_samples {st.importance_samples}; subset: {text}"
     return text
 
 
@@ -109,9 +167,13 @@ def rare_event_variables(result) -> tuple:
     The events' probability variables (``contact_probability`` ...) are the estimator's, with
     the attributes ``estimator``, ``estimator_status``, ``interval``, ``estimator_seconds``
     (wall time) and, when it has something to say, ``estimator_note`` (a fallback) or
-    ``estimator_message`` (no number); the plain run's
-    counts (``n_contact`` ...) stay. Importance sampling adds the design point along
-    ``factor`` (names: :func:`tolsim.study.analyses.sensitivity.study_factors`).
+    ``estimator_message`` (why the estimate is not ``ok``: no number, or a number kept with
+    a failed diagnostic or a disagreement); the plain run's counts (``n_contact`` ...) stay.
+    Per event also ``*_status`` (the status as a CF flag) and the diagnostics of the
+    estimator (:data:`DIAGNOSTICS`); with ``estimator = "rare"`` each estimator's own
+    estimate (``*_subset``, ``*_importance``: :data:`PART_VALUES`). Importance sampling adds
+    the design point along ``factor`` (names:
+    :func:`tolsim.study.analyses.sensitivity.study_factors`).
     """
     config = result.config
     data, attrs, factors = {}, {}, None
@@ -136,9 +198,26 @@ def rare_event_variables(result) -> tuple:
         attrs[f"{prefix}_ci_upper"].update(interval=r.interval)
         if estimate.note:
             attrs[prefix]["estimator_note"] = estimate.note
-        if not r.ok:
+        if r.message:
             attrs[prefix]["estimator_message"] = r.message
-        if r.estimator == "importance" and r.ok:
+        data[f"{prefix}_status"] = status_flag(r.status)
+        attrs[f"{prefix}_status"] = {**tag, **flag_attributes()}
+        for suffix, (field, kind, _, estimators) in DIAGNOSTICS.items():
+            if r.estimator in estimators:
+                value = getattr(r, field)
+                data[f"{prefix}_{suffix}"] = np.int64(value) if kind == "i" else float(value)
+        for part, p in estimate.parts.items():
+            for suffix, (field, kind, _) in PART_VALUES.items():
+                name = f"{prefix}_{part}{suffix}"
+                value = getattr(p, field)
+                data[name] = (status_flag(value) if suffix == "_status" else
+                              np.int64(value) if kind == "i" else float(value))
+                attrs[name] = {"estimator": p.estimator, "estimator_status": p.status}
+            attrs[f"{prefix}_{part}"]["interval"] = p.interval
+            attrs[f"{prefix}_{part}_status"].update(flag_attributes())
+            if p.message:
+                attrs[f"{prefix}_{part}_status"]["estimator_message"] = p.message
+        if estimate.design_point is not None:
             design = estimate.design_point
             factors = design.factors
             length = np.array([k == "length" for k in design.kinds], dtype=bool)

@@ -127,9 +127,10 @@ RARE_EVENTS = (("contact_probability", "ball-to-ball contact within the stroke")
 
 def rare_events_html(ds) -> list:
     """The rare-event estimates of a file (``[study] estimator``), as HTML parts: per event
-    the estimator, P, CV, interval and model evaluations, and for importance sampling the
-    design point ("the most likely way to fail") per tolerance source. Empty for a plain
-    Monte Carlo file."""
+    the estimator, P, CV, interval and model evaluations, its status (with the reason when
+    not ``ok``) and diagnostics, with ``estimator = "rare"`` each estimator's own number,
+    and for importance sampling the design point ("the most likely way to fail") per
+    tolerance source. Empty for a plain Monte Carlo file."""
     rows, points = [], []
     for name, what in RARE_EVENTS:
         if name not in ds.variables or f"{name}_evaluations" not in ds.variables:
@@ -139,12 +140,17 @@ def rare_events_html(ds) -> list:
             continue
         p = number(ds, name)
         lo, hi = number(ds, f"{name}_ci_lower"), number(ds, f"{name}_ci_upper")
+        status = str(attrs.get("estimator_status", "ok"))
+        flag = status if status == "ok" else f"<b>{html.escape(status.upper())}</b>"
+        if attrs.get("estimator_message"):
+            flag += f": {html.escape(str(attrs['estimator_message']))}"
         rows.append(
             f"<tr><td>{html.escape(what)}</td>"
             f"<td>{html.escape(ESTIMATOR_NAMES.get(attrs['estimator'], attrs['estimator']))}"
             f"</td><td class='num'>{html.escape(format_fraction(p, lo, hi))}</td>"
             f"<td class='num'>{number(ds, f'{name}_coefficient_of_variation'):.3g}</td>"
             f"<td class='num'>{integer(ds, f'{name}_evaluations'):,}</td>"
+            f"<td>{flag}</td><td>{html.escape(diagnostics_text(ds, name))}</td>"
             f"<td>{html.escape(str(attrs.get('interval', '')))}"
             f"{html.escape(' ' + str(attrs['note'])) if attrs.get('note') else ''}</td></tr>")
         prefix = name.removesuffix("_probability")  # contact_, ..._exceedance_
@@ -154,9 +160,39 @@ def rare_events_html(ds) -> list:
         return []
     return ["<h3>Rare events</h3><p>Estimated after the plain run by the estimator named, "
             "in the study's standard-normal input space (README \"Rare events\"); each "
-            "interval is the estimator's own.</p><table><tr><th>event</th><th>estimator</th>"
+            "interval is the estimator's own. A status other than ok means the estimator "
+            "does not back the number (a failed diagnostic, or subset simulation and "
+            "importance sampling disagree): the verdict on it is undecided.</p>"
+            "<table><tr><th>event</th><th>estimator</th>"
             "<th>P (95 % interval)</th><th>CV</th><th>model evaluations</th>"
-            "<th>interval</th></tr>", *rows, "</table>", *points]
+            "<th>status</th><th>diagnostics</th><th>interval</th></tr>", *rows, "</table>",
+            *points]
+
+
+#: The diagnostics of a rare-event estimate in the report: variable suffix -> format.
+DIAGNOSTIC_FORMATS = {
+    "effective_sample_size": "effective failing samples {:.4g}",
+    "largest_weight_share": "largest weight {:.2%}",
+    "form_ratio": "P_FORM / P_IS {:.3g}",
+    "ancestors": "{:.0f} level-0 ancestors",
+    "level_independent_coefficient_of_variation": "CV with independent levels {:.3g}",
+}
+
+
+def diagnostics_text(ds, name) -> str:
+    """The diagnostics of the estimate ``name`` in one line, and with ``estimator = "rare"``
+    each estimator's number with its interval and status ("" when the file has none)."""
+    values = {suffix: number(ds, f"{name}_{suffix}") for suffix in DIAGNOSTIC_FORMATS
+              if f"{name}_{suffix}" in ds.variables}
+    parts = [DIAGNOSTIC_FORMATS[suffix].format(value) for suffix, value in values.items()
+             if np.isfinite(value) and (suffix != "ancestors" or value > 0)]
+    for part, title in (("subset", "subset simulation"), ("importance", "importance sampling")):
+        var = f"{name}_{part}"
+        if var in ds.variables:
+            value = format_fraction(number(ds, var), number(ds, f"{var}_ci_lower"),
+                                    number(ds, f"{var}_ci_upper"))
+            parts.append(f"{title} {value} ({ds[var].attrs.get('estimator_status', '')})")
+    return "; ".join(parts)
 
 
 def _design_point_table(ds, name, what) -> str:

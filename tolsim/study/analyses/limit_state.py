@@ -20,7 +20,7 @@ References
 """
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from tolsim.study.analyses.rare_events import (
     series_importance_sampling,
     subset_simulation,
 )
+from tolsim.study.analyses.rare_events.api import combine
 from tolsim.study.analyses.sensitivity import study_factors
 from tolsim.study.pipeline.block import (
     evaluate_block,
@@ -637,11 +638,14 @@ class EventEstimate:
         sampling falling back to subset simulation), else "".
     design_point : DesignPointSummary or None
         Importance sampling's design point (of its most probable component) in the study's
-        factors, when ``result`` is its.
+        factors, when it gave a number (``importance``, ``rare``).
     components : SeriesDesignPoints or None
         Importance sampling: every component's design point and beta.
     seconds : float
         Wall time [s].
+    parts : dict
+        ``rare`` on a smooth event: ``subset`` and ``importance`` -> each estimator's
+        RareEventResult, which ``result`` combines or sets side by side; empty otherwise.
     """
 
     event: str
@@ -651,6 +655,7 @@ class EventEstimate:
     design_point: DesignPointSummary | None = None
     components: SeriesDesignPoints | None = None
     seconds: float = 0.0
+    parts: dict = field(default_factory=dict)
 
     def describe(self) -> str:
         """One line: the event, the estimator and its number (or why there is none)."""
@@ -665,7 +670,9 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
 
     ``importance`` tries FORM on a smooth limit state and falls back to subset simulation
     (same settings) when the limit state is not smooth or importance sampling gives no
-    number, saying why in ``note``.
+    number, saying why in ``note``; a number flagged by a diagnostic is kept, not ok.
+    ``rare`` runs both and combines them (:func:`~tolsim.study.analyses.rare_events.api.
+    combine`); the two results are in :attr:`EventEstimate.parts`.
 
     Notes
     -----
@@ -680,7 +687,16 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     for a true 1.18e-3, the pairs of the train having betas of 3.44 to 3.58. On the other events
     (``along_track``, friction) it is not attempted, and where FORM fails on a component, or no
     sample fails, subset simulation runs instead: each time :attr:`EventEstimate.note` says so
-    in one line.
+    in one line. An importance-sampling number that a diagnostic flags (``diagnostic_failed``)
+    is kept, with its status and message (no fallback: the number is there to inspect).
+    ``rare``: both, cross-checked by :func:`tolsim.study.analyses.rare_events.api.combine` (the
+    rule of ``tolsim.rare_events.estimate(method="rare")``): their inverse-variance combination
+    when both are ``ok`` and agree (:func:`~tolsim.study.analyses.rare_events.api.agree`), else
+    both numbers (:attr:`EventEstimate.parts`) and status ``estimators_disagree`` (or the flag
+    of the one that failed). Both draw from the event's seed, so each number is the one the
+    ``subset`` or ``importance`` study gives. Where importance sampling is not attempted (not
+    smooth), subset simulation's result stands alone, with a note; where it gives no number,
+    ``combine`` keeps subset simulation's with importance sampling's flag (not ``ok``).
     """
     st = config.study
     started = time.perf_counter()
@@ -691,10 +707,10 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
         return subset_simulation(g, g.dimension, seed, samples_per_level=st.samples_per_level,
                                  p0=st.p0, max_levels=st.max_levels, batch_size=batch_size)
 
-    note, design, components = "", None, None
+    note, design, components, parts = "", None, None, {}
     if st.estimator == "subset":
         result = subset()
-    elif st.estimator == "importance":
+    elif st.estimator in ("importance", "rare"):
         if not g.smooth:
             why = ("along_track propagation gives a limit state that is not smooth (the "
                    "smallest gap over the time steps)" if is_along_track(config) else
@@ -704,17 +720,20 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
         else:
             result, components = series_importance_sampling(
                 g, seed, samples=st.importance_samples, batch_size=batch_size)
-            if result.ok:
+            if np.isfinite(result.probability):
                 design = design_point_summary(config, result.design_point,
                                               components.names[components.most_probable])
-            else:
+            if st.estimator == "rare":
+                parts = {"subset": subset(), "importance": result}
+                result = combine(parts["subset"], result)
+            elif design is None:
                 note = f"importance sampling: {result.message}; subset simulation used"
                 result, components = subset(), None
     else:
         raise ValueError(f"estimator = {st.estimator!r}: choose one of "
                          f"{', '.join(ESTIMATORS[1:])} (monte_carlo is the plain run)")
     return EventEstimate(event, st.estimator, result, note, design, components,
-                         time.perf_counter() - started)
+                         time.perf_counter() - started, parts)
 
 
 def estimate_events(config, *, batch_size=None, notify=None) -> dict:

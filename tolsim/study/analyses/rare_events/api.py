@@ -203,19 +203,24 @@ def combine(sub, imp) -> RareEventResult:
     p = float(np.dot(weights, [sub.probability, imp.probability]) / weights.sum())
     se = 1.0 / math.sqrt(float(weights.sum()))
     z = check_confidence(sub.confidence_level)
+    ci = (max(p - z * se, 0.0), p + z * se)
+    unresolved = sub.unresolved + imp.unresolved
+    # the bounds: the combined estimate and its interval when every row was resolved (the
+    # three coincide, :mod:`~tolsim.study.analyses.rare_events.result`), else the hull of the
+    # two estimators' bounds
+    bounds = ((p, p, *ci) if not unresolved else
+              (min(sub.bound_lower, imp.bound_lower), max(sub.bound_upper, imp.bound_upper),
+               min(sub.bounds_ci_lower, imp.bounds_ci_lower),
+               max(sub.bounds_ci_upper, imp.bounds_ci_upper)))
     return RareEventResult(
         estimator="rare", probability=p, standard_error=se,
         coefficient_of_variation=se / p if p > 0 else float("inf"),
-        ci_lower=max(p - z * se, 0.0), ci_upper=p + z * se,
-        confidence_level=sub.confidence_level,
+        ci_lower=ci[0], ci_upper=ci[1], confidence_level=sub.confidence_level,
         interval="inverse-variance combination of subset simulation and importance "
                  "sampling, normal (approximate)",
         evaluations=evaluations, dimension=sub.dimension, status=STATUS_OK,
-        message="", unresolved=sub.unresolved + imp.unresolved, failures=imp.failures,
-        bound_lower=min(sub.bound_lower, imp.bound_lower),
-        bound_upper=max(sub.bound_upper, imp.bound_upper),
-        bounds_ci_lower=min(sub.bounds_ci_lower, imp.bounds_ci_lower),
-        bounds_ci_upper=max(sub.bounds_ci_upper, imp.bounds_ci_upper),
+        message="", unresolved=unresolved, failures=imp.failures, bound_lower=bounds[0],
+        bound_upper=bounds[1], bounds_ci_lower=bounds[2], bounds_ci_upper=bounds[3],
         samples_per_level=sub.samples_per_level, thresholds=sub.thresholds,
         level_probabilities=sub.level_probabilities,
         level_coefficients_of_variation=sub.level_coefficients_of_variation,
