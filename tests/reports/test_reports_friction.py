@@ -174,7 +174,10 @@ def test_verdict_with_an_allowed_fraction(friction_result):
                             (0.5 * (lo + hi), V.UNDECIDED)):
         check = V.friction_check(ds, allowed)
         assert check.status == status, allowed
-        assert check.requirement == f"P(increase > 0.2 N) ≤ {format_fraction(allowed)}"
+        # the allowed fraction as configured, to 6 significant digits (issue 26: a limit is
+        # never shown rounded to a neighbour of itself)
+        assert check.requirement == (f"P(increase > 0.2 N) ≤ "
+                                     f"{format_fraction(allowed, digits=6)}")
         verdict = V.study_verdict(ds, friction_exceedance_limit=allowed)
         assert verdict.checks[-1] == check
 
