@@ -559,6 +559,23 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
     info[2] = 1.0 if worst <= tol else 0.0
 
 
+@jit(inline="always")
+def contact_ellipses(dbeta, force, nominal_angle, semi_major_coefficient,
+                     semi_minor_coefficient, rd, beta, a, b, hoff):
+    """A ball's four loaded contact angles [rad], Hertz semi-axes a, b and the curved surface's
+    arc-centre offset h (lengths in units of R_B), written into ``beta``, ``a``, ``b``,
+    ``hoff`` (4,): the setup shared by :func:`full_kernel`, :func:`full_loaded_kernel` and the
+    regime kernel."""
+    for i in range(4):
+        beta[i] = nominal_angle + dbeta[i]
+        f13 = np.cbrt(force[i])
+        a[i] = semi_major_coefficient * f13
+        b[i] = semi_minor_coefficient * f13
+        # curved surface: centre of the deformed arc at h p_i (edges on the ball)
+        hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
+                                                                      - a[i] * a[i]))
+
+
 @pjit
 def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_coefficient,
                 curved, rd, free_spin, tol, max_iter, cin, sin_, win, xo, wo, tr, wr,
@@ -573,14 +590,8 @@ def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_
         a = np.empty(4)
         b = np.empty(4)
         hoff = np.empty(4)
-        for i in range(4):
-            beta[i] = nominal_angle + dbeta[n, i]
-            f13 = np.cbrt(force[n, i])
-            a[i] = semi_major_coefficient * f13
-            b[i] = semi_minor_coefficient * f13
-            # curved surface: centre of the deformed arc at h p_i (edges on the ball)
-            hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
-                                                                          - a[i] * a[i]))
+        contact_ellipses(dbeta[n], force[n], nominal_angle, semi_major_coefficient,
+                         semi_minor_coefficient, rd, beta, a, b, hoff)
         state = np.zeros(4)
         contact = np.empty((4, 5))
         info = np.zeros(3)
@@ -701,13 +712,8 @@ def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_co
         a = np.empty(4)
         b = np.empty(4)
         hoff = np.empty(4)
-        for i in range(4):
-            beta[i] = nominal_angle + dbeta[n, i]
-            f13 = np.cbrt(force[n, i])
-            a[i] = semi_major_coefficient * f13
-            b[i] = semi_minor_coefficient * f13
-            hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
-                                                                          - a[i] * a[i]))
+        contact_ellipses(dbeta[n], force[n], nominal_angle, semi_major_coefficient,
+                         semi_minor_coefficient, rd, beta, a, b, hoff)
         for k in range(4):
             out_state[n, k] = np.nan
             for m in range(6):

@@ -12,6 +12,7 @@ from tolsim._jit import jit, pjit
 from tolsim.physics.velocity._full_kernels import (
     SLIDING_POLE,
     ball_loads_kernel,
+    contact_ellipses,
     planar_contact_integrals,
     solve_one,
 )
@@ -432,13 +433,9 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
         hoff = np.empty(4)
         px = np.empty(4)
         py = np.empty(4)
+        contact_ellipses(dbeta[n], force[n], nominal_angle, semi_major_coefficient,
+                         semi_minor_coefficient, rd, beta, a, b, hoff)
         for i in range(4):
-            beta[i] = nominal_angle + dbeta[n, i]
-            f13 = np.cbrt(force[n, i])
-            a[i] = semi_major_coefficient * f13
-            b[i] = semi_minor_coefficient * f13
-            hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
-                                                                          - a[i] * a[i]))
             px[i] = _SX[i] * np.sin(beta[i])
             py[i] = _SY[i] * np.cos(beta[i])
         fb = force[n]
