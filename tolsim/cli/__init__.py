@@ -60,24 +60,6 @@ def integer_at_least(minimum, what, maximum=None):
     return parse
 
 
-@contextlib.contextmanager
-def warnings_as_lines(command, category):
-    """Inside the block, a warning of ``category`` is shown as one line ``<command>: warning:
-    <message>`` on stderr; other warnings as Python shows them."""
-    show = warnings.showwarning
-
-    def one_line(message, kind, filename, lineno, file=None, line=None):
-        if issubclass(kind, category):
-            print(f"{command}: warning: {' '.join(str(message).split())}", file=sys.stderr)
-        else:
-            show(message, kind, filename, lineno, file, line)
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("always", category)
-        warnings.showwarning = one_line
-        yield
-
-
 class Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line and exit code 2 (no usage dump)."""
 
@@ -108,18 +90,19 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefa
 
 
 @contextlib.contextmanager
-def config_warnings(command):
-    """Print each config warning issued inside as one line on stderr, once.
+def warnings_as_lines(command):
+    """Print each of tolsim's own warnings issued inside as one line on stderr, once.
 
-    A :class:`tolsim.io.config.reader.ConfigWarning` (an unusual value in a config: a sweep
-    reads the config once per point) becomes ``<command>: warning: <message>``; other
-    warnings go to the previous handler.
+    A warning whose category tolsim defines (an unusual config value,
+    :class:`tolsim.io.config.reader.ConfigWarning`; a result file without checksums,
+    :class:`tolsim.io.checksums.UnverifiedResultWarning`) becomes ``<command>: warning:
+    <message>``, each text once (a sweep reads its config once per point); other warnings go
+    to the previous handler.
     """
     shown, previous = set(), warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
-        reader = sys.modules.get("tolsim.io.config.reader")  # loaded if a config was read
-        if reader is not None and issubclass(category, reader.ConfigWarning):
+        if category.__module__.startswith("tolsim."):
             text = " ".join(str(message).split())
             if text not in shown:
                 shown.add(text)
@@ -128,8 +111,8 @@ def config_warnings(command):
         previous(message, category, filename, lineno, file, line)
 
     with warnings.catch_warnings():  # (which also resets the once-per-place registries)
-        # shown, whatever the filters say (a config's warnings are part of the answer)
-        warnings.filterwarnings("default", category=UserWarning, module=r"tolsim\.io\.config")
+        # shown, whatever the filters say (they are part of the answer)
+        warnings.filterwarnings("default", category=UserWarning, module=r"tolsim\.")
         warnings.showwarning = show
         yield
 
@@ -173,7 +156,7 @@ def main(argv=None):
             parser.print_help()
             return 2
         module = importlib.import_module(SUBCOMMANDS[args.command])
-        with config_warnings(command):
+        with warnings_as_lines(command):
             return module.run(args)
     except UsageError as exc:
         msg = " ".join(str(exc).split())  # always one line

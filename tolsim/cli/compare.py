@@ -7,7 +7,7 @@ import os
 import sys
 import time
 
-from tolsim.cli import UsageError, warnings_as_lines
+from tolsim.cli import UsageError
 
 DESCRIPTION = """\
 Put two or more result files of 'tolsim run' side by side. The first file is the reference;
@@ -73,7 +73,6 @@ def run(args) -> int:
     out = args.out
     if os.path.exists(out) and not os.path.isdir(out):
         raise UsageError(f"--out {out} exists and is not a folder")
-    from tolsim.io.checksums import UnverifiedResultWarning  # noqa: PLC0415
     from tolsim.reports.compare import NotAResult, compare_runs  # noqa: PLC0415
     from tolsim.reports.result_view import FailsChecksum  # noqa: PLC0415
 
@@ -84,8 +83,7 @@ def run(args) -> int:
             print(f"[{time.perf_counter() - started:5.1f} s] {msg}", file=sys.stderr)
 
     try:
-        with warnings_as_lines("tolsim compare", UnverifiedResultWarning):
-            result = compare_runs(args.results, out, progress=say, verify=not args.no_verify)
+        result = compare_runs(args.results, out, progress=say, verify=not args.no_verify)
     except FailsChecksum as exc:
         raise UsageError(f"{exc}; --no-verify compares anyway (forensics)") from None
     except NotAResult as exc:

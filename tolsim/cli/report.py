@@ -10,7 +10,7 @@ import os
 import sys
 import time
 
-from tolsim.cli import UsageError, integer_at_least, warnings_as_lines
+from tolsim.cli import UsageError, integer_at_least
 
 DESCRIPTION = """\
 Write an HTML report (report.html, figures embedded, plus the PNGs) and the same report as
@@ -85,13 +85,6 @@ def add_parser(subparsers, formatter_class=None):
 
 
 def run(args) -> int:
-    from tolsim.io.checksums import UnverifiedResultWarning  # noqa: PLC0415
-
-    with warnings_as_lines("tolsim report", UnverifiedResultWarning):
-        return _report(args)
-
-
-def _report(args) -> int:
     from tolsim.reports.result_view import FailsChecksum  # noqa: PLC0415
     from tolsim.reports.study import NotAResult, make_report  # noqa: PLC0415
 

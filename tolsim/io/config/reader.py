@@ -30,7 +30,7 @@ class ConfigWarning(UserWarning):
     """An unusual but possible value in a study configuration (one line, like ConfigError).
 
     Issued with :func:`warnings.warn`; the command line prints each one once, as
-    ``tolsim <command>: warning: <message>`` (:func:`tolsim.cli.config_warnings`).
+    ``tolsim <command>: warning: <message>`` (:func:`tolsim.cli.warnings_as_lines`).
     """
 
 
