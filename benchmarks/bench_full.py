@@ -24,7 +24,7 @@ import numpy as np
 from tolsim.physics.geometry import paired_forces
 from tolsim.physics.velocity.full import full
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests" / "physics"))
 from test_full import reference_solve  # noqa: E402  (the SciPy twin lives with the tests)
 
 

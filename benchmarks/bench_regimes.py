@@ -19,6 +19,7 @@ import time
 
 import numba
 import numpy as np
+from bench_full import timed  # the best of a few wall times (run from benchmarks/)
 
 from tolsim.physics.static.solve import GrooveErrors, solve_static
 from tolsim.physics.velocity.full import full
@@ -33,15 +34,6 @@ def random_balls(n, seed=25):
     st = solve_static(200.0 * rho, np.full(n, 200.0), errors)
     keep = st.converged & (st.contact_count >= 3)
     return st.contact_angle_deviation[keep], st.normal_force[keep]
-
-
-def timed(func, *args, repeat=3, **kwargs):
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = func(*args, **kwargs)
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def main(argv=None):
