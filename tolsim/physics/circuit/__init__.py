@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tolsim.physics.circuit._kernels import (
+    SPEED_TOLERANCE,
     STATUS_EVENT_OVERFLOW,
     STATUS_ITERATIONS,
     STATUS_JAMMED,
@@ -409,7 +410,9 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
     (4) leaves in two blocks separates. So a step is exact for constant epsilon and K,
     whatever its length (the test of step-size independence). The contacts are inelastic
     and quasi-static (Notes of :func:`tolsim.physics.trains.train_contact_constant`). Events
-    closer than 1e-12 of the step's travel are simultaneous. A ball enters the zone with the
+    closer than 1e-12 of the step's travel are simultaneous, and speeds closer than 1e-12
+    are equal (``SPEED_TOLERANCE``: a resting pair is not opened and closed again by
+    rounding). A ball enters the zone with the
     gap the circuit gives it: no fresh draw. Cost: O(N) per event and per step; a step
     of up to about one ball diameter has a few events.
 
@@ -575,6 +578,7 @@ def run(state: CircuitState, velocity_deviation, creep_stiffness, stroke, steps,
 
 
 __all__ = [
+    "SPEED_TOLERANCE",
     "STATUS_EVENT_OVERFLOW",
     "STATUS_ITERATIONS",
     "STATUS_JAMMED",

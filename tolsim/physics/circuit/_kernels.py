@@ -9,6 +9,9 @@ from tolsim._jit import jit, pjit
 CHUNK = 64
 #: Events closer than this fraction of the step's travel are simultaneous.
 TIE_TOLERANCE = 1e-12
+#: Speeds per unit travel closer than this are equal (a gap changing by less than 1e-12 m per
+#: metre of travel does not change): rounding cannot open a resting pair or close it again.
+SPEED_TOLERANCE = 1e-12
 
 #: Where a contact happens (the pair's two balls, upstream first, in the direction of flow).
 WHERE_INSIDE, WHERE_ENTRY, WHERE_EXIT, WHERE_RETURN = 0, 1, 2, 3
@@ -205,9 +208,9 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
             # a pair stays closed inside a block, or resting at zero force between two
             # blocks of one speed (a column at rest); it opens where the one ahead is faster
             ring_closed[r] = cut < 0 or (r != cut and label[r] == label[r1]) or (
-                ring_closed[r] and speed[r] == speed[r1])
+                ring_closed[r] and speed[r1] - speed[r] <= SPEED_TOLERANCE)
             t_pair[r] = np.inf
-            if not ring_closed[r] and speed[r] > speed[r1]:
+            if not ring_closed[r] and speed[r] - speed[r1] > SPEED_TOLERANCE:
                 g = _gap(q, half_sum, length, n, r)
                 t = (g if g > 0.0 else 0.0) / (speed[r] - speed[r1])
                 t_pair[r] = t
