@@ -200,7 +200,8 @@ def test_kernel_matches_numpy_twin(travel, drag):
                             got.event_travel[rows, slots], strict=True))
         expected = sorted(want["events"])
         assert [e[:3] for e in events] == [e[:3] for e in expected]
-        assert_allclose([e[3] for e in events], [e[3] for e in expected], rtol=0, atol=1e-12)
+        # event travel: position rounding (~1e-16 m) over a closing rate as small as ~1e-7
+        assert_allclose([e[3] for e in events], [e[3] for e in expected], rtol=0, atol=1e-9)
         assert not got.status.any()
         state = got.state
 

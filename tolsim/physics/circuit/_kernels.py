@@ -34,48 +34,53 @@ def _block_speed(weight, weighted_speed, unloaded, coast, drag):
 
 @jit
 def _solve_blocks(free_speed, weight, loaded, closed, drag, cut, n, label, speed, force,
-                  block_start, block_weight, block_sum, block_unloaded, block_coast):
+                  block_start, block_weight, block_sum, block_unloaded, block_coast,
+                  block_speed):
     """Generalised pool adjacent violators on the ring, cut at ring pair ``cut`` (-1: the
     closed ring). Writes ``speed`` and ``label`` per ring ball and ``force`` per ring pair;
     returns True when a block holding loaded balls is jammed (speed 0)."""
     start = cut + 1 if cut >= 0 else 0
     top = -1
+    r = start if start < n else 0
     for m in range(n):
-        r = (start + m) % n
         top += 1
         block_start[top] = m
         block_weight[top] = weight[r]
         block_sum[top] = weight[r] * free_speed[r]
         block_unloaded[top] = 0.0 if loaded[r] else 1.0
         block_coast[top] = 0.0 if loaded[r] else free_speed[r]
+        block_speed[top] = _block_speed(block_weight[top], block_sum[top],
+                                        block_unloaded[top], block_coast[top], drag)
         while top > 0:
-            pair = (start + block_start[top] - 1) % n
-            if cut < 0 or (closed[pair] and
-                           _block_speed(block_weight[top - 1], block_sum[top - 1],
-                                        block_unloaded[top - 1], block_coast[top - 1], drag)
-                           > _block_speed(block_weight[top], block_sum[top],
-                                          block_unloaded[top], block_coast[top], drag)):
+            pair = r - (m - block_start[top]) - 1  # ring pair ahead of the lower block
+            if pair < 0:
+                pair += n
+            if cut < 0 or (closed[pair] and block_speed[top - 1] > block_speed[top]):
                 block_weight[top - 1] += block_weight[top]
                 block_sum[top - 1] += block_sum[top]
                 block_unloaded[top - 1] += block_unloaded[top]
                 block_coast[top - 1] += block_coast[top]
                 top -= 1
+                block_speed[top] = _block_speed(block_weight[top], block_sum[top],
+                                                block_unloaded[top], block_coast[top], drag)
             else:
                 break
+        r += 1
+        if r == n:
+            r = 0
     jammed = False
     lowest = 0.0
+    r = start if start < n else 0
     for b in range(top + 1):
         first = block_start[b]
         last = block_start[b + 1] - 1 if b < top else n - 1
-        value = _block_speed(block_weight[b], block_sum[b], block_unloaded[b],
-                             block_coast[b], drag)
+        value = block_speed[b]
         share = 0.0  # static friction of each unloaded ball of a block at rest
         if value == 0.0 and block_weight[b] > 0.0:
             jammed = True
             share = block_sum[b] / block_unloaded[b] if block_unloaded[b] > 0.0 else 0.0
         resultant = 0.0
         for m in range(first, last + 1):
-            r = (start + m) % n
             speed[r] = value
             label[r] = first
             if loaded[r]:
@@ -90,12 +95,12 @@ def _solve_blocks(free_speed, weight, loaded, closed, drag, cut, n, label, speed
                     lowest = resultant
             else:
                 force[r] = 0.0
-    if cut < 0:  # the closed ring: the least prestress that keeps every force >= 0
-        for r in range(n):
-            force[r] = force[r] - lowest
+            r += 1
+            if r == n:
+                r = 0
     for r in range(n):
-        if force[r] < 0.0:
-            force[r] = 0.0
+        f = force[r] - lowest if cut < 0 else force[r]  # closed ring: least prestress
+        force[r] = f if f > 0.0 else 0.0
     return jammed
 
 
@@ -108,19 +113,17 @@ def _gap(position, half_sum, length, n, r):
 
 
 @jit
-def _to_boundary(position, loaded, entry, zone, length):
-    """Travel of a ball along the circuit to the next zone boundary [m], >= 0: the exit for a
-    loaded ball, the entry for an unloaded one (rounding past a boundary reads as 0)."""
-    loc = (position - entry) % length
-    if loaded:
-        if loc > 0.5 * (zone + length):
-            loc -= length
-        d = zone - loc
-    else:
-        if loc < 0.5 * zone:
-            loc += length
-        d = length - loc
-    return d if d > 0.0 else 0.0
+def _widest_open(q, half_sum, length, closed, n):
+    """The open ring pair with the widest gap (-1 when every pair is closed)."""
+    cut = -1
+    widest = -np.inf
+    for r in range(n):
+        if not closed[r]:
+            g = _gap(q, half_sum, length, n, r)
+            if g > widest:
+                widest = g
+                cut = r
+    return cut
 
 
 @jit
@@ -130,37 +133,27 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
                      work_b):
     """One step of one circuit, in place (Notes of :func:`tolsim.physics.circuit.step`).
 
-    ``position``, ``diameter``, ``eps``, ``stiffness``, ``loaded`` (ball order, N) and
-    ``closed`` (ball pair k: balls k, k + 1 mod N) and ``speed_out`` (the balls' circuit speeds,
-    read as the coasting speeds of unloaded balls when ``drag`` is 0) are the state, updated
-    in place; ``column_out`` (4,) gets the
-    entry and exit column forces at the end of the step and their step means. Returns
-    (events, status). Work arrays: ``work_f`` (12, N) float, ``work_i`` (3, N) int64,
-    ``work_b`` (2, N) bool.
+    ``position``, ``diameter``, ``eps``, ``stiffness``, ``loaded`` (ball order, N),
+    ``closed`` (ball pair k: balls k, k + 1 mod N) and ``speed_out`` (the balls' circuit
+    speeds, read as the coasting speeds of unloaded balls when ``drag`` is 0) are the state,
+    updated in place; ``column_out`` (4,) gets the entry and exit column forces at the end of
+    the step and their step means. Returns (events, status). Work arrays: ``work_f`` (15, N)
+    float, ``work_i`` (3, N) int64, ``work_b`` (2, N) bool.
     """
     n = position.shape[0]
     capacity = event_pair.shape[0]
     forward = travel >= 0.0
     total = abs(travel)
     entry = 0.0 if forward else -zone
-    q = work_f[0]
-    half_sum = work_f[1]
-    free_speed = work_f[2]
-    weight = work_f[3]
-    speed = work_f[4]
-    force = work_f[5]
-    mean_force = work_f[6]
-    t_pair = work_f[7]
-    t_ball = work_f[8]
-    block_weight = work_f[9]
-    block_sum = work_f[10]
-    coast = work_f[11]
-    ball = work_i[0]
-    label = work_i[1]
-    block_start = work_i[2]
-    ring_loaded = work_b[0]
-    ring_closed = work_b[1]
-    # gather in the direction of flow: ring r = ball r (forward) or ball N - 1 - r
+    q, half_sum, free_speed, weight, speed, force, mean_force = (
+        work_f[0], work_f[1], work_f[2], work_f[3], work_f[4], work_f[5], work_f[6])
+    t_pair, t_ball, block_weight, block_sum, coast, loc, block_speed, loaded_speed = (
+        work_f[7], work_f[8], work_f[9], work_f[10], work_f[11], work_f[12], work_f[13],
+        work_f[14])
+    ball, label, block_start = work_i[0], work_i[1], work_i[2]
+    ring_loaded, ring_closed = work_b[0], work_b[1]
+    # gather in the direction of flow: ring r = ball r (forward) or ball N - 1 - r; loc is
+    # the travel from the entry (loaded balls in [0, L_z], unloaded ones in [L_z, L_c])
     for r in range(n):
         b = r if forward else n - 1 - r
         ball[r] = b
@@ -168,8 +161,15 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
         ring_loaded[r] = loaded[b]
         coast[r] = speed_out[b]
         mean_force[r] = 0.0
+        loaded_speed[r] = 0.5 * (1.0 - eps[b])
+        x = (q[r] - entry) % length
+        if ring_loaded[r]:
+            loc[r] = x - length if x > 0.5 * (zone + length) else x
+        else:
+            loc[r] = x + length if x < 0.5 * zone else x
     for r in range(n):
-        b, b1 = ball[r], ball[(r + 1) % n]
+        r1 = r + 1 if r + 1 < n else 0
+        b, b1 = ball[r], ball[r1]
         half_sum[r] = 0.5 * (diameter[b] + diameter[b1])
         ring_closed[r] = closed[b if forward else b1]
     events = 0
@@ -178,33 +178,26 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
     tie = TIE_TOLERANCE * total
     column_out[2] = 0.0
     column_out[3] = 0.0
+    changed = True  # the state changed since the last solve
     for _iteration in range(4 * n + 16):
         for r in range(n):
-            b = ball[r]
             if ring_loaded[r]:
-                free_speed[r] = 0.5 * (1.0 - eps[b])
-                weight[r] = 2.0 * stiffness[b]
+                free_speed[r] = loaded_speed[r]
+                weight[r] = 2.0 * stiffness[ball[r]]
             else:
                 free_speed[r] = coast[r]
                 weight[r] = 0.0
-        cut = -1
-        widest = -np.inf
-        for r in range(n):
-            if not ring_closed[r]:
-                g = _gap(q, half_sum, length, n, r)
-                if g > widest:
-                    widest = g
-                    cut = r
+        cut = _widest_open(q, half_sum, length, ring_closed, n)
         # t_ball and t_pair hold the blocks' unloaded counts and coasting speeds during the
         # solve (they are rewritten after it)
         if _solve_blocks(free_speed, weight, ring_loaded, ring_closed, drag, cut, n, label,
-                         speed, force, block_start, block_weight, block_sum, t_ball, t_pair):
+                         speed, force, block_start, block_weight, block_sum, t_ball, t_pair,
+                         block_speed):
             status |= STATUS_JAMMED
-        for r in range(n):
-            coast[r] = speed[r]
         best = remaining
         for r in range(n):
-            r1 = (r + 1) % n
+            coast[r] = speed[r]
+            r1 = r + 1 if r + 1 < n else 0
             # a pair stays closed inside a block, or resting at zero force between two
             # blocks of one speed (a column at rest); it opens where the one ahead is faster
             ring_closed[r] = cut < 0 or (r != cut and label[r] == label[r1]) or (
@@ -216,34 +209,32 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
                 t_pair[r] = t
                 if t < best:
                     best = t
-        for r in range(n):
             t_ball[r] = np.inf
             if speed[r] > 0.0:
-                t = _to_boundary(q[r], ring_loaded[r], entry, zone, length) / speed[r]
+                d = (zone if ring_loaded[r] else length) - loc[r]
+                t = (d if d > 0.0 else 0.0) / speed[r]
                 t_ball[r] = t
                 if t < best:
                     best = t
         # advance to the event (or the end of the step)
         for r in range(n):
             q[r] += speed[r] * best
+            loc[r] += speed[r] * best
             mean_force[r] += force[r] * best
-            r1 = (r + 1) % n
-            if not ring_loaded[r] and ring_loaded[r1]:
-                column_out[0] = force[r]
-                column_out[2] += force[r] * best
-            elif ring_loaded[r] and not ring_loaded[r1]:
-                column_out[1] = force[r]
-                column_out[3] += force[r] * best
+            r1 = r + 1 if r + 1 < n else 0
+            if ring_loaded[r] != ring_loaded[r1]:
+                column_out[2 if ring_loaded[r1] else 3] += force[r] * best
         done = total - remaining
         remaining -= best
         limit = best + tie
+        changed = False
         for r in range(n):
             if t_pair[r] <= limit:
+                changed = True
                 ring_closed[r] = True
-                r1 = (r + 1) % n
+                r1 = r + 1 if r + 1 < n else 0
                 if events < capacity:
-                    b, b1 = ball[r], ball[r1]
-                    event_pair[events] = b if forward else b1
+                    event_pair[events] = ball[r] if forward else ball[r1]
                     if ring_loaded[r] and ring_loaded[r1]:
                         event_where[events] = WHERE_INSIDE
                     elif ring_loaded[r1]:
@@ -259,49 +250,46 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
                     status |= STATUS_EVENT_OVERFLOW
         for r in range(n):
             if t_ball[r] <= limit:
+                changed = True
                 ring_loaded[r] = not ring_loaded[r]
+                if ring_loaded[r]:
+                    loc[r] -= length  # entered: the entry is loc = L_c = 0
         if remaining <= tie:
             break
     else:
         status |= STATUS_ITERATIONS
-    # scatter back in ball order; the end-of-step state (speeds of the last solve)
-    column_out[0] = 0.0
-    column_out[1] = 0.0
+    # scatter back in ball order, with the end-of-step speeds and forces (solved again only
+    # if the last advance ended with an event)
     for r in range(n):
         b = ball[r]
         position[b] = q[r] if forward else -q[r]
         loaded[b] = ring_loaded[r]
+    if changed:
+        for r in range(n):
+            if ring_loaded[r]:
+                free_speed[r] = loaded_speed[r]
+                weight[r] = 2.0 * stiffness[ball[r]]
+            else:
+                free_speed[r] = coast[r]
+                weight[r] = 0.0
+        cut = _widest_open(q, half_sum, length, ring_closed, n)
+        if _solve_blocks(free_speed, weight, ring_loaded, ring_closed, drag, cut, n, label,
+                         speed, force, block_start, block_weight, block_sum, t_ball, t_pair,
+                         block_speed):
+            status |= STATUS_JAMMED
+    column_out[0] = 0.0
+    column_out[1] = 0.0
     for r in range(n):
         b = ball[r]
-        if ring_loaded[r]:
-            free_speed[r] = 0.5 * (1.0 - eps[b])
-            weight[r] = 2.0 * stiffness[b]
-        else:
-            free_speed[r] = coast[r]
-            weight[r] = 0.0
-    cut = -1
-    widest = -np.inf
-    for r in range(n):
-        if not ring_closed[r]:
-            g = _gap(q, half_sum, length, n, r)
-            if g > widest:
-                widest = g
-                cut = r
-    if _solve_blocks(free_speed, weight, ring_loaded, ring_closed, drag, cut, n, label, speed,
-                     force, block_start, block_weight, block_sum, t_ball, t_pair):
-        status |= STATUS_JAMMED
-    for r in range(n):
-        b, r1 = ball[r], (r + 1) % n
+        r1 = r + 1 if r + 1 < n else 0
         pair = b if forward else ball[r1]
         speed_out[b] = speed[r]
         velocity_out[b] = 1.0 - 2.0 * speed[r] if ring_loaded[r] else np.nan
         force_out[pair] = force[r]
         mean_force_out[pair] = mean_force[r] / total if total > 0.0 else force[r]
         closed[pair] = ring_closed[r]
-        if not ring_loaded[r] and ring_loaded[r1]:
-            column_out[0] = force[r]
-        elif ring_loaded[r] and not ring_loaded[r1]:
-            column_out[1] = force[r]
+        if ring_loaded[r] != ring_loaded[r1]:
+            column_out[0 if ring_loaded[r1] else 1] = force[r]
     if total > 0.0:
         column_out[2] /= total
         column_out[3] /= total
@@ -322,7 +310,7 @@ def step_circuit_kernel(position, diameter, eps, stiffness, loaded, closed, leng
     """
     m, n = position.shape
     for chunk in prange((m + CHUNK - 1) // CHUNK):
-        work_f = np.empty((12, n))
+        work_f = np.empty((15, n))
         work_i = np.empty((3, n), dtype=np.int64)
         work_b = np.empty((2, n), dtype=np.bool_)
         for c in range(chunk * CHUNK, min(m, (chunk + 1) * CHUNK)):
