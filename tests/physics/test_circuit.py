@@ -228,6 +228,30 @@ def test_conservation_order_identity_and_size():
     assert not record.status.any()
 
 
+@pytest.mark.parametrize("drag", [0.0, 0.01])
+def test_step_size_independent(drag):
+    # Notes, "The step": with constant epsilon and K the step is event-exact, so 7 steps
+    # and 350 steps over one 0.14 m stroke give the same end state and the same contact
+    # events (positions 1e-12 m; event travel 1e-9 m, the rounding of positions over the
+    # slowest closing rates, as in the twin test).
+    state, eps, stiffness = random_circuits(10, 21, zero_slack_rows=1)
+    coarse = circuit.run(state, eps, stiffness, 0.14, 7, drag, event_capacity=4 * BALLS)
+    fine = circuit.run(state, eps, stiffness, 0.14, 350, drag)
+    assert_allclose(coarse.state.position, fine.state.position, rtol=0, atol=1e-12)
+    assert_array_equal(coarse.state.closed, fine.state.closed)
+    assert_array_equal(coarse.state.loaded, fine.state.loaded)
+
+    def events(record):
+        e = record.events
+        order = np.lexsort((e["travel"], e["pair"], e["circuit"]))
+        return [e[k][order] for k in ("circuit", "pair", "where", "travel")]
+
+    for a, b in zip(events(coarse)[:3], events(fine)[:3], strict=True):
+        assert_array_equal(a, b)
+    assert_allclose(events(coarse)[3], events(fine)[3], rtol=0, atol=1e-9)
+    assert events(fine)[0].size > 50 and not (coarse.status | fine.status).any()
+
+
 @pytest.mark.parametrize("common", [0.0, 1.5e-3])
 @pytest.mark.parametrize("stroke", [0.6, -0.6])
 def test_equal_speeds_zero_drag(common, stroke):

@@ -335,7 +335,7 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
     g_k = sigma_{k+1} - sigma_k - (D_k + D_{k+1}) / 2, with sigma_N = sigma_0 + L_c. Their
     sum telescopes to L_c - sum_k D_k, the slack, whatever the positions: the state holds
     positions, not gaps, so the slack is conserved by construction (to the rounding of one
-    sum, about N ulp(sigma); the tests check 1e-12 m over thousands of steps). A closed pair
+    sum, about N ulp(sigma); the tests check 1e-12 m over 800 steps). A closed pair
     never overlaps, so the balls never change order.
 
     **One ball.** A pair k in contact carries a compressive force Q_k >= 0 (ball k pushes
