@@ -126,8 +126,8 @@ def circuit_length(diameter, slack):
 
         [carriage.circuit]
         balls = 30              # balls per circuit, more than the loaded zone holds
-        slack_mm = 0.5          # total clearance of the circuit
-        return_drag_N = 0.01    # resistance of one unloaded ball moving in the circuit
+        slack_mm = 1.0          # total clearance of the circuit
+        return_drag_N = 0.02    # resistance of one unloaded ball moving in the circuit
 
     Without ``[carriage.circuit]`` today's open trains stay. ``slack_mm`` and
     ``return_drag_N`` become ``slack`` and ``return_drag`` in SI at load time; the loaded zone
@@ -143,30 +143,39 @@ def circuit_length(diameter, slack):
       D and each turnaround is pi x 10 mm = 31.4 mm (estimate).
     * Return channel: as long as the carriage body, about the loaded zone, 120.6 mm
       (estimate; the end caps add to the turnarounds).
-    * L_c = 120.6 + 2 x 31.4 + 120.6 = 304 mm, so 30 balls of 10 mm with 4 mm to spare.
-      A circuit is filled as full as assembly allows; the slack that is left is of the
-      order of a fraction of a ball (estimate: 0.1 to 1 mm, default 0.5 mm = 0.05 D). 12
-      balls are loaded and 18 are in the turnarounds and the return channel.
+    * L_c = 120.6 + 2 x 31.4 + 120.6 = 304 mm (an estimate to a few mm), so 30 balls of
+      10 mm; the slack is not derived from this sum (below). 12 balls are loaded and 18
+      are in the turnarounds and the return channel.
+    * Slack: a circuit is filled ball by ball until no further ball fits, so
+      0 <= slack < D = 10 mm; the designer sizes the circuit for the ball count plus a
+      small clearance, so the slack sits at the low end (estimate, no catalogue gives it).
+      For comparison, today's open model draws the zone's gaps U(0, 100 um)
+      (``[train] initial_gap`` of configs/carriage_preload.toml), a mean of 50 um per
+      pair, which over the 30 pairs of this circuit is 1.5 mm. Proposed default 1.0 mm
+      (0.1 D, estimate); a sweep of 0 to 3 mm covers the plausible range.
     * The 20-size guides of the catalogues carry smaller balls (about 3 to 4.8 mm, estimate)
       and about as many balls per circuit; the circuit above is that of the paper's 10 mm
       ball, to match the project's configs.
 
-    **Default ``return_drag_N`` = 0.01 N per unloaded ball (order-of-magnitude estimate).**
+    **Default ``return_drag_N`` = 0.02 N per unloaded ball (order-of-magnitude estimate).**
 
     * Weight friction: a 10 mm steel ball weighs m g = 7850 kg/m^3 x (pi/6)(0.01 m)^3 x
       9.81 m/s^2 = 0.040 N; on the plastic wall of a horizontal return channel with a
       sliding or rolling-with-slip friction coefficient 0.1 to 0.3 (steel on greased
       POM/nylon, estimate) it costs 0.004 to 0.012 N.
     * Grease: a ball pushed through grease of yield stress 100 to 500 Pa (NLGI 1 to 2,
-      estimate) over its cross-section pi (5 mm)^2 = 7.9e-5 m^2 needs 0.008 to 0.04 N;
-      the viscous part, 3 pi eta D u with eta = 0.1 Pa s and u = 0.1 m/s, is 1e-3 N.
+      estimate) over its cross-section pi (5 mm)^2 = 7.9e-5 m^2 needs 0.008 to 0.04 N in
+      a channel packed with grease, less in one that holds only a film (0 to 0.04 N); the
+      viscous part, 3 pi eta D u with eta = 0.1 Pa s and u = 0.1 m/s, is 1e-3 N.
     * The turnarounds add wall friction from the ball being turned (its centripetal force
       is negligible, m u^2 / r = 4e-3 kg x 0.01 / 0.01 = 4e-3 N at u = 0.1 m/s) and from
       the push of the column against the curved wall, which the drag per ball absorbs.
 
-    Hence 0.004 to 0.05 N per ball; the default 0.01 N gives 18 x 0.01 = 0.18 N for the
+    Hence 0.004 to 0.05 N per ball; the default 0.02 N is weight friction at mu = 0.2
+    (0.008 N) plus a partly greased channel (0.01 N). It gives 18 x 0.02 = 0.36 N for the
     column of the circuit above, in the issue's 0.1 to 0.5 N (16 balls x 0.004 to 0.03 N
-    plus grease and turnarounds), and comparable with K sigma_epsilon ~ 0.3 N.
+    plus grease and turnarounds), and comparable with K sigma_epsilon ~ 0.3 N. A sweep of
+    0.005 to 0.05 N covers the range.
     """
     d = np.asarray(diameter, dtype=np.float64)
     return d.sum(axis=-1) + np.asarray(slack, dtype=np.float64)
@@ -424,17 +433,19 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
 
     **Neglected.**
 
-    * Inertia: a 10 mm ball (4.1 g) leaving at v/2 = 0.1 m/s against f = 0.01 N coasts
-      m (v/2)^2 / (2 f) = 2 mm, for about 40 ms, before it stops (0.005 mm at v = 10 mm/s, the
-      paper's speed). The quasi-static model stops it at once; the coasting changes where
-      the exit contact happens, not the slack or the order (estimate, not modelled).
+    * Inertia: a 10 mm ball (4.1 g) leaving at v/2 = 0.1 m/s against f = 0.02 N coasts
+      m (v/2)^2 / (2 f) = 1.0 mm, for about 20 ms, before it stops (0.003 mm at
+      v = 10 mm/s, the paper's speed). The quasi-static model stops it at once; the
+      coasting changes where the exit contact happens (by up to a tenth of a ball at
+      0.2 m/s), not the slack or the order (estimate, not modelled).
     * Gravity along the column: none in the straight channels of a horizontal guide; in the
       turnarounds of a horizontal guide it acts across the path (it is part of the wall
       friction in f). For a vertical guide the column's weight, 18 x 0.04 N = 0.7 N, would
       act along it: not modelled.
     * Turnaround friction beyond the drag: the column pressed against the curved wall by
-      its own force Q adds a capstan-like friction mu Q pi; with Q ~ 0.2 N and mu ~ 0.1 it is
-      ~0.06 N, below the drag's uncertainty, and it is lumped into f.
+      its own force Q adds a capstan-like friction mu Q pi; with Q ~ 0.4 N and mu ~ 0.1 it is
+      ~0.1 N per turnaround, within the drag's factor-of-ten uncertainty, and it is lumped
+      into f (a force-dependent drag would need a second parameter).
     * Ball-to-ball friction in the circuit (``braking_sensitivity`` of the trains) and the
       unloaded balls' spin; elastic deformation of the balls (the least-prestress rule for
       slack = 0 replaces it).
