@@ -8,6 +8,7 @@ from tolsim.physics._fastmath import SMALL_ANGLE, SMALL_TAN, atan_small, sin_cos
 from tolsim.physics.carriage._kernels import (
     LIFT_OFF,
     STATUS_CONVERGED,
+    STATUS_FAILED,
     STATUS_LIFT_OFF,
     STEP_CAP,
     cholesky,
@@ -636,7 +637,7 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
                     low, step, trial)
             out_status[a] = status
             out_iterations[a] = it
-            if status == STATUS_LIFT_OFF:
+            if status == STATUS_LIFT_OFF or status == STATUS_FAILED:
                 for b in range(nball):
                     out_ball_converged[a, b] = ball_ok[last, b]
                     out_count[a, b] = 0

@@ -12,9 +12,11 @@ from tolsim.physics.carriage._kernels import (
 from tolsim.physics.carriage.layout import (
     DOFS,
     CarriageBatch,
+    CarriageError,
     CarriageLayout,
     CarriageLoad,
     CarriageSolution,
+    CarriageStatus,
     locked_dofs,
 )
 from tolsim.physics.geometry import TABLE1, Bearing
@@ -139,6 +141,62 @@ class _Balls:
         # force of the ball on its carriage groove, module frame: (-N_x, N_y)
         out["groove_force"] = np.stack([-out["load"][:, 0], out["load"][:, 1]], axis=-1)
         return out
+
+
+def _settle(evaluate, a_s, q_s, step, out, limit):
+    """Carry a carriage that touches nothing along ``step`` until its contacts close.
+
+    ``out`` is the evaluation at ``q_s`` (no carriage flank loaded), ``step`` a descent
+    direction of the potential Pi (scaled q). Pi(q_s + s step) is convex in s, with the
+    constant slope -R . step < 0 while nothing touches: the distance s is doubled until the
+    slope turns >= 0 (a contact closed and carries the load along ``step``), then the root of
+    the slope is found by regula falsi (Illinois) to 1 % of the initial slope (Notes of
+    :func:`solve_carriage`, "Settling"). Lift-off: the grooves reach ``limit`` with nothing
+    loaded. Returns (status, q_s, out); ``numba`` twin: ``_kernels.settle``.
+    """
+    move = float(np.abs(np.einsum("bik,k->bi", a_s, step)).max())
+    room = limit - float(np.abs(np.einsum("bik,k->bi", a_s, q_s)).max())
+    s_max = (1.0 - 1e-9) * room / move  # |A (q_s + s step)| <= limit for s <= s_max
+    slope0 = -float(out["residual_q"] @ step)
+    s_lo, d_lo = 0.0, slope0
+    s = 1.0
+    while True:  # bracket the minimum along the ray
+        s = min(s, s_max)
+        cand = evaluate(q_s + s * step)
+        if cand is None or not cand["converged"].all():
+            return CarriageStatus.FAILED, q_s, out
+        slope = -float(cand["residual_q"] @ step)
+        if slope >= 0.0:
+            s_hi, d_hi = s, slope
+            break
+        s_lo, d_lo = s, slope
+        if s >= s_max:
+            loaded = (cand["groove_force"] ** 2).sum() > 0
+            return (CarriageStatus.FAILED if loaded else CarriageStatus.LIFT_OFF), q_s, out
+        s *= 2.0
+    side = 0
+    for _ in range(60):  # regula falsi (Illinois) on the slope
+        if abs(slope) <= 1e-2 * abs(slope0) or s_hi - s_lo <= 1e-12 * s_hi:
+            break
+        s = s_hi - d_hi * (s_hi - s_lo) / (d_hi - d_lo)
+        cand = evaluate(q_s + s * step)
+        if cand is None or not cand["converged"].all():
+            return CarriageStatus.FAILED, q_s, out
+        slope = -float(cand["residual_q"] @ step)
+        if slope < 0.0:
+            s_lo, d_lo = s, slope
+            d_hi = 0.5 * d_hi if side == -1 else d_hi
+            side = -1
+        else:
+            s_hi, d_hi = s, slope
+            d_lo = 0.5 * d_lo if side == 1 else d_lo
+            side = 1
+    if not (cand["groove_force"] ** 2).sum() > 0:
+        s = s_hi
+        cand = evaluate(q_s + s * step)
+        if cand is None or not cand["converged"].all():
+            return CarriageStatus.FAILED, q_s, out
+    return CarriageStatus.CONVERGED, q_s + s * step, cand
 
 
 # --------------------------------------------------------------------------------------------
@@ -345,8 +403,10 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
         out["potential"] = out["energy"].sum() - q_s_ext @ q_s
         return out
 
-    def lift_off():
-        return ValueError(f"the carriage lifts off the rail under the load ({load.describe()})")
+    def failed():
+        return CarriageError(f"the carriage solve failed under the load ({load.describe()}): "
+                             f"the motion left the gothic arch with contacts loaded, or a ball "
+                             f"solve failed", CarriageStatus.FAILED)
 
     delta_ref = max((f_ref / k) ** (2.0 / 3.0), FLOOR_LENGTH)
     k_ref = 1.5 * k * np.sqrt(delta_ref) * 0.5
@@ -359,7 +419,7 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
     q_s = np.zeros(5)
     out = evaluate(q_s)
     if out is None or not out["converged"].all():
-        raise lift_off()
+        raise failed()
     converged = False
     it = 0
     while True:
@@ -370,13 +430,12 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
         if it >= max_iter:
             break
         it += 1
+        loose = not (out["groove_force"] ** 2).sum() > 0  # no carriage flank loaded
         kff = out["tangent"][np.ix_(free, free)]
         rf = out["residual_q"][free]
         w = np.linalg.eigvalsh(kff)
         wg = np.linalg.eigvalsh(geometric[np.ix_(free, free)])
         if w[0] <= 1e-10 * wg[-1]:  # zero (unloaded) or singular tangent: regularise
-            if not (out["groove_force"] ** 2).sum() > 0 and it > 1:
-                raise lift_off()
             kff = kff + geometric[np.ix_(free, free)]
         step = np.zeros(5)
         step[free] = np.linalg.solve(kff, rf)
@@ -396,11 +455,17 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
                     break
             alpha *= 0.5
         if trial is None:
-            raise lift_off()
+            raise failed()
         q_s = q_s + alpha_trial * step
         out = trial
-    if not (out["groove_force"] ** 2).sum() > 0 and load_norm > 0:
-        raise lift_off()
+        if loose and not (out["groove_force"] ** 2).sum() > 0:  # closed no contact: settle
+            status, q_s, out = _settle(evaluate, a_s, q_s, step, out, LIFT_OFF * dist)
+            if status == CarriageStatus.LIFT_OFF:
+                raise CarriageError(f"the carriage lifts off the rail under the load "
+                                    f"({load.describe()}): it pulls the carriage away from "
+                                    f"every contact", CarriageStatus.LIFT_OFF)
+            if status != CarriageStatus.CONVERGED:
+                raise failed()
 
     shape4, shape2 = (t, n, 4), (t, n, 2)
     nx, ny = out["load"][:, 0], out["load"][:, 1]
@@ -424,6 +489,7 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
         converged=bool(converged),
         iterations=it,
         residual=out["residual_q"] / scale,
+        status=CarriageStatus.CONVERGED if converged else CarriageStatus.NOT_CONVERGED,
     )
 
 
