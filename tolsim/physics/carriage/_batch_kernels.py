@@ -631,7 +631,7 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
                     arc_centres(a * nball + b, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0,
                                 dist, base[b])
                 status, it, cur, last = nested_newton(
-                    q, free, groove_map, geometric, base, half, dist, k, tol, max_iter,
+                    q, free, groove_map, geometric, base, half, s0, c0, dist, k, tol, max_iter,
                     ball_tol, ball_max_iter, ball_floor, floor, load_norm, k_ref, singular, cap,
                     limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state, kreg,
                     low, step, trial)

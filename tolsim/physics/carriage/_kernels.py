@@ -295,7 +295,7 @@ def scaled_error(residual, free, scale):
 
 
 @jit
-def nested_newton(q, free, groove_map, geometric, base, half, dist, k, tol, max_iter,
+def nested_newton(q, free, groove_map, geometric, base, half, s0, c0, dist, k, tol, max_iter,
                    ball_tol, ball_max_iter, ball_floor, force_floor, load_norm, k_ref, singular,
                    cap, limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state,
                    kreg, low, step, trial):
@@ -388,7 +388,7 @@ def nested_newton(q, free, groove_map, geometric, base, half, dist, k, tol, max_
         cur = nxt
         last = cur
         if loose and not state[cur, 2] > 0.0:  # the step closed no contact: settle
-            code, cur = settle(q, step, cur, groove_map, base, half, dist, k, ball_tol,
+            code, cur = settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol,
                                ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
                                work, residual, tangent, state, trial)
             last = cur
@@ -401,8 +401,36 @@ def nested_newton(q, free, groove_map, geometric, base, half, dist, k, tol, max_
 
 
 @jit
-def settle(q, step, cur, groove_map, base, half, dist, k, ball_tol, ball_max_iter, ball_floor,
-           limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state, trial):
+def receding(groove_map, step, s0, c0):
+    """Whether the carriage motion ``step`` moves every carriage flank away from its ball.
+
+    The approach of carriage flank i changes by -u_i . dg under a groove translation dg, u_i
+    the direction from the ball centre to the contact, nominally (s0, c0) for TR and (-s0,
+    c0) for TL (module frame): both recede where c0 dg_2 >= s0 |dg_1| (to round-off, 1e-12
+    of the largest groove travel). A ball held by its two flanks in a gothic arch then has
+    no contact left to close, whatever its clearance.
+    """
+    big = 0.0
+    for b in range(groove_map.shape[0]):
+        for c in range(2):
+            g = 0.0
+            for j in range(5):
+                g += groove_map[b, c, j] * step[j]
+            big = max(big, abs(g))
+    for b in range(groove_map.shape[0]):
+        g1 = g2 = 0.0
+        for j in range(5):
+            g1 += groove_map[b, 0, j] * step[j]
+            g2 += groove_map[b, 1, j] * step[j]
+        if c0 * g2 - s0 * abs(g1) < -1e-12 * big:
+            return False
+    return True
+
+
+@jit
+def settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol, ball_max_iter,
+           ball_floor, limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state,
+           trial):
     """Carry a carriage that touches nothing along ``step`` until its contacts close.
 
     The compiled twin of ``solve._settle`` (Notes of :func:`solve_carriage`, "Settling"):
@@ -410,9 +438,9 @@ def settle(q, step, cur, groove_map, base, half, dist, k, ball_tol, ball_max_ite
     ``step`` is doubled until the slope -R . step of the potential turns >= 0, then its root
     is found by regula falsi (Illinois) to 1 % of the initial slope. On success q moves to
     q + s step, evaluated in the returned buffer. Returns (status, buffer): STATUS_CONVERGED
-    (settled), STATUS_LIFT_OFF (the grooves reach ``limit`` with nothing loaded) or
-    STATUS_FAILED (a ball solve failed, or the grooves reach ``limit`` with contacts loaded
-    and the potential still falling).
+    (settled), STATUS_LIFT_OFF (the grooves reach ``limit`` with nothing loaded, every
+    carriage flank moving away from its ball: :func:`receding`) or STATUS_FAILED (a ball
+    solve failed, or the grooves reach ``limit`` with contacts loaded or approaching).
     """
     nball = groove_map.shape[0]
     move = gmax = 0.0
@@ -451,7 +479,8 @@ def settle(q, step, cur, groove_map, base, half, dist, k, ball_tol, ball_max_ite
             break
         s_lo, d_lo = s, slope
         if s >= s_max:
-            return (STATUS_FAILED if state[src, 2] > 0.0 else STATUS_LIFT_OFF), src
+            off = not state[src, 2] > 0.0 and receding(groove_map, step, s0, c0)
+            return (STATUS_LIFT_OFF if off else STATUS_FAILED), src
         s *= 2.0
     side = 0
     for _ in range(60):  # regula falsi (Illinois) on the slope

@@ -212,8 +212,9 @@ class CarriageStatus(enum.IntEnum):
         by a descent ray of the convex potential along which no contact closes before the
         grooves leave the gothic arch (Notes of :func:`solve_carriage`, "Settling").
     FAILED
-        The solve broke down: the motion left the gothic arch with contacts loaded (a load
-        beyond the model), or a ball solve failed.
+        No answer within the model: the motion leaves the gothic arch (a quarter of d = R_G -
+        R_B of groove travel) before an equilibrium, with contacts loaded or approaching (a
+        load beyond the arch, or a clearance larger than it), or a ball solve failed.
     """
 
     CONVERGED = 0
@@ -231,8 +232,9 @@ _STATUS_TEXT = {
     CarriageStatus.NOT_CONVERGED: "the carriage Newton did not converge within max_iter steps",
     CarriageStatus.LIFT_OFF: "lifted off: the load pulls the carriage away from every contact "
                              "(no equilibrium)",
-    CarriageStatus.FAILED: "failed: the motion left the gothic arch with contacts loaded, or a "
-                           "ball solve failed",
+    CarriageStatus.FAILED: "failed: the motion leaves the gothic arch before an equilibrium "
+                           "(contacts out of its reach, or a load beyond it), or a ball solve "
+                           "failed",
 }
 
 

@@ -8,6 +8,7 @@ from tolsim.physics.carriage._kernels import (
     STATUS_CONVERGED,
     STEP_CAP,
     carriage_balls_kernel,
+    receding,
 )
 from tolsim.physics.carriage.layout import (
     DOFS,
@@ -143,7 +144,7 @@ class _Balls:
         return out
 
 
-def _settle(evaluate, a_s, q_s, step, out, limit):
+def _settle(evaluate, a_s, q_s, step, out, limit, beta0):
     """Carry a carriage that touches nothing along ``step`` until its contacts close.
 
     ``out`` is the evaluation at ``q_s`` (no carriage flank loaded), ``step`` a descent
@@ -152,7 +153,8 @@ def _settle(evaluate, a_s, q_s, step, out, limit):
     slope turns >= 0 (a contact closed and carries the load along ``step``), then the root of
     the slope is found by regula falsi (Illinois) to 1 % of the initial slope (Notes of
     :func:`solve_carriage`, "Settling"). Lift-off: the grooves reach ``limit`` with nothing
-    loaded. Returns (status, q_s, out); ``numba`` twin: ``_kernels.settle``.
+    loaded and every carriage flank receding (``_kernels.receding``); failure: with contacts
+    loaded or approaching. Returns (status, q_s, out); compiled twin: ``_kernels.settle``.
     """
     move = float(np.abs(np.einsum("bik,k->bi", a_s, step)).max())
     room = limit - float(np.abs(np.einsum("bik,k->bi", a_s, q_s)).max())
@@ -171,8 +173,9 @@ def _settle(evaluate, a_s, q_s, step, out, limit):
             break
         s_lo, d_lo = s, slope
         if s >= s_max:
-            loaded = (cand["groove_force"] ** 2).sum() > 0
-            return (CarriageStatus.FAILED if loaded else CarriageStatus.LIFT_OFF), q_s, out
+            off = (not (cand["groove_force"] ** 2).sum() > 0
+                   and receding(np.ascontiguousarray(a_s), step, np.sin(beta0), np.cos(beta0)))
+            return (CarriageStatus.LIFT_OFF if off else CarriageStatus.FAILED), q_s, out
         s *= 2.0
     side = 0
     for _ in range(60):  # regula falsi (Illinois) on the slope
@@ -405,7 +408,8 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
 
     def failed():
         return CarriageError(f"the carriage solve failed under the load ({load.describe()}): "
-                             f"the motion left the gothic arch with contacts loaded, or a ball "
+                             f"the motion leaves the gothic arch before an equilibrium "
+                             f"(contacts out of its reach, or a load beyond it), or a ball "
                              f"solve failed", CarriageStatus.FAILED)
 
     delta_ref = max((f_ref / k) ** (2.0 / 3.0), FLOOR_LENGTH)
@@ -459,7 +463,8 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
         q_s = q_s + alpha_trial * step
         out = trial
         if loose and not (out["groove_force"] ** 2).sum() > 0:  # closed no contact: settle
-            status, q_s, out = _settle(evaluate, a_s, q_s, step, out, LIFT_OFF * dist)
+            status, q_s, out = _settle(evaluate, a_s, q_s, step, out, LIFT_OFF * dist,
+                                       bearing.nominal_contact_angle)
             if status == CarriageStatus.LIFT_OFF:
                 raise CarriageError(f"the carriage lifts off the rail under the load "
                                     f"({load.describe()}): it pulls the carriage away from "
