@@ -301,7 +301,11 @@ def nested_newton(q, free, groove_map, geometric, base, half, s0, c0, dist, k, t
                    kreg, low, step, trial):
     """The Newton of :func:`solve_carriage` on q, every ball solved at each evaluation.
 
-    Returns (status, iterations, buffer of the solution, buffer of the last evaluation).
+    A regularised step from a state with no carriage flank loaded that closes no contact
+    settles the carriage along it (:func:`settle`; Notes of :func:`solve_carriage`,
+    "Settling"). Returns (status, iterations, buffer of the solution, buffer of the last
+    evaluation); the status is STATUS_LIFT_OFF only from :func:`settle`, STATUS_FAILED where
+    no step stays in the gothic arch or a ball solve fails.
     """
     nball = groove_map.shape[0]
     cur = 0
