@@ -5,7 +5,8 @@ small sample, and either writes the netCDF files to a folder (``--write DIR``, k
 the repository) or compares fresh runs against such a folder (``--compare DIR``). A comparison
 checks every data variable and coordinate to the bit (NaNs in the same places), and every
 attribute but the run's own stamps (``history``, ``date_created``, timings), and exits 1 on the
-first difference it lists.
+first difference it lists. A snapshot missing from the folder (a config added since) is
+reported as new, not as a difference.
 
 ``tolsim allocate`` and ``tolsim carriage --json`` are snapshotted too, as text.
 
@@ -117,16 +118,22 @@ def main(argv=None):
             _run(a, args.write / name)
             print(f"wrote {name}", flush=True)
         return 0
-    failed = 0
+    failed = fresh = 0
     with tempfile.TemporaryDirectory() as tmp:
         for name, a in runs:
             new = Path(tmp) / name
             _run(a, new)
+            if not (args.compare / name).exists():  # a config added since the snapshot
+                fresh += 1
+                print(f"new        {name} (runs; no snapshot in {args.compare} to compare)",
+                      flush=True)
+                continue
             diff = _differences(args.compare / name, new)
             failed += bool(diff)
             print(f"{'DIFFERS' if diff else 'identical'}  {name}", *diff[:10], sep="\n    ",
                   flush=True)
-    print(f"{len(runs) - failed} of {len(runs)} identical")
+    print(f"{len(runs) - failed - fresh} of {len(runs) - fresh} identical"
+          + (f", {fresh} new" if fresh else ""))
     return 1 if failed else 0
 
 

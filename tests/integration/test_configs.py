@@ -28,7 +28,7 @@ SAMPLES = {
 #: `tolsim carriage` load distribution.
 CARRIAGE_CONFIGS = ("carriage_preload.toml",)
 #: What-if sweeps (issue 14): run, seeded, in tests/io/test_sweep.py.
-SWEEP_CONFIGS = ("sweep_rail_roll.toml", "sweep_yaw_moment.toml")
+SWEEP_CONFIGS = ("sweep_preload.toml", "sweep_rail_roll.toml", "sweep_yaw_moment.toml")
 
 
 def run(name, samples="default"):

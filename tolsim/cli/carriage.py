@@ -25,7 +25,9 @@ catalogue's units (N/um for forces against translations, N m/urad for moments ag
 rotations), the DOFs the layout cannot resist (locked), and convergence.
 
 Frame: z along the rail, x lateral, y up; loads at the reference point midway between the
-tracks. A load the tracks cannot carry, or one that lifts the carriage off, is an error.
+tracks. A carriage with clearance (a negative preload_oversize_um) settles onto its
+contacts. A load the tracks cannot carry, one that lifts the carriage off (pulls it away from
+every contact), or one with no equilibrium within the gothic arch is an error.
 
 Examples:
   tolsim carriage configs/carriage_preload.toml
@@ -69,7 +71,7 @@ def evaluate(config, seed=None) -> dict:
     Raises
     ------
     UsageError
-        A load the layout cannot carry, or lift-off.
+        A load the layout cannot carry, lift-off, or no equilibrium within the gothic arch.
     """
     from tolsim.study.pipeline.carriage import solve_config_carriage  # noqa: PLC0415
 

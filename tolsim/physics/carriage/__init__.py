@@ -7,7 +7,11 @@ that balances the external load, and with it the four contacts of every ball.
 
 The conventions, the equilibrium and how carriage loads map to the balls are in the Notes of
 :func:`solve_carriage`; the batched solve and balls moving through the carriage in those of
-:func:`solve_carriage_batch`; the end relief in :func:`end_relief`. Layout: ``layout`` (the
+:func:`solve_carriage_batch`; the end relief in :func:`end_relief`; a carriage with clearance
+settling onto its contacts, and lift-off, in the Notes of :func:`solve_carriage` ("Settling").
+Every solve ends with a :class:`CarriageStatus` (CONVERGED, NOT_CONVERGED, LIFT_OFF, FAILED):
+per assembly in :attr:`CarriageBatch.status`, in :attr:`CarriageSolution.status`, and as
+:attr:`CarriageError.status` where :func:`solve_carriage` raises. Layout: ``layout`` (the
 dataclasses and geometry), ``solve`` (the validated solves), ``_kernels`` and
 ``_batch_kernels`` (the Numba loops).
 
@@ -21,6 +25,7 @@ from tolsim.physics.carriage._batch_kernels import carriage_batch_kernel
 from tolsim.physics.carriage._kernels import (
     BATCH_STATUS,
     STATUS_CONVERGED,
+    STATUS_FAILED,
     STATUS_LIFT_OFF,
     STATUS_NOT_CONVERGED,
     carriage_balls_kernel,
@@ -32,9 +37,11 @@ from tolsim.physics.carriage.layout import (
     DOFS,
     LOAD_UNITS,
     CarriageBatch,
+    CarriageError,
     CarriageLayout,
     CarriageLoad,
     CarriageSolution,
+    CarriageStatus,
     end_relief,
     locked_dofs,
 )
@@ -53,12 +60,15 @@ __all__ = [
     "DOF_UNITS",
     "LOAD_UNITS",
     "STATUS_CONVERGED",
+    "STATUS_FAILED",
     "STATUS_LIFT_OFF",
     "STATUS_NOT_CONVERGED",
     "CarriageBatch",
+    "CarriageError",
     "CarriageLayout",
     "CarriageLoad",
     "CarriageSolution",
+    "CarriageStatus",
     "carriage_balls_kernel",
     "carriage_batch_kernel",
     "condensed_ball",

@@ -8,6 +8,7 @@ from tolsim.physics._fastmath import SMALL_ANGLE, SMALL_TAN, atan_small, sin_cos
 from tolsim.physics.carriage._kernels import (
     LIFT_OFF,
     STATUS_CONVERGED,
+    STATUS_FAILED,
     STATUS_LIFT_OFF,
     STEP_CAP,
     cholesky,
@@ -630,13 +631,13 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
                     arc_centres(a * nball + b, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0,
                                 dist, base[b])
                 status, it, cur, last = nested_newton(
-                    q, free, groove_map, geometric, base, half, dist, k, tol, max_iter,
+                    q, free, groove_map, geometric, base, half, s0, c0, dist, k, tol, max_iter,
                     ball_tol, ball_max_iter, ball_floor, floor, load_norm, k_ref, singular, cap,
                     limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state, kreg,
                     low, step, trial)
             out_status[a] = status
             out_iterations[a] = it
-            if status == STATUS_LIFT_OFF:
+            if status == STATUS_LIFT_OFF or status == STATUS_FAILED:
                 for b in range(nball):
                     out_ball_converged[a, b] = ball_ok[last, b]
                     out_count[a, b] = 0

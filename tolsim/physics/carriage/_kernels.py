@@ -3,6 +3,7 @@
 import numpy as np
 
 from tolsim._jit import jit
+from tolsim.physics.carriage.layout import CarriageStatus
 from tolsim.physics.static import displacement_one, flank, flank_newton, move_top_groove
 
 #: Largest groove displacement [fraction of d = R_G - R_B] a Newton step may take, and the
@@ -144,16 +145,13 @@ def carriage_balls_kernel(groove_disp, e_n, e_t, rot_b, rot_t, off_b, off_t, ove
         out_stiffness[n, 1, 0] = s12
         out_stiffness[n, 1, 1] = s22
         out_energy[n] = energy
-#: Status codes of a batched assembly (:class:`CarriageBatch`).
-STATUS_CONVERGED = 0
-STATUS_NOT_CONVERGED = 1
-STATUS_LIFT_OFF = 2
-BATCH_STATUS = {
-    STATUS_CONVERGED: "converged",
-    STATUS_NOT_CONVERGED: "the carriage Newton did not converge within max_iter steps",
-    STATUS_LIFT_OFF: "lifted off (no carriage flank loaded), left the gothic arch, or a ball "
-                     "solve failed",
-}
+#: Status codes of a batched assembly (:class:`CarriageBatch`), as plain ints for the kernels:
+#: the values of :class:`CarriageStatus`.
+STATUS_CONVERGED = int(CarriageStatus.CONVERGED)
+STATUS_NOT_CONVERGED = int(CarriageStatus.NOT_CONVERGED)
+STATUS_LIFT_OFF = int(CarriageStatus.LIFT_OFF)
+STATUS_FAILED = int(CarriageStatus.FAILED)
+BATCH_STATUS = {int(s): s.describe() for s in CarriageStatus}
 
 
 @jit
@@ -297,13 +295,17 @@ def scaled_error(residual, free, scale):
 
 
 @jit
-def nested_newton(q, free, groove_map, geometric, base, half, dist, k, tol, max_iter,
+def nested_newton(q, free, groove_map, geometric, base, half, s0, c0, dist, k, tol, max_iter,
                    ball_tol, ball_max_iter, ball_floor, force_floor, load_norm, k_ref, singular,
                    cap, limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state,
                    kreg, low, step, trial):
     """The Newton of :func:`solve_carriage` on q, every ball solved at each evaluation.
 
-    Returns (status, iterations, buffer of the solution, buffer of the last evaluation).
+    A regularised step from a state with no carriage flank loaded that closes no contact
+    settles the carriage along it (:func:`settle`; Notes of :func:`solve_carriage`,
+    "Settling"). Returns (status, iterations, buffer of the solution, buffer of the last
+    evaluation); the status is STATUS_LIFT_OFF only from :func:`settle`, STATUS_FAILED where
+    no step stays in the gothic arch or a ball solve fails.
     """
     nball = groove_map.shape[0]
     cur = 0
@@ -325,14 +327,13 @@ def nested_newton(q, free, groove_map, geometric, base, half, dist, k, tol, max_
         if it >= max_iter:
             break
         it += 1
+        loose = not state[cur, 2] > 0.0  # no carriage flank loaded
         if not cholesky(tangent[cur], free, low) > singular:  # singular: regularise
-            if not state[cur, 2] > 0.0 and it > 1:
-                return STATUS_LIFT_OFF, it, cur, last
             for i in range(5):
                 for j in range(5):
                     kreg[i, j] = tangent[cur, i, j] + k_ref * geometric[i, j]
             if not cholesky(kreg, free, low) > 0.0:
-                return STATUS_LIFT_OFF, it, cur, last
+                return STATUS_FAILED, it, cur, last
         cholesky_solve(low, free, residual[cur], step)
         move = 0.0
         for b in range(nball):
@@ -372,7 +373,7 @@ def nested_newton(q, free, groove_map, geometric, base, half, dist, k, tol, max_
                     break
             alpha *= 0.5
         if found < 0.0:
-            return STATUS_LIFT_OFF, it, cur, last
+            return STATUS_FAILED, it, cur, last
         if not accepted:  # the last valid candidate (re-evaluated if overwritten since)
             alpha = found
             for j in range(5):
@@ -390,6 +391,135 @@ def nested_newton(q, free, groove_map, geometric, base, half, dist, k, tol, max_
         potential = pot
         cur = nxt
         last = cur
-    if not state[cur, 2] > 0.0 and load_norm > 0.0:
-        return STATUS_LIFT_OFF, it, cur, last
+        if loose and not state[cur, 2] > 0.0:  # the step closed no contact: settle
+            code, cur = settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol,
+                               ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
+                               work, residual, tangent, state, trial)
+            last = cur
+            if code != STATUS_CONVERGED:
+                return code, it, cur, last
+            potential = state[cur, 0]
+            for j in range(5):
+                potential -= q_ext[j] * q[j]
     return status, it, cur, last
+
+
+@jit
+def receding(groove_map, step, s0, c0):
+    """Whether the carriage motion ``step`` moves every carriage flank away from its ball.
+
+    The approach of carriage flank i changes by -u_i . dg under a groove translation dg, u_i
+    the direction from the ball centre to the contact, nominally (s0, c0) for TR and (-s0,
+    c0) for TL (module frame): both recede where c0 dg_2 >= s0 |dg_1| (to round-off, 1e-12
+    of the largest groove travel). A ball held by its two flanks in a gothic arch then has
+    no contact left to close, whatever its clearance.
+    """
+    big = 0.0
+    for b in range(groove_map.shape[0]):
+        for c in range(2):
+            g = 0.0
+            for j in range(5):
+                g += groove_map[b, c, j] * step[j]
+            big = max(big, abs(g))
+    for b in range(groove_map.shape[0]):
+        g1 = g2 = 0.0
+        for j in range(5):
+            g1 += groove_map[b, 0, j] * step[j]
+            g2 += groove_map[b, 1, j] * step[j]
+        if c0 * g2 - s0 * abs(g1) < -1e-12 * big:
+            return False
+    return True
+
+
+@jit
+def settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol, ball_max_iter,
+           ball_floor, limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state,
+           trial):
+    """Carry a carriage that touches nothing along ``step`` until its contacts close.
+
+    The compiled twin of ``solve._settle`` (Notes of :func:`solve_carriage`, "Settling"):
+    buffer ``cur`` holds the evaluation at q (no carriage flank loaded); the distance s along
+    ``step`` is doubled until the slope -R . step of the potential turns >= 0, then its root
+    is found by regula falsi (Illinois) to 1 % of the initial slope. On success q moves to
+    q + s step, evaluated in the returned buffer. Returns (status, buffer): STATUS_CONVERGED
+    (settled), STATUS_LIFT_OFF (the grooves reach ``limit`` with nothing loaded, every
+    carriage flank moving away from its ball: :func:`receding`) or STATUS_FAILED (a ball
+    solve failed, or the grooves reach ``limit`` with contacts loaded or approaching).
+    """
+    nball = groove_map.shape[0]
+    move = gmax = 0.0
+    for b in range(nball):
+        for c in range(2):
+            g = gs = 0.0
+            for j in range(5):
+                g += groove_map[b, c, j] * q[j]
+                gs += groove_map[b, c, j] * step[j]
+            gmax = max(gmax, abs(g))
+            move = max(move, abs(gs))
+    s_max = (1.0 - 1e-9) * (limit - gmax) / move  # |A (q + s step)| <= limit for s <= s_max
+    slope0 = 0.0
+    for j in range(5):
+        slope0 -= residual[cur, j] * step[j]
+    s_lo, d_lo = 0.0, slope0
+    s_hi, d_hi = 0.0, 0.0
+    s = 1.0
+    src = cur
+    slope = slope0
+    while True:  # bracket the minimum along the ray
+        s = min(s, s_max)
+        for j in range(5):
+            trial[j] = q[j] + s * step[j]
+        dst = 1 - src
+        if _evaluate_balls(trial, True, src, dst, groove_map, base, half, dist, k, ball_tol,
+                           ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
+                           work, residual, tangent, state) != 0:
+            return STATUS_FAILED, dst
+        src = dst
+        slope = 0.0
+        for j in range(5):
+            slope -= residual[src, j] * step[j]
+        if slope >= 0.0:
+            s_hi, d_hi = s, slope
+            break
+        s_lo, d_lo = s, slope
+        if s >= s_max:
+            off = not state[src, 2] > 0.0 and receding(groove_map, step, s0, c0)
+            return (STATUS_LIFT_OFF if off else STATUS_FAILED), src
+        s *= 2.0
+    side = 0
+    for _ in range(60):  # regula falsi (Illinois) on the slope
+        if abs(slope) <= 1e-2 * abs(slope0) or s_hi - s_lo <= 1e-12 * s_hi:
+            break
+        s = s_hi - d_hi * (s_hi - s_lo) / (d_hi - d_lo)
+        for j in range(5):
+            trial[j] = q[j] + s * step[j]
+        dst = 1 - src
+        if _evaluate_balls(trial, True, src, dst, groove_map, base, half, dist, k, ball_tol,
+                           ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
+                           work, residual, tangent, state) != 0:
+            return STATUS_FAILED, dst
+        src = dst
+        slope = 0.0
+        for j in range(5):
+            slope -= residual[src, j] * step[j]
+        if slope < 0.0:
+            s_lo, d_lo = s, slope
+            d_hi = 0.5 * d_hi if side == -1 else d_hi
+            side = -1
+        else:
+            s_hi, d_hi = s, slope
+            d_lo = 0.5 * d_lo if side == 1 else d_lo
+            side = 1
+    if not state[src, 2] > 0.0:
+        s = s_hi
+        for j in range(5):
+            trial[j] = q[j] + s * step[j]
+        dst = 1 - src
+        if _evaluate_balls(trial, True, src, dst, groove_map, base, half, dist, k, ball_tol,
+                           ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
+                           work, residual, tangent, state) != 0:
+            return STATUS_FAILED, dst
+        src = dst
+    for j in range(5):
+        q[j] += s * step[j]
+    return STATUS_CONVERGED, src

@@ -1,5 +1,6 @@
 """Carriage layout, load and results: tracks, balls and the rigid-body groove map."""
 
+import enum
 from dataclasses import dataclass
 
 import numpy as np
@@ -198,6 +199,54 @@ class CarriageLoad:
                 f"{self.roll_moment:g} N m")
 
 
+class CarriageStatus(enum.IntEnum):
+    """Outcome of a carriage solve (:attr:`CarriageBatch.status`, :attr:`CarriageSolution.status`,
+    :attr:`CarriageError.status`).
+
+    CONVERGED
+        The force and moment balance of the carriage and of every ball within tolerance.
+    NOT_CONVERGED
+        The Newton did not reach the tolerance within its steps; the last iterate is reported.
+    LIFT_OFF
+        No equilibrium exists: the load pulls the carriage away from every contact. Certified
+        by a descent ray of the convex potential along which no contact closes before the
+        grooves leave the gothic arch (Notes of :func:`solve_carriage`, "Settling").
+    FAILED
+        No answer within the model: the motion leaves the gothic arch (a quarter of d = R_G -
+        R_B of groove travel) before an equilibrium, with contacts loaded or approaching (a
+        load beyond the arch, or a clearance larger than it), or a ball solve failed.
+    """
+
+    CONVERGED = 0
+    NOT_CONVERGED = 1
+    LIFT_OFF = 2
+    FAILED = 3
+
+    def describe(self) -> str:
+        """One line for messages."""
+        return _STATUS_TEXT[self]
+
+
+_STATUS_TEXT = {
+    CarriageStatus.CONVERGED: "converged",
+    CarriageStatus.NOT_CONVERGED: "the carriage Newton did not converge within max_iter steps",
+    CarriageStatus.LIFT_OFF: "lifted off: the load pulls the carriage away from every contact "
+                             "(no equilibrium)",
+    CarriageStatus.FAILED: "failed: the motion leaves the gothic arch before an equilibrium "
+                           "(contacts out of its reach, or a load beyond it), or a ball solve "
+                           "failed",
+}
+
+
+class CarriageError(ValueError):
+    """A carriage solve without an answer (:func:`solve_carriage`); ``status`` is
+    :attr:`CarriageStatus.LIFT_OFF` or :attr:`CarriageStatus.FAILED`."""
+
+    def __init__(self, message: str, status: CarriageStatus):
+        super().__init__(message)
+        self.status = CarriageStatus(status)
+
+
 @dataclass(frozen=True)
 class CarriageSolution:
     """Equilibrium of one carriage assembly (ball arrays over (n_tracks, n); BL, BR, TR, TL).
@@ -233,6 +282,8 @@ class CarriageSolution:
         Carriage Newton steps.
     residual : ndarray, (5,)
         Q + sum of the ball forces and moments at the solution [N, N m].
+    status : CarriageStatus
+        CONVERGED or NOT_CONVERGED (lift-off and failure raise :class:`CarriageError`).
     """
 
     contact_angle_deviation: np.ndarray
@@ -251,6 +302,7 @@ class CarriageSolution:
     converged: bool
     iterations: int
     residual: np.ndarray
+    status: CarriageStatus = CarriageStatus.CONVERGED
 
 
 @dataclass(frozen=True)
@@ -258,7 +310,7 @@ class CarriageBatch:
     """Equilibria of m sampled carriage assemblies (:func:`solve_carriage_batch`).
 
     Ball arrays are over (m, n_tracks, n), contacts BL, BR, TR, TL. An assembly with status
-    ``STATUS_LIFT_OFF`` has NaN forces, angles, loads, displacement, stiffness and residual,
+    ``LIFT_OFF`` or ``FAILED`` has NaN forces, angles, loads, displacement, stiffness and residual,
     and contact count 0. A ball outside the loaded zone (``loaded`` False in
     :func:`solve_carriage_batch`) has zero forces, contact count 0, NaN angles and loads, and
     counts as converged.
@@ -287,10 +339,11 @@ class CarriageBatch:
     iterations : ndarray of int32, (m,)
         Carriage Newton steps (of the nested Newton where ``fallback``).
     status : ndarray of int8, (m,)
-        ``STATUS_CONVERGED`` (0), ``STATUS_NOT_CONVERGED`` (1: max_iter steps without
-        reaching tol; the last iterate is reported) or ``STATUS_LIFT_OFF`` (2: the carriage
-        lifted off, its motion left the gothic arch, or a ball solve failed); ``BATCH_STATUS``
-        describes each.
+        :class:`CarriageStatus` codes: ``CONVERGED`` (0), ``NOT_CONVERGED`` (1: max_iter steps
+        without reaching tol; the last iterate is reported), ``LIFT_OFF`` (2: no equilibrium,
+        the load pulls the carriage off every contact) or ``FAILED`` (3: the motion left the
+        gothic arch with contacts loaded, or a ball solve failed); ``BATCH_STATUS`` describes
+        each.
     fallback : ndarray of bool, (m,)
         The joint Newton did not converge and the nested Newton solved the assembly.
     locked : tuple of str

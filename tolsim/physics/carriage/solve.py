@@ -8,13 +8,16 @@ from tolsim.physics.carriage._kernels import (
     STATUS_CONVERGED,
     STEP_CAP,
     carriage_balls_kernel,
+    receding,
 )
 from tolsim.physics.carriage.layout import (
     DOFS,
     CarriageBatch,
+    CarriageError,
     CarriageLayout,
     CarriageLoad,
     CarriageSolution,
+    CarriageStatus,
     locked_dofs,
 )
 from tolsim.physics.geometry import TABLE1, Bearing
@@ -141,6 +144,64 @@ class _Balls:
         return out
 
 
+def _settle(evaluate, a_s, q_s, step, out, limit, beta0):
+    """Carry a carriage that touches nothing along ``step`` until its contacts close.
+
+    ``out`` is the evaluation at ``q_s`` (no carriage flank loaded), ``step`` a descent
+    direction of the potential Pi (scaled q). Pi(q_s + s step) is convex in s, with the
+    constant slope -R . step < 0 while nothing touches: the distance s is doubled until the
+    slope turns >= 0 (a contact closed and carries the load along ``step``), then the root of
+    the slope is found by regula falsi (Illinois) to 1 % of the initial slope (Notes of
+    :func:`solve_carriage`, "Settling"). Lift-off: the grooves reach ``limit`` with nothing
+    loaded and every carriage flank receding (``_kernels.receding``); failure: with contacts
+    loaded or approaching. Returns (status, q_s, out); compiled twin: ``_kernels.settle``.
+    """
+    move = float(np.abs(np.einsum("bik,k->bi", a_s, step)).max())
+    room = limit - float(np.abs(np.einsum("bik,k->bi", a_s, q_s)).max())
+    s_max = (1.0 - 1e-9) * room / move  # |A (q_s + s step)| <= limit for s <= s_max
+    slope0 = -float(out["residual_q"] @ step)
+    s_lo, d_lo = 0.0, slope0
+    s = 1.0
+    while True:  # bracket the minimum along the ray
+        s = min(s, s_max)
+        cand = evaluate(q_s + s * step)
+        if cand is None or not cand["converged"].all():
+            return CarriageStatus.FAILED, q_s, out
+        slope = -float(cand["residual_q"] @ step)
+        if slope >= 0.0:
+            s_hi, d_hi = s, slope
+            break
+        s_lo, d_lo = s, slope
+        if s >= s_max:
+            off = (not (cand["groove_force"] ** 2).sum() > 0
+                   and receding(np.ascontiguousarray(a_s), step, np.sin(beta0), np.cos(beta0)))
+            return (CarriageStatus.LIFT_OFF if off else CarriageStatus.FAILED), q_s, out
+        s *= 2.0
+    side = 0
+    for _ in range(60):  # regula falsi (Illinois) on the slope
+        if abs(slope) <= 1e-2 * abs(slope0) or s_hi - s_lo <= 1e-12 * s_hi:
+            break
+        s = s_hi - d_hi * (s_hi - s_lo) / (d_hi - d_lo)
+        cand = evaluate(q_s + s * step)
+        if cand is None or not cand["converged"].all():
+            return CarriageStatus.FAILED, q_s, out
+        slope = -float(cand["residual_q"] @ step)
+        if slope < 0.0:
+            s_lo, d_lo = s, slope
+            d_hi = 0.5 * d_hi if side == -1 else d_hi
+            side = -1
+        else:
+            s_hi, d_hi = s, slope
+            d_lo = 0.5 * d_lo if side == 1 else d_lo
+            side = 1
+    if not (cand["groove_force"] ** 2).sum() > 0:
+        s = s_hi
+        cand = evaluate(q_s + s * step)
+        if cand is None or not cand["converged"].all():
+            return CarriageStatus.FAILED, q_s, out
+    return CarriageStatus.CONVERGED, q_s + s * step, cand
+
+
 # --------------------------------------------------------------------------------------------
 # Public API
 # --------------------------------------------------------------------------------------------
@@ -182,8 +243,11 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
     Raises
     ------
     ValueError
-        Bad input; a load the layout cannot carry (a component along a locked mechanism);
-        a carriage that lifts off.
+        Bad input; a load the layout cannot carry (a component along a locked mechanism).
+    CarriageError
+        (a ValueError) A carriage that lifts off (``status`` ``CarriageStatus.LIFT_OFF``) or
+        has no equilibrium within the gothic arch (``CarriageStatus.FAILED``; Notes,
+        "Settling").
 
     Notes
     -----
@@ -240,7 +304,7 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
     and mixed [N/rad] = [N m/m] entries). R is minus the gradient of the convex potential
     sum_i (2/5) K max(delta_i, 0)^2.5 - Q . q (the ball positions minimised out), which the line
     search uses; a zero tangent (no preload, unloaded start) is regularised by the stiffness of
-    balls at a reference approach.
+    balls at a reference approach, and a carriage with clearance settles (below).
 
     *Locked DOFs*: a ball in its gothic arch resists both translations of its groove in the module
     plane, so the carriage can move without loading any ball exactly along the null space of the
@@ -257,9 +321,51 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
     its own vanishing force, Newton stalled near 1e-13 N and the assembly was reported as lifted
     off.
 
-    A contact that opens is reported (``contact_count``), not an error. A carriage that lifts off
-    entirely (no carriage flank loaded, or the motion leaves the gothic arch) is a ValueError
-    naming the load (in :func:`solve_carriage_batch`: status ``STATUS_LIFT_OFF``).
+    A contact that opens is reported (``contact_count``), not an error.
+
+    **Settling (a carriage with clearance; issue 25)**
+
+    With a negative oversize o (clearance, catalogue classes such as THK HSR "normal", -5 to +2
+    um) nothing touches at q = 0: every force, the tangent K_c and the Hertz energy vanish, and
+    the potential Pi(q) = sum_i (2/5) K max(delta_i, 0)^2.5 - Q . q is linear, -Q . q, on the
+    whole set of motions that close no contact. Pi is convex in q (delta_i = |P - C_i(g)| + const
+    is convex in (P, g) jointly, as the norm of an affine map; t -> max(t, 0)^2.5 is convex and
+    increasing; minimising over the ball centres P keeps convexity) and C^1, with -grad Pi = R.
+    Newton needs a nonzero tangent, so where it finds none it takes the regularised step dq =
+    (k_ref sum A^T A)^-1 R, a descent direction (slope -R . dq < 0), with its line search; if
+    that step, from a state with no carriage flank loaded, still closes no contact, the carriage
+    *settles* along it: phi(s) = Pi(q + s dq) is convex with the constant slope -R . dq < 0 until
+    a contact closes, and then increasing slope. s is doubled until the slope turns >= 0 (the
+    contacts closed and carry the load along dq), and the root of the slope is found by regula
+    falsi (Illinois) to 1 % of the initial slope; Newton goes on from there (a few steps: 6 for
+    ``configs/carriage_preload.toml`` at o = -5 um). Pi falls at every step, so settling and
+    Newton cannot cycle; a Newton step that opens every contact again settles again.
+
+    *Lift-off* is the case where no equilibrium exists: along the descent ray nothing closes
+    before the grooves leave the gothic arch (their travel reaches a quarter of d), so Pi falls
+    without bound within the model. It is reported only where, besides, every carriage flank
+    moves away from its ball along the ray: the approach of flank i changes by -u_i . dg, u_i =
+    (+/-sin beta_0, cos beta_0) for TR and TL (module frame), so both recede where cos(beta_0)
+    dg_2 >= sin(beta_0) |dg_1| for every ball. A phi = 0 track pulled upwards lifts off with or
+    without preload. A four-point gothic arch carries a side load either way, so the wrapped
+    two-row guide pulled upwards settles on its other diagonals (by the module's mirror symmetry
+    exactly as far as pressed down): it does not lift off. A ray that reaches the end of the
+    arch with contacts loaded or approaching (a load beyond the arch, or a clearance larger
+    than it) has no answer within the model: ``CarriageStatus.FAILED``. :func:`solve_carriage`
+    raises :class:`CarriageError` (a ValueError naming the load) with ``status`` LIFT_OFF or
+    FAILED; :func:`solve_carriage_batch` reports the same codes per assembly.
+
+    Settling happens only where the Newton before it gave up (a zero tangent after its first
+    step), so every carriage that converged before converges by the same operations to the
+    same bits. *Check*, pure vertical load V on the wrapped guide with clearance (h = o/2 < 0):
+    by symmetry every ball carries the side load V/n on one diagonal pair, two-point, its centre
+    midway between the two arc centres, rho(s) = |2 d e + s x| apart after a side travel s of
+    the carriage groove, so delta = rho/2 - d + h and V/n = K delta^1.5 (2 d sin(beta_0) + s) /
+    rho. To first order s = (-2 h + 2 (F/K)^(2/3)) / sin(beta_0), F = V / (n sin(beta_0)): the
+    clearance closing along the diagonal plus the Hertz approach of the loaded pair, 7.071 +
+    2.343 = 9.414 um for 300 N on 24 balls at o = -5 um; exactly 9.3626 um (the pair's line
+    turns by s cos(beta_0) / (2 d)), as the solver gives
+    (``tests/physics/test_carriage_clearance.py``).
 
     **How carriage loads map to the balls' side-force ratio**
 
@@ -345,8 +451,11 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
         out["potential"] = out["energy"].sum() - q_s_ext @ q_s
         return out
 
-    def lift_off():
-        return ValueError(f"the carriage lifts off the rail under the load ({load.describe()})")
+    def failed():
+        return CarriageError(f"the carriage solve failed under the load ({load.describe()}): "
+                             f"the motion leaves the gothic arch before an equilibrium "
+                             f"(contacts out of its reach, or a load beyond it), or a ball "
+                             f"solve failed", CarriageStatus.FAILED)
 
     delta_ref = max((f_ref / k) ** (2.0 / 3.0), FLOOR_LENGTH)
     k_ref = 1.5 * k * np.sqrt(delta_ref) * 0.5
@@ -359,7 +468,7 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
     q_s = np.zeros(5)
     out = evaluate(q_s)
     if out is None or not out["converged"].all():
-        raise lift_off()
+        raise failed()
     converged = False
     it = 0
     while True:
@@ -370,13 +479,12 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
         if it >= max_iter:
             break
         it += 1
+        loose = not (out["groove_force"] ** 2).sum() > 0  # no carriage flank loaded
         kff = out["tangent"][np.ix_(free, free)]
         rf = out["residual_q"][free]
         w = np.linalg.eigvalsh(kff)
         wg = np.linalg.eigvalsh(geometric[np.ix_(free, free)])
         if w[0] <= 1e-10 * wg[-1]:  # zero (unloaded) or singular tangent: regularise
-            if not (out["groove_force"] ** 2).sum() > 0 and it > 1:
-                raise lift_off()
             kff = kff + geometric[np.ix_(free, free)]
         step = np.zeros(5)
         step[free] = np.linalg.solve(kff, rf)
@@ -396,11 +504,18 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
                     break
             alpha *= 0.5
         if trial is None:
-            raise lift_off()
+            raise failed()
         q_s = q_s + alpha_trial * step
         out = trial
-    if not (out["groove_force"] ** 2).sum() > 0 and load_norm > 0:
-        raise lift_off()
+        if loose and not (out["groove_force"] ** 2).sum() > 0:  # closed no contact: settle
+            status, q_s, out = _settle(evaluate, a_s, q_s, step, out, LIFT_OFF * dist,
+                                       bearing.nominal_contact_angle)
+            if status == CarriageStatus.LIFT_OFF:
+                raise CarriageError(f"the carriage lifts off the rail under the load "
+                                    f"({load.describe()}): it pulls the carriage away from "
+                                    f"every contact", CarriageStatus.LIFT_OFF)
+            if status != CarriageStatus.CONVERGED:
+                raise failed()
 
     shape4, shape2 = (t, n, 4), (t, n, 2)
     nx, ny = out["load"][:, 0], out["load"][:, 1]
@@ -424,6 +539,7 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
         converged=bool(converged),
         iterations=it,
         residual=out["residual_q"] / scale,
+        status=CarriageStatus.CONVERGED if converged else CarriageStatus.NOT_CONVERGED,
     )
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from tolsim.physics.carriage import (
     DOFS,
     CarriageSolution,
+    CarriageStatus,
     solve_carriage,
     solve_carriage_batch,
 )
@@ -96,7 +97,8 @@ def solve_config_carriage(config, seed: int | None = None) -> CarriageResult:
     ------
     ValueError
         A config without ``[carriage]``; a load the track layout cannot carry; a carriage
-        that lifts off (messages from :func:`tolsim.physics.carriage.solve_carriage`).
+        that lifts off or fails (:class:`tolsim.physics.carriage.CarriageError`, whose
+        ``status`` says which; messages from :func:`tolsim.physics.carriage.solve_carriage`).
     """
     carriage = config.carriage
     if carriage is None:
@@ -115,9 +117,13 @@ def solve_config_carriage(config, seed: int | None = None) -> CarriageResult:
     return CarriageResult(solution, eps, model)
 
 
-#: Codes of :attr:`CarriageState.status` (as ``solve_carriage_batch``): solved, Newton not
-#: converged, lifted off / a ball solve failed.
-CARRIAGE_SOLVED, CARRIAGE_NOT_CONVERGED, CARRIAGE_FAILED = 0, 1, 2
+#: Codes of :attr:`CarriageState.status`: those of ``solve_carriage_batch``
+#: (:class:`tolsim.physics.carriage.CarriageStatus`): solved, Newton not converged, lifted off
+#: (no equilibrium: the load pulls the carriage off every contact), failed (the motion leaves
+#: the gothic arch, or a ball solve failed).
+CARRIAGE_SOLVED, CARRIAGE_NOT_CONVERGED, CARRIAGE_LIFT_OFF, CARRIAGE_FAILED = (
+    int(CarriageStatus.CONVERGED), int(CarriageStatus.NOT_CONVERGED),
+    int(CarriageStatus.LIFT_OFF), int(CarriageStatus.FAILED))
 
 
 @dataclass
@@ -131,7 +137,8 @@ class CarriageState:
     stiffness : ndarray, (m, 5)
         Diagonal of the tangent carriage stiffness [N/m, N m/rad] (NaN where not solved).
     status : ndarray of int8, (m,)
-        :data:`CARRIAGE_SOLVED`, :data:`CARRIAGE_NOT_CONVERGED` or :data:`CARRIAGE_FAILED`.
+        :data:`CARRIAGE_SOLVED`, :data:`CARRIAGE_NOT_CONVERGED`, :data:`CARRIAGE_LIFT_OFF` or
+        :data:`CARRIAGE_FAILED`.
     """
 
     displacement: np.ndarray
@@ -205,6 +212,7 @@ def evaluate_carriage(config, values: dict):
     return state, CarriageState(q, k, status)
 
 
-__all__ = ["CARRIAGE_FAILED", "CARRIAGE_NOT_CONVERGED", "CARRIAGE_SOLVED", "DOFS",
+__all__ = ["CARRIAGE_FAILED", "CARRIAGE_LIFT_OFF", "CARRIAGE_NOT_CONVERGED", "CARRIAGE_SOLVED",
+           "DOFS",
            "CarriageResult", "CarriageState", "ball_velocity_deviation",
            "carriage_groove_errors", "evaluate_carriage", "solve_config_carriage"]
