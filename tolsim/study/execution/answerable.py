@@ -92,8 +92,9 @@ def check_answerable(config, statistics) -> None:
             raise UnanswerableStudy(f"{head}{exc} (the carriage solver, nominal assembly), "
                                     f"and {what}; change {keys}") from None
         if int(statistics.carriage_count) == 0:
-            raise UnanswerableStudy(f"{head}{what}: no carriage is solved (lift-off or no "
-                                    f"convergence); change {keys}")
+            raise UnanswerableStudy(f"{head}{what}: the carriage solver solves none of its "
+                                    f"carriages (each lifts off or does not converge); "
+                                    f"change {keys}")
     balls = int(statistics.n_balls)
     counts = {
         "loss": int(statistics.n_loss_of_contact),
@@ -106,7 +107,7 @@ def check_answerable(config, statistics) -> None:
         "loss": f"loss of contact: {share} have a contact force <= 0 under the load",
         "static": f"loads beyond a limit: the static contact model does not converge for "
                   f"{share}",
-        "full": f"loads beyond a limit: {share} are outside the analytic model's validity and "
+        "full": f"loads beyond a limit: {share} are outside the fast model's validity and "
                 "the full model gives no value either",
     }[cause]
     raise UnanswerableStudy(f"{head}{what} ({reason}); change {keys}")

@@ -416,7 +416,8 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         cause and the config keys) right after that block, before any checkpoint is written
         (:func:`~tolsim.study.execution.answerable.check_answerable`). The first block is then
         evaluated alone, as a chunk of its own (no effect on the result). ``tolsim run`` sets
-        it; False (default) runs such a study to the end, its trains counted as unresolved.
+        it for a single study (not for the points of a sweep); False (default) runs such a
+        study to the end, its trains counted as unresolved.
 
     Returns
     -------
