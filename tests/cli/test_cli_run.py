@@ -344,3 +344,102 @@ def test_summary_splits_the_spot_checks_by_stratum(tmp_path, capsys):
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("spot checks"))
     m = re.search(r"uniform (\d+): RMS [\d.]+ %, max [\d.]+ %; near the limit (\d+): RMS", line)
     assert m and int(m.group(1)) + int(m.group(2)) == 20, line
+
+
+# --- issue 26, item 4: a study that cannot answer is refused after its first block ------------
+def _variant(tmp_path, name, replacements):
+    """A packaged config with ``(old, new)`` text replacements, written to tmp_path."""
+    text = (CONFIGS / name).read_text()
+    for old, new in replacements:
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    cfg = tmp_path / name
+    cfg.write_text(text)
+    return cfg
+
+
+# The two cases of issue 26: before, each ran to the end with exit 0 and printed nan,
+# "(1e+02 %)" and "ball -1".
+UNANSWERABLE = [
+    pytest.param("yaw_moment_tolerances.toml",
+                 [("yaw_moment_N_m = 15.0", "yaw_moment_N_m = 1500.0"),
+                  ("samples = 20000", "samples = 3000"),
+                  ("sensitivity_samples = 1024", "sensitivity_samples = 0")],
+                 ["no train of the first block (1,024 assemblies) resolves",
+                  "loss of contact: 10,240 of 10,240 balls",
+                  "change loads.normal_load_N = 200.0, loads.yaw_moment_N_m = 1500.0"],
+                 id="yaw_moment_1500_N_m"),
+    pytest.param("carriage_preload.toml",
+                 [("vertical_N = 300.0", "vertical_N = -50000.0"),
+                  ("samples = 2000", "samples = 300")],
+                 ["no assembly of the first block (300 assemblies) resolves",
+                  "loss of contact: 7,200 of 7,200 balls",
+                  "change carriage.load.vertical_N = -50000.0",
+                  "carriage.preload_oversize_um = 2.0"],
+                 id="vertical_load_minus_50_kN"),
+]
+
+
+@pytest.mark.parametrize("name, replacements, words", UNANSWERABLE)
+def test_study_that_cannot_answer_is_refused(tmp_path, capsys, monkeypatch, name,
+                                             replacements, words):
+    import tolsim.study.execution.runner as runner
+
+    cfg = _variant(tmp_path, name, replacements)
+    chunks = []
+
+    def recording(config, chunk_list, *args, **kwargs):  # the chunks as they are consumed
+        for chunk, result in zip(chunk_list, runner_prefetched(config, chunk_list, *args,
+                                                               **kwargs), strict=False):
+            chunks.append(chunk)
+            yield result
+
+    runner_prefetched = runner.prefetched
+    monkeypatch.setattr(runner, "prefetched", recording)
+    rc = main(["run", str(cfg), "-o", str(tmp_path / "out.nc")])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.count("\n") == 1 and err.startswith(f"tolsim run: error: {cfg}: the study "
+                                                    "cannot answer: "), err
+    for word in words:
+        assert word in err, (word, err)
+    assert chunks == [[0]]  # decided on the first block, alone, before any other ran
+    assert sorted(os.listdir(tmp_path)) == [name]  # no result, no checkpoint
+
+
+def test_lift_off_is_the_carriage_solvers_verdict_in_run_and_carriage(tmp_path, capsys,
+                                                                       monkeypatch):
+    # tolsim run and tolsim carriage share one classification of lift-off: the carriage
+    # solver's, through solve_config_carriage. Here the solver is made to report lift-off (a
+    # four-point-contact carriage within the 4200 MPa limit holds a pulling load on its upper
+    # flanks, so no packaged load lifts it off); both commands then say the same.
+    import tolsim.study.pipeline.carriage as carriage
+
+    cfg = _variant(tmp_path, "carriage_preload.toml",
+                   [("vertical_N = 300.0", "vertical_N = -50000.0"),
+                    ("samples = 2000", "samples = 300")])
+    message = "the carriage lifts off the rail under the load (test)"
+
+    def lifts_off(*args, **kwargs):
+        raise ValueError(message)
+
+    monkeypatch.setattr(carriage, "solve_carriage", lifts_off)
+    assert main(["carriage", str(cfg)]) == 2
+    said = capsys.readouterr().err
+    assert message in said
+    assert main(["run", str(cfg), "-o", str(tmp_path / "out.nc")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"the study cannot answer: {message}" in err, err
+    assert "carriage.load.vertical_N = -50000.0" in err
+    assert sorted(os.listdir(tmp_path)) == ["carriage_preload.toml"]
+
+
+def test_a_pulling_load_held_by_the_upper_flanks_is_not_lift_off(tmp_path, capsys):
+    # -50 kN pulls the carriage up; its four-point-contact balls hold it on their upper
+    # flanks (two contacts each, the others open): the carriage solver converges, so
+    # tolsim carriage prints it and tolsim run's refusal names loss of contact, not lift-off.
+    cfg = _variant(tmp_path, "carriage_preload.toml",
+                   [("vertical_N = 300.0", "vertical_N = -50000.0")])
+    assert main(["carriage", str(cfg)]) == 0
+    out = capsys.readouterr().out
+    assert "converged: yes" in out and "24 of 24 balls have opened contacts" in out

@@ -10,7 +10,7 @@ from scipy import stats
 
 from tolsim.io.config import ConfigError, default_config_text, load_config, parse_config
 from tolsim.physics.geometry import Bearing
-from tolsim.study.spec import Distribution
+from tolsim.study.spec import MAX_SEED, Distribution
 
 MINIMAL = """\
 [bearing]
@@ -133,6 +133,8 @@ BAD = [
     ("bad_model", ("seed = 1", "seed = 1\nvelocity_model = 'magic'"), "study.velocity_model",
      24),
     ("negative_seed", ("seed = 1", "seed = -1"), "study.seed", 23),
+    # issue 26, item 5: a seed the result file cannot store (uint64), refused at load time
+    ("seed_beyond_uint64", ("seed = 1", "seed = 18446744073709551616"), "study.seed", 23),
     ("zero_samples", ("samples = 100", "samples = 0"), "study.samples", 22),
     ("unknown_source", ("[tolerances.bottom_rotation]", "[tolerances.rail_wobble]"),
      "tolerances.rail_wobble", 17),
@@ -208,6 +210,13 @@ def test_bad_config_one_line_error_naming_key(replace_, key, line):
 
 def test_count_of_malformed_examples():
     assert len(BAD) >= 15
+
+
+def test_largest_seed_is_accepted():
+    # 2^64 - 1 is the largest seed the result file stores (uint64); the CLI's --seed and the
+    # config's study.seed share the bound (tolsim.study.spec.MAX_SEED)
+    text = MINIMAL.replace("seed = 1", f"seed = {2**64 - 1}")
+    assert parse_config(text).study.seed == MAX_SEED == 2**64 - 1
 
 
 def test_missing_file_is_config_error(tmp_path):

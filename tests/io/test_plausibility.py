@@ -18,7 +18,7 @@ from test_config import MINIMAL
 
 from tolsim.cli import main
 from tolsim.io.config import ConfigError, load_config, parse_config
-from tolsim.io.config.plausibility import MAX_HERTZ_PRESSURE, RANGES
+from tolsim.io.config.plausibility import MAX_HERTZ_PRESSURE, RANGES, range_rows, ranges_markdown
 from tolsim.io.config.reader import ConfigWarning, show
 from tolsim.physics.geometry import TABLE1
 from tolsim.physics.hertz import hertz_constants
@@ -347,3 +347,18 @@ def test_carriage_reads_a_config_without_study(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["balls"] == out["balls"]
     with pytest.raises(ConfigError, match="study section is missing"):
         parse_config(text)
+
+
+def test_readme_table_of_ranges_is_the_code_s():
+    # issue 26: the README's table of plausibility ranges is generated from RANGES
+    # (ranges_markdown); a range changed in the code without the README fails here.
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    start = readme.index("<!-- plausibility-table:")
+    start = readme.index("\n", start) + 1
+    end = readme.index("<!-- end plausibility-table -->")
+    assert readme[start:end].strip() == ranges_markdown()
+    # every entry of RANGES has its row, with both intervals and its source
+    rows = {row[0]: row for row in range_rows()}
+    assert set(RANGES) <= set(rows)
+    assert rows["bearing.ball_diameter"][1:3] == ("[0.3, 104.775] mm", "[1, 25.4] mm")
+    assert rows["bearing.friction_coefficient"][1] == "[0, 1]"

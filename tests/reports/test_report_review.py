@@ -3,6 +3,7 @@ initial gap, the assumptions table with where each comes from, the verdict again
 limits, and the PDF with the sign-off block."""
 
 import hashlib
+import html
 import itertools
 import re
 import shutil
@@ -19,6 +20,8 @@ from tolsim.physics.velocity.analytic import VALIDITY_ERROR_BUDGET
 from tolsim.reports import assumptions as A
 from tolsim.reports import study as study_report
 from tolsim.reports import verdict as V
+from tolsim.reports.pdf import report_pages
+from tolsim.reports.study import shared
 from tolsim.study.execution.runner import run_study
 from tolsim.study.statistics import quality
 
@@ -299,3 +302,49 @@ def test_pdf_renders(default_report, tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert len(list(tmp_path.glob("pg*.png"))) >= 5
+
+
+# --------------------------------------------------------------------------------------------
+# issue 26, item 7: the PDF holds what the HTML holds; a --no-pdf page links to no PDF
+# --------------------------------------------------------------------------------------------
+def _squeezed(text):
+    """Text without whitespace: the PDF wraps cells at spaces and after _ . /."""
+    return "".join(str(text).split())
+
+
+def test_pdf_holds_what_the_html_holds(default_result, default_report):
+    # Before, the PDF lacked the results at a glance, the linear stack-up, the ranked Sobol'
+    # tables and the provenance. Each row the HTML page shows from the shared tables
+    # (tolsim.reports.study.shared) is checked in the PDF's text, and the page's too.
+    path, ds, _ = default_result
+    out, page = default_report
+    sens = study_report.compute_sensitivity(ds, 16)  # small: only the tables are checked
+    content = study_report.pdf_content(ds, {}, sens, out.verdict, path)
+    text = _squeezed(" ".join(t.get_text() for fig in report_pages(**content)
+                              for t in fig.texts))
+    expected = [shared.GLANCE_TITLE, "Provenance", shared.STACKUP_HEADING]
+    expected += [x for label, value, _ in shared.glance_rows(ds) for x in (label, value)]
+    expected += [x for row in shared.provenance_rows(ds) for x in row]
+    stackup = shared.stackup_table(ds)
+    assert stackup is not None and stackup.rows  # the default study is of free balls
+    expected += [c for row in stackup.rows for c in row]
+    blocks = shared.sensitivity_blocks(sens, ds)
+    assert len(blocks) == 2  # epsilon and contact
+    for block in blocks:
+        expected += [block["lead"], block["table"].heading]
+        expected += [c for row in block["table"].rows for c in row]
+    missing = [x for x in expected if _squeezed(x) not in text]
+    assert not missing, missing
+    # the page shows the same rows (escaped for HTML)
+    assert all(html.escape(label) in page for label, _, _ in shared.glance_rows(ds))
+    assert shared.STACKUP_HEADING in page and "<h2>Provenance</h2>" in page
+
+
+def test_no_pdf_page_does_not_link_to_a_pdf(default_result, default_report, tmp_path):
+    path, _, _ = default_result
+    _, with_pdf = default_report
+    assert "report.pdf" in with_pdf
+    out = study_report.make_report(path, tmp_path / "rep", sensitivity=False, pdf=False)
+    page = open(out.html, encoding="utf-8").read()
+    assert out.pdf == "" and not (tmp_path / "rep" / "report.pdf").exists()
+    assert "report.pdf" not in page and "--no-pdf" in page

@@ -14,6 +14,7 @@ import tempfile
 from pathlib import Path
 
 from tolsim.cli import UsageError, integer_at_least
+from tolsim.study.spec import MAX_SEED
 
 DESCRIPTION = """\
 Run a Monte Carlo tolerance study: sample assemblies (tolerances, gaps), solve each ball's
@@ -60,8 +61,6 @@ examples:
 
 
 _positive_int = integer_at_least(1, "a positive integer")
-#: The largest seed: numpy's SeedSequence takes any, the result file stores it as uint64.
-MAX_SEED = 2**64 - 1
 _seed = integer_at_least(0, f"an integer from 0 to {MAX_SEED}", maximum=MAX_SEED)
 _count = integer_at_least(0, "a non-negative integer")
 
@@ -527,7 +526,8 @@ def run(args) -> int:
                            progress=bar.update, checkpoint_path=str(checkpoint),
                            checkpoint_interval=args.checkpoint_interval,
                            target=args.target_ci_width, notify=notify,
-                           save_samples=args.save_samples, scheduler=args.scheduler)
+                           save_samples=args.save_samples, scheduler=args.scheduler,
+                           require_answer=True)
     except DamagedCheckpoint as exc:
         raise UsageError(f"{exc}; --fresh discards it") from None
     except ValueError as exc:  # also a scheduler that cannot be reached

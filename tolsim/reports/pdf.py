@@ -5,15 +5,21 @@ and writes them with :class:`matplotlib.backends.backend_pdf.PdfPages`:
 
 1. the headline and the verdict box with its checks, and what was studied;
 2. the sampled inputs (tolerances and the initial gap) and the assumptions table, with where
-   each comes from;
+   each comes from, and the results at a glance;
 3. in a study with a ``[carriage]``, the carriage section (load case, preload, tracks with
    the nominal load distribution and its figure, displacement and stiffness, solved
-   carriages), then the figures of the HTML report, with their captions; in a study with
-   ``[contact]`` the section "What contact costs" takes the place of its figure (its
-   paragraphs, tables and notes around the friction figure);
-4. the review and sign-off block: prepared by / reviewed by / approved by, each with name,
-   function, date and a signature line, the decision, comments, and the SHA-256 of the
-   result file that the signatures refer to.
+   carriages), then the sections of the HTML report with their figures and captions and
+   the tables below them (the quality table and the linear stack-up, the ranked Sobol'
+   tables, the spot-check status); in a study with ``[contact]`` the section "What contact
+   costs" takes the place of its figure (its paragraphs, tables and notes around the
+   friction figure);
+4. the provenance (the result file's global attributes), then the review and sign-off
+   block: prepared by / reviewed by / approved by, each with name, function, date and a
+   signature line, the decision, comments, and the SHA-256 of the result file that the
+   signatures refer to.
+
+The HTML page shows besides only the config's TOML text and, in a study with a rare-event
+estimator, its tables (README "Handing on a study").
 
 Text is wrapped to measured widths (Agg text metrics), so long values never run over a
 column; every page carries the report's identity and "page i of n" in its footer.
@@ -312,6 +318,20 @@ def _carriage_section(doc, carriage, png, caption):
             doc.image(png, caption)
 
 
+def _block(doc, item):
+    """A sentence (str) or a table with its heading and note (one without rows: heading and
+    note only)."""
+    if isinstance(item, str):
+        doc.paragraph(item, size=8.5)
+        return
+    doc.heading(item.heading, size=10.5)
+    if item.rows:
+        doc.table(list(item.header), [[str(c) for c in row] for row in item.rows],
+                  list(item.widths))
+    if item.note:
+        doc.paragraph(item.note, size=7.5, colour="0.4")
+
+
 def _friction_section(doc, friction, png, caption):
     """The section "What contact costs" of a study with ``[contact]`` where its figure comes:
     its heading, paragraphs and tables, the friction figure after table ``figure_after``,
@@ -375,7 +395,8 @@ def render_pdf(**report) -> bytes:
 
 def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assumptions,
                  figures, captions, sections, result_path, sign_off, carriage=None,
-                 friction=None) -> list:
+                 friction=None, glance=(), glance_notes=(), section_tables=None,
+                 provenance=(), tolerance_note="") -> list:
     """The pages of the PDF report, A4 portrait Figures in order.
 
     Parameters
@@ -408,6 +429,19 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
         (:func:`tolsim.reports.study.friction_content`): ``heading``, ``paragraphs``,
         ``tables``, ``figure_after`` (the table that ``figures["friction"]`` follows) and
         ``notes``; drawn where the friction figure comes.
+    tolerance_note : str
+        The sentence below the table of sampled inputs.
+    glance : list of (str, str)
+        The rows of "Results at a glance" (:func:`tolsim.reports.study.shared.glance_rows`),
+        drawn after the assumptions; ``glance_notes`` are sentences below them.
+    section_tables : dict, optional
+        Section name (a key of ``sections``) -> what follows its figure, in order: tables
+        (objects like ``carriage``'s; one without rows is its heading and note) and
+        sentences (str). A section with these but no figure gets its heading. Sections are
+        drawn in the order of ``sections``.
+    provenance : list of (str, str)
+        The provenance table (global attributes of the result file), before the sign-off
+        (the HTML page has it after; the sign-off closes the PDF on its own page).
 
     Returns
     -------
@@ -442,22 +476,40 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
         doc.table(["input", "scope", "distribution", "parameters", "config"],
                   [[r.source, r.scope, r.distribution, r.parameters, r.key]
                    for r in tolerances], [0.25, 0.08, 0.15, 0.3, 0.22])
+        if tolerance_note:
+            doc.paragraph(tolerance_note, size=7.5, colour="0.4")
     else:
         doc.paragraph("The config stored in the result file names no sampled input.")
     doc.heading("Assumptions and where they come from")
     doc.table(["topic", "assumption", "value", "source"],
               [[r.topic, r.item, r.value, r.source] for r in assumptions],
               [0.11, 0.2, 0.38, 0.31])
+    if glance:
+        doc.heading(sections.get("glance", "Results at a glance"))
+        doc.table(["quantity", "value"], [list(r) for r in glance], [0.4, 0.6])
+        for text in glance_notes:
+            doc.paragraph(text, size=8.5)
     if carriage is not None:
         _carriage_section(doc, carriage, figures.get("carriage"), captions.get("carriage", ""))
     doc.new_page()
-    for name, png in figures.items():
+    section_tables = section_tables or {}
+    names = list(figures) + [n for n in sections if n not in figures and n in section_tables]
+    order = [n for n in sections if n in names] + [n for n in names if n not in sections]
+    for name in order:
+        png = figures.get(name)
         if name == "carriage" and carriage is not None:
             continue  # drawn in its section
         if name == "friction" and friction is not None:
             _friction_section(doc, friction, png, captions.get(name, ""))
-            continue
-        doc.image(png, captions.get(name, ""), heading=sections.get(name, name))
+        elif png is not None:
+            doc.image(png, captions.get(name, ""), heading=sections.get(name, name))
+        else:
+            doc.heading(sections.get(name, name), size=11.5)
+        for item in section_tables.get(name, ()):
+            _block(doc, item)
+    if provenance:  # before the sign-off, which closes the report on its own page
+        doc.heading("Provenance", size=11.5)
+        doc.table(["attribute", "value"], [list(r) for r in provenance], [0.3, 0.7])
     doc.new_page()
     _sign_off(doc, sha, *sign_off)
     doc.finish(f"{title} | tolsim {__version__} | result SHA-256 {sha[:16]}…")

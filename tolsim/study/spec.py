@@ -52,6 +52,8 @@ CREEP_MODELS = ("analytic", "full")
 #: (``normal``, untruncated ``cpk``) when its values are checked against the static model's
 #: range: P(|z| > 8) = 1.2e-15, so even 10^9 balls never draw beyond it.
 PLAUSIBLE_NORMAL_RANGE = 8.0
+#: The largest seed: numpy's SeedSequence takes any, the result file stores it as uint64.
+MAX_SEED = 2**64 - 1
 
 
 # --------------------------------------------------------------------------------------------
@@ -646,8 +648,8 @@ class StudyConfig:
                 raise ValueError(f"samples = {samples!r} must be a positive integer")
             changes["samples"] = samples
         if seed is not None:
-            if not (isinstance(seed, int) and seed >= 0):
-                raise ValueError(f"seed = {seed!r} must be a non-negative integer")
+            if not (isinstance(seed, int) and 0 <= seed <= MAX_SEED):
+                raise ValueError(f"seed = {seed!r} must be an integer from 0 to {MAX_SEED}")
             changes["seed"] = seed
         text = self.text
         for key, value in changes.items():

@@ -163,6 +163,64 @@ RANGES = {
 }
 
 
+#: How :func:`range_rows` shows each entry of :data:`RANGES`: (unit, SI per unit); the unit
+#: of a relative range (``per``) is the reference itself.
+DISPLAY_UNITS = {
+    "bearing.ball_diameter": ("mm", MM), "bearing.conformity": ("", 1.0),
+    "bearing.nominal_contact_angle": ("deg", DEG), "bearing.youngs_modulus": ("GPa", GPA),
+    "bearing.poisson_ratio": ("", 1.0), "bearing.friction_coefficient": ("", 1.0),
+    "contact.ball_friction_coefficient": ("", 1.0), "motion.groove_velocity": ("m/s", 1.0),
+    "motion.stroke": ("m", 1.0), "motion.duration": ("m of stroke", 1.0),
+    "train.initial_gap": ("D", 1.0), "train.balls": ("", 1.0),
+    "carriage.balls_per_track": ("", 1.0), "carriage.ball_pitch": ("D", 1.0),
+    "carriage.preload_oversize": ("um", UM), "carriage.track.x": ("m", 1.0),
+    "carriage.track.y": ("m", 1.0), "carriage.track.orientation": ("deg", DEG),
+}
+
+
+#: Possible ranges checked where the key is read, not in :data:`RANGES` (shown by
+#: :func:`range_rows`).
+POSSIBLE_ELSEWHERE = {
+    "carriage.preload_oversize": "[-(f - 1/2) D / 4, (f - 1/2) D / 4] (the static model's "
+                                 "range; 100 um for the default 10 mm ball, f = 0.54)",
+}
+
+
+def range_rows() -> list:
+    """The table of :data:`RANGES` as text, one row per key: (key, possible, usual, source),
+    the intervals in :data:`DISPLAY_UNITS` ("D": ball diameters), and last the Hertz
+    pressure limit of the loads. The README's table is this one (a test compares them)."""
+
+    def interval(low, high, open_low, open_high, unit, factor):
+        lo = "-inf" if low is None else show(round(low / factor, 12))
+        hi = "inf" if high is None else show(round(high / factor, 12))
+        unit = f" {unit}" if unit else ""
+        return f"{'(' if open_low else '['}{lo}, {hi}{')' if open_high else ']'}{unit}"
+
+    rows = []
+    for key, rng in RANGES.items():
+        unit, factor = DISPLAY_UNITS[key]
+        usual_low = rng.low if rng.usual_low is None else rng.usual_low
+        usual_high = rng.high if rng.usual_high is None else rng.usual_high
+        possible = POSSIBLE_ELSEWHERE.get(key) or interval(
+            rng.low, rng.high, rng.open_low, rng.open_high, unit, factor)
+        rows.append((key, possible,
+                     interval(usual_low, usual_high, False, False, unit, factor), rng.source))
+    rows.append(("[loads], carriage.load", f"Hertz pressure <= {MAX_HERTZ_PRESSURE / 1e6:.0f} "
+                 "MPa", "", "ISO 76 / ISO 14728-2 static load rating: beyond it the elastic "
+                 "contact model no longer holds"))
+    return rows
+
+
+def ranges_markdown() -> str:
+    """:func:`range_rows` as a Markdown table (the README's)."""
+    lines = ["| key | possible (error outside) | usual (warning outside) | source |",
+             "|---|---|---|---|"]
+    lines += [f"| `{key}` | {possible} | {usual} | {source} |"
+              for key, possible, usual, source in range_rows()]
+    return "\n".join(lines)
+
+
 def _message(table, key, kind, value_si, rng: Range, possible: bool) -> str:
     """'= 10 m is outside the possible range [0.0003, 0.104775] m (source)': the value and
     the range in the unit the user wrote."""

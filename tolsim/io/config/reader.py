@@ -198,7 +198,7 @@ class Table:
                 return f"{name}_{u}" if u else name
         return f"{name}_<unit>"
 
-    def integer(self, key, *, default=None, minimum=None):
+    def integer(self, key, *, default=None, minimum=None, maximum=None):
         if key not in self.data:
             if default is None:
                 raise self.error(key, "is missing")
@@ -207,6 +207,8 @@ class Table:
         v = self._number(key, self.data[key], integer=True)
         if minimum is not None and v < minimum:
             raise self.error(key, f"= {v!r} must be >= {minimum}")
+        if maximum is not None and v > maximum:
+            raise self.error(key, f"= {v!r} must be <= {maximum}")
         return int(v)
 
     def string(self, key, choices, *, default=None):

@@ -29,6 +29,7 @@ from tolsim.study.spec import (
     CREEP_MODELS,
     DISTRIBUTIONS,
     ESTIMATORS,
+    MAX_SEED,
     PLAUSIBLE_NORMAL_RANGE,
     PROPAGATIONS,
     SAMPLINGS,
@@ -543,7 +544,7 @@ def read_study(t: Table) -> StudySettings:
                                  "[-100 %, 100 %] (|epsilon| > 1 stops or reverses a ball)")
     s = StudySettings(
         samples=t.integer("samples", minimum=1),
-        seed=t.integer("seed", minimum=0),
+        seed=t.integer("seed", minimum=0, maximum=MAX_SEED),
         block_size=t.integer("block_size", default=1024, minimum=1),
         velocity_model=t.string("velocity_model", VELOCITY_MODELS, default="analytic"),
         static_model=t.string("static_model", STATIC_MODELS, default="paired"),

@@ -17,7 +17,6 @@ from tolsim.reports.result_view import (
     integer,
     number,
 )
-from tolsim.reports.study.figures import OUTPUT_SHORT, output_titles
 from tolsim.reports.study.friction import (
     FRICTION_CAPTION,
     friction_content,
@@ -26,11 +25,22 @@ from tolsim.reports.study.friction import (
     without_output,
 )
 from tolsim.reports.study.sections import carriage_content, carriage_summary, section_titles
+from tolsim.reports.study.shared import (
+    GLANCE_TITLE,
+    NO_FACTORS_TEXT,
+    NO_LIMIT_TEXT,
+    glance_rows,
+    provenance_rows,
+    quality_note,
+    quality_rows,
+    scope_note,
+    sensitivity_blocks,
+    stackup_table,
+)
 from tolsim.reports.style import (
     data_uri,
 )
 from tolsim.reports.verdict import (
-    CPK_QUANTITY,
     ESTIMATOR_NAMES,
     FAIL,
     PASS,
@@ -38,8 +48,6 @@ from tolsim.reports.verdict import (
     UNDECIDED,
     any_train,
     contact_unit,
-    cpk_text,
-    estimator_label,
     has_friction,
     study_verdict,
     tracks_of,
@@ -225,13 +233,6 @@ def _row(label, value, num=True):
     return f"<tr><th>{html.escape(label)}</th><td{cls}>{html.escape(str(value))}</td></tr>"
 
 
-def _pct(x, digits=3):
-    if not np.isfinite(x):
-        return "n/a"
-    v = round(100 * x, digits) or 0.0  # no "-0.000"
-    return f"{v:+.{digits}f} %"
-
-
 def tolerance_rows(ds):
     """Tolerance table rows (:func:`tolsim.reports.assumptions.tolerance_table`), the initial
     gap included; the config's keys as written when it cannot be parsed."""
@@ -329,43 +330,15 @@ def _verdict_html(verdict, lines):
     return parts
 
 
-def _stackup_rows(ds):
-    """Worst case and RSS of the linear stack-up beside the Monte Carlo (HTML parts); a
-    carriage study has none (a note says why)."""
-    if "critical_ball" not in ds:
-        if tracks_of(ds):
-            return ["<h3>Linear stack-up beside the Monte Carlo</h3><p class='muted'>Not "
-                    "computed for a carriage: its balls are coupled through the carriage "
-                    "(one ball's error moves the carriage and so loads the others), so the "
-                    "free-ball sensitivities of the stack-up do not apply. The Monte Carlo "
-                    "figures above are the ones to use.</p>"]
+def _stackup_html(ds):
+    """The linear stack-up beside the Monte Carlo (HTML parts; :func:`stackup_table`)."""
+    table = stackup_table(ds)
+    if table is None:
         return []
-    b, pr = integer(ds, "critical_ball"), integer(ds, "critical_pair")
-
-    def at(name, k):
-        return float(np.asarray(ds[name])[k])
-
-    return [
-        "<h3>Linear stack-up beside the Monte Carlo</h3><table>",
-        "<tr><th>quantity</th><th>nominal</th><th>worst case (± over the tolerance bands)"
-        "</th><th>RSS (1σ)</th><th>Monte Carlo std</th></tr>",
-        f"<tr><td>ε of ball {b} (largest RSS)</td>"
-        f"<td class='num'>{_pct(at('velocity_deviation_nominal', b))}</td>"
-        f"<td class='num'>±{100 * at('velocity_deviation_worst_case', b):.3f} %</td>"
-        f"<td class='num'>{100 * at('velocity_deviation_rss', b):.3f} %</td>"
-        f"<td class='num'>{100 * at('velocity_deviation_std_by_ball', b):.3f} %</td></tr>",
-        f"<tr><td>gap closure of pair {pr} over the stroke</td>"
-        f"<td class='num'>{1e6 * at('gap_closure_nominal', pr):.3g} µm</td>"
-        f"<td class='num'>±{1e6 * at('gap_closure_worst_case', pr):.3g} µm</td>"
-        f"<td class='num'>{1e6 * at('gap_closure_rss', pr):.3g} µm</td><td>–</td></tr>",
-        "</table><p class='muted'>Linearised sensitivities at the mean state (central "
-        "differences through the study's own models, "
-        "<code>tolsim.study.analyses.worst_case</code>): "
-        "the worst case adds every source at the edge of its band, RSS adds them as "
-        "independent standard deviations (with the rail fields' correlation). Where RSS and "
-        "the Monte Carlo std agree, the model is near-linear over the tolerances; the "
-        "Monte Carlo figures are the ones to use.</p>",
-    ]
+    if not table.rows:  # a carriage study: why there is none
+        return [f"<h3>{html.escape(table.heading)}</h3>"
+                f"<p class='muted'>{html.escape(table.note)}</p>"]
+    return table_html(table)
 
 
 def table_html(table):
@@ -384,12 +357,11 @@ def table_html(table):
 
 
 def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None,
-          friction=None):
+                friction=None, pdf=True):
+    """The HTML page of a study report; ``pdf``: whether a ``report.pdf`` is made beside it
+    (the page links to it only then)."""
     a = ds.attrs
-    n_asm = integer(ds, "n_assemblies")
-    one, many = contact_unit(ds)
     tracks = tracks_of(ds)
-    model = str(a.get("velocity_model", "?"))
     verdict = verdict if verdict is not None else study_verdict(ds, q)
     tolerances = tolerance_rows(ds)
     parts = [
@@ -399,8 +371,10 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
         f"<h1>{html.escape(a.get('title', 'tolsim study'))}</h1>",
         f"<p class='muted'>Report of <code>{html.escape(os.path.basename(path))}</code>, "
         f"made by tolsim {__version__} on "
-        f"{datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}. The same report as PDF, with "
-        "the sign-off fields: <code>report.pdf</code>.</p>",
+        f"{datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}. "
+        + ("The same report as PDF, with the sign-off fields: <code>report.pdf</code>.</p>"
+           if pdf else "Made without a PDF (<code>--no-pdf</code>): the sign-off table is at "
+                       "the end of this page.</p>"),
         *_verdict_html(verdict, headline(ds, sens)),
         "<h2>1. What was studied</h2><table>",
         *(_row(label, value, num) for label, value, num in study_facts(ds)),
@@ -413,11 +387,7 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
         parts += [f"<tr><td>{html.escape(r.source)}</td><td>{html.escape(r.scope)}</td>"
                   f"<td>{html.escape(r.distribution)}</td><td>{html.escape(r.parameters)}</td>"
                   f"<td><code>{html.escape(r.key)}</code></td></tr>" for r in tolerances]
-        parts.append("</table><p class='muted'>Scope: rail and carriage errors are drawn once "
-                     + ("per track and assembly (each track has its own rail and carriage "
-                        "groove; " if tracks else "per assembly (")
-                     + "or as a random field along the rail with a correlation "
-                     "length), ball errors per ball, the gap per adjacent pair.</p>")
+        parts.append(f"</table><p class='muted'>{html.escape(scope_note(ds))}</p>")
     parts += ["<h3 id='assumptions'>Assumptions and where they come from</h3>",
               "<table><tr><th>topic</th><th>assumption</th><th>value</th>"
               "<th>source</th></tr>"]
@@ -430,47 +400,9 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
         "<code>tolsim run</code>)</summary>",
         f"<pre>{html.escape(str(a.get('config', '')))}</pre></details>",
     ]
-    # key numbers
-    p, lo, hi = (number(ds, x) for x in ("contact_probability", "contact_probability_ci_lower",
-                                      "contact_probability_ci_upper"))
-    tq = np.asarray(ds["time_to_contact_quantile"], dtype=float)
-    lev = np.asarray(ds["quantile"])
-    med = tq[int(np.argmin(np.abs(lev - 0.5)))]
-    n_unres = integer(ds, "n_assemblies_unresolved")
-    bounds = [number(ds, f"contact_probability_{x}") for x in (
-        "bound_lower", "bound_upper", "bounds_ci_lower", "bounds_ci_upper")]
     parts += [
-        "<h2>2. Results at a glance</h2><table>",
-        _row("P(ball-to-ball contact within the stroke)" + (
-                f" per assembly (contact in {any_train(tracks)})" if tracks else ""),
-             f"{format_fraction(p, lo, hi)}  " + (
-                 f"({integer(ds, 'n_contact'):,} of {n_asm - n_unres:,} {many} whose outcome is "
-                 "known; Clopper-Pearson)" if estimator_label(ds) == "Clopper-Pearson" else
-                 f"({estimator_label(ds)}; the plain run: {integer(ds, 'n_contact'):,} of "
-                 f"{n_asm - n_unres:,} {many})")),
-        *([_row(f"bounds over all {n_asm:,} {many} ({n_unres:,} unresolved counted as no "
-                "contact / contact)",
-                f"{format_fraction(bounds[0])} to {format_fraction(bounds[1])} (95 % interval "
-                f"{format_fraction(bounds[2])} to {format_fraction(bounds[3])})")]
-          if n_unres else []),
-        _row("propagation model", a.get("propagation_assumption", a.get("propagation", "?")),
-             False),
-        _row("earliest / median first contact (given contact)",
-             f"{number(ds, 'time_to_contact_min'):.4g} s / {med:.4g} s"
-             if integer(ds, "n_contact") else "no contact"),
-        _row("ε mean / std", f"{_pct(number(ds, 'velocity_deviation_mean'))} / "
-                             f"{100 * number(ds, 'velocity_deviation_std'):.3f} %"),
-        _row("ε range", f"{_pct(number(ds, 'velocity_deviation_min'))} to "
-                        f"{_pct(number(ds, 'velocity_deviation_max'))}"),
-        _row(f"balls outside the {model} model's validity, re-solved with the full model",
-             f"{integer(ds, 'n_balls_resolved_full'):,} of "
-             f"{integer(ds, 'n_balls_outside_validity'):,} "
-             f"in {float(a.get('full_model_resolve_seconds', 0.0)):.2f} s"),
-        _row("unresolved balls (static not converged / loss of contact / full model failed)",
-             f"{integer(ds, 'n_balls_not_converged')} / {integer(ds, 'n_balls_loss_of_contact')} / "
-             f"{integer(ds, 'n_balls_full_failed')}; {n_unres} {many} unresolved (none left out: "
-             "see the bounds)" + (f"; {integer(ds, 'n_assemblies_carriage_failed'):,} carriages "
-                                  "not solved" if tracks else "")),
+        f"<h2>{GLANCE_TITLE}</h2><table>",
+        *(_row(label, value, num) for label, value, num in glance_rows(ds)),
         "</table>",
         *([f"<p class='verdict'>{html.escape(a['propagation_caveat'])}</p>"]
           if a.get("propagation_caveat") else []),
@@ -511,42 +443,14 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
         parts += [f"<p class='muted'>{html.escape(text)}</p>" for text in friction["notes"]]
     parts.append(f"<h2>{html.escape(titles['quality'])}</h2>")
     if q:
-        prop, cap = q["_proportion"], q["_capability"]
-        limit = 100 * number(ds, "velocity_deviation_limit")
-        parts += ["<table>", _row("spec limit", f"|ε| ≤ {limit:.4g} %"),
-                  _row("balls out of spec", f"{prop.text()} ({prop.method}"
-                       + (f"; design effect {prop.design_effect:.2f}"
-                          if np.isfinite(getattr(prop, "design_effect", np.nan)) else "")
-                       + ")")]
-        if cap is not None:
-            digits = next((c.digits for c in verdict.checks if c.quantity == CPK_QUANTITY), 3)
-            parts += [_row("Cpk = (L − |μ|)/(3σ)",  # with the digits of the verdict's row
-                           f"{cpk_text(cap.cpk, digits)} (95 % CI "
-                           f"{cpk_text(cap.cpk_lower, digits)} to "
-                           f"{cpk_text(cap.cpk_upper, digits)}, {cap.method})"),
-                      _row("Cp = L/(3σ)", f"{cap.cp:.3f}"),
-                      _row("percentile Cpk (ISO 22514-2)", f"{cap.cpk_percentile:.3f}"),
-                      _row("out of spec if ε were normal", format_fraction(
-                          cap.normal_out_of_spec))]
-        parts.append("</table>")
-        parts.append("<p class='muted'>Balls of one assembly share its rail and carriage "
-                     + ("errors and its carriage's load distribution" if tracks else "errors")
-                     + ", so they are correlated: the intervals take the assembly as the "
-                     "sampling unit (ratio estimator with Korn &amp; Graubard's effective "
-                     "sample size for the fraction out of spec, delta method over assemblies "
-                     "for Cpk; Cochran, Sampling Techniques, 1977, Ch. 6 and 9). "
-                     "Cpk: distance from the mean of ε to the nearer spec "
-                     "limit in units of 3σ; 1.33 means 4σ. Where the two Cpk differ, ε is "
-                     "not normal and the percentile index is the one to use. "
-                     "Fractions below 0.1 % are shown in ppm.</p>")
+        parts += ["<table>", *(_row(label, value) for label, value in
+                               quality_rows(ds, q, verdict)), "</table>",
+                  f"<p class='muted'>{html.escape(quality_note(ds))}</p>"]
         fig("quality")
     else:
-        parts.append("<p>No limit on |ε| in the config (<code>[study] "
-                     "velocity_deviation_limit_percent</code> or <code>_ppm</code>): no "
-                     "fraction out of spec or capability index.</p>")
-    parts += _stackup_rows(ds)
+        parts.append(f"<p>{html.escape(NO_LIMIT_TEXT)}</p>")
+    parts += _stackup_html(ds)
     parts.append(f"<h2>{html.escape(titles['sensitivity'])}</h2>")
-    titles_out = output_titles(one)
     if friction_indices(sens) is not None:
         parts.append("<p class='muted'>The drivers of the friction increase are ranked in "
                      f"section {html.escape(titles['friction'].split('.')[0])}.</p>")
@@ -554,32 +458,17 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
     if sens is None:
         parts.append(f"<p>{html.escape(sens_source)}</p>")
     elif len(sens.factors) == 0:
-        parts.append("<p>The study has no random tolerance: every assembly is the same, "
-                     "nothing to rank.</p>")
+        parts.append(f"<p>{html.escape(NO_FACTORS_TEXT)}</p>")
     else:
         parts.append(f"<p class='muted'>{html.escape(sens_source)}</p>")
         fig("sensitivity")
-        for k, output in enumerate(sens.outputs):
-            if np.all(np.isnan(sens.total[k])):
-                parts.append(f"<p>{html.escape(titles_out.get(output, output))}: the "
-                             "output does not vary, no ranking.</p>")
+        for block in sensitivity_blocks(sens, ds):
+            table = block["table"]
+            if table is None:
+                parts.append(f"<p>{html.escape(block['lead'])}</p>")
                 continue
-            top = int(np.nanargmax(sens.total[k]))
-            parts.append(
-                f"<p class='verdict'>Largest driver of "
-                f"{html.escape(OUTPUT_SHORT.get(output, output))}: "
-                f"{html.escape(sens.factors[top])} (total effect {sens.total[k, top]:.2f}, "
-                f"alone {sens.first_order[k, top]:.2f}).</p>")
-            parts.append(f"<h3>Ranked by {html.escape(titles_out.get(output, output))}"
-                         "</h3><table><tr><th>rank</th><th>tolerance</th>"
-                         "<th>total effect S_T [95 % CI]</th><th>first order S</th></tr>")
-            order = np.argsort(-np.nan_to_num(sens.total[k], nan=-1.0), kind="stable")
-            for rank, i in enumerate(order, 1):
-                t, (tl, th) = sens.total[k, i], sens.total_ci[k, i]
-                parts.append(f"<tr><td class='num'>{rank}</td><td>{html.escape(sens.factors[i])}"
-                             f"</td><td class='num'>{t:.3f} [{tl:.3f}, {th:.3f}]</td>"
-                             f"<td class='num'>{sens.first_order[k, i]:.3f}</td></tr>")
-            parts.append("</table>")
+            parts.append(f"<p class='verdict'>{html.escape(block['lead'])}</p>")
+            parts += table_html(table)
     parts.append(f"<h2>{html.escape(titles['spot_checks'])}</h2>")
     fig("spot_checks")
     parts.append(f"<p class='muted'>{html.escape(str(a.get('spot_check_status', '')))}</p>")
@@ -590,10 +479,6 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
     parts.append("</table><p>Decision: " + " &nbsp; ".join(
         f"&#9744; {d}" for d in SIGN_OFF_DECISIONS) + "</p>")
     parts.append("<h2>Provenance</h2><table>")
-    for key in ("Conventions", "source", "history", "seed", "references",
-                "contact_probability_interval", "velocity_deviation_quantile_resolution",
-                "time_to_contact_quantile_resolution", "elapsed_seconds", "workers"):
-        if key in a:
-            parts.append(_row(key, a[key], False))
+    parts += [_row(key, value, False) for key, value in provenance_rows(ds)]
     parts.append("</table></body></html>")
     return "\n".join(parts)

@@ -26,6 +26,7 @@ from tolsim.reports.study.figures import (
 from tolsim.reports.study.friction import (
     ball_diameter_of,
     friction_content,
+    friction_indices,
     plot_friction,
     without_output,
 )
@@ -39,11 +40,23 @@ from tolsim.reports.study.page import (
     study_facts,
     tolerance_rows,
 )
-from tolsim.reports.study.sections import carriage_content, section_titles
+from tolsim.reports.study.sections import ReportTable, carriage_content, section_titles
 from tolsim.reports.study.sensitivity import (
     compute_sensitivity,
     config_error_text,
     sensitivity_from_file,
+)
+from tolsim.reports.study.shared import (
+    GLANCE_TITLE,
+    NO_FACTORS_TEXT,
+    NO_LIMIT_TEXT,
+    glance_rows,
+    provenance_rows,
+    quality_note,
+    quality_rows,
+    scope_note,
+    sensitivity_blocks,
+    stackup_table,
 )
 from tolsim.reports.style import (
     render_png,
@@ -168,11 +181,11 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     say("report.html")
     files = {f"{name}.png": png for name, png in pngs.items()}
     files["report.html"] = report_html(ds, pngs, sens, source, q, os.fspath(path), out.verdict,
-                                       carriage, out.friction).encode("utf-8")
+                                       carriage, out.friction, pdf=pdf).encode("utf-8")
     if pdf:
         say("report.pdf")
         files["report.pdf"] = render_report_pdf(ds, figs, sens, out.verdict, path, carriage,
-                                                out.friction)
+                                                out.friction, q, source)
     written = write_files(folder, files)
     out.figures = {name: written[f"{name}.png"] for name in pngs}
     out.html = written["report.html"]
@@ -180,10 +193,12 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     return out
 
 
-def render_report_pdf(ds, figs, sens, verdict, path, carriage=None, friction=None) -> bytes:
+def render_report_pdf(ds, figs, sens, verdict, path, carriage=None, friction=None,
+                      q=None, sens_source="") -> bytes:
     """The PDF of a report as bytes (:func:`tolsim.reports.pdf.render_pdf`; the arguments
-    as for :func:`write_report_pdf`)."""
-    return pdf.render_pdf(**pdf_content(ds, figs, sens, verdict, path, carriage, friction))
+    as for :func:`pdf_content`)."""
+    return pdf.render_pdf(**pdf_content(ds, figs, sens, verdict, path, carriage, friction, q,
+                                        sens_source))
 
 
 def write_report_pdf(ds, figs, sens, verdict, path, pdf_path, carriage=None,
@@ -196,10 +211,15 @@ def write_report_pdf(ds, figs, sens, verdict, path, pdf_path, carriage=None,
                                                  friction))
 
 
-def pdf_content(ds, figs, sens, verdict, path, carriage=None, friction=None) -> dict:
+def pdf_content(ds, figs, sens, verdict, path, carriage=None, friction=None, q=None,
+                sens_source="") -> dict:
     """The arguments of :func:`tolsim.reports.pdf.report_pages` for a result file (with
     ``carriage``, the section of :func:`carriage_content`, in a carriage study, and
-    ``friction``, the section of :func:`friction_content`, in a study with ``[contact]``)."""
+    ``friction``, the section of :func:`friction_content`, in a study with ``[contact]``;
+    ``q`` the quality of :func:`tolsim.study.statistics.quality.dataset_quality`, made when
+    not given; ``sens_source`` where the Sobol' indices come from). The PDF holds what the
+    HTML page holds (:mod:`tolsim.reports.study.shared`)
+    but the config's TOML text and the rare-event tables (README "Reports")."""
     order = ("carriage", "velocity_deviation", "contact", "friction", "quality",
              "sensitivity", "spot_checks")
     pngs = {name: render_png(figs[name], dpi=pdf.FIGURE_DPI) for name in order if name in figs}
@@ -213,10 +233,50 @@ def pdf_content(ds, figs, sens, verdict, path, carriage=None, friction=None) -> 
     subtitle = (f"Result file {os.path.basename(os.fspath(path))}, report by tolsim "
                 f"{__version__} on {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}; "
                 f"study run by {a.get('source', '?')}: {a.get('history', '?')}")
+    titles = section_titles(ds)
+    q = quality.dataset_quality(ds) if q is None else q
     return dict(
         title=str(a.get("title", "tolsim study")), subtitle=subtitle,
         verdict=verdict, headline=headline(ds, sens),
         facts=[(label, str(value)) for label, value, _ in study_facts(ds)],
         tolerances=tolerance_rows(ds), assumptions=assumption_table(ds), figures=pngs,
-        captions=captions(ds), sections=section_titles(ds), result_path=os.fspath(path),
-        sign_off=(SIGN_OFF_ROLES, SIGN_OFF_FIELDS, SIGN_OFF_DECISIONS), **extra)
+        captions=captions(ds),
+        sections={"glance": GLANCE_TITLE, **{n: titles[n] for n in order if n in titles}},
+        result_path=os.fspath(path),
+        sign_off=(SIGN_OFF_ROLES, SIGN_OFF_FIELDS, SIGN_OFF_DECISIONS),
+        glance=[(label, str(value)) for label, value, _ in glance_rows(ds)],
+        glance_notes=[str(a["propagation_caveat"])] if a.get("propagation_caveat") else [],
+        tolerance_note=scope_note(ds) if tolerance_rows(ds) else "",
+        section_tables=_section_tables(ds, sens, verdict, q, sens_source),
+        provenance=provenance_rows(ds), **extra)
+
+
+def _section_tables(ds, sens, verdict, q, sens_source="") -> dict:
+    """What follows the figures of the PDF's sections (:func:`tolsim.reports.pdf.
+    report_pages`), as on the HTML page: the quality table and the linear stack-up, the
+    ranked Sobol' tables, the spot-check status."""
+    out = {}
+    if q:
+        out["quality"] = [ReportTable("Fraction out of spec and capability", ("quantity",
+                                                                               "value"),
+                                      tuple(quality_rows(ds, q, verdict)), (0.4, 0.6),
+                                      quality_note(ds))]
+    else:
+        out["quality"] = [NO_LIMIT_TEXT]
+    stackup = stackup_table(ds)
+    if stackup is not None:
+        out["quality"].append(stackup)
+    lead = []
+    if friction_indices(sens) is not None:
+        lead.append("The drivers of the friction increase are ranked in section "
+                    f"{section_titles(ds)['friction'].split('.')[0]}.")
+    ranked = without_output(sens)
+    if ranked is not None and len(ranked.factors) == 0:
+        lead.append(NO_FACTORS_TEXT)
+    elif sens_source:
+        lead.append(sens_source)
+    blocks = sensitivity_blocks(sens, ds)
+    out["sensitivity"] = lead + [x for b in blocks for x in (b["lead"], b["table"]) if x]
+    if ds.attrs.get("spot_check_status"):
+        out["spot_checks"] = [str(ds.attrs["spot_check_status"])]
+    return out

@@ -54,6 +54,7 @@ from tolsim.study.analyses.limit_state import check_supported, estimate_events
 from tolsim.study.analyses.sensitivity import study_sensitivity
 from tolsim.study.analyses.worst_case import linear_stackup
 from tolsim.study.execution import saved_samples
+from tolsim.study.execution.answerable import check_answerable
 from tolsim.study.execution.chunks import (
     SPOT_FIELDS,
     SpotChecks,
@@ -370,7 +371,8 @@ def _spot_rows_of_shorter_run(config, plan_used, parts):
 def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, progress=None,
               checkpoint_path=None, checkpoint_interval: float = 30.0,
               max_blocks: int | None = None, target: PrecisionTarget | None = None,
-              notify=None, save_samples: int = 0, scheduler=None) -> StudyResult:
+              notify=None, save_samples: int = 0, scheduler=None,
+              require_answer: bool = False) -> StudyResult:
     """Run a Monte Carlo tolerance study.
 
     Parameters
@@ -408,10 +410,23 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         (a ``dask_jobqueue.SLURMCluster``, say; both left running). The results
         are merged here in block order, so the result does not depend on it; ``workers``
         must then be 1 (the cluster's workers do the work).
+    require_answer : bool
+        Refuse a study that cannot answer: if no train of the first block resolves, raise
+        :class:`~tolsim.study.execution.answerable.UnanswerableStudy` (a ValueError naming the
+        cause and the config keys) right after that block, before any checkpoint is written
+        (:func:`~tolsim.study.execution.answerable.check_answerable`). The first block is then
+        evaluated alone, as a chunk of its own (no effect on the result). ``tolsim run`` sets
+        it for a single study (not for the points of a sweep); False (default) runs such a
+        study to the end, its trains counted as unresolved.
 
     Returns
     -------
     StudyResult
+
+    Raises
+    ------
+    UnanswerableStudy
+        With ``require_answer``, if every train of the first block is unresolved.
     """
     if not (isinstance(workers, int) and workers >= 1):
         raise ValueError(f"workers = {workers!r} must be a positive integer")
@@ -459,8 +474,10 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     reached = bool(target is not None and resumed and target.reached(committed.statistics))
     last_block = resumed if reached else total_blocks
     started = time.perf_counter()
-    chunks = [list(range(i, min(i + chunk_blocks, last_block)))
-              for i in range(resumed, last_block, chunk_blocks)]
+    probe = require_answer and resumed == 0 and last_block > 1 and chunk_blocks > 1
+    first = 1 if probe else resumed  # the first block alone: decided before the others run
+    chunks = ([[0]] if probe else []) + [list(range(i, min(i + chunk_blocks, last_block)))
+                                         for i in range(first, last_block, chunk_blocks)]
     notice = _CompileNotice(lambda: _say(notify, COMPILING_MESSAGE))
     results = executor = watch = session = None
     loop_ended = False
@@ -491,6 +508,8 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
                 assert index == committed.next_block
                 committed = committed.after(block_acc, spots)  # the one commit of a block
                 merged_here += 1
+                if require_answer and committed.next_block == 1:
+                    check_answerable(config, committed.statistics)
                 if progress:
                     progress(int(block_acc.n_assemblies))
                 if target is not None and target.reached(committed.statistics):
