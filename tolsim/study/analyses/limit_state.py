@@ -700,7 +700,7 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     (:func:`rare_size`: the combined number is mostly importance sampling's, subset
     simulation cross-checks it), so that ``rare`` costs about what ``importance`` alone
     costs plus half a subset simulation (on ``configs/rare_contact.toml`` FORM on the
-    components, 1160 evaluations per pair, is most of it). Where importance sampling is not
+    components, 949 evaluations per pair, is most of it). Where importance sampling is not
     attempted (not smooth), subset simulation's result stands alone at full size, with a
     note; where it gives no number,
     ``combine`` keeps subset simulation's with importance sampling's flag (not ``ok``).

@@ -34,14 +34,13 @@ FORM_SUBSET_LIMIT = 5.0
 AGREEMENT_LEVEL = 0.99
 #: ``method="rare"``: subset simulation at half its own default size (500 samples per level),
 #: importance sampling at its own (2000 samples), and one FORM search (importance sampling's,
-#: budget 2000 evaluations) whose design points serve both, so that ``rare`` costs about
-#: one estimator alone plus FORM. The combination's variance is mostly importance sampling's
-#: (CV ~0.05 against subset's ~0.2-0.5); subset simulation is there to cross-check it. With
-#: importance sampling at 1000 samples too, the combination covered only 90 % on RP35
-#: (100 repeats, ``benchmarks/rare_event_coverage.py``).
+#: at most as many evaluations as its samples) whose design points serve both, so that
+#: ``rare`` costs about one estimator alone plus FORM. The combination's variance is mostly
+#: importance sampling's (CV ~0.05 against subset's ~0.2-0.5); subset simulation is there
+#: to cross-check it. With importance sampling at 1000 samples too, the combination covered
+#: only 90 % on RP35 (100 repeats, ``benchmarks/rare_event_coverage.py``).
 RARE_SAMPLES_PER_LEVEL = 500
 RARE_IMPORTANCE_SAMPLES = 2000
-FORM_BUDGET = 2000
 #: Key of the FORM cross-check's seed under the caller's seed (so it does not share streams
 #: with the estimator itself).
 CHECK_STREAM = 0x63686B  # 'chk'
@@ -133,9 +132,10 @@ def estimate(g, dimension, method="rare", seed=0, **options) -> RareEventResult:
         search = {k: imp_options.pop(k) for k in ("restarts", "gradient", "step")
                   if k in imp_options}
         sub_seed, imp_seed = estimator_seeds(root)
-        # one FORM search, seeded as importance sampling's own would be, with its budget at
-        # full size; its design points serve importance sampling and subset's mode check
-        found = find_design_points(g, d, imp_seed, max_evaluations=FORM_BUDGET,
+        # one FORM search, seeded and budgeted as importance sampling's own would be (so its
+        # part is the number method "importance" gives with imp_seed); its design points
+        # serve importance sampling and subset's mode check
+        found = find_design_points(g, d, imp_seed, max_evaluations=imp_options["samples"],
                                    batch_size=options.get("batch_size"), **search)
         sub = subset_simulation(g, d, sub_seed, design_points=found.points, **common,
                                 **sub_options)
