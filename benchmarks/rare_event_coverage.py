@@ -9,10 +9,14 @@ the truth), the ``ok`` runs whose interval misses the truth by more than a facto
 ``importance_1``   FORM from the origin only, IS around that one design point (as before
                    issue 23, now with its diagnostics)
 ``importance``     FORM from several starts, IS over the mixture of every design point
-``subset``         subset simulation alone (genealogy CV, ancestor count)
-``subset+FORM``    :func:`tolsim.rare_events.estimate` ``method="subset"``: subset with the
-                   FORM cross-check
-``rare``           ``method="rare"``: subset and importance sampling cross-checked
+``subset_alone``   :func:`subset_simulation` without design points (genealogy CV, ancestor
+                   count): a reference, not a method of ``estimate``. It cannot see a mode
+                   that its intermediate levels lost (RP110) and returns ``ok`` there.
+``subset``         :func:`tolsim.rare_events.estimate` ``method="subset"``: FORM first, then
+                   subset simulation with its per-design-point check (``lost_modes``) and
+                   the FORM cross-check of the total
+``rare``           ``method="rare"``: one FORM search shared, subset simulation (half size,
+                   own seed) and importance sampling (own seed) cross-checked
 ``monte_carlo``    100 000 plain samples (Clopper-Pearson)
 
 Run: ``python benchmarks/rare_event_coverage.py [--repeats 100] [--only RP89 RP35]``.
@@ -35,8 +39,8 @@ SEED = 23_2026
 ESTIMATORS = {
     "importance_1": lambda p, s: importance_sampling(p.g, p.dimension, s, restarts=0),
     "importance": lambda p, s: estimate(p.g, p.dimension, "importance", s),
-    "subset": lambda p, s: subset_simulation(p.g, p.dimension, s),
-    "subset+FORM": lambda p, s: estimate(p.g, p.dimension, "subset", s),
+    "subset_alone": lambda p, s: subset_simulation(p.g, p.dimension, s),
+    "subset": lambda p, s: estimate(p.g, p.dimension, "subset", s),
     "rare": lambda p, s: estimate(p.g, p.dimension, "rare", s),
     "monte_carlo": lambda p, s: estimate(p.g, p.dimension, "monte_carlo", s),
 }

@@ -36,7 +36,7 @@ from tolsim.study.analyses.rare_events import (
     series_importance_sampling,
     subset_simulation,
 )
-from tolsim.study.analyses.rare_events.api import agree
+from tolsim.study.analyses.rare_events.api import agree, estimator_seeds
 from tolsim.study.execution.runner import run_study
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -100,12 +100,20 @@ def test_the_estimators_agree_and_are_combined(rare):
     assert r.unresolved == 0
     assert (r.bound_lower, r.bound_upper) == (r.probability, r.probability)
     assert (r.bounds_ci_lower, r.bounds_ci_upper) == (r.ci_lower, r.ci_upper)
-    # each part is the number the subset or importance study gives (the same seed)
+    # each part is the number that estimator gives alone from its own child of the event's
+    # seed (issue 23: independent streams), subset simulation at half samples_per_level
     config = rare.config
+    g = limit_state.LimitState(config, "contact")
+    sub_seed, imp_seed = estimator_seeds(limit_state.event_seed(config, "contact"))
+    alone = {"subset": subset_simulation(g, g.dimension, sub_seed, samples_per_level=250,
+                                         p0=config.study.p0),
+             "importance": series_importance_sampling(g, imp_seed, samples=1000)[0]}
     for name, part in estimate.parts.items():
-        alone = limit_state.estimate_event(dataclasses.replace(config, study=dataclasses.replace(
-            config.study, estimator=name)), "contact").result
-        assert alone.probability == part.probability and alone.evaluations == part.evaluations
+        assert alone[name].probability == part.probability
+        assert alone[name].evaluations == part.evaluations
+    same_seed = subset_simulation(g, g.dimension, limit_state.event_seed(config, "contact"),
+                                  samples_per_level=250, p0=config.study.p0)
+    assert same_seed.probability != sub.probability
     # the diagnostics of both are carried by the combined result
     assert r.effective_sample_size == imp.effective_sample_size and r.ancestors == sub.ancestors
     assert estimate.design_point is not None

@@ -32,6 +32,15 @@ METHODS = ("subset", "importance", "rare", "monte_carlo")
 FORM_SUBSET_LIMIT = 5.0
 #: Confidence level of the agreement test of ``method="rare"`` (:func:`agree`).
 AGREEMENT_LEVEL = 0.99
+#: ``method="rare"``: subset simulation at half its own default size (500 samples per level),
+#: importance sampling at its own (2000 samples), and one FORM search (importance sampling's,
+#: at most as many evaluations as its samples) whose design points serve both, so that
+#: ``rare`` costs about one estimator alone plus FORM. The combination's variance is mostly
+#: importance sampling's (CV ~0.05 against subset's ~0.2-0.5); subset simulation is there
+#: to cross-check it. With importance sampling at 1000 samples too, the combination covered
+#: only 90 % on RP35 (100 repeats, ``benchmarks/rare_event_coverage.py``).
+RARE_SAMPLES_PER_LEVEL = 500
+RARE_IMPORTANCE_SAMPLES = 2000
 #: Key of the FORM cross-check's seed under the caller's seed (so it does not share streams
 #: with the estimator itself).
 CHECK_STREAM = 0x63686B  # 'chk'
@@ -51,16 +60,23 @@ def estimate(g, dimension, method="rare", seed=0, **options) -> RareEventResult:
         d.
     method : {"rare", "subset", "importance", "monte_carlo"}
         ``"subset"``
-            Subset simulation (any limit state, smooth or not; cost about
-            n (1 + 0.9 log10(1 / P))), then a cross-check with FORM from several starts:
-            flagged ``"estimators_disagree"`` when FORM's design points hold (second order)
-            more than :data:`FORM_SUBSET_LIMIT` times the upper end of subset's interval (the
-            chains lost a failure mode). ``form_check=False`` skips it.
+            FORM from several starts (at most n evaluations, seeded from the child
+            (CHECK_STREAM,) of ``seed``), then subset simulation (any limit state, smooth or
+            not; cost about n (1 + 0.9 log10(1 / P))) checked against every design point
+            (:func:`~tolsim.study.analyses.rare_events.subset.lost_modes`:
+            ``"diagnostic_failed"`` when one holds far more than the chains found near it),
+            and flagged ``"estimators_disagree"`` when the design points hold (second order)
+            more than :data:`FORM_SUBSET_LIMIT` times the upper end of subset's interval.
+            ``form_check=False`` skips both.
         ``"importance"``
             FORM from several starts and importance sampling around every design point found
             (smooth limit states; the cheapest for a small P), with its diagnostics.
         ``"rare"`` (default)
-            Both, cross-checked: when both are ``ok`` and agree (:func:`agree`), the
+            Both, from the two children of :func:`estimator_seeds` (subset simulation the
+            first, importance sampling the second), sharing one FORM search (its design
+            points serve importance sampling and subset's mode check), subset simulation at
+            :data:`RARE_SAMPLES_PER_LEVEL` samples per level unless ``subset=`` says
+            otherwise. Cross-checked: when both are ``ok`` and agree (:func:`agree`), the
             inverse-variance combination of the two (status ``ok``); when one is flagged by
             its own diagnostics but agrees with the other, the other's result;
             otherwise status ``"estimators_disagree"`` (or the flag of a failing one, when
@@ -97,36 +113,66 @@ def estimate(g, dimension, method="rare", seed=0, **options) -> RareEventResult:
     if method == "importance":
         return importance_sampling(g, d, root, **options)
     if method == "subset":
-        form_check = options.pop("form_check", True)
-        result = subset_simulation(g, d, root, **options)
-        if form_check:
-            result = form_cross_check(g, d, root, result, options.get("batch_size"),
-                                      budget=options.get("samples_per_level", 1000))
-        return result
+        if not options.pop("form_check", True):
+            return subset_simulation(g, d, root, **options)
+        found = find_design_points(g, d, check_sequence(root),
+                                   max_evaluations=options.get("samples_per_level", 1000),
+                                   batch_size=options.get("batch_size"))
+        result = subset_simulation(g, d, root, design_points=found.points, **options)
+        return form_cross_check(result, found)
     if method == "rare":
         unknown = set(options) - {"subset", "importance", "batch_size", "confidence_level"}
         if unknown:
             raise TypeError(f"method 'rare' takes subset=, importance=, batch_size= and "
                             f"confidence_level=; got {sorted(unknown)}")
         common = {k: options[k] for k in ("batch_size", "confidence_level") if k in options}
-        sub = subset_simulation(g, d, root, **common, **options.get("subset", {}))
-        imp = importance_sampling(g, d, root, **common, **options.get("importance", {}))
+        sub_options = {"samples_per_level": RARE_SAMPLES_PER_LEVEL,
+                       **options.get("subset", {})}
+        imp_options = {"samples": RARE_IMPORTANCE_SAMPLES, **options.get("importance", {})}
+        search = {k: imp_options.pop(k) for k in ("restarts", "gradient", "step")
+                  if k in imp_options}
+        sub_seed, imp_seed = estimator_seeds(root)
+        # one FORM search, seeded and budgeted as importance sampling's own would be (so its
+        # part is the number method "importance" gives with imp_seed); its design points
+        # serve importance sampling and subset's mode check
+        found = find_design_points(g, d, imp_seed, max_evaluations=imp_options["samples"],
+                                   batch_size=options.get("batch_size"), **search)
+        sub = subset_simulation(g, d, sub_seed, design_points=found.points, **common,
+                                **sub_options)
+        imp = importance_sampling(g, d, imp_seed, design_points=found, **common,
+                                  **imp_options)
+        imp = replace(imp, evaluations=imp.evaluations + found.evaluations)
         return combine(sub, imp)
     raise ValueError(f"method = {method!r}; choose one of {METHODS}")
 
 
-def form_cross_check(g, d, root, result, batch_size=None, budget=1000):
-    """Flag a subset result that FORM's design points contradict (see :func:`estimate`).
+def estimator_seeds(root):
+    """The SeedSequences of subset simulation and importance sampling in ``method="rare"``
+    (and ``estimator = "rare"``): the two children that ``root.spawn(2)`` gives a fresh copy
+    of ``root`` (spawn keys (..., 0) and (..., 1)), so that the estimators draw from
+    independent streams and the caller's sequence is not advanced (same seed, same result)."""
+    return np.random.SeedSequence(root.entropy, spawn_key=root.spawn_key,
+                                  pool_size=root.pool_size).spawn(2)
 
-    The FORM searches (from the origin and seeded restarts, at most ``budget`` evaluations,
-    added to ``result.evaluations``) are seeded from the child (CHECK_STREAM,) of ``root``.
+
+def check_sequence(root):
+    """The child (CHECK_STREAM,) of ``root``: the seed of the FORM search of
+    ``method="subset"`` (not a stream of subset simulation itself)."""
+    return np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key, CHECK_STREAM),
+                                  pool_size=root.pool_size)
+
+
+def form_cross_check(result, found):
+    """Subset's ``result`` with FORM's design points ``found`` (a
+    :class:`~tolsim.study.analyses.rare_events.form.DesignPointSet`; their evaluations
+    added), flagged ``"estimators_disagree"`` when their probability far exceeds its interval.
+
     Only a FORM probability far *above* subset's interval flags: FORM is often far off on a
-    curved limit state, but a design point that holds much more than subset found means the
-    chains never reached that part of the failure domain.
+    curved limit state, but design points that hold much more than subset found mean the
+    chains never reached that part of the failure domain. (Per design point, the check of
+    :func:`~tolsim.study.analyses.rare_events.subset.lost_modes` has already run in
+    subset simulation.)
     """
-    child = np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key, CHECK_STREAM),
-                                   pool_size=root.pool_size)
-    found = find_design_points(g, d, child, max_evaluations=budget, batch_size=batch_size)
     result = replace(result, evaluations=result.evaluations + found.evaluations,
                      form_probability=found.form_probability,
                      design_points=(np.array([p.point for p in found.points])

@@ -206,8 +206,17 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         [u, u + h e_k, u - h e_k])."""
         if gradient is not None:
             return values(u[None]), _user_gradient(gradient, u)
-        g = values(np.concatenate([u[None], u + step * np.eye(d), u - step * np.eye(d)]))
+        g = last.get(u.tobytes())
+        if g is None:
+            g = values(np.concatenate([u[None], u + step * np.eye(d), u - step * np.eye(d)]))
+            last.clear()
+            last[u.tobytes()] = g
         return g, (g[1:d + 1] - g[d + 1:]) / (2 * step)
+
+    # the rows [u, u + h e_k, u - h e_k] of the last gradient, not evaluated twice: SLSQP's
+    # first gradient is at the start (the origin, already evaluated) and its last one at its
+    # result, where the checks below need the same rows
+    last = {}
 
     def fail(u, g_grad, why):
         beta = float(np.linalg.norm(u))
@@ -234,7 +243,7 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
     def constraint(u):
         key = u.tobytes()
         if key not in cache:
-            g = values(u[None])[0]
+            g = last[key][0] if key in last else values(u[None])[0]
             if not np.isfinite(g):
                 raise _Unevaluable(f"the limit state is {g} at a point of the search")
             cache.clear()
@@ -258,8 +267,10 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
     except _Unevaluable as error:
         return fail(origin, grad0, f"FORM search stopped: {error}")
     point = np.asarray(result.x, dtype=float)
-    rows = np.concatenate([point[None], point + step * np.eye(d), point - step * np.eye(d)])
-    g = values(rows)
+    g = last.get(point.tobytes())
+    if g is None:
+        g = values(np.concatenate([point[None], point + step * np.eye(d),
+                                   point - step * np.eye(d)]))
     g_star = float(g[0])
     forward = (g[1:d + 1] - g_star) / step
     backward = (g_star - g[d + 1:]) / step
