@@ -117,6 +117,12 @@ def scipy_baseline(layout, load, oversize, errors):
     return forces, calls
 
 
+def _probability(acc):
+    """P(contact) with its 95 % interval and the count (as the README quotes it)."""
+    p, low, high = acc.contact_probability()
+    return f"{p:.3f} [{low:.3f}, {high:.3f}] ({int(acc.n_contact)} of {int(acc.n_assemblies)})"
+
+
 def along_track_study(assemblies, time_steps):
     """assemblies/s of the study path with along_track propagation (and constant, the
     baseline), ``configs/carriage_preload.toml`` with ``assemblies`` samples in one block."""
@@ -142,10 +148,9 @@ def along_track_study(assemblies, time_steps):
     print(f"along_track study            {rate:,.1f} assemblies/s ({assemblies} assemblies x "
           f"{time_steps} steps in {t_along:.2f} s on {numba.get_num_threads()} threads; "
           f"{rate * time_steps:,.0f} assembly-steps/s, an assembly followed until its first "
-          f"contact); P(contact) {int(acc.n_contact) / assemblies:.3f}, unresolved "
-          f"{int(acc.n_unresolved)}")
+          f"contact); P(contact) {_probability(acc)}, unresolved {int(acc.n_unresolved)}")
     print(f"constant study (baseline)    {assemblies / t_const:,.0f} assemblies/s "
-          f"({t_const:.2f} s); P(contact) {int(ref.n_contact) / assemblies:.3f}; along_track "
+          f"({t_const:.2f} s); P(contact) {_probability(ref)}; along_track "
           f"is {t_along / t_const:,.0f}x dearer")
     return rate
 

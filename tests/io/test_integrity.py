@@ -28,7 +28,8 @@ from tolsim.study.execution.runner import StudyInterrupted
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 #: Attributes that stamp a run (its time), not its result.
-STAMPS = ("history", "date_created", "elapsed_seconds", "full_model_resolve_seconds")
+STAMPS = ("history", "date_created", "elapsed_seconds", "full_model_resolve_seconds",
+          "compile_seconds", "balls_per_second")
 
 
 def _one_line_error(capsys, argv, *words):

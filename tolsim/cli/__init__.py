@@ -24,6 +24,7 @@ SUBCOMMANDS = {
     "carriage": "tolsim.cli.carriage",
     "compare": "tolsim.cli.compare",
     "allocate": "tolsim.cli.allocate",
+    "warmup": "tolsim.cli.warmup",
 }
 
 SUMMARIES = {
@@ -34,6 +35,7 @@ SUMMARIES = {
     "carriage": "load distribution of one carriage on its ball tracks, with preload",
     "compare": "studies side by side: statistics, differences with intervals, config changes",
     "allocate": "least-cost tolerances that meet a probabilistic target (P, quantile)",
+    "warmup": "compile the kernels of the studies ahead of a first run",
 }
 
 

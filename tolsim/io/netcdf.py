@@ -38,6 +38,7 @@ __all__ = ["IntegrityError", "NUMERIC_ATTRIBUTES", "PLAIN_PROBABILITY_VARIABLES"
 #: points is text: lines ``point K: value``).
 NUMERIC_ATTRIBUTES = ("seed", "samples", "block_size", "workers", "sensitivity_samples",
                       "samples_maximum", "elapsed_seconds", "full_model_resolve_seconds",
+                      "compile_seconds", "balls_per_second",
                       "velocity_deviation_quantile_resolution",
                       "time_to_contact_quantile_resolution")
 #: Global attributes written as text.

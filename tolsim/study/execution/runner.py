@@ -49,6 +49,7 @@ import numpy as np
 from numba.core import event as numba_event
 
 from tolsim import __version__
+from tolsim._jit import compile_seconds
 from tolsim.study.analyses.friction_examples import friction_examples
 from tolsim.study.analyses.limit_state import check_supported, estimate_events
 from tolsim.study.analyses.sensitivity import study_sensitivity
@@ -101,6 +102,19 @@ class StudyResult:
     # a rare-event estimator (study.estimator): event ->
     # tolsim.study.analyses.limit_state.EventEstimate
     rare_events: dict | None = None
+    # Numba compilation in this process [s]: in the whole run, and inside ``elapsed``
+    compile_seconds: float = 0.0
+    loop_compile_seconds: float = 0.0
+    assemblies_run: int | None = None  # evaluated in this process (None: all of them)
+
+    @property
+    def balls_per_second(self) -> float:
+        """Throughput of the work done in this process: the balls of the assemblies it
+        evaluated (after a resume, only those) over ``elapsed`` without compilation."""
+        done = (int(self.statistics.n_assemblies) if self.assemblies_run is None
+                else self.assemblies_run)
+        seconds = self.elapsed - self.loop_compile_seconds
+        return done * self.config.balls / seconds if seconds > 0 else float("nan")
 
     @property
     def friction(self):
@@ -470,6 +484,8 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
             if progress:
                 progress(done)
     resumed = committed.next_block
+    done_before = int(committed.statistics.n_assemblies)
+    compiled_before = compile_seconds(thread=False)
     # a checkpoint saved just after the target was met: nothing left to run
     reached = bool(target is not None and resumed and target.reached(committed.statistics))
     last_block = resumed if reached else total_blocks
@@ -543,6 +559,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         if session is not None and not loop_ended:
             session.close()
     elapsed = time.perf_counter() - started
+    loop_compile = compile_seconds(thread=False) - compiled_before
     acc = committed.statistics
     n_done = int(acc.n_assemblies)
     result_config = config
@@ -581,7 +598,10 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     return StudyResult(result_config, acc, spots, elapsed, workers, resumed, meta, sensitivity,
                        target=target, target_reached=reached, samples_maximum=st.samples,
                        stackup=stackup, samples=samples, carriage_nominal=nominal,
-                       friction_examples=examples, rare_events=rare)
+                       friction_examples=examples, rare_events=rare,
+                       compile_seconds=compile_seconds(thread=False) - compiled_before,
+                       loop_compile_seconds=loop_compile,
+                       assemblies_run=n_done - done_before)
 
 
 def _say(notify, message):
