@@ -16,6 +16,7 @@ from tolsim.reports.result_view import (
     config_or_none,
     integer,
     number,
+    regime_counts_text,
 )
 from tolsim.reports.study.figures import OUTPUT_SHORT, output_titles
 from tolsim.reports.study.friction import (
@@ -462,10 +463,13 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
                              f"{100 * number(ds, 'velocity_deviation_std'):.3f} %"),
         _row("ε range", f"{_pct(number(ds, 'velocity_deviation_min'))} to "
                         f"{_pct(number(ds, 'velocity_deviation_max'))}"),
-        _row(f"balls outside the {model} model's validity, re-solved with the full model",
+        _row(f"balls sent to the full model (outside the {model} model's validity, or an open "
+             "contact), solved",
              f"{integer(ds, 'n_balls_resolved_full'):,} of "
              f"{integer(ds, 'n_balls_outside_validity'):,} "
              f"in {float(a.get('full_model_resolve_seconds', 0.0)):.2f} s"),
+        *([_row("balls by regime (A: every contact slips; B: one sticks)",
+                regime_counts_text(ds), False)] if "n_balls_regime" in ds else []),
         _row("unresolved balls (static not converged / loss of contact / full model failed)",
              f"{integer(ds, 'n_balls_not_converged')} / {integer(ds, 'n_balls_loss_of_contact')} / "
              f"{integer(ds, 'n_balls_full_failed')}; {n_unres} {many} unresolved (none left out: "
