@@ -128,3 +128,53 @@ def test_analytic_undefined_at_loss_of_contact(capsys):
     text = capsys.readouterr().out
     assert "velocity deviation    undefined" in text
     assert "--model full treats one unloaded contact" in text
+
+
+def test_forces_out_of_balance_warn_with_the_imbalance(capsys):
+    # Issue 25, bad input. Geometry ([Lin2018] Fig. 2, beta_0 = 45 deg): BL at
+    # p = (-sin 43, -cos 43) and TR at p = (+sin 45, +cos 45) on the ball, each pushing inward
+    # with 200 N along -p. Net force on the ball: -200 (sin 45 - sin 43, cos 45 - cos 43)
+    # = (-5.0220, +4.8480) N, |.| = 2 * 200 * sin(1 deg) = 6.9809 N (the two contacts are 2 deg
+    # from opposite). A warning, not an error: the paper's paired forces are slightly out of
+    # balance themselves.
+    args = ["ball", "--model", "full", "--forces-n", "200", "0", "200", "0",
+            "--dbeta-deg", "-2", "2", "0", "0"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    lines = [line for line in text.splitlines() if "do not balance" in line]
+    assert len(lines) == 1
+    assert "net contact force 6.98 N (x -5.02 N, y +4.85 N)" in lines[0]
+    # balanced forces (the paired ones at dbeta = 0, or opposite contacts): no warning
+    assert main(["ball", "--forces-n", "200", "0", "200", "0", "--dbeta-deg", "1", "0", "1",
+                 "0", "--model", "full"]) == 0
+    assert "do not balance" not in capsys.readouterr().out
+    assert main(["ball", "--forces-n", "20", "10", "20", "10", "--dbeta-deg", "0", "0", "0",
+                 "0"]) == 0
+    assert "do not balance" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("forces, dbeta, regime", [
+    # two opposite contacts with equal angles: exactly two-point, epsilon = 0 (issue 25)
+    (["100", "0", "100", "0"], ["1", "0", "1", "0"], "2-point"),
+    # case (a) of issue 25 at rho = -0.95 with paired forces: the light pair slides, a heavy
+    # contact sticks (chi < 1)
+    (None, None, "B"),
+    # the paper's ball 1 (rho = -0.6): every contact slips
+    ([], [], "A"),
+])
+def test_ball_shows_its_regime_and_chi(forces, dbeta, regime, capsys):
+    args = ["ball", "--model", "full"]
+    if forces is None:
+        args += ["--load-n", "-190", "200"]
+    elif forces:
+        args += ["--forces-n", *forces, "--dbeta-deg", *dbeta]
+    assert main(args + ["--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["regime"] == regime
+    chi = out["stick_criterion"]
+    if regime == "2-point":
+        assert out["velocity_deviation"] == 0.0 and chi == 0.0
+    else:
+        assert (chi < 1.0) is (regime == "B")
+    assert main(args) == 0
+    assert f"regime                {regime}" in capsys.readouterr().out

@@ -344,16 +344,23 @@ def test_clearance_settles_every_ball_two_point(capsys, tmp_path):
     assert len(re.findall(r"(?m)^\s+[01]\s+\d+\s+-?\d+\.\d\d ", table)) == 24
 
 
-def test_no_preload_opens_contacts_and_epsilon_is_null(capsys, tmp_path):
-    # preload class "none" under the shipped load: one diagonal of each ball opens
-    # (two-point contact), so no velocity model takes the ball: epsilon is null in the JSON
-    # (strict JSON, no NaN) and "-" in the table, with a note
+def test_no_preload_every_ball_is_two_point_with_zero_epsilon(capsys, tmp_path):
+    # preload class "none" under the shipped load: one diagonal of each ball opens. Issue 25:
+    # an exactly two-point ball (two opposite contacts, equal angles and forces, as statics
+    # force) rolls at v/2, so epsilon = 0 exactly (the closed form of
+    # tolsim.physics.velocity.regimes.two_point_loaded with no load), regime "2-point"; the
+    # table marks the open contacts and no longer says that no model takes the ball
     text = CONFIG.read_text(encoding="utf-8").replace("preload_oversize_um = 2.0",
                                                       "preload_oversize_um = 0.0")
     path = tmp_path / "none.toml"
     path.write_text(text, encoding="utf-8")
     out = run_json(capsys, path)
     assert all(b["contact_count"] == 2 for b in out["balls"])
-    assert all(b["velocity_deviation"] is None for b in out["balls"])
+    assert all(b["velocity_deviation"] == 0.0 for b in out["balls"])
+    assert all(b["regime"] == "2-point" for b in out["balls"])
     assert main(["carriage", str(path)]) == 0
-    assert "24 of 24 balls have opened contacts" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "24 of 24 balls have open contacts" in text
+    assert "regimes: 2-point 24" in text
+    assert text.count("    open ") >= 48  # two open contacts per ball
+    assert "no velocity model takes" not in text

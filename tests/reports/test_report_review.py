@@ -103,11 +103,11 @@ def test_assumptions_table_says_where_each_comes_from(default_result, default_re
     assert "|c/a| ≤ 0.18" in thresholds.value
     assert "benchmarks/validity_budget.py" in thresholds.source and "not proven" not in (
         thresholds.source)
-    resolved = by["validity budget", "balls outside the thresholds, re-solved with the full "
-                                     "model"]
+    resolved = by["validity budget", "balls sent to the full model (outside the thresholds, "
+                                     "or an open contact)"]
     n_out, n_res = int(ds.n_balls_outside_validity), int(ds.n_balls_resolved_full)
     assert resolved.value.startswith(f"{n_out:,} of {int(ds.n_balls):,} balls; {n_res:,} "
-                                     "re-solved")
+                                     "solved")
     assert "n_balls_resolved_full" in resolved.source
     # and on the page, as a table
     table = _section(default_report[1], "assumptions")

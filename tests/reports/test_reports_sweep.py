@@ -201,11 +201,14 @@ def test_verdict_per_point_against_the_contact_limit(sweeps, tmp_path):
 
 
 def test_unresolved_points_show_their_bounds(tmp_path):
-    # Beyond about 35 N m the end balls lose contact (configs/sweep_yaw_moment.toml): those
-    # trains are unresolved and the table gives the bounds over all trains
+    # Beyond about 35 N m the end balls lose a contact (configs/sweep_yaw_moment.toml). The
+    # full model solves such balls (issue 25), but the paper's paired forces put a contact in
+    # tension there (|rho| > 1: the static model out of its range), so with them those trains
+    # are unresolved and the table gives the bounds over all trains
     text = re.sub(r"(?ms)^\[sweep\].*", "", (CONFIGS / "sweep_yaw_moment.toml").read_text())
     text = text.replace("samples = 20000", "samples = 128").replace(
-        "spot_checks = 50", "spot_checks = 2")
+        "spot_checks = 50", "spot_checks = 2").replace('static_model = "solved"',
+                                                       'static_model = "paired"')
     c = parse_config(text + '[sweep]\n"loads.yaw_moment_N_m" = [30.0, 45.0]\n', "u.toml")
     ds, _ = run_sweep(c, tmp_path / "u.nc")
     unresolved = ds.n_assemblies_unresolved.values

@@ -19,6 +19,12 @@ from tolsim.io.config import ConfigError, load_config, parse_config
 from tolsim.io.netcdf import result_to_dataset
 from tolsim.physics.carriage import solve_carriage
 from tolsim.physics.static import GrooveErrors
+from tolsim.physics.velocity.models import (
+    BALL_REGIMES,
+    BALL_THREE_POINT,
+    BALL_TWO_POINT,
+    BALL_UNRESOLVED,
+)
 from tolsim.study.analyses.sensitivity import study_sensitivity
 from tolsim.study.execution.runner import run_study
 from tolsim.study.pipeline.carriage import (
@@ -182,15 +188,23 @@ def test_preload_changes_the_contact_probability():
     assert medium.carriage_mean[6] > 1.2 * light.carriage_mean[6]
 
 
-def test_without_preload_the_two_point_balls_are_counted_not_dropped():
-    # Zero oversize under a vertical load: one diagonal of every ball opens (two-point
-    # contact), which no velocity model takes. Every assembly still counts: its trains are
-    # unresolved (or its carriage not solved), and the bounds say P(contact) is unknown.
-    acc = run_study(with_preload(0.0, samples=50)).statistics
-    assert acc.n_assemblies == 50
-    assert acc.n_balls == 50 * 24
-    assert acc.n_unresolved + acc.n_contact == 50
-    assert acc.n_balls_valid < acc.n_balls
+@pytest.mark.parametrize("oversize_um", [0.0, 1.0])
+def test_no_and_light_preload_leave_no_ball_unresolved(oversize_um):
+    # Issue 25: zero oversize under a vertical load opens one diagonal of most balls (two-
+    # point contact; with the sampled tolerances some become three- or four-point), and 1 um
+    # puts balls on both sides of the regime switch. The full model solves every one (regimes
+    # A, B, three- and two-point), so no train is unresolved and the partial-identification
+    # bounds of P(contact) collapse onto the estimate (exact equality: no unknown outcome).
+    acc = run_study(with_preload(oversize_um, samples=64)).statistics
+    assert acc.n_assemblies == 64 and acc.n_balls == 64 * 24
+    assert acc.n_unresolved == 0 and acc.n_balls_valid == acc.n_balls
+    low, high, _, _ = acc.contact_probability_bounds()
+    assert low == high == acc.contact_probability()[0]
+    counts = dict(zip(BALL_REGIMES, acc.regime_count.tolist(), strict=True))
+    assert sum(counts.values()) == acc.n_balls and counts[BALL_UNRESOLVED] == 0
+    assert counts[BALL_THREE_POINT] + counts[BALL_TWO_POINT] > 0  # open contacts solved
+    if oversize_um == 0.0:
+        assert counts[BALL_TWO_POINT] > acc.n_balls / 4
 
 
 def test_ball_oversize_matters_in_a_preloaded_carriage():
@@ -229,6 +243,13 @@ def test_result_file_has_the_track_dimension_and_carriage_statistics():
     assert_allclose(ds.carriage_translational_stiffness_nominal.values,
                     np.diag(nominal.stiffness)[:2], rtol=1e-12)
     assert int(ds.n_assemblies_carriage_failed) == 0
+    # issue 25: balls per regime, a CF flag coordinate (CF 1.10 Sec. 3.5)
+    assert ds.n_balls_regime.dims == ("ball_regime",)
+    assert int(ds.n_balls_regime.sum()) == int(ds.n_balls)
+    assert ds.ball_regime.attrs["flag_meanings"].split() == list(BALL_REGIMES.values())
+    assert_array_equal(ds.ball_regime.attrs["flag_values"], list(BALL_REGIMES))
+    assert_array_equal(ds.ball_regime.values, list(BALL_REGIMES))
+    assert int(ds.n_balls_unloaded) == int(ds.n_balls_regime.sel(ball_regime=4))
     # the sampled stiffness scatters around the nominal one
     assert float(ds.carriage_translational_stiffness_std[1]) > 0
     assert float(ds.carriage_translational_stiffness_mean[1]) == pytest.approx(

@@ -6,7 +6,11 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import parse_config
 from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
-from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_constant
+from tolsim.study.pipeline.propagation import (
+    first_contact_along_track,
+    first_contact_constant,
+    pushed_velocity_deviation,
+)
 from tolsim.study.sampling import error_values, sample_block
 
 
@@ -154,3 +158,42 @@ def test_along_track_matches_rk4_reference():
     assert_array_equal(np.isfinite(t_b), hit)
     assert_array_equal(pair_b, pair_ref)
     assert_allclose(t_b[hit], t_ref[hit], rtol=0, atol=1e-3 * c.motion.duration)
+
+
+# --------------------------------------------------------------------------------------------
+# Unloaded balls: pushed along (issue 25)
+# --------------------------------------------------------------------------------------------
+def test_unloaded_ball_closes_both_of_its_gaps_at_once():
+    # Hand computation: balls 0 and 2 loaded (eps 1 %, 0), ball 1 unloaded, gaps 1 and 3 mm.
+    # The unloaded ball carries force only when both gaps have closed, at
+    # t = (1 + 3) mm / ((0.01 - 0) v / 2) = 80 s at v = 10 mm/s; it gets
+    # eps = 0.01 + (0 - 0.01) * 1 / 4 = 0.0075, which closes gap 0 at 1 mm / (0.0025 v / 2) and
+    # gap 1 at 3 mm / (0.0075 v / 2), both 80 s (exact to round-off).
+    eps = np.array([[0.01, np.nan, 0.0]])
+    gap = np.array([[1e-3, 3e-3]])
+    filled = pushed_velocity_deviation(gap, eps, np.array([[False, True, False]]))
+    assert_allclose(filled, [[0.01, 0.0075, 0.0]], rtol=1e-15)
+    t, pair = first_contact_constant(gap, filled, 0.01, 100.0)
+    assert_allclose(t, [80.0], rtol=1e-12)
+    assert pair[0] in (0, 1)
+    # diverging neighbours: never
+    t, _ = first_contact_constant(gap, pushed_velocity_deviation(
+        gap, np.array([[0.0, np.nan, 0.01]]), np.array([[False, True, False]])), 0.01, 1e9)
+    assert np.isinf(t[0])
+
+
+def test_unloaded_runs_ends_and_whole_trains():
+    # a run of two between loaded balls: gaps 1, 1, 2 mm -> eps at G_i / G = 1/4 and 2/4;
+    # an unloaded end ball moves with its one neighbour; a train without a loaded ball stays
+    # at 0; a NaN neighbour (unresolved ball) stays NaN; two tracks are independent
+    gap = np.array([[1e-3, 1e-3, 2e-3, 1e-3, 5e-3, 1e-3]])
+    eps = np.array([[0.004, 9.0, 9.0, 0.0, 0.002, 9.0, 9.0, 9.0]])
+    unloaded = np.array([[False, True, True, False, False, True, True, True]])
+    out = pushed_velocity_deviation(gap, eps, unloaded, tracks=2)
+    assert_allclose(out, [[0.004, 0.003, 0.002, 0.0, 0.002, 0.002, 0.002, 0.002]], rtol=1e-15)
+    out = pushed_velocity_deviation(gap[:, :3], np.array([[9.0, 9.0, 9.0, 9.0]]),
+                                    np.ones((1, 4), bool))
+    assert_array_equal(out, 0.0)
+    out = pushed_velocity_deviation(gap[:, :2], np.array([[np.nan, 9.0, 0.0]]),
+                                    np.array([[False, True, False]]))
+    assert np.isnan(out[0, 1])

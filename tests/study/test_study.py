@@ -9,8 +9,15 @@ from scipy.special import ndtr
 from scipy.stats import binomtest
 
 from tolsim.io.config import parse_config
+from tolsim.physics.geometry import paired_forces
+from tolsim.physics.velocity.models import BALL_REGIME_A, BALL_UNLOADED, BALL_UNRESOLVED
 from tolsim.study.execution.runner import StudyInterrupted, run_study
-from tolsim.study.pipeline.evaluate import evaluate_balls, rigid_angle_deviation
+from tolsim.study.pipeline.evaluate import (
+    StaticResult,
+    ball_velocities,
+    evaluate_balls,
+    rigid_angle_deviation,
+)
 from tolsim.study.statistics.accumulator import Accumulator, clopper_pearson
 from tolsim.study.statistics.intervals import histogram_quantiles
 
@@ -516,3 +523,32 @@ def test_resume_and_ignored_checkpoint_are_said(tmp_path):
     said.clear()
     run_study(make(samples=1000, seed=5), checkpoint_path=str(ckpt), notify=said.append)
     assert len(said) == 1 and said[0].startswith(f"ignoring {ckpt}: it is not a checkpoint")
+
+
+def test_unloaded_ball_is_counted_as_pushed_not_unresolved():
+    # Issue 25: a ball without a loaded contact has no epsilon of its own (NaN, not valid) but
+    # is pushed along: counted as unloaded, its train resolved; a ball with one loaded contact
+    # or a contact in tension (the static model out of its range) stays unresolved, counted as
+    # loss of contact. The counts partition the balls.
+    c = parse_config((CONFIGS / "known_answer.toml").read_text())
+    loaded = paired_forces(np.array([-120.0, 120.0]), np.array([200.0, 200.0]))
+    force = np.array([loaded[0], [0.0] * 4, loaded[1], [0.0, 5.0, 0.0, 0.0],
+                      paired_forces(300.0, 200.0)])
+    static = StaticResult(np.zeros((5, 4)), force, np.ones(5, bool))
+    state = ball_velocities(c, static, (1, 5))
+    assert_array_equal(state.regime[0], [BALL_REGIME_A, BALL_UNLOADED, BALL_REGIME_A,
+                                         BALL_UNRESOLVED, BALL_UNRESOLVED])
+    assert_array_equal(state.valid[0], [True, False, True, False, False])
+    assert_array_equal(state.unloaded[0], [False, True, False, False, False])
+    assert_array_equal(state.loss_of_contact[0], [False, False, False, True, True])
+    acc = Accumulator(5, (-0.01, 0.01), 10, 1.0, 10)
+    acc.add(state, np.array([np.inf]), np.array([-1]))
+    assert (acc.n_unloaded, acc.n_loss_of_contact, acc.n_full_failed, acc.n_balls_valid) == (
+        1, 2, 0, 2)
+    assert acc.regime_count.tolist() == [2, 2, 0, 0, 0, 1]  # unresolved, A, B, 3, 2, unloaded
+    assert acc.n_unresolved == 1  # balls 3 and 4 leave the train unknown
+    three = ball_velocities(c, StaticResult(np.zeros((3, 4)), force[:3], np.ones(3, bool)),
+                            (1, 3))
+    acc = Accumulator(3, (-0.01, 0.01), 10, 1.0, 10)
+    acc.add(three, np.array([np.inf]), np.array([-1]))
+    assert acc.n_unresolved == 0 and acc.n_assemblies_valid == 1

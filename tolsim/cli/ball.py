@@ -16,10 +16,17 @@ from tolsim.physics.geometry import (
     TABLE1,
     TABLE1_GROOVE_VELOCITY,
     TABLE1_NORMAL_LOAD,
+    contact_force_resultant,
     paired_forces,
 )
 from tolsim.physics.velocity.ball_loads import DEFAULT_BALL_FRICTION
-from tolsim.physics.velocity.models import MODELS, VALIDITY_NOTES
+from tolsim.physics.velocity.models import (
+    BALL_REGIME_LABELS,
+    MODELS,
+    VALIDITY_NOTES,
+    ball_regime,
+)
+from tolsim.physics.velocity.regimes import stick_criterion
 
 DESCRIPTION = """\
 Velocity deviation epsilon of one ball in a four-point-contact linear ball bearing:
@@ -214,7 +221,10 @@ def _angles_and_forces(args, bearing):
                          "the static model and of the tolerance sources)")
     if not given and args.static == "paired":
         forces, source = _forces(args, bearing)
-        return dbeta_deg, forces, source, {"contact_angle_source": "given"}, []
+        warnings = []
+        if source == "given":
+            warnings.extend(_imbalance_warning(dbeta_deg, forces, bearing))
+        return dbeta_deg, forces, source, {"contact_angle_source": "given"}, warnings
     for key, value in given.items():
         flag, unit, limit = STATIC_ERROR_OPTIONS[key]
         arr = np.atleast_1d(np.asarray(value, dtype=float))
@@ -344,6 +354,23 @@ def _forces(args, bearing):
     return forces, "paired"
 
 
+#: Net contact force over sum F above which --forces-n is said to be out of balance (the
+#: round-off of four typed forces is far below it).
+IMBALANCE_WARNING = 1e-6
+
+
+def _imbalance_warning(dbeta_deg, forces, bearing):
+    """[warning] when --forces-n cannot balance the ball in its cross-section, else []."""
+    beta = bearing.nominal_contact_angle + np.deg2rad(dbeta_deg)
+    fx, fy = contact_force_resultant(beta, forces)
+    net = math.hypot(fx, fy)
+    if not net > IMBALANCE_WARNING * float(np.sum(forces)):
+        return []
+    return [f"--forces-n: the forces do not balance the ball in its cross-section: net "
+            f"contact force {net:.3g} N (x {fx:+.3g} N, y {fy:+.3g} N) at these contact "
+            "angles; the result is for the forces as given"]
+
+
 def _loss_of_contact_warning(model, forces, eps):
     """The warning for unloaded flanks or an undefined epsilon (None if neither)."""
     unloaded = [c for c, f in zip(CONTACTS, forces, strict=True) if not f > 0]
@@ -411,8 +438,16 @@ def evaluate(args):
         out["velocity_deviation_eq22"] = float(result.velocity_deviation_eq22)
     if "sliding_contact" in result.extra:
         out["sliding_contact"] = CONTACTS[int(result.extra["sliding_contact"])]
+    chi = float(stick_criterion(np.maximum(forces, 0.0), bearing))
+    out["stick_criterion"] = chi if math.isfinite(chi) else None
     if args.model == "full":
+        stuck = int(np.asarray(result.stuck_contact))
         out.update({
+            "regime": BALL_REGIME_LABELS[int(ball_regime(np.asarray(forces)[None],
+                                                         np.atleast_1d(result.regime))[0])],
+            "stuck_contact": (CONTACTS[stuck] if 0 <= stuck < 4 else
+                              "+".join(CONTACTS[k] for k in (stuck - 4, stuck - 2))
+                              if stuck >= 4 else None),
             "surface": options["surface"],
             "converged": bool(result.converged),
             "residual": float(result.residual),
@@ -494,6 +529,16 @@ def _text(out):
         lines.append("c/a                   "
                      + "  ".join(f"{c:9.4f}" if math.isfinite(c) else f"{'undefined':>9}"
                                  for c in out["contact_offset_ratio"]))
+    chi = out.get("stick_criterion")
+    regime = out.get("regime")
+    if regime is not None:
+        stuck = f", {out['stuck_contact']} stuck" if out.get("stuck_contact") else ""
+        lines.append(f"regime                {regime}{stuck} (chi = "
+                     f"{'inf' if chi is None else format(chi, '.4g')}; A: all contacts slip, "
+                     "B: one sticks, chi < 1 favours B)")
+    elif chi is not None:
+        lines.append(f"stick criterion chi   {chi:.4g} (the {out['model']} model assumes every "
+                     "contact slips, regime A; below 1 one contact sticks: --model full)")
     if "carriage_force_n" in out:
         lines += _load_text(out)
     if "static" in out:

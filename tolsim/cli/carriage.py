@@ -8,6 +8,7 @@ import numpy as np
 from tolsim.cli import UsageError
 from tolsim.physics.carriage import DOFS
 from tolsim.physics.geometry import CONTACTS
+from tolsim.physics.velocity.models import BALL_REGIME_LABELS, BALL_UNLOADED, BALL_UNRESOLVED
 
 DESCRIPTION = """\
 Load distribution of one rigid carriage on its preloaded ball tracks (tolsim issue 12), for
@@ -18,8 +19,10 @@ and ball sizes drawn from the config's [tolerances]). The config needs no [study
 
 Per ball (track t, ball j, ball 0 trailing, at z along the rail): the four contact forces
 F_BL F_BR F_TR F_TL and contact-angle deviations dbeta in the ball's module frame, the
-side-force ratio rho = N_x / N_y and the velocity deviation epsilon (the analytical model;
-the full friction model where the analytical one is outside its validity). For the carriage:
+side-force ratio rho = N_x / N_y, the velocity deviation epsilon (the analytical model; the
+full friction model where the analytical one is outside its validity or a contact is open)
+and the ball's regime: A (all four contacts slip), B (one contact sticks), 3-point, 2-point
+(rolls at v/2, epsilon = 0) or unloaded (pushed along, no epsilon). For the carriage:
 its displacement (u_x, u_y [um]; pitch, yaw, roll [urad]) and tangent stiffness in the
 catalogue's units (N/um for forces against translations, N m/urad for moments against
 rotations), the DOFs the layout cannot resist (locked), and convergence.
@@ -99,6 +102,7 @@ def evaluate(config, seed=None) -> dict:
                 "side_force_ratio": _finite(sol.side_force_ratio[t, j]),
                 "velocity_deviation": _finite(result.velocity_deviation[t, j]),
                 "velocity_model": str(result.velocity_model[t, j]) or None,
+                "regime": BALL_REGIME_LABELS[int(result.regime[t, j])],
             })
     carriage = config.carriage
     return {
@@ -126,6 +130,11 @@ def evaluate(config, seed=None) -> dict:
     }
 
 
+def _force(value):
+    """A contact force [N] for the table: 'open' where the contact carries none."""
+    return f"{value:8.2f}" if value > 0 else f"{'open':>8}"
+
+
 def _number(value, fmt):
     return format(value, fmt) if value is not None else f"{'-':>{len(format(0.0, fmt))}}"
 
@@ -142,27 +151,41 @@ def _text(out) -> str:
         f"{load['roll_moment_n_m']:g} N m",
         "",
         "track ball   z [mm]     F_BL     F_BR     F_TR     F_TL [N]  "
-        "dbeta_BL  dbeta_BR  dbeta_TR  dbeta_TL [deg]      rho  epsilon [%]",
+        "dbeta_BL  dbeta_BR  dbeta_TR  dbeta_TL [deg]      rho  epsilon [%]  regime",
     ]
     for b in out["balls"]:
         eps = b["velocity_deviation"]
         lines.append(
             f"{b['track']:>5} {b['ball']:>4} {b['z_mm']:8.2f} "
-            + " ".join(f"{f:8.2f}" for f in b["normal_force_n"]) + "     "
+            + " ".join(_force(f) for f in b["normal_force_n"]) + "     "
             + " ".join(f"{d:+9.4f}" for d in b["contact_angle_deviation_deg"]) + "       "
             + _number(b["side_force_ratio"], "+8.4f") + "  "
             + (_number(None, "+9.5f") if eps is None else f"{round(100 * eps, 5) + 0.0:+9.5f}")
+            + f"  {b['regime']}"
             + ("" if b["velocity_model"] in ("analytic", None) else f" ({b['velocity_model']})"))
     opened = sum(b["contact_count"] < 4 for b in out["balls"])
-    undefined = sum(b["velocity_deviation"] is None for b in out["balls"])
     by_full = sum(b["velocity_model"] == "full" for b in out["balls"])
+    counts = {}
+    for b in out["balls"]:
+        counts[b["regime"]] = counts.get(b["regime"], 0) + 1
+    lines.append("regimes: " + ", ".join(f"{label} {counts[label]}"
+                                         for label in BALL_REGIME_LABELS.values()
+                                         if label in counts)
+                 + " (A: all four contacts slip; B: one contact sticks; 2-point rolls at v/2)")
     if by_full:
-        lines.append(f"(full): epsilon of {by_full} balls from the full friction model, the "
-                     "analytical one being outside its validity there")
+        lines.append(f"(full): epsilon of {by_full} balls from the full friction model (outside "
+                     "the analytical model's validity, or with an open contact)")
     if opened:
-        lines.append(f"{opened} of {len(out['balls'])} balls have opened contacts (F = 0); "
-                     f"epsilon is undefined (-) for {undefined}: no velocity model takes a ball "
-                     "without four loaded contacts")
+        lines.append(f"{opened} of {len(out['balls'])} balls have open contacts (F = 0, shown "
+                     "as 'open')")
+    unloaded = counts.get(BALL_REGIME_LABELS[BALL_UNLOADED], 0)
+    if unloaded:
+        lines.append(f"epsilon is undefined (-) for the {unloaded} unloaded balls: no contact "
+                     "carries load, so they are pushed along by their neighbours")
+    unsolved = counts.get(BALL_REGIME_LABELS[BALL_UNRESOLVED], 0)
+    if unsolved:
+        lines.append(f"epsilon is undefined (-) for {unsolved} balls: the full friction model "
+                     "found no certified minimum of the dissipated power there")
     d = out["displacement"]
     lines += [
         "",

@@ -337,14 +337,21 @@ def summary(ds, output, elapsed) -> str:
             f"median {at(tq, 0.5):.4g} s, 95 % by {at(tq, 0.95):.4g} s (given contact, "
             "resolved trains)")
     n_balls = int(ds.n_balls)
-    n_unresolved_balls = n_balls - int(ds.n_balls_valid)
+    n_unloaded = int(ds.n_balls_unloaded) if "n_balls_unloaded" in ds else 0
+    n_unresolved_balls = n_balls - int(ds.n_balls_valid) - n_unloaded
     lines.append(
-        f"balls: {int(ds.n_balls_outside_validity)} of {n_balls} outside the "
-        f"{a['velocity_model']} model's validity, {int(ds.n_balls_resolved_full)} of them "
-        f"re-solved with the full model ({float(a['full_model_resolve_seconds']):.2f} s); "
+        f"balls: {int(ds.n_balls_outside_validity)} of {n_balls} sent to the full model "
+        f"(outside the {a['velocity_model']} model's validity or with an open contact), "
+        f"{int(ds.n_balls_resolved_full)} of them solved "
+        f"({float(a['full_model_resolve_seconds']):.2f} s); "
         f"unresolved {n_unresolved_balls} (static not converged "
         f"{int(ds.n_balls_not_converged)}, loss of contact {int(ds.n_balls_loss_of_contact)}, "
         f"full model failed {int(ds.n_balls_full_failed)}); unresolved trains u = {n_unres}")
+    if "n_balls_regime" in ds:
+        from tolsim.reports.result_view import regime_counts_text  # noqa: PLC0415
+
+        lines.append(f"balls by regime: {regime_counts_text(ds)} (A: every contact slips; B: "
+                     "one sticks)")
     if n_asm and n_unres / n_asm > UNRESOLVED_WARNING:
         lines.append(
             f"warning: {n_unres} of {n_asm} trains ({100 * n_unres / n_asm:.2g} %) are "

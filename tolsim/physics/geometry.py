@@ -162,3 +162,26 @@ def paired_forces(side_load, normal_load, nominal_contact_angle=np.pi / 4):
     f1 = (ny / c0 - nx / s0) / 2.0
     f2 = (ny / c0 + nx / s0) / 2.0
     return np.stack([f1, f2, f1, f2], axis=-1)
+
+
+def contact_force_resultant(contact_angle, normal_force):
+    """Net force of the four contacts on a ball in its cross-section [N], (..., 2) as (x, y).
+
+    Contact i sits at p_i = (sx_i sin beta_i, sy_i cos beta_i) on the ball (unit vector from
+    the centre, :data:`SIDE_SIGN_X`, :data:`SIDE_SIGN_Y`) and pushes it inward with F_i along
+    -p_i, so the net force is -sum F_i p_i; static equilibrium of a ball without other loads
+    in the cross-section needs it to vanish. Two opposite contacts of force F whose angles
+    differ by Delta leave |2 F sin(Delta / 2)|.
+
+    Parameters
+    ----------
+    contact_angle : array_like, (..., 4)
+        beta_i [rad], BL, BR, TR, TL.
+    normal_force : array_like, (..., 4)
+        F_i [N].
+    """
+    beta = np.asarray(contact_angle, dtype=float)
+    force = np.asarray(normal_force, dtype=float)
+    fx = -np.sum(force * SIDE_SIGN_X * np.sin(beta), axis=-1)
+    fy = -np.sum(force * SIDE_SIGN_Y * np.cos(beta), axis=-1)
+    return np.stack([fx, fy], axis=-1)

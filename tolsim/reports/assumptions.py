@@ -626,8 +626,9 @@ def assumption_table(ds, config=None) -> list:
     failed, n = integer(ds, "n_balls_full_failed", None) or 0, integer(ds, "n_balls", None) or 0
     if outside is not None:
         redone = "?" if redone is None else f"{redone:,}"  # older files lack the counts
-        add("validity budget", "balls outside the thresholds, re-solved with the full model",
-            f"{outside:,} of {n:,} balls; {redone} re-solved, {failed:,} that the full "
+        add("validity budget", "balls sent to the full model (outside the thresholds, or "
+            "an open contact)",
+            f"{outside:,} of {n:,} balls; {redone} solved, {failed:,} that the full "
             f"model could not solve (in {float(a.get('full_model_resolve_seconds', 0)):.2f} s)",
             "result file (n_balls_outside_validity, n_balls_resolved_full, "
             "n_balls_full_failed)")

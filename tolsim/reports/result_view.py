@@ -18,6 +18,7 @@ import xarray as xr
 from tolsim.io import schema
 from tolsim.io.config import parse_config
 from tolsim.io.netcdf import IntegrityError, check_attributes, read_result, verify_checksums
+from tolsim.physics.velocity.models import BALL_REGIME_LABELS, BALL_UNLOADED
 
 #: Names of the tolsim result-file variables the study report needs.
 REQUIRED = ("velocity_deviation_histogram", "contact_probability", "survival_probability",
@@ -122,6 +123,18 @@ def integer(ds, name, default=0) -> int:
     if name not in ds.variables:
         return default
     return int(np.asarray(ds[name]))
+
+
+def regime_counts_text(ds) -> str:
+    """Balls per regime of a result (``n_balls_regime``, issue 25) in one line, the empty
+    regimes left out; "" for a file without the counts."""
+    if "n_balls_regime" not in ds.variables:
+        return ""
+    counts = dict(zip(np.asarray(ds["ball_regime"]).tolist(),
+                      np.asarray(ds["n_balls_regime"]).tolist(), strict=True))
+    names = {**BALL_REGIME_LABELS, BALL_UNLOADED: "unloaded (pushed along)"}
+    return ", ".join(f"{names.get(code, code)} {count:,}" for code, count in counts.items()
+                     if count)
 
 
 def attribute(ds, name, default="?"):

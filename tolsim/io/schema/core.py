@@ -13,6 +13,7 @@ import numpy as np
 from tolsim import __version__
 from tolsim.io.schema.declaration import Section, V
 from tolsim.physics.geometry import CONTACTS
+from tolsim.physics.velocity.models import BALL_REGIMES
 from tolsim.study.analyses.limit_state import EVENT_PROBABILITY
 from tolsim.study.pipeline.propagation import propagation_assumption, propagation_caveat
 from tolsim.study.sampling import SPOT_CHECK_STRATA
@@ -60,6 +61,8 @@ CORE_COORDINATES = {
     "factor": V(("factor",), "1", "tolerance source index (names in factor_name)", "i",
                 required=False),
     "factor_name": V(("factor",), "1", "tolerance source", "U", required=False),
+    "ball_regime": V(("ball_regime",), "1", "regime of a ball (flag_meanings)", "i",
+                     required=False),
 }
 
 #: The data variables of every result file (the sections add theirs).
@@ -126,12 +129,18 @@ CORE_VARIABLES = {
     "n_balls": V((), "1", "number of balls evaluated", "i"),
     "n_balls_valid": V((), "1", "balls with a resolved epsilon (fast or full model)", "i"),
     "n_balls_not_converged": V((), "1", "balls whose static solution did not converge", "i"),
-    "n_balls_loss_of_contact": V((), "1", "balls with a contact force <= 0", "i"),
-    "n_balls_outside_validity": V((), "1", "balls outside the fast velocity model's validity "
-                                           "limits, sent to the full model", "i"),
-    "n_balls_resolved_full": V((), "1", "balls re-solved with the full friction model", "i"),
-    "n_balls_full_failed": V((), "1", "balls outside the fast model's validity that the full "
-                                      "model could not solve", "i"),
+    "n_balls_loss_of_contact": V((), "1", "balls the static model left without balance (a "
+                                          "contact in tension, or one loaded contact)", "i"),
+    "n_balls_outside_validity": V((), "1", "balls sent to the full model: outside the fast "
+                                           "velocity model's validity limits, or with two or "
+                                           "three loaded contacts", "i"),
+    "n_balls_resolved_full": V((), "1", "balls solved with the full friction model", "i"),
+    "n_balls_full_failed": V((), "1", "balls sent to the full model that it could not "
+                                      "solve", "i"),
+    "n_balls_unloaded": V((), "1", "balls without a loaded contact: no epsilon of their own, "
+                                   "pushed along by their neighbours", "i", required=False),
+    "n_balls_regime": V(("ball_regime",), "1", "number of balls in each regime", "i",
+                        required=False),
     # per-assembly totals (tolsim.study.statistics.intervals.CLUSTER_COLUMNS): the assembly as the
     # sampling unit of ball-level proportions and Cpk
     "assembly_count": V((), "1", "number of assemblies behind the per-assembly moments", "i"),
@@ -299,6 +308,8 @@ def collect(result, history=None) -> tuple:
         "n_balls_outside_validity": acc.n_outside_validity,
         "n_balls_resolved_full": acc.n_resolved_full,
         "n_balls_full_failed": acc.n_full_failed,
+        "n_balls_unloaded": acc.n_unloaded,
+        "n_balls_regime": (("ball_regime",), acc.regime_count),
         "assembly_count": np.int64(acc.cluster.count),
         "assembly_total_mean": (("assembly_total",), acc.cluster.mean),
         "assembly_total_comoment": (("assembly_total", "assembly_total_b"),
@@ -340,6 +351,7 @@ def collect(result, history=None) -> tuple:
         # CF coordinate variables are numeric: an index, and the names as a label variable
         "contact": (("contact",), np.arange(len(CONTACTS), dtype=np.int64)),
         "contact_name": (("contact",), np.array(CONTACTS)),
+        "ball_regime": (("ball_regime",), np.array(list(BALL_REGIMES), dtype=np.int8)),
     }
     attrs = {
         "Conventions": CONVENTIONS,
@@ -398,6 +410,9 @@ def finish(result, ds) -> None:
     ds["spot_check_stratum"].attrs.update(  # CF 3.5 flags
         flag_values=np.arange(len(SPOT_CHECK_STRATA), dtype=np.int8),
         flag_meanings=" ".join(SPOT_CHECK_STRATA))
+    if "ball_regime" in ds.coords:
+        ds["ball_regime"].attrs.update(flag_values=np.array(list(BALL_REGIMES), dtype=np.int8),
+                                       flag_meanings=" ".join(BALL_REGIMES.values()))
 
 
 SECTION = Section(collect=collect, assign=assign, finish=finish)

@@ -4,7 +4,7 @@ a glance, the quality table, the linear stack-up, the ranked Sobol' tables and t
 
 import numpy as np
 
-from tolsim.reports.result_view import integer, number
+from tolsim.reports.result_view import integer, number, regime_counts_text
 from tolsim.reports.study.figures import OUTPUT_SHORT, output_titles
 from tolsim.reports.study.friction import without_output
 from tolsim.reports.study.sections import ReportTable
@@ -115,10 +115,16 @@ def glance_rows(ds) -> list:
                          f"{100 * number(ds, 'velocity_deviation_std'):.3f} %", True),
         ("ε range", f"{pct(number(ds, 'velocity_deviation_min'))} to "
                     f"{pct(number(ds, 'velocity_deviation_max'))}", True),
-        (f"balls outside the {model} model's validity, re-solved with the full model",
+        (f"balls sent to the full model (outside the {model} model's validity, or an open "
+         "contact), solved",
          f"{integer(ds, 'n_balls_resolved_full'):,} of "
          f"{integer(ds, 'n_balls_outside_validity'):,} "
          f"in {float(a.get('full_model_resolve_seconds', 0.0)):.2f} s", True),
+    ]
+    if "n_balls_regime" in ds:
+        rows.append(("balls by regime (A: every contact slips; B: one sticks)",
+                     regime_counts_text(ds), False))
+    rows += [
         ("unresolved balls (static not converged / loss of contact / full model failed)",
          f"{integer(ds, 'n_balls_not_converged')} / {integer(ds, 'n_balls_loss_of_contact')} / "
          f"{integer(ds, 'n_balls_full_failed')}; {n_unres} {many} unresolved (none left out: "

@@ -16,7 +16,11 @@ import numpy as np
 from tolsim.study.pipeline.carriage import CarriageState, evaluate_carriage
 from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
 from tolsim.study.pipeline.evaluate import BallState, evaluate_balls, loads_at, loads_per_ball
-from tolsim.study.pipeline.propagation import first_contact_along_track, first_contact_tracks
+from tolsim.study.pipeline.propagation import (
+    first_contact_along_track,
+    first_contact_tracks,
+    pushed_velocity_deviation,
+)
 from tolsim.study.pipeline.track_friction import FrictionState, TrackFriction, evaluate_friction
 from tolsim.study.sampling import error_values
 
@@ -91,9 +95,9 @@ class BlockOutcome:
 
     @property
     def resolved(self) -> np.ndarray:
-        """Assemblies (m,) whose every ball was resolved (at the start, and along the track
-        with ``along_track``)."""
-        ok = self.state.valid.all(axis=1)
+        """Assemblies (m,) whose every ball was resolved or unloaded (at the start, and
+        along the track with ``along_track``)."""
+        ok = self.state.accounted.all(axis=1)
         return ok if self.train_valid is None else self.train_valid & ok
 
 
@@ -132,9 +136,12 @@ START_EVALUATIONS = {
 # --------------------------------------------------------------------------------------------
 def _constant(config, block, values):
     state, carriage = START_EVALUATIONS[variant(config)](config, block, values)
-    t, pair = first_contact_tracks(block.initial_gap, state.velocity_deviation,
-                                   config.motion.groove_velocity, config.motion.duration,
-                                   config.n_tracks)
+    eps = state.velocity_deviation
+    unloaded = state.unloaded
+    if unloaded.any():  # pushed along: no epsilon of their own (issue 25)
+        eps = pushed_velocity_deviation(block.initial_gap, eps, unloaded, config.n_tracks)
+    t, pair = first_contact_tracks(block.initial_gap, eps, config.motion.groove_velocity,
+                                   config.motion.duration, config.n_tracks)
     friction = (None if config.contact is None  # after contact: trains and friction
                 else evaluate_friction(config, block.initial_gap, state))
     return BlockOutcome(values, state, t, pair, None, 0.0, carriage, friction)

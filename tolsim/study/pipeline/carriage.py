@@ -5,9 +5,8 @@ The Python API behind ``tolsim carriage``: :func:`solve_config_carriage` solves 
 assembly (the config's preload and per-ball oversize deviations, no sampled tolerances) with
 :func:`tolsim.physics.carriage.solve_carriage`, then takes epsilon of each ball from the
 improved analytical model (:func:`tolsim.physics.velocity.analytic.analytic`) and, where that model
-is
-outside its validity, from the full friction model (:func:`tolsim.study.pipeline.evaluate.
-full_velocity`), as a study does for its spot checks.
+is outside its validity or a contact is open, from the full friction model
+(:func:`tolsim.study.pipeline.evaluate.full_velocity`), as a study does.
 """
 
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ from tolsim.physics.carriage import (
 )
 from tolsim.physics.static import GrooveErrors
 from tolsim.physics.velocity.analytic import analytic
+from tolsim.physics.velocity.models import BALL_REGIME_A, BALL_UNRESOLVED
 from tolsim.study.pipeline.evaluate import (
     StaticResult,
     ball_velocities,
@@ -41,24 +41,32 @@ class CarriageResult:
     ----------
     solution : tolsim.physics.carriage.CarriageSolution
     velocity_deviation : ndarray, (n_tracks, n)
-        epsilon of each ball [-] (NaN where neither model gives one, e.g. a ball in
-        two-point contact).
+        epsilon of each ball [-] (NaN where the ball is unloaded, or no model solves it).
     velocity_model : ndarray of str, (n_tracks, n)
         ``analytic``, ``full`` or ``""`` (no value), per ball.
+    regime : ndarray of int8, (n_tracks, n)
+        The ball's regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`).
     """
 
     solution: CarriageSolution
     velocity_deviation: np.ndarray
     velocity_model: np.ndarray
+    regime: np.ndarray
 
 
 def ball_velocity_deviation(solution: CarriageSolution, bearing, groove_velocity=0.01):
-    """epsilon [-] and the model that gave it, per ball of a solved carriage.
+    """epsilon [-], the model that gave it and the regime, per ball of a solved carriage.
+
+    The analytical model where it is valid (regime A), else the full model, which also takes
+    the balls with two or three loaded contacts (issue 25).
 
     Returns
     -------
     eps : ndarray, (n_tracks, n)
+        NaN for an unloaded ball (no epsilon of its own) or one no model solves.
     model : ndarray of str, (n_tracks, n)
+    regime : ndarray of int8, (n_tracks, n)
+        :data:`tolsim.physics.velocity.models.BALL_REGIMES` code.
     """
     shape = solution.normal_force.shape[:2]
     dbeta = np.ascontiguousarray(solution.contact_angle_deviation.reshape(-1, 4))
@@ -68,13 +76,16 @@ def ball_velocity_deviation(solution: CarriageSolution, bearing, groove_velocity
     eps = np.asarray(res.velocity_deviation, dtype=float).copy()
     good = np.asarray(res.valid, dtype=bool) & np.isfinite(eps)
     model = np.where(good, "analytic", "")
+    regime = np.where(good, np.int8(BALL_REGIME_A), np.int8(BALL_UNRESOLVED))
     redo = np.flatnonzero(~good)
     eps[redo] = np.nan
     if redo.size:
-        eps_full, ok = full_velocity(dbeta[redo], force[redo], bearing, groove_velocity)
+        eps_full, ok, regime_full = full_velocity(dbeta[redo], np.where(
+            np.isfinite(force[redo]), force[redo], 0.0), bearing, groove_velocity)
         eps[redo[ok]] = eps_full[ok]
         model[redo[ok]] = "full"
-    return eps.reshape(shape), model.reshape(shape)
+        regime[redo] = regime_full
+    return eps.reshape(shape), model.reshape(shape), regime.reshape(shape)
 
 
 def solve_config_carriage(config, seed: int | None = None) -> CarriageResult:
@@ -112,9 +123,9 @@ def solve_config_carriage(config, seed: int | None = None) -> CarriageResult:
                                  for f in GrooveErrors.TRAILING})
     solution = solve_carriage(carriage.layout, carriage.load, config.bearing,
                               oversize=carriage.oversize, groove_errors=errors)
-    eps, model = ball_velocity_deviation(solution, config.bearing,
-                                         config.motion.groove_velocity)
-    return CarriageResult(solution, eps, model)
+    eps, model, regime = ball_velocity_deviation(solution, config.bearing,
+                                                 config.motion.groove_velocity)
+    return CarriageResult(solution, eps, model, regime)
 
 
 #: Codes of :attr:`CarriageState.status`: those of ``solve_carriage_batch``

@@ -27,7 +27,7 @@ from tolsim.physics.carriage import (
     solve_carriage_batch,
 )
 from tolsim.physics.static import GrooveErrors
-from tolsim.physics.velocity.models import MODEL_UNRESOLVED
+from tolsim.physics.velocity.models import BALL_UNRESOLVED, MODEL_UNRESOLVED
 from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.evaluate import (
     BallState,
@@ -251,6 +251,7 @@ def _initial_state(config, ball_z, loaded, batch, state):
     dbeta = np.full(full + (4,), np.nan)
     force = np.zeros(full + (4,))
     model = np.full(full, MODEL_UNRESOLVED, dtype=state.model.dtype)
+    regime = np.full(full, BALL_UNRESOLVED, dtype=state.regime.dtype)  # as ``lost``
     eps[loaded] = state.velocity_deviation
     valid[loaded] = state.valid
     converged[loaded] = state.converged
@@ -258,12 +259,13 @@ def _initial_state(config, ball_z, loaded, batch, state):
     dbeta[loaded] = state.contact_angle_deviation
     force[loaded] = state.normal_force
     model[loaded] = state.model
+    regime[loaded] = state.regime
 
     def first(x):
         return np.ascontiguousarray(x[:, :, :n].reshape((m, tracks * n) + x.shape[3:]))
 
     balls = BallState(first(eps), first(valid), first(converged), first(lost), first(dbeta),
-                      first(force), first(model), state.resolve_seconds)
+                      first(force), first(model), state.resolve_seconds, first(regime))
     stiffness = np.ascontiguousarray(np.diagonal(batch.stiffness, axis1=1, axis2=2))
     carriage = CarriageState(batch.displacement, stiffness, batch.status.astype(np.int8))
     return balls, carriage

@@ -19,17 +19,21 @@ Two registries, picked by name from the config (no if/elif chains):
     name -> ``f(dbeta, force, bearing, out_eps, out_valid)`` calling the Numba kernels of
     :mod:`tolsim.physics.velocity.analytic` directly on preallocated arrays.
 
-Every ball counts. A ball whose static solution converged with all four forces > 0 but which
-lies outside the fast model's validity (the error-budget thresholds of
-:mod:`tolsim.physics.velocity.analytic`) is re-solved with the full friction model
-(:func:`tolsim.physics.velocity.full.full`, batched over the balls that need it), and its epsilon
-enters the train like any other. Only a ball that no model can solve stays *unresolved*
-(epsilon NaN): its static solve did not converge, it lost a contact, or ``full`` could not
-take it (did not converge, or a contact angle or ellipse outside the model's range). The
-statistics count unresolved balls by cause and bound the probabilities over their trains
+Every ball counts (issue 25). A ball whose static solution converged with all four forces > 0
+but which lies outside the fast model's validity (the error-budget thresholds of
+:mod:`tolsim.physics.velocity.analytic`), and every ball with two or three loaded contacts,
+is solved with the full friction model (:func:`tolsim.physics.velocity.full.full`, batched
+over the balls that need it; it handles regime B and three- and two-point balls), and its
+epsilon enters the train like any other. Each ball's regime is recorded
+(:data:`tolsim.physics.velocity.models.BALL_REGIMES`). A ball with no loaded contact is
+*unloaded*: it has no epsilon of its own, is pushed along by its neighbours, and is counted as
+such (:func:`tolsim.study.pipeline.propagation.pushed_velocity_deviation`). Only a ball that no
+model can solve stays *unresolved* (epsilon NaN): its static solve did not converge, its static
+model put a contact in tension or left it one loaded contact (loss of contact), or ``full``
+could not certify it (or a contact angle or ellipse outside the model's range). The statistics
+count unresolved balls by cause and bound the probabilities over their trains
 (:mod:`tolsim.study.statistics.accumulator`); none is silently dropped. Since invalid balls are
-re-solved,
-the fast model's thresholds trade speed against accuracy, not truth against bias.
+re-solved, the fast model's thresholds trade speed against accuracy, not truth against bias.
 
 ``velocity_model = "full"`` evaluates every ball with the full model (slow; for checks).
 """
@@ -57,7 +61,15 @@ from tolsim.physics.velocity.analytic import (
     analytic_kernel,
     eq24_kernel,
 )
-from tolsim.physics.velocity.models import MODEL_FAST, MODEL_FULL, MODEL_UNRESOLVED
+from tolsim.physics.velocity.models import (
+    BALL_REGIME_A,
+    BALL_UNLOADED,
+    BALL_UNRESOLVED,
+    MODEL_FAST,
+    MODEL_FULL,
+    MODEL_UNRESOLVED,
+    ball_regime,
+)
 
 CONTACTS = ("BL", "BR", "TR", "TL")
 
@@ -257,18 +269,29 @@ def _analytic(dbeta, force, bearing, out_eps, out_valid):
 
 def _full(dbeta, force, bearing, out_eps, out_valid):
     """The full friction model on every ball it can take (see :func:`full_velocity`)."""
-    out_eps[:], out_valid[:] = full_velocity(dbeta, force, bearing)
+    out_eps[:], out_valid[:], _ = full_velocity(dbeta, force, bearing)
 
 
 VELOCITY_KERNELS = {"eq24": _eq24, "analytic": _analytic, "full": _full}
 
-def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
-    """epsilon of balls from :func:`tolsim.physics.velocity.full.full`, never raising.
 
-    Balls that ``full`` cannot take (fewer than four positive forces, a loaded contact angle
-    outside (0, 90) deg, a contact ellipse wider than R_B / 2) and balls for which it does not
-    converge come back with ``ok`` False and epsilon NaN. epsilon does not depend on
-    ``groove_velocity``.
+def loaded_contacts(force):
+    """Loaded contacts (F > 0) per ball, (n,) int8, from (n, 4) forces [N]; a negative force
+    (a contact in tension: the static model out of its range) counts as -1 for the ball."""
+    f = force  # column by column: a reduction over axis 1 is slow
+    count = ((f[:, 0] > 0.0).astype(np.int8) + (f[:, 1] > 0.0) + (f[:, 2] > 0.0)
+             + (f[:, 3] > 0.0))
+    tension = (f[:, 0] < 0.0) | (f[:, 1] < 0.0) | (f[:, 2] < 0.0) | (f[:, 3] < 0.0)
+    return np.where(tension, np.int8(-1), count.astype(np.int8))
+
+
+def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
+    """epsilon and regime of balls from :func:`tolsim.physics.velocity.full.full`, never raising.
+
+    ``full`` takes four-, three- and two-point balls (issue 25). Balls that it cannot take
+    (fewer than two loaded contacts, a contact in tension, a loaded contact angle outside
+    (0, 90) deg, a contact ellipse wider than R_B / 2) and balls it does not certify come back
+    with ``ok`` False and epsilon NaN. epsilon does not depend on ``groove_velocity``.
 
     Parameters
     ----------
@@ -280,19 +303,28 @@ def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
     -------
     eps : ndarray (n,)
     ok : ndarray of bool (n,)
+    regime : ndarray of int8 (n,)
+        :data:`tolsim.physics.velocity.models.BALL_REGIMES` code (``BALL_UNRESOLVED`` where not
+        ok; ``BALL_UNLOADED`` for a ball without a loaded contact).
     """
     module = friction_module()
     n = len(dbeta)
     eps = np.full(n, np.nan)
     ok = np.zeros(n, dtype=bool)
-    if n == 0 or module is None or not hasattr(module, "full"):
-        return eps, ok
+    regime = np.full(n, BALL_UNRESOLVED, dtype=np.int8)
+    if n == 0:
+        return eps, ok, regime
+    with np.errstate(invalid="ignore"):
+        count = loaded_contacts(np.where(np.isfinite(force), force, -1.0))
+    regime[count == 0] = BALL_UNLOADED
+    if module is None or not hasattr(module, "full"):
+        return eps, ok, regime
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                          bearing.poisson_ratio)
     beta = bearing.nominal_contact_angle + dbeta
     with np.errstate(invalid="ignore"):
-        takes = (np.all(np.isfinite(dbeta), axis=1) & np.all(np.isfinite(force), axis=1)
-                 & np.all(force > 0.0, axis=1) & np.all((beta > 0) & (beta < 0.5 * np.pi), axis=1)
+        takes = ((count >= 2) & np.all(np.isfinite(dbeta), axis=1)
+                 & np.all((beta > 0) & (beta < 0.5 * np.pi), axis=1)
                  & np.all(hc.semi_major_coefficient * np.cbrt(force)
                           < 0.5 * bearing.ball_radius, axis=1))
     idx = np.flatnonzero(takes)
@@ -301,7 +333,8 @@ def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
         good = np.asarray(res.valid, dtype=bool) & np.isfinite(res.velocity_deviation)
         eps[idx[good]] = res.velocity_deviation[good]
         ok[idx[good]] = True
-    return eps, ok
+        regime[idx[good]] = ball_regime(force[idx[good]], res.regime[good])
+    return eps, ok, regime
 
 
 # --------------------------------------------------------------------------------------------
@@ -331,10 +364,13 @@ def serial_if_small(n):
 class BallState:
     """Evaluated balls, each array of shape ``shape`` (+ (4,) for per-contact arrays).
 
-    ``velocity_deviation`` is NaN where the ball is unresolved (``valid`` False); ``model``
-    says which model gave it (:data:`MODEL_FAST`, :data:`MODEL_FULL` for a ball outside the
-    fast model's validity re-solved with the full model, :data:`MODEL_UNRESOLVED`).
-    ``resolve_seconds`` is the time spent in the full-model re-solves [s], compilation of the
+    ``velocity_deviation`` is NaN where the ball is unresolved or unloaded (``valid`` False);
+    ``model`` says which model gave it (:data:`MODEL_FAST`, :data:`MODEL_FULL` for a ball
+    solved with the full model, :data:`MODEL_UNRESOLVED`); ``regime`` is its
+    :data:`tolsim.physics.velocity.models.BALL_REGIMES` code (None: ``BALL_REGIME_A`` where
+    valid, else ``BALL_UNRESOLVED``). ``loss_of_contact``: balls the static model left
+    without balance (a contact in tension, or one loaded contact). ``resolve_seconds`` is the
+    time spent in the full-model solves [s], compilation of the
     kernels (a cold cache) excluded.
     """
 
@@ -346,12 +382,28 @@ class BallState:
     normal_force: np.ndarray
     model: np.ndarray
     resolve_seconds: float = 0.0
+    regime: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.regime is None:
+            self.regime = np.where(self.valid, np.int8(BALL_REGIME_A),
+                                   np.int8(BALL_UNRESOLVED))
+
+    @property
+    def unloaded(self) -> np.ndarray:
+        """Balls without a loaded contact: no epsilon of their own, pushed along."""
+        return self.regime == BALL_UNLOADED
+
+    @property
+    def accounted(self) -> np.ndarray:
+        """Balls with an answer: an epsilon (``valid``) or unloaded (pushed along)."""
+        return self.valid | (self.regime == BALL_UNLOADED)
 
     def rows(self, sl):
         """The balls of the assemblies ``sl`` (a slice of the first axis)."""
         return BallState(self.velocity_deviation[sl], self.valid[sl], self.converged[sl],
                          self.loss_of_contact[sl], self.contact_angle_deviation[sl],
-                         self.normal_force[sl], self.model[sl], 0.0)
+                         self.normal_force[sl], self.model[sl], 0.0, self.regime[sl])
 
 
 def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
@@ -402,34 +454,43 @@ def ball_velocities(config, static: StaticResult, shape) -> BallState:
     """
     n = int(np.prod(shape))
     resolve_seconds = 0.0
+    fast = config.study.velocity_model != "full"
     with serial_if_small(n):
         force = static.normal_force
         dbeta = static.contact_angle_deviation
+        count = loaded_contacts(force)
         solvable = static.converged & static.four_point
         eps = np.empty(n)
-        valid = np.empty(n, dtype=np.bool_)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            VELOCITY_KERNELS[config.study.velocity_model](
-                dbeta, np.maximum(force, 0.0), config.bearing, eps, valid)
-        valid &= solvable & np.isfinite(eps)
+        valid = np.zeros(n, dtype=np.bool_)
+        if fast:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                VELOCITY_KERNELS[config.study.velocity_model](
+                    dbeta, np.maximum(force, 0.0), config.bearing, eps, valid)
+            valid &= solvable & np.isfinite(eps)
         model = np.where(valid, np.int8(MODEL_FAST), np.int8(MODEL_UNRESOLVED))
-        redo = np.flatnonzero(solvable & ~valid)
-        if len(redo) and config.study.velocity_model != "full":
+        regime = np.where(valid, np.int8(BALL_REGIME_A), np.int8(BALL_UNRESOLVED))
+        regime[static.converged & (count == 0)] = BALL_UNLOADED
+        # the full model: four-point balls outside the fast model's validity, and every ball
+        # with two or three loaded contacts
+        redo = np.flatnonzero(static.converged & ~valid & (count >= 2))
+        if len(redo):
             c0, t0 = compile_seconds(), time.perf_counter()
-            eps_full, ok = full_velocity(dbeta[redo], force[redo], config.bearing,
-                                         config.motion.groove_velocity)
+            eps_full, ok, regime_full = full_velocity(dbeta[redo], force[redo], config.bearing,
+                                                      config.motion.groove_velocity)
             # model time only: a cold kernel cache compiles the full model here, once
             resolve_seconds = (time.perf_counter() - t0) - (compile_seconds() - c0)
             eps[redo] = eps_full
             valid[redo] = ok
             model[redo[ok]] = MODEL_FULL
-    if config.study.velocity_model == "full":
-        model[valid] = MODEL_FULL
+            regime[redo] = regime_full
+    if not fast:
+        resolve_seconds = 0.0  # the study's own model, not a re-solve
     eps[~valid] = np.nan
+    lost = static.converged & ((count == 1) | (count < 0))
     return BallState(
         eps.reshape(shape), valid.reshape(shape), static.converged.reshape(shape),
-        (static.converged & ~static.four_point).reshape(shape), dbeta.reshape(shape + (4,)),
-        force.reshape(shape + (4,)), model.reshape(shape), resolve_seconds,
+        lost.reshape(shape), dbeta.reshape(shape + (4,)), force.reshape(shape + (4,)),
+        model.reshape(shape), resolve_seconds, regime.reshape(shape),
     )
 
 

@@ -23,6 +23,13 @@ then on). A reported contact is therefore certain; whether the train's first con
 known, or whether it touches at all when no resolved pair does, is for the statistics to
 bound (:mod:`tolsim.study.statistics.accumulator`).
 
+Unloaded balls (no loaded contact, issue 25) have no epsilon of their own: they are pushed
+along by their neighbours and carry no force until a gap on each side has closed. Mode (a)
+gives them the epsilon that closes all the gaps between their loaded neighbours at once
+(:func:`pushed_velocity_deviation`), so the first contact it reports is the first contact that
+carries force. Mode (b) does not yet: there an unloaded ball leaves its train unresolved
+(counted and bounded).
+
 Travel to contact is the carriage travel v t [m].
 
 After contact (a study with ``[contact]``, issue 13): mode (a) leaves the trains to the
@@ -139,6 +146,83 @@ def first_contact_constant(initial_gap, velocity_deviation, groove_velocity, hor
     pair = np.empty(len(gap), dtype=np.int64)
     constant_contact_kernel(gap, eps, 0.5 * groove_velocity, float(horizon), time, pair)
     return time, pair
+
+
+@pjit
+def pushed_kernel(gap, eps, unloaded, out):
+    """Kernel of :func:`pushed_velocity_deviation` on (trains, balls) rows."""
+    m, n = eps.shape
+    for t in prange(m):
+        for i in range(n):
+            out[t, i] = eps[t, i]
+        i = 0
+        while i < n:
+            if not unloaded[t, i]:
+                i += 1
+                continue
+            last = i  # the run of unloaded balls i..last
+            while last + 1 < n and unloaded[t, last + 1]:
+                last += 1
+            before = i - 1
+            after = last + 1
+            if before < 0 and after >= n:
+                for k in range(i, last + 1):
+                    out[t, k] = 0.0
+            elif before < 0 or after >= n:
+                side = after if before < 0 else before
+                for k in range(i, last + 1):
+                    out[t, k] = eps[t, side]
+            else:
+                total = 0.0
+                for j in range(before, last + 1):
+                    total += gap[t, j]
+                run = 0.0
+                for k in range(i, last + 1):
+                    run += gap[t, k - 1]
+                    f = run / total if total > 0.0 else (k - before) / (after - before)
+                    out[t, k] = eps[t, before] + f * (eps[t, after] - eps[t, before])
+            i = last + 1
+
+
+def pushed_velocity_deviation(initial_gap, velocity_deviation, unloaded, tracks=1):
+    """epsilon of the balls with those of unloaded balls filled in (``constant``, issue 25).
+
+    Parameters
+    ----------
+    initial_gap : array_like, shape (m, tracks * (balls - 1))
+        Gaps [m], track by track.
+    velocity_deviation : array_like, shape (m, tracks * balls)
+        epsilon per ball [-] (anything at the unloaded balls).
+    unloaded : array_like of bool, shape (m, tracks * balls)
+    tracks : int
+
+    Returns
+    -------
+    ndarray, shape (m, tracks * balls)
+        epsilon, with each unloaded ball's replaced as in the Notes.
+
+    Notes
+    -----
+    An unloaded ball has no contact force, so no friction: it is pushed along by a neighbour
+    without force. A run of unloaded balls k..l between loaded balls a = k - 1 and b = l + 1
+    carries force only once all the gaps g_a..g_l between a and b have closed, at
+    t = sum g / ((eps_a - eps_b) v / 2) when eps_a > eps_b, never otherwise. Giving ball
+    i of the run eps_a + (eps_b - eps_a) G_i / G, G_i = g_a + ... + g_{i-1} the gaps from a to
+    i and G their sum over the run, closes every one of those gaps at exactly that time (each
+    gap closes at rate (eps_b - eps_a) g_j / G), so the constant propagation's first contact
+    is the first contact that carries force. A run at the end of a train (one loaded
+    neighbour) moves with that neighbour and never carries force; a train without a loaded
+    ball keeps eps = 0 (nothing moves it). A NaN neighbour (an unresolved ball) gives NaN.
+    """
+    eps = np.ascontiguousarray(velocity_deviation, dtype=np.float64)
+    m = eps.shape[0]
+    balls = eps.shape[1] // tracks
+    gap = np.ascontiguousarray(np.asarray(initial_gap, dtype=np.float64).reshape(
+        m * tracks, max(balls - 1, 0)))
+    flags = np.ascontiguousarray(np.asarray(unloaded, dtype=np.bool_).reshape(m * tracks, balls))
+    out = np.empty((m * tracks, balls))
+    pushed_kernel(gap, eps.reshape(m * tracks, balls), flags, out)
+    return out.reshape(eps.shape)
 
 
 def first_contact_tracks(initial_gap, velocity_deviation, groove_velocity, horizon, tracks=1):

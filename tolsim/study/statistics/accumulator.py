@@ -42,7 +42,7 @@ import copy
 
 import numpy as np
 
-from tolsim.physics.velocity.models import MODEL_FULL
+from tolsim.physics.velocity.models import BALL_REGIMES, MODEL_FULL
 from tolsim.study.statistics.intervals import (
     ClusterMoments,
     assembly_totals,
@@ -102,7 +102,7 @@ class Accumulator:
     FIELDS = (
         "n_assemblies", "n_assemblies_valid", "n_contact", "n_unresolved", "n_balls",
         "n_balls_valid", "n_not_converged", "n_loss_of_contact", "n_outside_validity",
-        "n_resolved_full", "n_full_failed",
+        "n_resolved_full", "n_full_failed", "n_unloaded", "regime_count",
         "eps_mean", "eps_m2", "eps_min", "eps_max", "eps_histogram", "eps_underflow",
         "eps_overflow", "ball_count", "ball_mean", "ball_m2", "time_histogram", "time_min",
         "time_max", "pair_count", "carriage_count", "carriage_failed", "carriage_mean",
@@ -135,6 +135,10 @@ class Accumulator:
         self.n_outside_validity = i8(0)
         self.n_resolved_full = i8(0)
         self.n_full_failed = i8(0)
+        self.n_unloaded = i8(0)  # balls without a loaded contact: pushed along, no epsilon
+        # balls per regime, in the order of BALL_REGIMES (unresolved, A, B, 3-, 2-point,
+        # unloaded)
+        self.regime_count = np.zeros(len(BALL_REGIMES), dtype=i8)
         # [s] wall time of the full-model re-solves: a timing, not part of the result (not in
         # FIELDS or state(); the runner's checkpoint keeps it apart)
         self.resolve_seconds = 0.0
@@ -234,8 +238,11 @@ class Accumulator:
         block.n_not_converged = np.int64(np.count_nonzero(~state.converged))
         block.n_loss_of_contact = np.int64(np.count_nonzero(state.loss_of_contact))
         block.n_resolved_full = np.int64(np.count_nonzero(state.model == MODEL_FULL))
+        block.n_unloaded = np.int64(np.count_nonzero(state.unloaded))
+        block.regime_count = np.bincount(state.regime.reshape(-1).astype(np.int64) + 1,
+                                         minlength=len(BALL_REGIMES)).astype(np.int64)
         block.n_full_failed = block.n_balls - block.n_balls_valid - \
-            block.n_not_converged - block.n_loss_of_contact
+            block.n_not_converged - block.n_loss_of_contact - block.n_unloaded
         block.n_outside_validity = block.n_resolved_full + block.n_full_failed
         block.resolve_seconds = float(state.resolve_seconds)
         x = eps[valid]
@@ -254,7 +261,7 @@ class Accumulator:
             mean = np.where(cnt > 0, np.nansum(eps, axis=0) / np.maximum(cnt, 1), 0.0)
             block.ball_mean = mean
             block.ball_m2 = np.nansum((eps - mean) ** 2, axis=0)
-        ok = valid.all(axis=1)
+        ok = state.accounted.all(axis=1)  # unloaded balls are pushed along
         if train_valid is not None:
             ok &= train_valid
         hit = np.isfinite(contact_time)
@@ -276,8 +283,8 @@ class Accumulator:
         for name in ("n_assemblies", "n_assemblies_valid", "n_contact", "n_unresolved",
                      "n_balls", "n_balls_valid", "n_not_converged", "n_loss_of_contact",
                      "n_outside_validity", "n_resolved_full", "n_full_failed",
-                     "resolve_seconds", "eps_histogram", "eps_underflow", "eps_overflow",
-                     "time_histogram", "pair_count"):
+                     "n_unloaded", "regime_count", "resolve_seconds", "eps_histogram",
+                     "eps_underflow", "eps_overflow", "time_histogram", "pair_count"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         n_a = self.n_balls_valid - other.n_balls_valid  # already added above
         _, mean, m2 = merge_moments(n_a, self.eps_mean, self.eps_m2, other.n_balls_valid,
