@@ -68,8 +68,8 @@ def test_summary_books_compilation_on_its_own_line(compiling_full_model, tmp_pat
     text = summary(ds, "r.nc", result.elapsed - result.loop_compile_seconds)
     line = next(x for x in text.splitlines() if x.startswith("compiled kernels:"))
     assert float(line.split()[2]) >= COMPILE
-    resolve = next(x for x in text.splitlines() if "re-solved with the full model" in x)
-    seconds = float(resolve.split("re-solved with the full model (")[1].split(" s)")[0])
+    resolve = next(x for x in text.splitlines() if "sent to the full model" in x)
+    seconds = float(resolve.split("of them solved (")[1].split(" s)")[0])
     assert seconds < COMPILE / 2
     rate = float(text.splitlines()[-1].split(", ")[-1].split(" balls/s")[0].replace(",", ""))
     assert rate == pytest.approx(ds.attrs["balls_per_second"], rel=1e-3)
