@@ -1,12 +1,72 @@
+"""The suite's shared set-up: deterministic property tests, and parallel runs.
+
+Parallel runs
+-------------
+``python -m pytest`` runs the tests on ``-n auto`` pytest-xdist worker processes with
+``--dist loadgroup`` (pyproject.toml's ``addopts``); ``-n 0`` runs them in this one process.
+Three rules keep a parallel run as correct as a serial one:
+
+* **A module runs on one worker.** Every test gets the mark ``xdist_group(<its module>)``
+  (``pytest_collection_modifyitems`` below) unless it has an ``xdist_group`` of its own: a
+  module- or class-scoped fixture is built once, not once per worker, and the kernels a module
+  needs are compiled by one worker, not by both at the same time. (Tests that must share a
+  worker with another module's say so with ``@pytest.mark.xdist_group("name")``.)
+* **Session-scoped fixtures are per worker.** A session fixture is built once in each worker
+  that asks for it (at most twice on 2 cores); to run something once for the whole module,
+  use a module-scoped fixture.
+* **The workers share one Numba cache, under a lock.** Numba writes each cache file
+  atomically, but it reads, changes and rewrites a kernel's index without a lock: two processes
+  that save two signatures of one kernel at the same moment can leave an index that points one
+  signature to the other's machine code (numba/numba#4807, #10128). In a worker, the save
+  (index and data) holds an exclusive ``flock`` on ``index.lock`` in the cache folder, so a
+  kernel that one worker compiled is loaded, not compiled again, by the other. (One folder
+  per worker would be safe too, but then each worker compiles every kernel: on a cold cache,
+  compiling is most of the suite's time.)
+
+Tests must not write outside ``tmp_path`` (each worker has its own ``basetemp``) and must not
+depend on how busy the machine is: the other worker, and other programs, share the cores.
+"""
+
+import fcntl
 import os
 
 import numpy as np
 import pytest
 from hypothesis import settings
+from numba.core import caching as numba_caching
+
+
+def _under_lock(save):
+    """``IndexDataCacheFile.save`` holding an exclusive lock on the cache folder."""
+
+    def save_locked(self, key, data):
+        folder = getattr(self, "_cache_path", None)
+        if folder is None:  # not the layout this lock was written for
+            return save(self, key, data)
+        with open(os.path.join(folder, "index.lock"), "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
+            return save(self, key, data)
+
+    return save_locked
+
+
+# A private Numba method: if a Numba release renames it, the workers run without the lock
+# (the race above is rare) rather than fail to start.
+_SAVE = getattr(getattr(numba_caching, "IndexDataCacheFile", None), "save", None)
+if os.environ.get("PYTEST_XDIST_WORKER") and _SAVE is not None:
+    numba_caching.IndexDataCacheFile.save = _under_lock(_SAVE)
 
 # Deterministic property tests: CI must not flake, and a failure must reproduce.
 settings.register_profile("tolsim", derandomize=True, deadline=None, max_examples=60)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "tolsim"))
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook turns the marks into groups
+def pytest_collection_modifyitems(config, items):
+    """Group the tests by module (xdist's ``--dist loadgroup``), unless a test has a group."""
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None:
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
 @pytest.fixture
