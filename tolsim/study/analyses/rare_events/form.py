@@ -69,6 +69,8 @@ from tolsim.study.analyses.rare_events.common import (
 FORM_DISTANCE_TOLERANCE = 1e-3
 FORM_ALIGNMENT_TOLERANCE = 1e-3
 SMOOTHNESS_TOLERANCE = 0.05
+#: SLSQP's default tolerance on |u|^2 / 2 in :func:`find_design_point`.
+SLSQP_FTOL = 1e-9
 #: Default finite-difference step of the design-point search, in standard-normal units.
 GRADIENT_STEP = 1e-4
 #: Second-order check: smallest eigenvalue of the projected Hessian of the Lagrangian accepted
@@ -154,7 +156,8 @@ class _Unevaluable(Exception):
 
 def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_STEP,
                       max_iterations=100, batch_size=None, start=None,
-                      second_order=True) -> DesignPoint:
+                      second_order=True, origin_values=None,
+                      search_gradient="central", ftol=SLSQP_FTOL) -> DesignPoint:
     """The most probable failure point u* by SLSQP, with the checks of the module docstring.
 
     Minimises |u|^2 / 2 subject to g(u) = 0 ([HasoferLind1974]) with
@@ -181,6 +184,17 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         First iterate (default the origin); the origin is checked (g(0) > 0) either way.
     second_order : bool
         Reject a point that is not a local minimum of |u| on g = 0 (module docstring).
+    origin_values : array_like (2 d + 1,), optional
+        g at [0, h e_k, -h e_k] when already evaluated (e.g. once for every component of a
+        series event); not evaluated nor counted again.
+    search_gradient : {"central", "forward"}
+        The differences of the gradients SLSQP asks for (without ``gradient``): central
+        (2 d rows) or forward (d rows; the checks at the result still take the central
+        differences, its backward rows added). Forward halves the cost of the search; its
+        error O(h) is far below the checks' tolerances.
+    ftol : float
+        SLSQP's tolerance on |u|^2 / 2 (``ftol``); the checks decide whether the end point is
+        a design point whatever it is.
 
     Returns
     -------
@@ -193,6 +207,10 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         raise ValueError(f"step = {step!r} must be > 0")
     max_iterations = check_count("max_iterations", max_iterations, 1)
     check_batch_size(batch_size)
+    if search_gradient not in ("central", "forward"):
+        raise ValueError(f"search_gradient = {search_gradient!r}; choose 'central' or "
+                         "'forward'")
+    forward_search = search_gradient == "forward"
     calls = [0, 0]
 
     def values(rows):
@@ -208,9 +226,12 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
             return values(u[None]), _user_gradient(gradient, u)
         g = last.get(u.tobytes())
         if g is None:
-            g = values(np.concatenate([u[None], u + step * np.eye(d), u - step * np.eye(d)]))
+            g = values(np.concatenate([u[None], u + step * np.eye(d)] if forward_search else
+                                      [u[None], u + step * np.eye(d), u - step * np.eye(d)]))
             last.clear()
             last[u.tobytes()] = g
+        if g.size == d + 1:
+            return g, (g[1:] - g[0]) / step
         return g, (g[1:d + 1] - g[d + 1:]) / (2 * step)
 
     # the rows [u, u + h e_k, u - h e_k] of the last gradient, not evaluated twice: SLSQP's
@@ -224,6 +245,12 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
                            unresolved=calls[1])
 
     origin = np.zeros(d)
+    if origin_values is not None:
+        origin_values = np.asarray(origin_values, dtype=float)
+        if origin_values.shape != (2 * d + 1,):
+            raise ValueError(f"origin_values of shape {origin_values.shape}; expected "
+                             f"({2 * d + 1},)")
+        last[origin.tobytes()] = origin_values
     g_rows, grad0 = value_and_gradient(origin)
     g0 = g_rows[0]
     if not np.isfinite(g0):
@@ -263,7 +290,7 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
                           method="SLSQP",
                           constraints=[{"type": "eq", "fun": constraint,
                                         "jac": constraint_gradient}],
-                          options={"maxiter": max_iterations, "ftol": 1e-9})
+                          options={"maxiter": max_iterations, "ftol": ftol})
     except _Unevaluable as error:
         return fail(origin, grad0, f"FORM search stopped: {error}")
     point = np.asarray(result.x, dtype=float)
@@ -271,14 +298,55 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
     if g is None:
         g = values(np.concatenate([point[None], point + step * np.eye(d),
                                    point - step * np.eye(d)]))
+    elif g.size == d + 1:                        # forward rows: the backward ones added
+        g = np.concatenate([g, values(point - step * np.eye(d))])
+    central_user = None if gradient is None else _user_gradient(gradient, point)
+    solver = "" if result.success else f" (SLSQP: {result.message})"
+    return checked_design_point(values, point, g, step, second_order, calls,
+                                central_user=central_user, solver=solver)
+
+
+def checked_design_point(values, point, g, step, second_order, calls, *, central_user=None,
+                         solver="") -> DesignPoint:
+    """The end point of a design-point search with the checks of the module docstring.
+
+    Parameters
+    ----------
+    values : callable
+        g on rows (m, d) -> (m,), counting its rows in ``calls`` (used for the second-order
+        check only).
+    point : ndarray (d,)
+        u*, the end of the search.
+    g : ndarray (2 d + 1,)
+        g at [u*, u* + h e_k, u* - h e_k] (h = ``step``).
+    step : float
+    second_order : bool
+    calls : list [rows evaluated, NaN rows]
+        Updated by ``values``; the counts of the result.
+    central_user : ndarray (d,), optional
+        The caller's gradient at u* (default the central differences of ``g``).
+    solver : str
+        Appended to the messages of a point not on the limit state or not normal to it.
+
+    Returns
+    -------
+    DesignPoint
+    """
+    d = point.size
+
+    def fail(u, g_grad, why):
+        beta = float(np.linalg.norm(u))
+        return DesignPoint(u, beta, float(ndtr(-beta)), g_grad, False, why, calls[0],
+                           unresolved=calls[1])
+
     g_star = float(g[0])
     forward = (g[1:d + 1] - g_star) / step
     backward = (g_star - g[d + 1:]) / step
     central = 0.5 * (forward + backward)
-    central_user = central if gradient is None else _user_gradient(gradient, point)
+    if central_user is None:
+        central_user = central
     beta = float(np.linalg.norm(point))
     norm = float(np.linalg.norm(central_user))
-    solver = "" if result.success else f" (SLSQP: {result.message})"
     if not (np.all(np.isfinite(g)) and np.all(np.isfinite(central_user))):
         return fail(point, central_user, f"the limit state is not finite around the design "
                                          f"point{solver}")
