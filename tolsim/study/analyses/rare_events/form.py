@@ -157,7 +157,7 @@ class _Unevaluable(Exception):
 def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_STEP,
                       max_iterations=100, batch_size=None, start=None,
                       second_order=True, origin_values=None,
-                      search_gradient="central", ftol=SLSQP_FTOL) -> DesignPoint:
+                      search_gradient="central", ftol=SLSQP_FTOL, known=()) -> DesignPoint:
     """The most probable failure point u* by SLSQP, with the checks of the module docstring.
 
     Minimises |u|^2 / 2 subject to g(u) = 0 ([HasoferLind1974]) with
@@ -195,6 +195,11 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
     ftol : float
         SLSQP's tolerance on |u|^2 / 2 (``ftol``); the checks decide whether the end point is
         a design point whatever it is.
+    known : sequence of DesignPoint
+        Accepted design points found before (:func:`find_design_points`): a search that ends
+        at one of them (the same direction and beta, as :func:`find_design_points` tells
+        them apart) stops there, flagged ``converged`` False with the message "already
+        found", without the checks' rows (the point passed them before).
 
     Returns
     -------
@@ -294,6 +299,10 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
     except _Unevaluable as error:
         return fail(origin, grad0, f"FORM search stopped: {error}")
     point = np.asarray(result.x, dtype=float)
+    beta = float(np.linalg.norm(point))
+    if beta > 0 and any(_near(point, beta, p.point, p.beta) for p in known):
+        return fail(point, np.full(d, np.nan), "the search ended at a design point already "
+                                               "found")
     g = last.get(point.tobytes())
     if g is None:
         g = values(np.concatenate([point[None], point + step * np.eye(d),
@@ -490,7 +499,9 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     along g = 0, which finds the small basins that points r s miss. After ``restarts`` searches it
     goes on while one of the last :data:`RESTART_PATIENCE` found a new point (at most
     :data:`MAX_RESTART_FACTOR` ``restarts``). Accepted points that differ in direction
-    (1 - cos > 1e-3) or beta (relative 1e-2) are kept. No finite number of starts is sure to
+    (1 - cos > 1e-3) or beta (relative 1e-2) are kept; a restart whose SLSQP search ends at
+    a point already kept stops there, without the rows of the checks (``known`` of
+    :func:`find_design_point`). No finite number of starts is sure to
     find every design point: importance sampling's diagnostics and the cross-check with
     subset simulation (:func:`tolsim.rare_events.estimate`, ``method="rare"``) are the
     safety net.
@@ -548,7 +559,7 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
                                            batch_size)
             evaluations += cost
             unresolved += nans
-        point = find_design_point(limit_state, d, start=start, **options)
+        point = find_design_point(limit_state, d, start=start, known=found, **options)
         evaluations += point.evaluations
         unresolved += point.unresolved
         searches += 1
@@ -630,9 +641,15 @@ def _ray_start(limit_state, direction, radius, batch_size):
 
 
 def _same(a, b) -> bool:
-    cos = float(a.point @ b.point) / (a.beta * b.beta)
-    return 1.0 - cos <= DISTINCT_DIRECTION and abs(a.beta - b.beta) <= DISTINCT_BETA * max(
-        a.beta, b.beta)
+    return _near(a.point, a.beta, b.point, b.beta)
+
+
+def _near(a, beta_a, b, beta_b) -> bool:
+    """Two points are the same design point (:data:`DISTINCT_DIRECTION`,
+    :data:`DISTINCT_BETA`)."""
+    cos = float(a @ b) / (beta_a * beta_b)
+    return 1.0 - cos <= DISTINCT_DIRECTION and abs(beta_a - beta_b) <= DISTINCT_BETA * max(
+        beta_a, beta_b)
 
 
 def _user_gradient(gradient, u):
