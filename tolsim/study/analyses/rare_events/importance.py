@@ -336,9 +336,9 @@ def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=No
     component, often several of similar beta (the pairs of a train). Importance sampling
     around one of them misses the others' failure domains and is low by a factor of up to
     their number, with a standard error that does not show it (module docstring). Here each
-    component's design point u*_k is found (iHLRF on the component alone with the checks of
-    :func:`find_design_point`, all components' searches side by side:
-    :func:`series_design_points`), and the
+    component's design point u*_k is found (SLSQP on the component alone with the checks of
+    :func:`~tolsim.study.analyses.rare_events.form.find_design_point`, the origin's rows
+    shared: :func:`series_design_points`), and the
     samples are drawn from the mixture q(v) = sum_k pi_k phi(v - u*_k), pi_k
     proportional to Phi(-beta_k), with the weight phi(v) / q(v) = 1 / sum_k pi_k
     exp(v . u*_k - beta_k^2 / 2) ([Melchers1989]'s
