@@ -157,7 +157,7 @@ class _Unevaluable(Exception):
 def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_STEP,
                       max_iterations=100, batch_size=None, start=None,
                       second_order=True, origin_values=None,
-                      search_gradient="central", ftol=SLSQP_FTOL, known=()) -> DesignPoint:
+                      ftol=SLSQP_FTOL, known=()) -> DesignPoint:
     """The most probable failure point u* by SLSQP, with the checks of the module docstring.
 
     Minimises |u|^2 / 2 subject to g(u) = 0 ([HasoferLind1974]) with
@@ -187,11 +187,6 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
     origin_values : array_like (2 d + 1,), optional
         g at [0, h e_k, -h e_k] when already evaluated (e.g. once for every component of a
         series event); not evaluated nor counted again.
-    search_gradient : {"central", "forward"}
-        The differences of the gradients SLSQP asks for (without ``gradient``): central
-        (2 d rows) or forward (d rows; the checks at the result still take the central
-        differences, its backward rows added). Forward halves the cost of the search; its
-        error O(h) is far below the checks' tolerances.
     ftol : float
         SLSQP's tolerance on |u|^2 / 2 (``ftol``); the checks decide whether the end point is
         a design point whatever it is.
@@ -212,10 +207,6 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         raise ValueError(f"step = {step!r} must be > 0")
     max_iterations = check_count("max_iterations", max_iterations, 1)
     check_batch_size(batch_size)
-    if search_gradient not in ("central", "forward"):
-        raise ValueError(f"search_gradient = {search_gradient!r}; choose 'central' or "
-                         "'forward'")
-    forward_search = search_gradient == "forward"
     calls = [0, 0]
 
     def values(rows):
@@ -231,12 +222,9 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
             return values(u[None]), _user_gradient(gradient, u)
         g = last.get(u.tobytes())
         if g is None:
-            g = values(np.concatenate([u[None], u + step * np.eye(d)] if forward_search else
-                                      [u[None], u + step * np.eye(d), u - step * np.eye(d)]))
+            g = values(np.concatenate([u[None], u + step * np.eye(d), u - step * np.eye(d)]))
             last.clear()
             last[u.tobytes()] = g
-        if g.size == d + 1:
-            return g, (g[1:] - g[0]) / step
         return g, (g[1:d + 1] - g[d + 1:]) / (2 * step)
 
     # the rows [u, u + h e_k, u - h e_k] of the last gradient, not evaluated twice: SLSQP's
@@ -307,8 +295,6 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
     if g is None:
         g = values(np.concatenate([point[None], point + step * np.eye(d),
                                    point - step * np.eye(d)]))
-    elif g.size == d + 1:                        # forward rows: the backward ones added
-        g = np.concatenate([g, values(point - step * np.eye(d))])
     central_user = None if gradient is None else _user_gradient(gradient, point)
     solver = "" if result.success else f" (SLSQP: {result.message})"
     return checked_design_point(values, point, g, step, second_order, calls,

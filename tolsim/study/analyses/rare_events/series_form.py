@@ -18,20 +18,19 @@ Two savings leave the checks as they are:
 On ``configs/rare_contact.toml`` (nine pairs, d = 52) the searches cost 5 793 rows instead of
 8 541 (7 701 with the shared origin alone), the betas change by at most 3e-6.
 
-Tried and rejected (same config): forward differences in the search
-(``search_gradient="forward"``, d rows per gradient instead of 2 d) made SLSQP take up to 120
-steps on the end pairs (22 187 rows in all); the improved HLRF iteration
-([ZhangDerKiureghian1995], an Armijo step on the merit function |u|^2 / 2 + c |g|) needed 11
-gradient steps per pair against SLSQP's 7 (11 508 rows), plain HLRF oscillating between
-beta 2.79 and 3.15 (the pairs' margins are strongly curved in u: the uniform initial gap
-enters through Phi).
+Tried and rejected (same config): forward differences in the search (d rows per gradient
+instead of 2 d) made SLSQP take up to 120 steps on the end pairs (22 187 rows in all); the
+improved HLRF iteration ([ZhangDerKiureghian1995], an Armijo step on the merit function
+|u|^2 / 2 + c |g|) needed 11 gradient steps per pair against SLSQP's 7 (11 508 rows), plain
+HLRF oscillating between beta 2.79 and 3.15 (the pairs' margins are strongly curved in u:
+the uniform initial gap enters through Phi).
 
 References
 ----------
 .. [ZhangDerKiureghian1995] Y. Zhang, A. Der Kiureghian, "Two improved algorithms for
    reliability analysis", in: R. Rackwitz, G. Augusti, A. Borri (eds.), Reliability and
-   Optimization of Structural Systems, Springer (1995) 297-304,
-   doi:10.1007/978-0-387-34866-7_32.
+   Optimization of Structural Systems, Proc. 6th IFIP WG 7.5 conference, Chapman & Hall
+   (1995) 297-304.
 """
 
 import numpy as np
@@ -39,9 +38,7 @@ import numpy as np
 from tolsim.study.analyses.rare_events.common import check_batch_size, check_count
 from tolsim.study.analyses.rare_events.form import GRADIENT_STEP, find_design_point
 
-#: Differences of the gradients of the searches, and SLSQP's tolerance on |u|^2 / 2 (module
-#: docstring).
-SEARCH_GRADIENT = "central"
+#: SLSQP's tolerance on |u|^2 / 2 in the searches (module docstring).
 SERIES_FTOL = 1e-4
 
 
@@ -83,8 +80,7 @@ def component_design_points(components, dimension, count, *, step=GRADIENT_STEP,
                                                                       batch_size)[:, j],
                                   d, step=step, max_iterations=max_iterations,
                                   batch_size=None, second_order=second_order,
-                                  origin_values=origin[:, j], search_gradient=SEARCH_GRADIENT,
-                                  ftol=SERIES_FTOL)
+                                  origin_values=origin[:, j], ftol=SERIES_FTOL)
         rows += point.evaluations
         nans += point.unresolved
         out.append(point)
