@@ -28,9 +28,8 @@ the uniform initial gap enters through Phi).
 References
 ----------
 .. [ZhangDerKiureghian1995] Y. Zhang, A. Der Kiureghian, "Two improved algorithms for
-   reliability analysis", in: R. Rackwitz, G. Augusti, A. Borri (eds.), Reliability and
-   Optimization of Structural Systems, Proc. 6th IFIP WG 7.5 conference, Chapman & Hall
-   (1995) 297-304.
+   reliability analysis", in: Reliability and Optimization of Structural Systems (Proc.
+   IFIP WG 7.5), 1995 (the iHLRF algorithm; editors and pages not checked here).
 """
 
 import numpy as np
