@@ -163,3 +163,26 @@ def test_a_failed_diagnostic_is_undecided(subset_file):
                                            estimator_message="constructed")
     assert contact_check(ds).status == UNDECIDED
     assert "(diagnostic_failed: constructed)" in contact_check(ds).reason
+
+
+def test_an_unchecked_subset_number_says_so(subset_file):
+    # estimator_mode_check (issue 23): "design_points" where FORM's design points checked
+    # subset simulation for a lost mode (rare_contact's pairs), "none" where there were none
+    # (a limit state that is not smooth): the verdict and the table say it is unchecked
+    from tolsim.reports.study import rare_events_html
+    from tolsim.reports.verdict import contact_check
+
+    ds = subset_file
+    assert ds.contact_probability.attrs["estimator_mode_check"] == "design_points"
+    checked = contact_check(ds)
+    assert "unchecked" not in checked.reason
+    assert "checked for a lost mode against FORM design points" in "".join(
+        rare_events_html(ds))
+    unchecked = ds.copy()
+    unchecked["contact_probability"].attrs = {**ds.contact_probability.attrs,
+                                              "estimator_mode_check": "none"}
+    verdict = contact_check(unchecked)
+    assert verdict.status == checked.status
+    assert "unchecked for a lost failure mode" in verdict.reason
+    assert "unchecked for a lost mode (no FORM design points)" in "".join(
+        rare_events_html(unchecked))

@@ -125,6 +125,12 @@ def estimator_flag(ds, name):
 def _flagged(status, reason, ds, name):
     """(status, reason) of a check whose estimate :func:`estimator_flag` flags."""
     flag = estimator_flag(ds, name)
+    if flag is None and status != NO_LIMIT and name in ds.variables and \
+            ds[name].attrs.get("estimator_mode_check") == "none":
+        # subset simulation without FORM design points (a limit state that is not smooth):
+        # its number is not checked for a lost failure mode, and the verdict says so
+        return status, (reason + "; the estimate is unchecked for a lost failure mode (subset "
+                                 "simulation without FORM design points)")
     if flag is None or status == NO_LIMIT:
         return status, reason
     why = ds[name].attrs.get("estimator_message", flag)

@@ -168,7 +168,10 @@ def rare_event_variables(result) -> tuple:
     the attributes ``estimator``, ``estimator_status``, ``interval``, ``estimator_seconds``
     (wall time) and, when it has something to say, ``estimator_note`` (a fallback) or
     ``estimator_message`` (why the estimate is not ``ok``: no number, or a number kept with
-    a failed diagnostic or a disagreement); the plain run's counts (``n_contact`` ...) stay.
+    a failed diagnostic or a disagreement), and where subset simulation gave or checked the
+    number ``estimator_mode_check``: ``design_points`` (checked for a lost failure mode against
+    FORM's design points of the event's components) or ``none`` (unchecked: a limit state
+    that is not smooth, or no design point found); the plain run's counts (``n_contact`` ...) stay.
     Per event also ``*_status`` (the status as a CF flag) and the diagnostics of the
     estimator (:data:`DIAGNOSTICS`); with ``estimator = "rare"`` each estimator's own
     estimate (``*_subset``, ``*_importance``: :data:`PART_VALUES`). Importance sampling adds
@@ -198,6 +201,8 @@ def rare_event_variables(result) -> tuple:
         attrs[f"{prefix}_ci_upper"].update(interval=r.interval)
         if estimate.note:
             attrs[prefix]["estimator_note"] = estimate.note
+        if estimate.mode_check:
+            attrs[prefix]["estimator_mode_check"] = estimate.mode_check
         if r.message:
             attrs[prefix]["estimator_message"] = r.message
         data[f"{prefix}_status"] = status_flag(r.status)

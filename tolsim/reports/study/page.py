@@ -194,6 +194,11 @@ def diagnostics_text(ds, name) -> str:
               if f"{name}_{suffix}" in ds.variables}
     parts = [DIAGNOSTIC_FORMATS[suffix].format(value) for suffix, value in values.items()
              if np.isfinite(value) and (suffix != "ancestors" or value > 0)]
+    check = ds[name].attrs.get("estimator_mode_check", "") if name in ds.variables else ""
+    if check:
+        parts.append("checked for a lost mode against FORM design points"
+                     if check == "design_points" else "unchecked for a lost mode (no FORM "
+                                                      "design points)")
     for part, title in (("subset", "subset simulation"), ("importance", "importance sampling")):
         var = f"{name}_{part}"
         if var in ds.variables:

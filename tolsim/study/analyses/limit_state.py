@@ -31,7 +31,8 @@ from tolsim.study.analyses.rare_events import (
     series_importance_sampling,
     subset_simulation,
 )
-from tolsim.study.analyses.rare_events.api import combine, estimator_seeds
+from tolsim.study.analyses.rare_events.api import combine, estimator_seeds, form_cross_check
+from tolsim.study.analyses.rare_events.importance import series_design_points
 from tolsim.study.analyses.sensitivity import study_factors
 from tolsim.study.pipeline.block import (
     evaluate_block,
@@ -67,6 +68,9 @@ EVENT_TITLES = {"contact": "P(contact)", "velocity_deviation_exceedance": "P(an 
                 "|epsilon| > limit)", "friction_exceedance": "P(friction increase > limit)"}
 #: Units of each event's g.
 EVENT_UNITS = {"contact": "m", "velocity_deviation_exceedance": "1", "friction_exceedance": "1"}
+#: :attr:`EventEstimate.mode_check` of a subset simulation run without design points.
+MODE_CHECK_NONE = "none"
+MODE_CHECK_DESIGN_POINTS = "design_points"
 #: Name of the gap factor (as :data:`tolsim.study.analyses.sensitivity.INITIAL_GAP`).
 INITIAL_GAP = "initial_gap"
 
@@ -647,6 +651,12 @@ class EventEstimate:
     parts : dict
         ``rare`` on a smooth event: ``subset`` and ``importance`` -> each estimator's
         RareEventResult, which ``result`` combines or sets side by side; empty otherwise.
+    mode_check : str
+        Whether subset simulation's number was checked for a lost failure mode against FORM
+        design points (:func:`~tolsim.study.analyses.rare_events.subset.lost_modes`):
+        ``"design_points"`` (the components' design points), ``"none"`` (subset simulation
+        ran without design points: its number is unchecked for a lost mode), "" when no
+        subset simulation gave or checked the number.
     """
 
     event: str
@@ -657,12 +667,15 @@ class EventEstimate:
     components: SeriesDesignPoints | None = None
     seconds: float = 0.0
     parts: dict = field(default_factory=dict)
+    mode_check: str = ""
 
     def describe(self) -> str:
         """One line: the event, the estimator and its number (or why there is none)."""
         line = f"{EVENT_TITLES[self.event]} by {self.result.describe()}"
         if self.note:
             line += f" [{self.note}]"
+        if self.mode_check == MODE_CHECK_NONE:
+            line += " [no FORM design points: unchecked for a lost failure mode]"
         return line
 
 
@@ -679,6 +692,13 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     -----
     **Estimators.**
     ``subset``: :func:`~tolsim.study.analyses.rare_events.subset_simulation` on g, for every event.
+    On a smooth series event FORM on its components comes first (:func:`checked_subset`), so
+    that a failure mode the chains lost flags the number (``diagnostic_failed``) instead of
+    leaving a wrong ``ok``; on the others (``along_track``, friction) there is no design
+    point, and :attr:`EventEstimate.mode_check` ``"none"`` records (in the result file and
+    the report's verdict) that the number is unchecked for a lost mode. ``rare`` and the
+    fallback of ``importance`` pass importance sampling's design points to subset simulation
+    (no extra cost).
     ``importance``: on a smooth series event (``contact`` with ``constant`` propagation,
     ``velocity_deviation_exceedance``), FORM on *every component* and importance sampling from
     the mixture of the shifted normals around their design points
@@ -700,9 +720,9 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     (:func:`rare_size`: the combined number is mostly importance sampling's, subset
     simulation cross-checks it), so that ``rare`` costs about what ``importance`` alone
     costs plus half a subset simulation (on ``configs/rare_contact.toml`` FORM on the
-    components, 949 evaluations per pair, is most of it). Where importance sampling is not
-    attempted (not smooth), subset simulation's result stands alone at full size, with a
-    note; where it gives no number,
+    components, 7 701 evaluations for the nine pairs, is most of it). Where importance
+    sampling is not attempted (not smooth), subset simulation's result stands alone at full
+    size, with a note; where it gives no number,
     ``combine`` keeps subset simulation's with importance sampling's flag (not ``ok``).
     """
     st = config.study
@@ -715,38 +735,84 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     rare = st.estimator == "rare"
     sub_seed, imp_seed = estimator_seeds(seed) if rare else (seed, seed)
 
-    def subset(per_level=st.samples_per_level):
+    def subset(per_level=st.samples_per_level, search=None):
         return subset_simulation(g, g.dimension, sub_seed, samples_per_level=per_level,
-                                 p0=st.p0, max_levels=st.max_levels, batch_size=batch_size)
+                                 p0=st.p0, max_levels=st.max_levels, batch_size=batch_size,
+                                 design_points=None if search is None else
+                                 search.design_points)
 
     note, design, components, parts = "", None, None, {}
-    if st.estimator == "subset":
+    mode_check = MODE_CHECK_NONE
+    if st.estimator in ("subset", "importance", "rare") and not g.smooth:
         result = subset()
-    elif st.estimator in ("importance", "rare"):
-        if not g.smooth:
+        if st.estimator != "subset":
             why = ("along_track propagation gives a limit state that is not smooth (the "
                    "smallest gap over the time steps)" if is_along_track(config) else
                    "the friction limit state jumps where the balls start to touch")
-            result = subset()
             note = f"importance sampling not attempted: {why}; subset simulation used"
-        else:
-            result, components = series_importance_sampling(
-                g, imp_seed, samples=st.importance_samples, batch_size=batch_size)
-            if np.isfinite(result.probability):
-                design = design_point_summary(config, result.design_point,
-                                              components.names[components.most_probable])
-            if st.estimator == "rare":
-                parts = {"subset": subset(rare_size(st.samples_per_level, st.p0)),
-                         "importance": result}
-                result = combine(parts["subset"], result)
-            elif design is None:
-                note = f"importance sampling: {result.message}; subset simulation used"
-                result, components = subset(), None
+    elif st.estimator == "subset":
+        result, mode_check = checked_subset(g, sub_seed, samples_per_level=st.samples_per_level,
+                                            p0=st.p0, max_levels=st.max_levels,
+                                            batch_size=batch_size)
+    elif st.estimator in ("importance", "rare"):
+        search = series_design_points(g, batch_size=batch_size)
+        result, components = series_importance_sampling(
+            g, imp_seed, samples=st.importance_samples, batch_size=batch_size, design=search)
+        mode_check = ""
+        if np.isfinite(result.probability):
+            design = design_point_summary(config, result.design_point,
+                                          components.names[components.most_probable])
+        checked = MODE_CHECK_DESIGN_POINTS if search.point_set.points else MODE_CHECK_NONE
+        if st.estimator == "rare":
+            parts = {"subset": subset(rare_size(st.samples_per_level, st.p0), search),
+                     "importance": result}
+            result = combine(parts["subset"], result)
+            mode_check = checked
+        elif design is None:
+            note = f"importance sampling: {result.message}; subset simulation used"
+            result, components = subset(search=search), None
+            mode_check = checked
     else:
         raise ValueError(f"estimator = {st.estimator!r}: choose one of "
                          f"{', '.join(ESTIMATORS[1:])} (monte_carlo is the plain run)")
     return EventEstimate(event, st.estimator, result, note, design, components,
-                         time.perf_counter() - started, parts)
+                         time.perf_counter() - started, parts, mode_check)
+
+
+def checked_subset(limit_state, seed, *, batch_size=None, **options):
+    """Subset simulation on a smooth series event, checked for a lost failure mode.
+
+    FORM on every component first (:func:`~tolsim.study.analyses.rare_events.importance.
+    series_design_points`), then :func:`~tolsim.study.analyses.rare_events.subset_simulation`
+    with the accepted design points (its lost-mode check, :func:`~tolsim.study.analyses.
+    rare_events.subset.lost_modes`: ``diagnostic_failed``) and the FORM cross-check of their
+    total (:func:`~tolsim.study.analyses.rare_events.api.form_cross_check`:
+    ``estimators_disagree``), as ``tolsim.rare_events.estimate(method="subset")`` does; the
+    searches' evaluations are added to the result's.
+
+    Parameters
+    ----------
+    limit_state : object
+        A smooth series event: ``dimension``, ``component_names``, ``components(u)`` and
+        ``__call__(u)`` (e.g. :class:`LimitState`).
+    seed : numpy.random.SeedSequence
+        Subset simulation's (FORM draws nothing).
+    batch_size : int, optional
+    **options
+        Of :func:`~tolsim.study.analyses.rare_events.subset_simulation`.
+
+    Returns
+    -------
+    (RareEventResult, mode check)
+        The mode check ``"design_points"``, or ``"none"`` when FORM accepted no design point
+        (then the number is unchecked for a lost mode).
+    """
+    search = series_design_points(limit_state, batch_size=batch_size)
+    found = search.point_set
+    result = subset_simulation(limit_state, limit_state.dimension, seed, batch_size=batch_size,
+                               design_points=found.points, **options)
+    return (form_cross_check(result, found),
+            MODE_CHECK_DESIGN_POINTS if found.points else MODE_CHECK_NONE)
 
 
 def rare_size(samples_per_level, p0):

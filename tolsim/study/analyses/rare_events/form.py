@@ -69,6 +69,8 @@ from tolsim.study.analyses.rare_events.common import (
 FORM_DISTANCE_TOLERANCE = 1e-3
 FORM_ALIGNMENT_TOLERANCE = 1e-3
 SMOOTHNESS_TOLERANCE = 0.05
+#: SLSQP's default tolerance on |u|^2 / 2 in :func:`find_design_point`.
+SLSQP_FTOL = 1e-9
 #: Default finite-difference step of the design-point search, in standard-normal units.
 GRADIENT_STEP = 1e-4
 #: Second-order check: smallest eigenvalue of the projected Hessian of the Lagrangian accepted
@@ -154,7 +156,8 @@ class _Unevaluable(Exception):
 
 def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_STEP,
                       max_iterations=100, batch_size=None, start=None,
-                      second_order=True) -> DesignPoint:
+                      second_order=True, origin_values=None,
+                      ftol=SLSQP_FTOL, known=()) -> DesignPoint:
     """The most probable failure point u* by SLSQP, with the checks of the module docstring.
 
     Minimises |u|^2 / 2 subject to g(u) = 0 ([HasoferLind1974]) with
@@ -181,6 +184,17 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         First iterate (default the origin); the origin is checked (g(0) > 0) either way.
     second_order : bool
         Reject a point that is not a local minimum of |u| on g = 0 (module docstring).
+    origin_values : array_like (2 d + 1,), optional
+        g at [0, h e_k, -h e_k] when already evaluated (e.g. once for every component of a
+        series event); not evaluated nor counted again.
+    ftol : float
+        SLSQP's tolerance on |u|^2 / 2 (``ftol``); the checks decide whether the end point is
+        a design point whatever it is.
+    known : sequence of DesignPoint
+        Accepted design points found before (:func:`find_design_points`): a search that ends
+        at one of them (the same direction and beta, as :func:`find_design_points` tells
+        them apart) stops there, flagged ``converged`` False with the message "already
+        found", without the checks' rows (the point passed them before).
 
     Returns
     -------
@@ -224,6 +238,12 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
                            unresolved=calls[1])
 
     origin = np.zeros(d)
+    if origin_values is not None:
+        origin_values = np.asarray(origin_values, dtype=float)
+        if origin_values.shape != (2 * d + 1,):
+            raise ValueError(f"origin_values of shape {origin_values.shape}; expected "
+                             f"({2 * d + 1},)")
+        last[origin.tobytes()] = origin_values
     g_rows, grad0 = value_and_gradient(origin)
     g0 = g_rows[0]
     if not np.isfinite(g0):
@@ -263,22 +283,65 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
                           method="SLSQP",
                           constraints=[{"type": "eq", "fun": constraint,
                                         "jac": constraint_gradient}],
-                          options={"maxiter": max_iterations, "ftol": 1e-9})
+                          options={"maxiter": max_iterations, "ftol": ftol})
     except _Unevaluable as error:
         return fail(origin, grad0, f"FORM search stopped: {error}")
     point = np.asarray(result.x, dtype=float)
+    beta = float(np.linalg.norm(point))
+    if beta > 0 and any(_near(point, beta, p.point, p.beta) for p in known):
+        return fail(point, np.full(d, np.nan), "the search ended at a design point already "
+                                               "found")
     g = last.get(point.tobytes())
     if g is None:
         g = values(np.concatenate([point[None], point + step * np.eye(d),
                                    point - step * np.eye(d)]))
+    central_user = None if gradient is None else _user_gradient(gradient, point)
+    solver = "" if result.success else f" (SLSQP: {result.message})"
+    return checked_design_point(values, point, g, step, second_order, calls,
+                                central_user=central_user, solver=solver)
+
+
+def checked_design_point(values, point, g, step, second_order, calls, *, central_user=None,
+                         solver="") -> DesignPoint:
+    """The end point of a design-point search with the checks of the module docstring.
+
+    Parameters
+    ----------
+    values : callable
+        g on rows (m, d) -> (m,), counting its rows in ``calls`` (used for the second-order
+        check only).
+    point : ndarray (d,)
+        u*, the end of the search.
+    g : ndarray (2 d + 1,)
+        g at [u*, u* + h e_k, u* - h e_k] (h = ``step``).
+    step : float
+    second_order : bool
+    calls : list [rows evaluated, NaN rows]
+        Updated by ``values``; the counts of the result.
+    central_user : ndarray (d,), optional
+        The caller's gradient at u* (default the central differences of ``g``).
+    solver : str
+        Appended to the messages of a point not on the limit state or not normal to it.
+
+    Returns
+    -------
+    DesignPoint
+    """
+    d = point.size
+
+    def fail(u, g_grad, why):
+        beta = float(np.linalg.norm(u))
+        return DesignPoint(u, beta, float(ndtr(-beta)), g_grad, False, why, calls[0],
+                           unresolved=calls[1])
+
     g_star = float(g[0])
     forward = (g[1:d + 1] - g_star) / step
     backward = (g_star - g[d + 1:]) / step
     central = 0.5 * (forward + backward)
-    central_user = central if gradient is None else _user_gradient(gradient, point)
+    if central_user is None:
+        central_user = central
     beta = float(np.linalg.norm(point))
     norm = float(np.linalg.norm(central_user))
-    solver = "" if result.success else f" (SLSQP: {result.message})"
     if not (np.all(np.isfinite(g)) and np.all(np.isfinite(central_user))):
         return fail(point, central_user, f"the limit state is not finite around the design "
                                          f"point{solver}")
@@ -422,7 +485,9 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
     along g = 0, which finds the small basins that points r s miss. After ``restarts`` searches it
     goes on while one of the last :data:`RESTART_PATIENCE` found a new point (at most
     :data:`MAX_RESTART_FACTOR` ``restarts``). Accepted points that differ in direction
-    (1 - cos > 1e-3) or beta (relative 1e-2) are kept. No finite number of starts is sure to
+    (1 - cos > 1e-3) or beta (relative 1e-2) are kept; a restart whose SLSQP search ends at
+    a point already kept stops there, without the rows of the checks (``known`` of
+    :func:`find_design_point`). No finite number of starts is sure to
     find every design point: importance sampling's diagnostics and the cross-check with
     subset simulation (:func:`tolsim.rare_events.estimate`, ``method="rare"``) are the
     safety net.
@@ -480,7 +545,7 @@ def find_design_points(limit_state, dimension, seed, *, restarts=DEFAULT_RESTART
                                            batch_size)
             evaluations += cost
             unresolved += nans
-        point = find_design_point(limit_state, d, start=start, **options)
+        point = find_design_point(limit_state, d, start=start, known=found, **options)
         evaluations += point.evaluations
         unresolved += point.unresolved
         searches += 1
@@ -562,9 +627,15 @@ def _ray_start(limit_state, direction, radius, batch_size):
 
 
 def _same(a, b) -> bool:
-    cos = float(a.point @ b.point) / (a.beta * b.beta)
-    return 1.0 - cos <= DISTINCT_DIRECTION and abs(a.beta - b.beta) <= DISTINCT_BETA * max(
-        a.beta, b.beta)
+    return _near(a.point, a.beta, b.point, b.beta)
+
+
+def _near(a, beta_a, b, beta_b) -> bool:
+    """Two points are the same design point (:data:`DISTINCT_DIRECTION`,
+    :data:`DISTINCT_BETA`)."""
+    cos = float(a @ b) / (beta_a * beta_b)
+    return 1.0 - cos <= DISTINCT_DIRECTION and abs(beta_a - beta_b) <= DISTINCT_BETA * max(
+        beta_a, beta_b)
 
 
 def _user_gradient(gradient, u):

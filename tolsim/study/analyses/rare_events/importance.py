@@ -59,7 +59,6 @@ from tolsim.study.analyses.rare_events.form import (
     DEFAULT_RESTARTS,
     GRADIENT_STEP,
     DesignPointSet,
-    find_design_point,
     find_design_points,
 )
 from tolsim.study.analyses.rare_events.result import (
@@ -71,6 +70,7 @@ from tolsim.study.analyses.rare_events.result import (
     RareEventResult,
     flagged,
 )
+from tolsim.study.analyses.rare_events.series_form import component_design_points
 
 #: Defensive share of the mixture spread evenly over the design points (the rest in proportion
 #: to Phi(-beta_k)), so that a point whose FORM estimate is too low still gets samples.
@@ -278,12 +278,35 @@ class SeriesDesignPoints:
         |u*_k| [-].
     evaluations : int
         Rows evaluated by the k searches.
+    design_points : tuple of DesignPoint
+        Each component's search (:func:`~tolsim.study.analyses.rare_events.series_form.
+        component_design_points`), converged or not: the form subset simulation's lost-mode
+        check takes (``design_points=``).
+    unresolved : int
+        Of the rows evaluated, those where a component was NaN.
     """
 
     names: tuple
     points: np.ndarray
     betas: np.ndarray
     evaluations: int
+    design_points: tuple = ()
+    unresolved: int = 0
+
+    @property
+    def failed(self):
+        """The first component whose search was not accepted (None when all were)."""
+        return next((k for k, p in enumerate(self.design_points) if not p.converged), None)
+
+    @property
+    def point_set(self) -> DesignPointSet:
+        """The accepted design points as a :class:`~tolsim.study.analyses.rare_events.form.
+        DesignPointSet` (by increasing beta; the evaluations of all the searches)."""
+        found = sorted((p for p in self.design_points if p.converged), key=lambda p: p.beta)
+        message = "" if self.failed is None else \
+            f"{self.names[self.failed]}: {self.design_points[self.failed].message}"
+        return DesignPointSet(tuple(found), self.evaluations, len(self.design_points), message,
+                              self.unresolved)
 
     @property
     def most_probable(self) -> int:
@@ -291,19 +314,32 @@ class SeriesDesignPoints:
         return int(np.argmin(self.betas))
 
 
+def series_design_points(limit_state, *, batch_size=None) -> SeriesDesignPoints:
+    """FORM on every component of a series event at once (:func:`~tolsim.study.analyses.
+    rare_events.series_form.component_design_points`); ``limit_state`` as
+    :func:`series_importance_sampling` takes it."""
+    names = tuple(limit_state.component_names)
+    found, rows, nans = component_design_points(limit_state.components, limit_state.dimension,
+                                                len(names), batch_size=batch_size)
+    return SeriesDesignPoints(names, np.array([p.point for p in found]),
+                              np.array([p.beta for p in found]), rows, found, nans)
+
+
 def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=None,
-                               confidence_level=0.95):
+                               confidence_level=0.95, design=None):
     """FORM on every component, then importance sampling from the mixture of N(u*_k, I).
 
     ``limit_state`` is a limit state of a series event with ``dimension``,
-    ``component_names`` and ``component(k)`` (a limit state of component k alone; e.g.
+    ``component_names`` and ``components(u)`` (all components' g, (rows, k); e.g.
     :class:`tolsim.study.analyses.limit_state.LimitState`). A series event (the union of its
     components: any pair touches, any ball beyond the limit) has a design point per
     component, often several of similar beta (the pairs of a train). Importance sampling
     around one of them misses the others' failure domains and is low by a factor of up to
     their number, with a standard error that does not show it (module docstring). Here each
-    component's design point u*_k is found (:func:`find_design_point` on the component
-    alone), and the samples are drawn from the mixture q(v) = sum_k pi_k phi(v - u*_k), pi_k
+    component's design point u*_k is found (SLSQP on the component alone with the checks of
+    :func:`~tolsim.study.analyses.rare_events.form.find_design_point`, the origin's rows
+    shared: :func:`series_design_points`), and the
+    samples are drawn from the mixture q(v) = sum_k pi_k phi(v - u*_k), pi_k
     proportional to Phi(-beta_k), with the weight phi(v) / q(v) = 1 / sum_k pi_k
     exp(v . u*_k - beta_k^2 / 2) ([Melchers1989]'s
     multi-modal sampling density for systems). The estimate is unbiased whatever the
@@ -324,6 +360,9 @@ def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=No
     batch_size : int, optional
         Most rows per model call; no effect on the result.
     confidence_level : float
+    design : SeriesDesignPoints, optional
+        Of :func:`series_design_points`, when already searched (its evaluations are counted
+        here all the same).
 
     Returns
     -------
@@ -334,26 +373,22 @@ def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=No
         ``form_failed`` when FORM gives no design point for some component (its message
         names it), ``no_failure`` when no sample fails.
     """
-    d = limit_state.dimension
     n = int(samples)
     if n < 2:
         raise ValueError(f"samples = {samples!r} must be >= 2")
     z = check_confidence(confidence_level)
     root = seed_sequence(seed)
     names = limit_state.component_names
-    common = dict(estimator="importance", confidence_level=confidence_level, dimension=d,
-                  samples_per_level=n)
-    points, betas, evaluations = [], [], 0
-    for k, name in enumerate(names):
-        found = find_design_point(limit_state.component(k), d, batch_size=batch_size)
-        evaluations += found.evaluations
-        if not found.converged:
-            return flagged(STATUS_FORM_FAILED, f"FORM found no design point for {name}: "
-                                                f"{found.message}", evaluations, 0,
-                            common), None
-        points.append(found.point)
-        betas.append(found.beta)
-    design = SeriesDesignPoints(tuple(names), np.array(points), np.array(betas), evaluations)
+    common = dict(estimator="importance", confidence_level=confidence_level,
+                  dimension=limit_state.dimension, samples_per_level=n)
+    if design is None:
+        design = series_design_points(limit_state, batch_size=batch_size)
+    evaluations = design.evaluations
+    if design.failed is not None:
+        k = design.failed
+        return flagged(STATUS_FORM_FAILED, f"FORM found no design point for {names[k]}: "
+                                            f"{design.design_points[k].message}", evaluations,
+                       design.unresolved, common), None
     best = design.most_probable
     shifts, beta = design.points, design.betas
     log_weight = log_ndtr(-beta)
@@ -366,7 +401,7 @@ def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=No
     failed, unevaluable, w = mixture_samples(limit_state, root, shifts, np.exp(log_weight), n,
                                              batch_size)
     evaluations += n
-    unresolved = int(np.count_nonzero(unevaluable))
+    unresolved = design.unresolved + int(np.count_nonzero(unevaluable))
     if not np.any(failed | unevaluable):
         return flagged(STATUS_NO_FAILURE, f"no failure among the {n} samples around the "
                                           f"{len(names)} design points: no probability "
