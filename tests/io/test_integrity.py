@@ -315,3 +315,20 @@ def test_resumed_sweep_equals_an_uninterrupted_one_attributes_included(tmp_path)
         np.testing.assert_array_equal(cut[name].values, whole[name].values, err_msg=name)
         assert {k: str(v) for k, v in cut[name].attrs.items()} == {
             k: str(v) for k, v in whole[name].attrs.items()}, name
+
+
+def test_resumed_sweep_counts_only_the_work_done_after_resuming(tmp_path):
+    # issue 26, item 8 for sweeps: the summary's balls/s was all points' balls over the time
+    # of the points run now, overstated after a resume. Point 1 (64 assemblies x 6 balls)
+    # finishes in the first call; the resumed call runs point 2 only, from its checkpoint
+    # (block 3 of 4 on, 16 assemblies per block): 1 block of 16 assemblies, 96 balls.
+    text = MINIMAL.replace("samples = 100", "samples = 64\nblock_size = 16")
+    c = parse_config(text + '\n[sweep]\n"loads.normal_load_N" = [150, 250]\n')
+    out = tmp_path / "cut.nc"
+    for _ in range(2):
+        with pytest.raises(StudyInterrupted):
+            run_sweep(c, out, max_blocks=3, checkpoint_interval=0, chunk_blocks=1)
+    _, work = run_sweep(c, out)
+    assert work.balls_run == 16 * c.balls
+    assert work.balls_per_second == pytest.approx(
+        work.balls_run / (work.elapsed - work.compile_seconds), rel=1e-12)

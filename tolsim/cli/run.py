@@ -568,7 +568,7 @@ def run(args) -> int:
     return 0
 
 
-def sweep_summary(ds, output, elapsed) -> str:
+def sweep_summary(ds, output, work) -> str:
     """Short plain-text summary of a sweep's result: one line per point."""
     import numpy as np  # noqa: PLC0415
 
@@ -598,9 +598,9 @@ def sweep_summary(ds, output, elapsed) -> str:
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
     lines.extend("  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in rows)
-    n_balls = int(np.sum(ds.n_balls))
-    rate = n_balls / elapsed if elapsed > 0 else float("nan")
-    lines.append(f"wrote {output} ({n} points, {elapsed:.1f} s, {rate:,.0f} balls/s)")
+    # the points run in this process only: a resumed sweep's earlier points took no time here
+    lines.append(f"wrote {output} ({n} points, {work.elapsed:.1f} s, "
+                 f"{work.balls_per_second:,.0f} balls/s)")
     return "\n".join(lines)
 
 
@@ -629,7 +629,7 @@ def _run_sweep(args, config, output) -> int:
             tqdm.tqdm.write(f"tolsim run: {message}", file=sys.stderr)
 
     try:
-        ds, elapsed = run_sweep(
+        ds, work = run_sweep(
             config, output, history=_command_line(args, output), progress=bar.update,
             on_point=on_point, notify=notify, fresh=args.fresh, workers=args.workers,
             chunk_blocks=args.chunk_blocks, checkpoint_interval=args.checkpoint_interval,
@@ -650,5 +650,5 @@ def _run_sweep(args, config, output) -> int:
     finally:
         bar.close()
     if not args.quiet:
-        print(sweep_summary(ds, output, elapsed))
+        print(sweep_summary(ds, output, work))
     return 0

@@ -13,6 +13,7 @@ uninterrupted one. The folder goes when the result is written.
 
 import os
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -162,6 +163,32 @@ def parts_folder(output) -> Path:
     return Path(f"{output}.sweep")
 
 
+@dataclass(frozen=True)
+class SweepWork:
+    """The work a :func:`run_sweep` call did in this process (a resumed sweep takes its
+    finished points from their part files: they count here neither in time nor in balls).
+
+    Attributes
+    ----------
+    elapsed : float
+        Wall time of the points run here [s], compilation included.
+    compile_seconds : float
+        Numba compilation inside ``elapsed`` [s].
+    balls_run : int
+        Balls of the assemblies evaluated here.
+    """
+
+    elapsed: float = 0.0
+    compile_seconds: float = 0.0
+    balls_run: int = 0
+
+    @property
+    def balls_per_second(self) -> float:
+        """Balls evaluated here over ``elapsed`` without compilation (NaN if none ran)."""
+        seconds = self.elapsed - self.compile_seconds
+        return self.balls_run / seconds if self.balls_run and seconds > 0 else float("nan")
+
+
 def run_sweep(config, output, *, history=None, progress=None, on_point=None, notify=None,
               fresh=False, **run_options):
     """Run every point of a swept config and write one result file (module docstring).
@@ -188,7 +215,7 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
 
     Returns
     -------
-    (xr.Dataset, elapsed seconds of the studies run here)
+    (xr.Dataset, SweepWork): the combined result, and the work done here
     """
     sweep = config.sweep
     folder = parts_folder(output)
@@ -200,7 +227,7 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
     if isinstance(scheduler, str):  # one cluster for all points (a LocalCluster starts once)
         run_options["scheduler"], cluster, _ = connect(scheduler)
     try:
-        datasets, elapsed = _run_points(config, folder, history, progress, on_point, notify,
+        datasets, work = _run_points(config, folder, history, progress, on_point, notify,
                                         run_options)
     finally:
         if cluster is not None or isinstance(scheduler, str):
@@ -213,13 +240,13 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
     combined.attrs["history"] = history_line(history)
     add_checksums(combined, write_dataset(combined, output))
     shutil.rmtree(folder, ignore_errors=True)
-    return combined, elapsed
+    return combined, work
 
 
 def _run_points(config, folder, history, progress, on_point, notify, run_options):
-    """Run or take from their part files every point of a sweep: (datasets, elapsed)."""
+    """Run or take from their part files every point of a sweep: (datasets, SweepWork)."""
     sweep = config.sweep
-    datasets, elapsed = [], 0.0
+    datasets, elapsed, compiled, balls = [], 0.0, 0.0, 0
     for k, point in enumerate(sweep.points):
         if on_point is not None:
             on_point(k, sweep)
@@ -242,6 +269,10 @@ def _run_points(config, folder, history, progress, on_point, notify, run_options
                            checkpoint_path=str(folder / f"point-{k:04d}.partial"),
                            **run_options)
         elapsed += result.elapsed
+        compiled += result.loop_compile_seconds
+        done = (int(result.statistics.n_assemblies) if result.assemblies_run is None
+                else result.assemblies_run)
+        balls += done * point.balls
         ds = result_to_dataset(result, history=history)
         ds.attrs["sweep_point_fingerprint"] = fp
         write_dataset(ds, part)
@@ -251,4 +282,4 @@ def _run_points(config, folder, history, progress, on_point, notify, run_options
         # every point as read from its part file, whether it ran now or in an earlier,
         # interrupted run: the combined file is then the same (attribute types included)
         datasets.append(read_result(part))
-    return datasets, elapsed
+    return datasets, SweepWork(elapsed, compiled, balls)
