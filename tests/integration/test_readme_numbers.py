@@ -5,6 +5,7 @@ machine-dependent timings cannot be checked on a CI machine, so the README must 
 benchmark that measures each of them, next to it.
 """
 
+import csv
 import re
 from dataclasses import replace
 from pathlib import Path
@@ -134,3 +135,25 @@ def test_rare_contact_plain_run_beside_subset():
     p = paragraph_with(r"plain run of `configs/rare_contact.toml`")
     assert f"{k} of {n:,}".replace(",", " ") in p
     assert f"[{100 * low:.3f} %, {100 * high:.3f} %]" in p
+
+
+def test_preload_sweep_numbers_are_those_of_its_figure():
+    # The preload sweep paragraph quotes the sweep the README's figure was made from
+    # (reports/examples/sweep_preload, `tolsim report` of `tolsim run configs/sweep_preload.toml
+    # --samples 20000`): each quoted P(contact) [95 % interval] is that point's value in the
+    # report's points.csv to the printed digits, and the figure exists.
+    p = paragraph_with(r"^P\(contact\) per assembly: ")
+    assert (ROOT / "reports/examples/sweep_preload.png").is_file()
+    with open(ROOT / "reports/examples/sweep_preload/points.csv", newline="") as f:
+        rows = {float(r["carriage.preload_oversize_um"]): r for r in csv.DictReader(f)}
+    assert all(int(r["n_assemblies"]) == 20000 and int(r["n_assemblies_unresolved"]) == 0
+               for r in rows.values())
+    quoted = re.findall(r"(0(?:\.\d+)?) \[(0(?:\.\d+)?), (0\.\d+)\] (?:from|at) (−?\d)", p)
+    assert len(quoted) == 7
+    for value, low, high, point in quoted:
+        r = rows[float(point.replace("−", "-"))]
+        digits = len(value.split(".")[1]) if "." in value else 0
+        for text, key in ((value, "contact_probability"), (low, "contact_probability_ci_lower"),
+                          (high, "contact_probability_ci_upper")):
+            d = len(text.split(".")[1]) if "." in text else digits
+            assert f"{float(r[key]):.{d}f}" == text, (point, key)
