@@ -432,6 +432,30 @@ def receding(groove_map, step, s0, c0):
 
 
 @jit
+def _ray_slope(residual, src, step):
+    """Slope -R . step of the carriage's potential along ``step`` (evaluation ``src``)."""
+    slope = 0.0
+    for j in range(5):
+        slope -= residual[src, j] * step[j]
+    return slope
+
+
+@jit
+def _at_distance(s, q, step, trial, src, groove_map, base, half, dist, k, ball_tol,
+                 ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok, work,
+                 residual, tangent, state):
+    """Evaluate the balls at q + s step (:func:`settle`) into the buffer other than ``src``:
+    (a ball solve failed, that buffer)."""
+    for j in range(5):
+        trial[j] = q[j] + s * step[j]
+    dst = 1 - src
+    failed = _evaluate_balls(trial, True, src, dst, groove_map, base, half, dist, k, ball_tol,
+                             ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
+                             work, residual, tangent, state) != 0
+    return failed, dst
+
+
+@jit
 def settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol, ball_max_iter,
            ball_floor, limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state,
            trial):
@@ -457,9 +481,7 @@ def settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol, ball
             gmax = max(gmax, abs(g))
             move = max(move, abs(gs))
     s_max = (1.0 - 1e-9) * (limit - gmax) / move  # |A (q + s step)| <= limit for s <= s_max
-    slope0 = 0.0
-    for j in range(5):
-        slope0 -= residual[cur, j] * step[j]
+    slope0 = _ray_slope(residual, cur, step)
     s_lo, d_lo = 0.0, slope0
     s_hi, d_hi = 0.0, 0.0
     s = 1.0
@@ -467,17 +489,12 @@ def settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol, ball
     slope = slope0
     while True:  # bracket the minimum along the ray
         s = min(s, s_max)
-        for j in range(5):
-            trial[j] = q[j] + s * step[j]
-        dst = 1 - src
-        if _evaluate_balls(trial, True, src, dst, groove_map, base, half, dist, k, ball_tol,
-                           ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
-                           work, residual, tangent, state) != 0:
-            return STATUS_FAILED, dst
-        src = dst
-        slope = 0.0
-        for j in range(5):
-            slope -= residual[src, j] * step[j]
+        failed, src = _at_distance(s, q, step, trial, src, groove_map, base, half, dist, k,
+                                   ball_tol, ball_max_iter, ball_floor, limit, q_ext, pos, grv,
+                                   resp, ball_ok, work, residual, tangent, state)
+        if failed:
+            return STATUS_FAILED, src
+        slope = _ray_slope(residual, src, step)
         if slope >= 0.0:
             s_hi, d_hi = s, slope
             break
@@ -491,17 +508,12 @@ def settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol, ball
         if abs(slope) <= 1e-2 * abs(slope0) or s_hi - s_lo <= 1e-12 * s_hi:
             break
         s = s_hi - d_hi * (s_hi - s_lo) / (d_hi - d_lo)
-        for j in range(5):
-            trial[j] = q[j] + s * step[j]
-        dst = 1 - src
-        if _evaluate_balls(trial, True, src, dst, groove_map, base, half, dist, k, ball_tol,
-                           ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
-                           work, residual, tangent, state) != 0:
-            return STATUS_FAILED, dst
-        src = dst
-        slope = 0.0
-        for j in range(5):
-            slope -= residual[src, j] * step[j]
+        failed, src = _at_distance(s, q, step, trial, src, groove_map, base, half, dist, k,
+                                   ball_tol, ball_max_iter, ball_floor, limit, q_ext, pos, grv,
+                                   resp, ball_ok, work, residual, tangent, state)
+        if failed:
+            return STATUS_FAILED, src
+        slope = _ray_slope(residual, src, step)
         if slope < 0.0:
             s_lo, d_lo = s, slope
             d_hi = 0.5 * d_hi if side == -1 else d_hi
@@ -512,14 +524,11 @@ def settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol, ball
             side = 1
     if not state[src, 2] > 0.0:
         s = s_hi
-        for j in range(5):
-            trial[j] = q[j] + s * step[j]
-        dst = 1 - src
-        if _evaluate_balls(trial, True, src, dst, groove_map, base, half, dist, k, ball_tol,
-                           ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok,
-                           work, residual, tangent, state) != 0:
-            return STATUS_FAILED, dst
-        src = dst
+        failed, src = _at_distance(s, q, step, trial, src, groove_map, base, half, dist, k,
+                                   ball_tol, ball_max_iter, ball_floor, limit, q_ext, pos, grv,
+                                   resp, ball_ok, work, residual, tangent, state)
+        if failed:
+            return STATUS_FAILED, src
     for j in range(5):
         q[j] += s * step[j]
     return STATUS_CONVERGED, src
