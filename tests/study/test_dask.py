@@ -29,9 +29,11 @@ from tolsim.cli import main
 from tolsim.study.execution import distributed as tolsim_distributed
 from tolsim.study.execution.distributed import (
     INSTALL_HINT,
+    TASK_BALLS,
     SchedulerError,
     chunks_per_task,
     parse_scheduler,
+    task_size,
 )
 from tolsim.study.execution.runner import run_study
 
@@ -351,3 +353,16 @@ def test_a_sweep_on_the_cluster_is_bit_identical(two_workers, tmp_path):
     there, _ = run_sweep(config, tmp_path / "there.nc", scheduler=two_workers, chunk_blocks=1)
     for name in here.data_vars:
         np.testing.assert_array_equal(there[name].values, here[name].values, err_msg=name)
+
+
+def test_a_single_block_probe_does_not_size_the_tasks():
+    # run_study's require_answer puts block 0 alone in front of chunks of 25 blocks; sizing
+    # the tasks by that first chunk put 200 full chunks (5e7 balls) into one task, and a
+    # Ctrl-C on a LocalCluster then waited for it (tests/study/test_dask.py ctrl-c test: 30 s
+    # to the first checkpoint, a 300 s hang on a busy machine)
+    per_block = 1024 * 10
+    chunks = [[0]] + [list(range(i, i + 25)) for i in range(1, 25 * 4000, 25)]
+    size = task_size(chunks, per_block, threads=2)
+    assert size == TASK_BALLS // (25 * per_block)
+    assert max(sum(len(c) for c in chunks[i:i + size]) for i in range(0, len(chunks), size)
+               ) * per_block <= TASK_BALLS

@@ -194,6 +194,15 @@ def chunks_per_task(chunks, balls_per_chunk: int, threads: int) -> int:
     return min(by_size, by_count)
 
 
+def task_size(chunks, balls_per_block: int, threads: int) -> int:
+    """:func:`chunks_per_task` for ``run_study``'s chunks, sized by the largest chunk: the
+    first may be a single block (the probe of ``require_answer``), far smaller than the rest,
+    and sizing by it would put hundreds of full chunks into one task (a task of 5e7 balls
+    where 2e6 was meant, slow to interrupt)."""
+    largest = max(len(c) for c in chunks[:2])  # only the first chunk can differ
+    return chunks_per_task(chunks, largest * balls_per_block, threads)
+
+
 class DaskSession:
     """A connection to a dask cluster, for one or more studies.
 
@@ -282,8 +291,7 @@ class DaskSession:
         if not chunks:
             return
         balls = getattr(config, "balls", config.train.balls)  # per assembly
-        balls_per_chunk = len(chunks[0]) * config.study.block_size * balls
-        size = chunks_per_task(chunks, balls_per_chunk, self.threads())
+        size = task_size(chunks, config.study.block_size * balls, self.threads())
         tasks = [chunks[i:i + size] for i in range(0, len(chunks), size)]
         token = uuid.uuid4().hex[:8]
         pending = deque()  # futures of the submitted tasks not yet merged, in task order
