@@ -5,7 +5,8 @@ the carriage's loaded zone while the carriage makes its stroke; the carriage is 
 they move, balls leave the zone at its trailing end and new ones enter at its leading end.
 :func:`first_contact_carriage_track` integrates a block of assemblies and finds the first
 ball-to-ball contact of each, as :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
-does for single trains.
+does for single trains, with the same loop (:func:`tolsim.study.pipeline.propagation.integrate`)
+in the carriage frame (:class:`CarriageFrame`).
 The theory (frames, the loaded zone with its exits and entries, the integration, the trains
 after contact) is in the Notes of :func:`first_contact_carriage_track`.
 
@@ -602,8 +603,10 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     round and the question does not arise.
 
     **Integration.**
-    The explicit midpoint rule of
-    :func:`tolsim.study.pipeline.propagation.first_contact_along_track` over
+    The one along-track integration of single trains,
+    :func:`tolsim.study.pipeline.propagation.integrate`, in the :class:`CarriageFrame`, with
+    the first contact (:class:`CarriageFirstContact`), the trains after contact
+    (:class:`CarriageTrains`) and the ``trace`` as its observers: the explicit midpoint rule over
     ``study.time_steps`` steps of dt: epsilon_1 of every loaded ball with the carriage solved at
     the balls' positions at the start of the step, the positions at the midpoint, epsilon_2 with
     the carriage solved again there (a ball outside the zone at the midpoint keeps epsilon_1),

@@ -13,7 +13,10 @@ touches when the gap closes.
     (rail random fields, read at the ball's rail position) and through the carriage's load
     distribution (read at its position in the carriage), integrated with the explicit
     midpoint rule; a contact event is located by linear interpolation of the gap within the
-    step in which it changes sign (exact for piecewise-constant epsilon).
+    step in which it changes sign (exact for piecewise-constant epsilon). One loop,
+    :func:`integrate`, steps every along-track propagation: a frame says how its balls are
+    evaluated and move (:class:`FreeBalls` here, the carriage's in
+    :mod:`tolsim.study.pipeline.carriage_track`), observers what is recorded or changed.
 
 Unresolved balls (epsilon NaN: no model could solve them, :mod:`tolsim.study.pipeline.evaluate`)
 never
