@@ -28,12 +28,13 @@ from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.static import GrooveErrors
 from tolsim.study.execution.runner import run_study
 from tolsim.study.pipeline.carriage_track import (
+    CarriageFrame,
     TrackTrace,
     advance_kernel,
     first_contact_carriage_track,
     slot_capacity,
 )
-from tolsim.study.pipeline.propagation import first_contact_tracks
+from tolsim.study.pipeline.propagation import StepObserver, first_contact_tracks, integrate
 from tolsim.study.sampling import (
     _ar1,
     block_generator,
@@ -345,6 +346,35 @@ def test_exit_and_entry_times_by_hand():
         assert_allclose(gaps[np.isfinite(gaps)], 50e-6, rtol=0, atol=1e-12)
         count = np.isfinite(z).sum(axis=2)
         assert np.all((count == 4) | (count == 5))
+
+
+class Following(StepObserver):
+    """Follows the given rows and records the rows of every step it sees."""
+
+    def __init__(self, rows):
+        self.rows, self.seen = rows, []
+
+    def begin(self, block, position):
+        self.mask = np.isin(np.arange(block.size), self.rows)
+
+    def following(self):
+        return self.mask
+
+    def observe(self, step):
+        self.seen.append(step.rows.tolist())
+
+
+def test_the_one_loop_integrates_the_rows_an_observer_follows():
+    # issue 22 (one along-track loop, propagation.integrate): in the carriage frame only the
+    # assemblies some observer still follows are evaluated (exact row indices, every step), and
+    # the loop stops before any evaluation when no observer follows a row.
+    c = config(samples=3, steps=4)
+    one = Following([1])
+    integrate(c, CarriageFrame(c, sample_block(c, 0)), [one])
+    assert one.seen == [[1]] * 4
+    none, frame = Following([]), CarriageFrame(c, sample_block(c, 0))
+    integrate(c, frame, [none])
+    assert none.seen == [] and frame.initial_state is None
 
 
 def test_along_track_agrees_with_constant_propagation_before_any_ball_moves_on():

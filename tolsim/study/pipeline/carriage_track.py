@@ -5,7 +5,8 @@ the carriage's loaded zone while the carriage makes its stroke; the carriage is 
 they move, balls leave the zone at its trailing end and new ones enter at its leading end.
 :func:`first_contact_carriage_track` integrates a block of assemblies and finds the first
 ball-to-ball contact of each, as :func:`tolsim.study.pipeline.propagation.first_contact_along_track`
-does for single trains.
+does for single trains, with the same loop (:func:`tolsim.study.pipeline.propagation.integrate`)
+in the carriage frame (:class:`CarriageFrame`).
 The theory (frames, the loaded zone with its exits and entries, the integration, the trains
 after contact) is in the Notes of :func:`first_contact_carriage_track`.
 
@@ -36,6 +37,7 @@ from tolsim.study.pipeline.evaluate import (
     groove_error_fields,
     serial_if_small,
 )
+from tolsim.study.pipeline.propagation import AlongTrackFrame, Step, StepObserver, integrate
 from tolsim.study.sampling import entering_capacity, moving_ball_values
 
 
@@ -51,7 +53,7 @@ def slot_capacity(config) -> int:
 
 
 @dataclass
-class TrackTrace:
+class TrackTrace(StepObserver):
     """What the integration did, for tests and plots (``trace`` of
     :func:`first_contact_carriage_track`).
 
@@ -76,6 +78,25 @@ class TrackTrace:
         """``exits`` or ``entries`` as an array (k, 4): assembly, track, ball id, time [s]."""
         rows = getattr(self, kind)
         return np.array(rows, dtype=float).reshape(-1, 4)
+
+    def following(self):
+        return False  # it records the rows the others follow
+
+    def observe(self, step):
+        state = step.state1
+        self.time.append(step.t)
+        self.rows.append(step.rows)
+        self.ball_z.append(step.position.copy())
+        self.ball_id.append(step.ball_id.copy())
+        self.velocity_deviation.append(state.velocity_deviation)
+        self.normal_load.append(np.where(state.loaded, state.batch.normal_load, np.nan))
+
+    def moved(self, step):
+        rows, events = step.rows, step.events
+        for ident, when, out in ((events[0], events[1], self.exits),
+                                 (events[2], events[3], self.entries)):
+            for a, tr, j in zip(*np.nonzero(ident >= 0), strict=True):
+                out.append((rows[a], tr, ident[a, tr, j], when[a, tr, j]))
 
 
 @jit
@@ -271,6 +292,222 @@ def _initial_state(config, ball_z, loaded, batch, state):
     return balls, carriage
 
 
+@dataclass
+class CarriageBalls:
+    """The balls of the assemblies integrated in a step, in slots (m_k, tracks, slots):
+    ``velocity_deviation`` epsilon (NaN unless loaded and resolved), ``valid`` (True where
+    not loaded), ``loaded``; ``batch`` the carriage solve, ``balls`` the BallState of the
+    loaded balls (flattened)."""
+
+    velocity_deviation: np.ndarray
+    valid: np.ndarray
+    loaded: np.ndarray
+    batch: object
+    balls: BallState
+
+
+@dataclass
+class CarriageStep(Step):
+    """A :class:`tolsim.study.pipeline.propagation.Step` of the carriage frame: ``rows`` the
+    assemblies integrated, ``ball_id`` their balls' ids (re-mapped in place by the frame's
+    advance); after it, ``previous_id`` the ids before, ``overflow`` (m_k,) and ``events``
+    (exit ids, exit times, entry ids, entry times) of :func:`advance_kernel`."""
+
+    rows: np.ndarray = None
+    ball_id: np.ndarray = None
+    previous_id: np.ndarray = None
+    overflow: np.ndarray = None
+    events: list = None
+
+
+class CarriageFrame(AlongTrackFrame):
+    """The carriage frame of :func:`first_contact_carriage_track` (its Notes): the balls in
+    slots (size, tracks, slots) at carriage-frame positions z, moving at
+    dz/dt = -(1 - epsilon) v / 2; the rows still followed, each evaluation one batched,
+    warm-started carriage solve (:class:`_Evaluation`); exits and entries at the end of each
+    step (:func:`advance_kernel`).
+
+    ``initial_state``, ``initial_carriage``: the balls and the carriages at t = 0;
+    ``resolve_seconds``: full-model re-solves after the start of the stroke [s].
+    """
+
+    def __init__(self, config, block):
+        self.config = config
+        self.evaluation = _Evaluation(config, block)
+        self.tracks, self.balls, self.slots = (self.evaluation.tracks, self.evaluation.balls,
+                                               self.evaluation.slots)
+        self.half_zone = self.evaluation.half_zone
+        self.v = config.motion.groove_velocity
+        self.diameter = 2.0 * config.bearing.ball_radius
+        m, tracks, n, slots = block.size, self.tracks, self.balls, self.slots
+        capacity = entering_capacity(config)
+        ball_z = np.full((m, tracks, slots), np.nan)
+        ball_z[:, :, :n] = block.initial_position.reshape(m, tracks, n)
+        super().__init__(block, ball_z)
+        self.ball_id = np.full((m, tracks, slots), -1, dtype=np.int64)
+        self.ball_id[:, :, :n] = np.arange(n)
+        self.ball_ok = np.ones((m, tracks, slots), dtype=bool)  # resolved so far
+        self.count = np.full((m, tracks), n, dtype=np.int64)
+        self.entered = np.zeros((m, tracks), dtype=np.int64)
+        self.entering_gap = np.ascontiguousarray(block.entering_gap.reshape(m, tracks,
+                                                                            capacity))
+        self.initial_state = self.initial_carriage = None
+        self.resolve_seconds = 0.0
+        self.rows = self.ids = None
+
+    def select(self, following):
+        rows = np.flatnonzero(following)
+        if rows.size == 0:
+            return None
+        self.rows, self.ids = rows, self.ball_id[rows]
+        return self.position[rows]
+
+    def evaluate(self, position, t):
+        balls = CarriageBalls(*self.evaluation(position, self.ids, t, self.rows))
+        self.resolve_seconds += balls.balls.resolve_seconds
+        return balls
+
+    def start(self, k, t, position):
+        balls = CarriageBalls(*self.evaluation(position, self.ids, t, self.rows))
+        if k == 0:
+            self.initial_state, self.initial_carriage = _initial_state(
+                self.config, position, balls.loaded, balls.batch, balls.balls)
+        else:
+            self.resolve_seconds += balls.balls.resolve_seconds
+        return balls
+
+    def predictor(self, state):
+        return np.nan_to_num(state.velocity_deviation)
+
+    def move(self, position, w, h):
+        return position - h * (1.0 - np.nan_to_num(w)) * 0.5 * self.v
+
+    def velocity(self, state1, state2):
+        # a ball outside the zone at the midpoint keeps epsilon_1
+        return np.where(state2.loaded, np.nan_to_num(state2.velocity_deviation),
+                        np.nan_to_num(state1.velocity_deviation))
+
+    def step(self, k, t, dt, position, new, state1, state2):
+        ok = self.ball_ok[self.rows] & state1.valid & state2.valid
+        with np.errstate(invalid="ignore"):
+            gap_old = position[..., 1:] - position[..., :-1] - self.diameter
+            gap_new = new[..., 1:] - new[..., :-1] - self.diameter
+        return CarriageStep(k, t, dt, position, new, gap_old, gap_new, ok, state1, state2,
+                            rows=self.rows, ball_id=self.ids)
+
+    def advance(self, step, new):
+        # exits at the trailing end, entries at the leading end
+        rows, z0, ids, ok = step.rows, step.position, step.ball_id, step.ball_ok
+        step.previous_id = ids.copy()
+        overflow = np.zeros(len(rows), dtype=bool)
+        sub_count, sub_entered = self.count[rows], self.entered[rows]
+        events = [np.empty(z0.shape, np.int64), np.empty(z0.shape),
+                  np.empty(z0.shape, np.int64), np.empty(z0.shape)]
+        advance_kernel(z0, new, ids, ok, sub_count, sub_entered, self.entering_gap[rows],
+                       self.half_zone, self.diameter, self.balls, step.t, step.dt, overflow,
+                       *events)
+        self.position[rows], self.ball_id[rows], self.ball_ok[rows] = new, ids, ok
+        self.count[rows], self.entered[rows] = sub_count, sub_entered
+        step.overflow, step.events = overflow, events
+
+
+class CarriageFirstContact(StepObserver):
+    """The first contact of each assembly in the carriage frame (``time``, ``pair``) and
+    whether it is known (``valid``), as in the Notes of :func:`first_contact_carriage_track`:
+    contacts between adjacent balls, both resolved so far and inside the zone at the time of
+    contact; an assembly is no longer followed after its first contact (by this observer)."""
+
+    def __init__(self, frame):
+        self.half_zone, self.slots, self.balls = frame.half_zone, frame.slots, frame.balls
+
+    def begin(self, block, position):
+        m = block.size
+        self.time = np.full(m, np.inf)
+        self.pair = np.full(m, -1, dtype=np.int64)
+        self.valid = np.ones(m, dtype=bool)
+        self.searching = None
+
+    def following(self):
+        return ~np.isfinite(self.time)
+
+    def observe(self, step):
+        rows, half, slots, n = step.rows, self.half_zone, self.slots, self.balls
+        z0, z1, ok = step.position, step.free, step.ball_ok
+        gap0, gap1 = step.gap_old, step.gap_new
+        searching = ~np.isfinite(self.time[rows])  # no first contact yet
+        self.searching = searching
+        resolved = step.state1.valid & step.state2.valid
+        self.valid[rows[searching]] &= resolved.all(axis=(1, 2))[searching]
+        # contacts between adjacent loaded balls, both resolved so far
+        with np.errstate(invalid="ignore", divide="ignore"):
+            closing = (gap1 <= 0.0) & (gap0 > gap1) & ok[..., 1:] & ok[..., :-1]
+            frac = np.where(gap0 <= 0.0, 0.0, gap0 / (gap0 - gap1))
+            behind = z0[..., :-1] + frac * (z1[..., :-1] - z0[..., :-1])
+            ahead = z0[..., 1:] + frac * (z1[..., 1:] - z0[..., 1:])
+            closing &= (behind >= -half) & (ahead <= half)
+        tc = np.where(closing, step.t + frac * step.dt, np.inf).reshape(len(rows), -1)
+        if tc.shape[1]:  # (a zone that holds one ball has no pairs)
+            first = np.argmin(tc, axis=1)  # the first track, then the trailing pair, on ties
+            tmin = tc[np.arange(len(rows)), first]
+            hit = np.isfinite(tmin) & searching
+            self.time[rows[hit]] = tmin[hit]
+            track, slot = np.divmod(first[hit], slots - 1)
+            self.pair[rows[hit]] = track * (n - 1) + np.minimum(slot, max(n - 2, 0))
+
+    def moved(self, step):
+        searching = self.searching
+        self.valid[step.rows[searching]] &= ~step.overflow[searching]
+
+
+class CarriageTrains(StepObserver):
+    """The loaded balls of each track as trains after contact (Notes of
+    :func:`first_contact_carriage_track`, "After contact") through a
+    :class:`tolsim.study.pipeline.track_friction.TrackFriction`; it follows every assembly
+    over the whole stroke."""
+
+    def __init__(self, frame, friction):
+        self.friction = friction
+        self.tracks, self.slots, self.balls = frame.tracks, frame.slots, frame.balls
+        self.half_zone, self.v = frame.half_zone, frame.v
+
+    def begin(self, block, position):
+        # the closed pairs at t = 0
+        m, tracks, n = block.size, self.tracks, self.balls
+        closed = np.zeros((m, tracks, max(self.slots - 1, 0)), dtype=bool)
+        closed[:, :, :n - 1] = block.initial_gap.reshape(m, tracks, n - 1) <= 0.0
+        self.friction.begin(m, closed.reshape(m * tracks, -1), carriage_frame=True)
+
+    def predict(self, state, w):
+        friction, trains = self.friction, (-1, self.slots)
+        loaded = state.loaded.reshape(trains)
+        load = friction.coefficients(state.balls, loaded, friction.touching())
+        return np.nan_to_num(friction.predict(state.velocity_deviation.reshape(trains), load,
+                                              loaded, loaded)).reshape(w.shape)
+
+    def advance(self, step, new):
+        # the step of the trains: cluster rule, then projection; the trains: balls loaded
+        # through the step (a ball leaving or entering the zone in it is in none, and drops
+        # its contacts)
+        friction, trains, v, dt = self.friction, (-1, self.slots), self.v, step.dt
+        state1, state2, z0 = step.state1, step.state2, step.position
+        loaded2 = state2.loaded.reshape(trains)
+        with np.errstate(invalid="ignore"):
+            member = (state1.loaded & state2.loaded
+                      & (np.abs(step.free) <= self.half_zone)).reshape(trains)
+        free = np.where(state2.loaded, state2.velocity_deviation,
+                        np.nan_to_num(state1.velocity_deviation)).reshape(trains)  # NaN: unresolved
+        w2 = np.nan_to_num(friction.velocity(free, friction.coefficients(state2.balls, loaded2),
+                                             loaded2, member))
+        return friction.advance(z0.reshape(trains),
+                                (z0 - dt * (1.0 - w2.reshape(z0.shape)) * 0.5 * v
+                                 ).reshape(trains), step.ball_id.reshape(trains)
+                                ).reshape(z0.shape)
+
+    def moved(self, step):
+        self.friction.carry(step.previous_id, step.ball_id)
+        self.friction.stop(np.repeat(step.overflow, self.tracks))
+
+
 def first_contact_carriage_track(config, block, trace: TrackTrace | None = None, *,
                                  friction=None):
     """First contact of a block's carriage assemblies, balls rolling through the carriage.
@@ -366,8 +603,10 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     round and the question does not arise.
 
     **Integration.**
-    The explicit midpoint rule of
-    :func:`tolsim.study.pipeline.propagation.first_contact_along_track` over
+    The one along-track integration of single trains,
+    :func:`tolsim.study.pipeline.propagation.integrate`, in the :class:`CarriageFrame`, with
+    the first contact (:class:`CarriageFirstContact`), the trains after contact
+    (:class:`CarriageTrains`) and the ``trace`` as its observers: the explicit midpoint rule over
     ``study.time_steps`` steps of dt: epsilon_1 of every loaded ball with the carriage solved at
     the balls' positions at the start of the step, the positions at the midpoint, epsilon_2 with
     the carriage solved again there (a ball outside the zone at the midpoint keeps epsilon_1),
@@ -426,119 +665,18 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     if block.entering_gap is None:
         raise ValueError("the block holds no entering balls: draw it with sample_block from "
                          "a config with [carriage] and propagation = 'along_track'")
-    st, motion = config.study, config.motion
-    v, steps = motion.groove_velocity, st.time_steps
-    dt = motion.duration / steps
-    diameter = 2.0 * config.bearing.ball_radius
-    evaluate = _Evaluation(config, block)
-    tracks, n, slots = evaluate.tracks, evaluate.balls, evaluate.slots
-    half = evaluate.half_zone
-    m = block.size
-    capacity = entering_capacity(config)
-    ball_z = np.full((m, tracks, slots), np.nan)
-    ball_z[:, :, :n] = block.initial_position.reshape(m, tracks, n)
-    ball_id = np.full((m, tracks, slots), -1, dtype=np.int64)
-    ball_id[:, :, :n] = np.arange(n)
-    ball_ok = np.ones((m, tracks, slots), dtype=bool)  # resolved at every evaluation so far
-    count = np.full((m, tracks), n, dtype=np.int64)
-    entered = np.zeros((m, tracks), dtype=np.int64)
-    entering_gap = np.ascontiguousarray(block.entering_gap.reshape(m, tracks, capacity))
-    time = np.full(m, np.inf)
-    pair = np.full(m, -1, dtype=np.int64)
-    valid = np.ones(m, dtype=bool)
-    active = np.ones(m, dtype=bool)
-    state0 = carriage0 = None
-    resolve_seconds = 0.0
-    if friction is not None:  # trains after contact: the closed pairs at t = 0
-        closed = np.zeros((m, tracks, max(slots - 1, 0)), dtype=bool)
-        closed[:, :, :n - 1] = block.initial_gap.reshape(m, tracks, n - 1) <= 0.0
-        friction.begin(m, closed.reshape(m * tracks, -1), carriage_frame=True)
-    trains = (m * tracks, slots)
-    for k in range(steps):
-        t0 = k * dt
-        rows = np.flatnonzero(active)
-        if rows.size == 0:
-            break
-        z0, ids = ball_z[rows], ball_id[rows]
-        eps1, ok1, loaded1, batch, state = evaluate(z0, ids, t0, rows)
-        if k == 0:
-            state0, carriage0 = _initial_state(config, z0, loaded1, batch, state)
-        else:
-            resolve_seconds += state.resolve_seconds
-        if trace is not None:
-            trace.time.append(t0)
-            trace.rows.append(rows)
-            trace.ball_z.append(z0.copy())
-            trace.ball_id.append(ids.copy())
-            trace.velocity_deviation.append(eps1)
-            normal = np.where(loaded1, batch.normal_load, np.nan)
-            trace.normal_load.append(normal)
-        e1 = np.nan_to_num(eps1)
-        w1 = e1
-        if friction is not None:  # touching balls move together (predictor)
-            loaded = loaded1.reshape(trains)
-            load = friction.coefficients(state, loaded, friction.touching())
-            w1 = np.nan_to_num(friction.predict(eps1.reshape(trains), load, loaded,
-                                                loaded)).reshape(z0.shape)
-        mid = z0 - 0.5 * dt * (1.0 - w1) * 0.5 * v
-        eps2, ok2, loaded2, _, state = evaluate(mid, ids, t0 + 0.5 * dt, rows)
-        resolve_seconds += state.resolve_seconds
-        e2 = np.where(loaded2, np.nan_to_num(eps2), e1)  # outside at the midpoint: epsilon_1
-        z1 = z0 - dt * (1.0 - e2) * 0.5 * v
-        ok = ball_ok[rows] & ok1 & ok2
-        searching = ~np.isfinite(time[rows])  # no first contact yet
-        valid[rows[searching]] &= (ok1 & ok2).all(axis=(1, 2))[searching]
-        # contacts between adjacent loaded balls, both resolved so far
-        with np.errstate(invalid="ignore", divide="ignore"):
-            gap0 = z0[..., 1:] - z0[..., :-1] - diameter
-            gap1 = z1[..., 1:] - z1[..., :-1] - diameter
-            closing = (gap1 <= 0.0) & (gap0 > gap1) & ok[..., 1:] & ok[..., :-1]
-            frac = np.where(gap0 <= 0.0, 0.0, gap0 / (gap0 - gap1))
-            behind = z0[..., :-1] + frac * (z1[..., :-1] - z0[..., :-1])
-            ahead = z0[..., 1:] + frac * (z1[..., 1:] - z0[..., 1:])
-            closing &= (behind >= -half) & (ahead <= half)
-        tc = np.where(closing, t0 + frac * dt, np.inf).reshape(len(rows), -1)
-        if tc.shape[1]:  # (a zone that holds one ball has no pairs)
-            first = np.argmin(tc, axis=1)  # the first track, then the trailing pair, on ties
-            tmin = tc[np.arange(len(rows)), first]
-            hit = np.isfinite(tmin) & searching
-            time[rows[hit]] = tmin[hit]
-            track, slot = np.divmod(first[hit], slots - 1)
-            pair[rows[hit]] = track * (n - 1) + np.minimum(slot, max(n - 2, 0))
-            if friction is None:  # an assembly is followed up to its first contact
-                active[rows[hit]] = False
-        if friction is not None:  # the step of the trains: cluster rule, then projection
-            # the trains: balls loaded through the step (a ball leaving or entering the zone
-            # in it is in none, and drops its contacts)
-            with np.errstate(invalid="ignore"):
-                member = (loaded1 & loaded2 & (np.abs(z1) <= half)).reshape(trains)
-            free = np.where(loaded2, eps2, e1).reshape(trains)  # NaN: unresolved
-            w2 = np.nan_to_num(friction.velocity(free, friction.coefficients(
-                state, loaded2.reshape(trains)), loaded2.reshape(trains), member))
-            z1 = friction.advance(z0.reshape(trains),
-                                  (z0 - dt * (1.0 - w2.reshape(z0.shape)) * 0.5 * v
-                                   ).reshape(trains), ids.reshape(trains)).reshape(z0.shape)
-            before = ids.copy()
-        # exits at the trailing end, entries at the leading end
-        overflow = np.zeros(len(rows), dtype=bool)
-        sub_count, sub_entered = count[rows], entered[rows]
-        events = [np.empty(z0.shape, np.int64), np.empty(z0.shape),
-                  np.empty(z0.shape, np.int64), np.empty(z0.shape)]
-        advance_kernel(z0, z1, ids, ok, sub_count, sub_entered, entering_gap[rows], half,
-                       diameter, n, t0, dt, overflow, *events)
-        ball_z[rows], ball_id[rows], ball_ok[rows] = z1, ids, ok
-        count[rows], entered[rows] = sub_count, sub_entered
-        valid[rows[searching]] &= ~overflow[searching]
-        if friction is not None:
-            friction.carry(before, ids)
-            friction.stop(np.repeat(overflow, tracks))
-        if trace is not None:
-            for ident, when, out in ((events[0], events[1], trace.exits),
-                                     (events[2], events[3], trace.entries)):
-                for a, tr, j in zip(*np.nonzero(ident >= 0), strict=True):
-                    out.append((rows[a], tr, ident[a, tr, j], when[a, tr, j]))
-    return time, pair, valid, resolve_seconds, state0, carriage0
+    frame = CarriageFrame(config, block)
+    first = CarriageFirstContact(frame)
+    observers = [first]
+    if friction is not None:  # every assembly followed over the stroke, trains after contact
+        observers.append(CarriageTrains(frame, friction))
+    if trace is not None:
+        observers.append(trace)
+    integrate(config, frame, observers)
+    return (first.time, first.pair, first.valid, frame.resolve_seconds, frame.initial_state,
+            frame.initial_carriage)
 
 
-__all__ = ["TrackTrace", "advance_kernel", "carry_pairs_kernel",
+__all__ = ["CarriageBalls", "CarriageFirstContact", "CarriageFrame", "CarriageStep",
+           "CarriageTrains", "TrackTrace", "advance_kernel", "carry_pairs_kernel",
            "first_contact_carriage_track", "slot_capacity"]

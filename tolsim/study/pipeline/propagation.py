@@ -13,7 +13,10 @@ touches when the gap closes.
     (rail random fields, read at the ball's rail position) and through the carriage's load
     distribution (read at its position in the carriage), integrated with the explicit
     midpoint rule; a contact event is located by linear interpolation of the gap within the
-    step in which it changes sign (exact for piecewise-constant epsilon).
+    step in which it changes sign (exact for piecewise-constant epsilon). One loop,
+    :func:`integrate`, steps every along-track propagation: a frame says how its balls are
+    evaluated and move (:class:`FreeBalls` here, the carriage's in
+    :mod:`tolsim.study.pipeline.carriage_track`), observers what is recorded or changed.
 
 Unresolved balls (epsilon NaN: no model could solve them, :mod:`tolsim.study.pipeline.evaluate`)
 never
@@ -267,12 +270,13 @@ def first_contact_tracks(initial_gap, velocity_deviation, groove_velocity, horiz
 
 @dataclass
 class Step:
-    """One midpoint step of :func:`integrate_along_track`, as its observers see it.
+    """One midpoint step of :func:`integrate`, as its observers see it.
 
-    ``position`` and ``free`` (m, balls): rail positions at the start of the step and at its
-    end on the free motion (each ball at its own epsilon) [m]; ``gap_old``, ``gap_new``
-    (m, balls - 1): the pairs' gaps there [m]; ``ball_ok`` (m, balls): resolved at every
-    evaluation so far; ``state1``, ``state2``: the balls at the start and at the midpoint.
+    ``position`` and ``free``: the positions at the start of the step and at its end on the
+    free motion (each ball at its own epsilon) [m], in the frame's shape ((m, balls) rail
+    positions for free balls); ``gap_old``, ``gap_new``: the pairs' gaps there [m] (along
+    the last axis); ``ball_ok``: resolved at every evaluation so far; ``state1``, ``state2``:
+    the balls at the start and at the midpoint.
     """
 
     index: int
@@ -288,11 +292,17 @@ class Step:
 
 
 class StepObserver:
-    """What :func:`integrate_along_track` calls at every step (each method may be left out:
-    the base class does nothing)."""
+    """What :func:`integrate` calls at every step (each method may be left out: the base class
+    does nothing)."""
 
     def begin(self, block, position):
-        """Before the first step: the block and its balls' rail positions at t = 0 [m]."""
+        """Before the first step: the block and its balls' positions at t = 0 [m] (those of
+        the frame: rail positions (m, balls) for free balls, carriage-frame slots
+        (m, tracks, slots) for a carriage)."""
+
+    def following(self):
+        """The rows (assemblies) it still needs integrated: bool (size,), or True for all."""
+        return True
 
     def predict(self, state, w):
         """The predictor's epsilon (m, balls) from the balls ``state`` at the start of the
@@ -307,17 +317,166 @@ class StepObserver:
         free motion)."""
         return new
 
+    def moved(self, step: Step):
+        """After the frame has moved its balls to the end of the step (a carriage frame has
+        then re-mapped its slots, the exits and entries in ``step``)."""
+
+
+class AlongTrackFrame:
+    """What one along-track propagation provides to :func:`integrate`: its balls, how they
+    are evaluated and how they move. The base class holds the block and the positions.
+
+    ``position``: every row's positions at the start of the next step [m].
+    """
+
+    def __init__(self, block, position):
+        self.block = block
+        self.position = position
+
+    def select(self, following):
+        """The positions of the rows to integrate in this step (``following``: bool (size,),
+        the rows an observer still needs), None when there are none."""
+        raise NotImplementedError
+
+    def start(self, k, t, position):
+        """The balls at the start of step ``k`` (time t [s]) at ``position``."""
+        raise NotImplementedError
+
+    def evaluate(self, position, t):
+        """The balls at ``position`` at time t [s] (the midpoint of a step)."""
+        raise NotImplementedError
+
+    def predictor(self, state):
+        """The epsilon that moves the balls to the midpoint (before the observers')."""
+        return state.velocity_deviation
+
+    def move(self, position, w, h):
+        """The positions after h [s] at epsilon ``w`` (NaN: nominal)."""
+        raise NotImplementedError
+
+    def velocity(self, state1, state2):
+        """The epsilon of the step's free motion, from the start and midpoint balls."""
+        return state2.velocity_deviation
+
+    def step(self, k, t, dt, position, new, state1, state2) -> Step:
+        """The :class:`Step` the observers see (``new``: the free motion)."""
+        raise NotImplementedError
+
+    def advance(self, step, new):
+        """Move to ``new`` at the end of the step."""
+        raise NotImplementedError
+
+
+def integrate(config, frame, observers=()):
+    """The one explicit midpoint integration along the track (mode b), for any frame.
+
+    Per step k of dt = T / ``study.time_steps`` (t = k dt): the rows some observer still
+    follows (:meth:`StepObserver.following`; the frame may integrate more, or stop when none
+    is left), the balls at the start of the step (epsilon_1), the positions at the midpoint
+    with it or with the observers' predictor (:meth:`StepObserver.predict`), the balls there
+    (epsilon_2), the free motion of the step with the frame's epsilon of the step
+    (:meth:`AlongTrackFrame.velocity`), which the observers see (:meth:`StepObserver.observe`)
+    and may then replace (:meth:`StepObserver.advance`: trains after contact); then the frame
+    moves to the end of the step (:meth:`AlongTrackFrame.advance`) and the observers see what
+    it did (:meth:`StepObserver.moved`).
+
+    Parameters
+    ----------
+    config : StudyConfig
+    frame : AlongTrackFrame
+        :class:`FreeBalls`, or the carriage's
+        (:class:`tolsim.study.pipeline.carriage_track.CarriageFrame`).
+    observers : sequence of StepObserver
+    """
+    steps = config.study.time_steps
+    dt = config.motion.duration / steps
+    for observer in observers:
+        observer.begin(frame.block, frame.position)
+    t = 0.0
+    for k in range(steps):
+        following = np.zeros(frame.block.size, dtype=bool)
+        for observer in observers:
+            following |= observer.following()
+        position = frame.select(following)
+        if position is None:
+            break
+        state1 = frame.start(k, t, position)
+        w1 = frame.predictor(state1)
+        for observer in observers:  # touching balls move together (predictor)
+            w1 = observer.predict(state1, w1)
+        mid = frame.move(position, w1, 0.5 * dt)
+        state2 = frame.evaluate(mid, t + 0.5 * dt)
+        new = frame.move(position, frame.velocity(state1, state2), dt)
+        step = frame.step(k, t, dt, position, new, state1, state2)
+        for observer in observers:
+            observer.observe(step)
+        for observer in observers:
+            new = observer.advance(step, new)
+        frame.advance(step, new)
+        for observer in observers:
+            observer.moved(step)
+        t = (k + 1) * dt
+
+
+class FreeBalls(AlongTrackFrame):
+    """The frame of free balls (single trains, the rail frame): every ball at its rail
+    position and carriage position, epsilon from the error sources read at the rail position
+    and the loads interpolated at the carriage position
+    (:func:`tolsim.study.pipeline.evaluate.loads_at`). Whole blocks are integrated over the
+    whole stroke (the error values are read for the block).
+
+    ``ball_ok`` (size, balls): resolved at every evaluation so far; ``resolve_seconds``: time
+    spent re-solving balls with the full model [s].
+    """
+
+    def __init__(self, config, block, initial_state=None):
+        super().__init__(block, block.initial_position.copy())
+        self.config = config
+        self.initial_state = initial_state
+        self.v = config.motion.groove_velocity
+        self.diameter = 2.0 * config.bearing.ball_radius
+        self.ball_ok = np.ones(self.position.shape, dtype=bool)
+        self.resolve_seconds = 0.0
+
+    def select(self, following):
+        return self.position
+
+    def evaluate(self, position, t):
+        config, block = self.config, self.block
+        values = error_values(config, block, rail_position=position)
+        nx, ny = loads_at(config, position - self.v * t)
+        state = evaluate_balls(config, values, nx, ny)
+        self.resolve_seconds += state.resolve_seconds
+        return state
+
+    def start(self, k, t, position):
+        if k == 0 and self.initial_state is not None:
+            return self.initial_state
+        return self.evaluate(position, t)
+
+    def move(self, position, w, h):
+        return position + h * (1.0 + np.nan_to_num(w)) * 0.5 * self.v
+
+    def step(self, k, t, dt, position, new, state1, state2):
+        self.ball_ok &= state1.valid & state2.valid
+        gap_old = np.diff(position, axis=1) - self.diameter
+        gap_new = np.diff(new, axis=1) - self.diameter
+        return Step(k, t, dt, position, new, gap_old, gap_new, self.ball_ok, state1, state2)
+
+    def advance(self, step, new):
+        self.position = new
+
 
 def integrate_along_track(config, block, initial_state=None, observers=()):
-    """The explicit midpoint integration of a block's trains along the track (mode b).
+    """The explicit midpoint integration of a block's free trains along the track (mode b).
 
-    Per step of dt: epsilon_1 of every ball at its rail position and carriage position at
-    the start of the step (the error sources read at the rail position, the loads
-    interpolated at the carriage position, :func:`tolsim.study.pipeline.evaluate.loads_at`),
-    the positions at the midpoint with it (or with the observers' predictor), epsilon_2
-    there, then the step with epsilon_2: the free motion, which the observers see
-    (:meth:`StepObserver.observe`) and may then replace (:meth:`StepObserver.advance`: the
-    trains after contact).
+    :func:`integrate` in the :class:`FreeBalls` frame: per step of dt, epsilon_1 of every
+    ball at its rail position and carriage position at the start of the step (the error
+    sources read at the rail position, the loads interpolated at the carriage position,
+    :func:`tolsim.study.pipeline.evaluate.loads_at`), the positions at the midpoint with it
+    (or with the observers' predictor), epsilon_2 there, then the step with epsilon_2: the
+    free motion, which the observers see (:meth:`StepObserver.observe`) and may then replace
+    (:meth:`StepObserver.advance`: the trains after contact).
 
     Parameters
     ----------
@@ -334,51 +493,9 @@ def integrate_along_track(config, block, initial_state=None, observers=()):
     resolve_seconds : float
         Time spent re-solving balls with the full model during the integration [s].
     """
-    v = config.motion.groove_velocity
-    horizon = config.motion.duration
-    steps = config.study.time_steps
-    dt = horizon / steps
-    diameter = 2.0 * config.bearing.ball_radius
-
-    resolve_seconds = 0.0
-
-    def evaluate(position, t):
-        nonlocal resolve_seconds
-        values = error_values(config, block, rail_position=position)
-        nx, ny = loads_at(config, position - v * t)
-        state = evaluate_balls(config, values, nx, ny)
-        resolve_seconds += state.resolve_seconds
-        return state
-
-    position = block.initial_position.copy()
-    ball_ok = np.ones(position.shape, dtype=bool)  # resolved at every evaluation so far
-    for observer in observers:
-        observer.begin(block, position)
-    t = 0.0
-    for k in range(steps):
-        if k == 0 and initial_state is not None:
-            state1 = initial_state
-        else:
-            state1 = evaluate(position, t)
-        eps1, ok1 = state1.velocity_deviation, state1.valid
-        w1 = eps1
-        for observer in observers:  # touching balls move together (predictor)
-            w1 = observer.predict(state1, w1)
-        mid = position + 0.5 * dt * (1.0 + np.nan_to_num(w1)) * 0.5 * v
-        state2 = evaluate(mid, t + 0.5 * dt)
-        eps2, ok2 = state2.velocity_deviation, state2.valid
-        ball_ok &= ok1 & ok2
-        new = position + dt * (1.0 + np.nan_to_num(eps2)) * 0.5 * v
-        gap_old = np.diff(position, axis=1) - diameter
-        gap_new = np.diff(new, axis=1) - diameter
-        step = Step(k, t, dt, position, new, gap_old, gap_new, ball_ok, state1, state2)
-        for observer in observers:
-            observer.observe(step)
-        for observer in observers:
-            new = observer.advance(step, new)
-        position = new
-        t = (k + 1) * dt
-    return ball_ok, resolve_seconds
+    frame = FreeBalls(config, block, initial_state)
+    integrate(config, frame, observers)
+    return frame.ball_ok, frame.resolve_seconds
 
 
 class FirstContact(StepObserver):
@@ -389,6 +506,9 @@ class FirstContact(StepObserver):
     def begin(self, block, position):
         self.time = np.full(block.size, np.inf)
         self.pair = np.full(block.size, -1, dtype=np.int64)
+
+    def following(self):
+        return ~np.isfinite(self.time)
 
     def observe(self, step):
         gap_old, gap_new, ball_ok = step.gap_old, step.gap_new, step.ball_ok
