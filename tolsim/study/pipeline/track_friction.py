@@ -800,9 +800,10 @@ def follow_along_track(config, block, initial_state=None, record=False):
 
     Returns (time, pair, train_valid, resolve_seconds, state, carriage, friction): the
     outputs of :func:`tolsim.study.pipeline.propagation.first_contact_along_track` (free balls;
-    state
-    the balls at t = 0, carriage None) or of :func:`tolsim.study.pipeline.carriage_track.
-    first_contact_carriage_track`, and the :class:`TrackFriction` that followed the trains.
+    state the balls at t = 0, carriage None) or of
+    :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`, and the
+    :class:`TrackFriction` that followed the trains (an observer of the one loop,
+    :func:`tolsim.study.pipeline.propagation.integrate`).
     """
     friction = TrackFriction(config, record=record)
     if config.carriage is not None:
