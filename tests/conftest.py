@@ -14,6 +14,8 @@ Three rules keep a parallel run as correct as a serial one:
 * **Session-scoped fixtures are per worker.** A session fixture is built once in each worker
   that asks for it (at most twice on 2 cores); to run something once for the whole module,
   use a module-scoped fixture.
+* **The kernels are compiled once, before the workers start** (``pytest_configure``:
+  ``tolsim warmup`` on every packaged config), so that the workers do not both compile them.
 * **The workers share one Numba cache, under a lock.** Numba writes each cache file
   atomically, but it reads, changes and rewrites a kernel's index without a lock: two processes
   that save two signatures of one kernel at the same moment can leave an index that points one
@@ -29,6 +31,9 @@ depend on how busy the machine is: the other worker, and other programs, share t
 
 import fcntl
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -59,6 +64,20 @@ if os.environ.get("PYTEST_XDIST_WORKER") and _SAVE is not None:
 # Deterministic property tests: CI must not flake, and a failure must reproduce.
 settings.register_profile("tolsim", derandomize=True, deadline=None, max_examples=60)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "tolsim"))
+
+
+def pytest_configure(config):
+    """Before the xdist workers start: compile the studies' kernels once (``tolsim warmup``
+    on every packaged config, two processes), so that the two workers load them from the
+    shared cache instead of both compiling the same kernels at the same time (on a cold
+    cache, compiling is most of the suite's time). Only in the controller of a parallel run;
+    a failure here is left to the tests to show."""
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    configs = sorted(str(p) for p in (Path(__file__).resolve().parents[1] / "configs").glob(
+        "*.toml"))
+    subprocess.run([sys.executable, "-m", "tolsim", "warmup", *configs], check=False,
+                   capture_output=True, timeout=1800)
 
 
 @pytest.hookimpl(tryfirst=True)  # before xdist's own hook turns the marks into groups
