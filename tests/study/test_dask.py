@@ -211,14 +211,15 @@ def test_resume_after_the_client_is_killed(two_workers, tmp_path):
 def test_ctrl_c_on_a_local_cluster(tmp_path):
     # Ctrl-C in a terminal reaches the whole process group, workers included: the client
     # saves the checkpoint and says so in one line, exit code 130, and no worker process
-    # prints a traceback of its own. The study (10^7 assemblies, 10^8 balls: tens of seconds
-    # after its first checkpoint on any machine; tasks are submitted a few at a time) is
-    # still running when the interrupt lands. (10^9 made the accumulator's per-block arrays
-    # 30 MB, rewritten at every checkpoint: minutes on a busy machine.)
+    # prints a traceback of its own. The study (10^8 assemblies, 10^9 balls: minutes after
+    # its first checkpoint on any machine; tasks are submitted a few at a time) is still
+    # running when the interrupt lands (10^7 finished first on a CI run). 10^9 made the
+    # accumulator's per-block arrays 30 MB, rewritten at every checkpoint: minutes to stop
+    # on a busy machine.
     root = Path(__file__).resolve().parents[2]
     out = tmp_path / "y.nc"
     command = [sys.executable, "-m", "tolsim", "run",
-               str(root / "configs" / "yaw_moment_tolerances.toml"), "--samples", "10000000",
+               str(root / "configs" / "yaw_moment_tolerances.toml"), "--samples", "100000000",
                "--scheduler", "local:2", "-o", str(out), "--checkpoint-interval", "0"]
     env = dict(os.environ, PYTHONWARNINGS="ignore")
     # The same study, small, first: its workers compile the kernels a cold cache lacks (a
