@@ -8,6 +8,7 @@ import threading
 import time
 
 import numba
+import numpy as np
 from numba.core import event as numba_event
 
 #: Options for every scalar/serial kernel.
@@ -26,6 +27,16 @@ def pjit(func=None, **overrides):
     """Decorate a kernel that loops over balls in parallel (``prange``)."""
     opts = dict(PJIT, **overrides)
     return numba.njit(**opts)(func) if func is not None else numba.njit(**opts)
+
+
+def kernel_array(a, dtype=np.float64):
+    """``a`` as a writable, C-contiguous array of ``dtype``; a copy only where it is not one.
+
+    Numba compiles a kernel once for every distinct argument type, and a read-only array (a
+    broadcast view, say) or one of another layout is another type: inputs passed through
+    this reach each kernel with one type, so each is compiled once, not once per caller.
+    """
+    return np.require(a, dtype=dtype, requirements=("C", "W"))
 
 
 class _CompileClock(numba_event.Listener):

@@ -60,7 +60,7 @@ import numpy as np
 from scipy.special import ndtri
 from scipy.stats import qmc
 
-from tolsim._jit import jit
+from tolsim._jit import jit, kernel_array
 
 #: Grid points per correlation length of a rail random field.
 FIELD_POINTS_PER_CORRELATION_LENGTH = 16
@@ -231,7 +231,7 @@ def _ar1(phi, scale, innovations):
     loop streams the whole chunk through the cache once per column.
     """
     out = np.empty_like(innovations)
-    _ar1_kernel(phi, scale, innovations, out)
+    _ar1_kernel(phi, scale, kernel_array(innovations), out)
     return out
 
 

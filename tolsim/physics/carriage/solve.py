@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from tolsim._jit import kernel_array
 from tolsim.physics.carriage._batch_kernels import carriage_batch_kernel
 from tolsim.physics.carriage._kernels import (
     LIFT_OFF,
@@ -124,7 +125,7 @@ class _Balls:
     """Evaluates all balls of one assembly at a carriage displacement."""
 
     def __init__(self, inputs, bearing, nball, tol, max_iter, floor):
-        self.inputs = inputs
+        self.inputs = tuple(kernel_array(a, a.dtype) for a in inputs)
         self.beta0 = bearing.nominal_contact_angle
         self.dist = bearing.groove_radius - bearing.ball_radius
         self.k = hertz_k(bearing)
@@ -741,6 +742,7 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
     frame = np.stack([np.cos(layout.track_orientation), np.sin(layout.track_orientation),
                       layout.track_x / length, layout.track_y / length], axis=1)
     groove_maps, amaps, zetas, geometrics, geometric_maxs, loaded_rows = maps
+    loaded_rows = kernel_array(loaded_rows, np.bool_)
     carriage_batch_kernel(groove_maps, amaps, frame, zetas, free_index, geometrics,
                           geometric_maxs, loaded_rows, q_ext[None, :], start, *inputs, scale,
                           bearing.nominal_contact_angle,

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tolsim._jit import kernel_array
 from tolsim.physics.circuit._kernels import (
     SPEED_TOLERANCE,
     STATUS_EVENT_OVERFLOW,
@@ -474,7 +475,8 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
     where = np.full((m, capacity), -1, dtype=np.int8)
     when = np.full((m, capacity), np.nan)
     status = np.empty(m, dtype=np.int64)
-    step_circuit_kernel(position, state.diameter, eps, stiffness, loaded, closed,
+    step_circuit_kernel(position, kernel_array(state.diameter), kernel_array(eps),
+                        kernel_array(stiffness), loaded, closed,
                         state.circuit_length, float(state.zone_length), float(return_drag),
                         float(travel), float(travel_start), speed, velocity, force,
                         mean_force, column, count, pair, where, when, status)

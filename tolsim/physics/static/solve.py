@@ -4,6 +4,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from tolsim._jit import kernel_array
 from tolsim.physics.geometry import TABLE1, Bearing
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.static._kernels import static_displacement_kernel, static_load_kernel
@@ -412,7 +413,8 @@ def solve_static(side_load, normal_load, errors: GrooveErrors | None = None,
     items += error_items(errors, bearing)
     arrays, shape = prepare_inputs(items, bearing)
     nx, ny, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize = arrays
-    nx, ny, rot_b, rot_t, oversize = (a[:, 0] for a in (nx, ny, rot_b, rot_t, oversize))
+    nx, ny, rot_b, rot_t, oversize = (kernel_array(a[:, 0])
+                                      for a in (nx, ny, rot_b, rot_t, oversize))
     n = int(np.prod(shape))
     dbeta, force, approach, ball, groove, conv, iters, count, resid = _kernel_outputs(n)
     dist = bearing.groove_radius - bearing.ball_radius
@@ -460,7 +462,7 @@ def solve_static_displacement(groove_displacement, errors: GrooveErrors | None =
     dist = bearing.groove_radius - bearing.ball_radius
     if np.any(np.abs(disp) > 0.25 * dist):
         raise ValueError(f"groove_displacement must stay within +/-{0.25 * dist:.3g} m")
-    rot_b, rot_t, oversize = (a[:, 0] for a in (rot_b, rot_t, oversize))
+    rot_b, rot_t, oversize = (kernel_array(a[:, 0]) for a in (rot_b, rot_t, oversize))
     n = int(np.prod(shape))
     dbeta, force, approach, ball, load, conv, iters, count, resid = _kernel_outputs(n)
     static_displacement_kernel(disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize,

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tolsim._jit import kernel_array
 from tolsim.physics.trains._kernels import (
     CHUNK,
     TIE_TOLERANCE,
@@ -75,9 +76,8 @@ def _train_arrays(velocity_deviation, creep_stiffness, braking_sensitivity):
                          "|braking_sensitivity| * creep_stiffness < 1")
     shape = eps.shape
     n = shape[-1]
-    return (np.ascontiguousarray(eps.reshape(-1, n)),
-            np.ascontiguousarray(stiffness.reshape(-1, n)),
-            np.ascontiguousarray(braking.reshape(-1, n)), shape)
+    return (kernel_array(eps.reshape(-1, n)), kernel_array(stiffness.reshape(-1, n)),
+            kernel_array(braking.reshape(-1, n)), shape)
 
 
 def cluster_velocities(velocity_deviation, creep_stiffness, touching,

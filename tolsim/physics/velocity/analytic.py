@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tolsim._jit import kernel_array
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.velocity._analytic_kernels import (
@@ -321,7 +322,8 @@ def analytic(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
 def _analytic_loaded(dbeta, force, shape, bearing, k_f, hc, push, neighbour_force,
                      ball_friction):
     """:func:`analytic` under external loads (validated inputs)."""
-    load_p, load_q = as_ball_loads(push, neighbour_force, ball_friction, shape)
+    load_p, load_q = (kernel_array(a)
+                      for a in as_ball_loads(push, neighbour_force, ball_friction, shape))
     mu = bearing.friction_coefficient
     if not mu > 0:
         raise ValueError(f"friction_coefficient = {mu!r}: a push needs raceway friction "
