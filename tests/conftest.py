@@ -16,6 +16,12 @@ Three rules keep a parallel run as correct as a serial one:
   use a module-scoped fixture.
 * **The kernels are compiled once, before the workers start** (``pytest_configure``:
   ``tolsim warmup`` on every packaged config), so that the workers do not both compile them.
+* **One Numba thread per worker.** Two workers on two cores each fill one core; a parallel
+  kernel on two threads in each would make every launch wait for a core, which costs
+  milliseconds on a busy machine: tests that step along the track call small kernels
+  thousands of times (80 s against 10 s for one test, measured). A test that checks that
+  results do not depend on the thread count runs the other count with the fixture
+  ``other_thread_count``.
 * **The workers share one Numba cache, under a lock.** Numba writes each cache file
   atomically, but it reads, changes and rewrites a kernel's index without a lock: two processes
   that save two signatures of one kernel at the same moment can leave an index that points one
@@ -35,6 +41,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 from hypothesis import settings
@@ -60,6 +67,8 @@ def _under_lock(save):
 _SAVE = getattr(getattr(numba_caching, "IndexDataCacheFile", None), "save", None)
 if os.environ.get("PYTEST_XDIST_WORKER") and _SAVE is not None:
     numba_caching.IndexDataCacheFile.save = _under_lock(_SAVE)
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    numba.set_num_threads(1)  # one core per worker (module docstring)
 
 # Deterministic property tests: CI must not flake, and a failure must reproduce.
 settings.register_profile("tolsim", derandomize=True, deadline=None, max_examples=60)
@@ -91,3 +100,20 @@ def pytest_collection_modifyitems(config, items):
 @pytest.fixture
 def rng():
     return np.random.default_rng(20181109)
+
+
+@pytest.fixture
+def other_thread_count():
+    """``run(function, *args, **kwargs)``: ``function`` on a Numba thread count other than
+    the ambient one (1 where several are in use, else all of Numba's), for the tests that
+    results do not depend on the thread count (a one-core machine has only one count)."""
+
+    def run(function, *args, **kwargs):
+        ambient = numba.get_num_threads()
+        numba.set_num_threads(1 if ambient > 1 else numba.config.NUMBA_NUM_THREADS)
+        try:
+            return function(*args, **kwargs)
+        finally:
+            numba.set_num_threads(ambient)
+
+    return run

@@ -4,7 +4,6 @@ Its reference (the "NumPy twin" of the kernel) is :func:`solve_carriage`, one as
 time; each test names its source and an explicit tolerance.
 """
 
-import numba
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
@@ -128,7 +127,7 @@ def test_agrees_with_solve_carriage(case, joint):
     assert solved >= m // 2
 
 
-def test_bit_identical_alone_in_any_batch_and_thread_count():
+def test_bit_identical_alone_in_any_batch_and_thread_count(other_thread_count):
     # Each assembly is solved by the same operations whatever the batch and the number of
     # Numba threads (the kernel's contract): exact equality.
     layout, load, oversize = CASES["wrapped_preloaded"]
@@ -148,14 +147,10 @@ def test_bit_identical_alone_in_any_batch_and_thread_count():
                                      groove_errors=one(errors, slice(a, a + 1)))
         for name in FIELDS:
             assert_array_equal(getattr(alone, name)[0], getattr(full, name)[a], err_msg=name)
-    threads = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        serial = solve_carriage_batch(layout, load, oversize=oversize, groove_errors=errors)
-    finally:
-        numba.set_num_threads(threads)
+    other = other_thread_count(solve_carriage_batch, layout, load, oversize=oversize,
+                               groove_errors=errors)
     for name in FIELDS:
-        assert_array_equal(getattr(serial, name), getattr(full, name), err_msg=name)
+        assert_array_equal(getattr(other, name), getattr(full, name), err_msg=name)
 
 
 @pytest.mark.parametrize("oversize", [1e-6, 4e-6])

@@ -9,7 +9,6 @@ optional end relief of the carriage grooves. Each test names its reference and t
 
 from dataclasses import replace
 
-import numba
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
@@ -407,7 +406,7 @@ def test_along_track_agrees_with_constant_propagation_before_any_ball_moves_on()
     assert_allclose(time[hit], t_ref[hit], rtol=5e-6)
 
 
-def test_results_do_not_depend_on_batching_or_threads():
+def test_results_do_not_depend_on_batching_or_threads(other_thread_count):
     # Each assembly's Newton starts from its own previous solution and every kernel solves an
     # assembly by the same operations in any batch and on any number of threads
     # (solve_carriage_batch Notes, "Many assemblies at once"): the first block alone, as part of
@@ -417,12 +416,7 @@ def test_results_do_not_depend_on_batching_or_threads():
                "end_relief_length_mm = 15.0", samples=24, block=12, steps=30)
     alone = first_contact_carriage_track(c, sample_block(c, 0))
     both = first_contact_carriage_track(c, sample_block(c, 0, 2))
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        serial = first_contact_carriage_track(c, sample_block(c, 0))
-    finally:
-        numba.set_num_threads(threads)
+    serial = other_thread_count(first_contact_carriage_track, c, sample_block(c, 0))
     assert np.isfinite(alone[0]).sum() >= 2  # contacts happen
     for other, rows in ((both, slice(0, 12)), (serial, slice(None))):
         for k in range(3):
