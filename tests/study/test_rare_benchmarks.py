@@ -22,8 +22,13 @@ from tolsim.rare_events import (
     importance_sampling,
     subset_simulation,
 )
-from tolsim.study.analyses.rare_events import STATUS_DIAGNOSTIC_FAILED, STATUS_FORM_FAILED
-from tolsim.study.analyses.rare_events.api import estimator_seeds
+from tolsim.study.analyses.rare_events import (
+    STATUS_DIAGNOSTIC_FAILED,
+    STATUS_ESTIMATORS_DISAGREE,
+    STATUS_FORM_FAILED,
+    RareEventResult,
+)
+from tolsim.study.analyses.rare_events.api import combine, estimator_seeds
 from tolsim.study.analyses.rare_events.subset import lost_modes
 
 _spec = importlib.util.spec_from_file_location(
@@ -203,3 +208,54 @@ def test_form_does_not_evaluate_the_final_rows_twice():
     assert len(batches) == len(set(batches))
     assert point.evaluations == sum(c.shape[0] for c in calls)
     assert_allclose(point.beta, -ndtri(1e-5), rtol=1e-6)
+
+
+def test_rare_returns_importance_where_subset_lost_a_mode_on_rp110():
+    # RP110: truth 1 - Phi(4) Phi(5) = 3.20e-5, closed form (test_closed_forms). Subset
+    # simulation loses the dominant mode (u_1 >= 4) in most runs and its check against the
+    # design points flags it (lost_mode_mass > 0); importance sampling, around the same design
+    # points, is right (97 % coverage over 100 runs). Before, the combination refused
+    # (estimators_disagree) in 74 of 100 runs, 14 of these 20; now importance sampling's
+    # number stands, with subset simulation named as set aside
+    problem = PROBLEMS["RP110"]
+    results = [estimate(problem.g, 2, "rare", s) for s in seeds()]
+    ok = [r for r in results if r.ok]
+    assert len(ok) >= 17
+    assert np.mean([r.ci_lower <= problem.truth <= r.ci_upper for r in ok]) >= 0.85
+    set_aside = [r for r in ok if r.message.startswith("subset simulation set aside")]
+    assert len(set_aside) >= 10
+    assert all("lost a failure mode" in r.message for r in set_aside)
+
+
+def _result(p, cv, status="ok", lost=0.0):
+    """A RareEventResult with P, CV, a 95 % lognormal-like interval and a lost-mode mass."""
+    return RareEventResult(estimator="x", probability=p, standard_error=p * cv,
+                           coefficient_of_variation=cv, ci_lower=p * np.exp(-1.96 * cv),
+                           ci_upper=p * np.exp(1.96 * cv), confidence_level=0.95,
+                           interval="test", evaluations=10, dimension=2, status=status,
+                           message="" if status == "ok" else "flagged", lost_mode_mass=lost)
+
+
+def test_combine_sets_subset_aside_only_when_its_lost_mode_explains_the_gap():
+    # constructed numbers (no model): importance sampling 3.2e-5 (CV 0.05) against subset
+    # simulation 3e-7 (CV 0.5), far beyond the 99 % agreement test
+    imp = _result(3.2e-5, 0.05)
+    # subset flagged for a lost mode holding 3.1e-5: explains the gap -> importance's number
+    explained = combine(_result(3e-7, 0.5, STATUS_DIAGNOSTIC_FAILED, 3.1e-5), imp)
+    assert explained.ok and explained.probability == imp.probability
+    assert explained.estimator == "rare" and "set aside" in explained.message
+    assert explained.evaluations == 20
+    # the same gap with subset ok (no lost mode seen): a true disagreement, refused
+    assert combine(_result(3e-7, 0.5), imp).status == STATUS_ESTIMATORS_DISAGREE
+    # flagged by the ancestor count, not by a design point: refused
+    assert combine(_result(3e-7, 0.5, STATUS_DIAGNOSTIC_FAILED), imp).status == \
+        STATUS_ESTIMATORS_DISAGREE
+    # a lost mode can only make subset low: importance below subset is not explained
+    assert combine(_result(3e-3, 0.5, STATUS_DIAGNOSTIC_FAILED, 1e-3), imp).status == \
+        STATUS_ESTIMATORS_DISAGREE
+    # the mass lost (1e-6) is far from the gap (3.2e-5 against 1.3e-6): not explained
+    assert combine(_result(3e-7, 0.5, STATUS_DIAGNOSTIC_FAILED, 1e-6), imp).status == \
+        STATUS_ESTIMATORS_DISAGREE
+    # importance sampling flagged itself: nothing to stand on
+    assert not combine(_result(3e-7, 0.5, STATUS_DIAGNOSTIC_FAILED, 3.1e-5),
+                       _result(3.2e-5, 0.05, STATUS_DIAGNOSTIC_FAILED)).ok

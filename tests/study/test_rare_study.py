@@ -263,8 +263,9 @@ def test_three_estimators_agree_on_the_scaled_yaw_study(rare_results):
     for p in (plain[0], sub.probability, imp.probability):
         assert RARE_CONTACT_REFERENCE / 2 < p < 2 * RARE_CONTACT_REFERENCE
     # the cost: a few thousand model calls where plain Monte Carlo needs 25 / P for CV 0.2
-    # (subset simulation 2 800 and FORM on the nine pairs 5 793 for its lost-mode check)
-    assert sub.evaluations <= 4 * 1000 + 6000 and sub.coefficient_of_variation < 0.4
+    # (subset simulation 2 800 and FORM on the nine pairs 2 471 for its lost-mode check:
+    # issue 23 asks for the checked estimator within 2x of the unchecked one)
+    assert sub.evaluations <= 2 * 2800 and sub.coefficient_of_variation < 0.4
     assert subset.rare_events["contact"].mode_check == "design_points"
     assert importance.rare_events["contact"].mode_check == ""
     assert imp.coefficient_of_variation < 0.1

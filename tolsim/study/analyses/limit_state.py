@@ -712,7 +712,9 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     is kept, with its status and message (no fallback: the number is there to inspect).
     ``rare``: both, cross-checked by :func:`tolsim.study.analyses.rare_events.api.combine` (the
     rule of ``tolsim.rare_events.estimate(method="rare")``): their inverse-variance combination
-    when both are ``ok`` and agree (:func:`~tolsim.study.analyses.rare_events.api.agree`), else
+    when both are ``ok`` and agree (:func:`~tolsim.study.analyses.rare_events.api.agree`),
+    importance sampling's number when subset simulation lost a failure mode that explains the
+    gap (:func:`~tolsim.study.analyses.rare_events.api.lost_mode_explains`), else
     both numbers (:attr:`EventEstimate.parts`) and status ``estimators_disagree`` (or the flag
     of the one that failed). They draw from independent streams, the two children that
     :func:`~tolsim.study.analyses.rare_events.api.estimator_seeds` spawns from the event's
@@ -720,7 +722,8 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     (:func:`rare_size`: the combined number is mostly importance sampling's, subset
     simulation cross-checks it), so that ``rare`` costs about what ``importance`` alone
     costs plus half a subset simulation (on ``configs/rare_contact.toml`` FORM on the
-    components, 7 701 evaluations for the nine pairs, is most of it). Where importance
+    components, 2 471 evaluations for the nine pairs, :mod:`~tolsim.study.analyses.
+    rare_events.series_form`). Where importance
     sampling is not attempted (not smooth), subset simulation's result stands alone at full
     size, with a note; where it gives no number,
     ``combine`` keeps subset simulation's with importance sampling's flag (not ``ok``).

@@ -20,7 +20,7 @@ from tolsim.study.analyses.rare_events.result import (
     STATUS_OK,
     RareEventResult,
 )
-from tolsim.study.analyses.rare_events.subset import subset_simulation
+from tolsim.study.analyses.rare_events.subset import MODE_LIMIT, subset_simulation
 
 #: ``method`` names of :func:`estimate`.
 METHODS = ("subset", "importance", "rare", "monte_carlo")
@@ -77,7 +77,10 @@ def estimate(g, dimension, method="rare", seed=0, **options) -> RareEventResult:
             points serve importance sampling and subset's mode check), subset simulation at
             :data:`RARE_SAMPLES_PER_LEVEL` samples per level unless ``subset=`` says
             otherwise. Cross-checked: when both are ``ok`` and agree (:func:`agree`), the
-            inverse-variance combination of the two (status ``ok``); when one is flagged by
+            inverse-variance combination of the two (status ``ok``); when subset simulation
+            is flagged for a failure mode it lost that explains its gap to importance
+            sampling (:func:`lost_mode_explains`), importance sampling's result (``ok``, the
+            message naming subset simulation as set aside); when one is flagged by
             its own diagnostics but agrees with the other, the other's result;
             otherwise status ``"estimators_disagree"`` (or the flag of a failing one, when
             neither has a trusted number), with both numbers in the message.
@@ -206,8 +209,36 @@ def agree(a, b) -> bool:
     return abs(math.log(a.probability / b.probability)) <= z * math.sqrt(s2)
 
 
+def lost_mode_explains(sub, imp) -> bool:
+    """Whether subset simulation's lost failure mode explains its gap to importance sampling.
+
+    True when importance sampling passed all of its diagnostics, subset simulation was flagged
+    by its check against the design points for a lost mode (``lost_mode_mass`` > 0,
+    :func:`~tolsim.study.analyses.rare_events.subset.lost_modes`: design points that hold far
+    more than the chains found near them), importance sampling's P is above subset's (a lost
+    mode makes subset low, never high) and within a factor :data:`MODE_LIMIT` of subset's P plus
+    the mass it lost (FORM's estimate of the lost modes is first or second order, so only a
+    factor is asked). Then importance sampling, which sampled around those design points,
+    stands (RP110 of RPRepo: 70 of 100 runs of ``method="rare"`` refused before; see
+    :func:`combine`). Any other gap between the two is a disagreement.
+    """
+    if not (imp.ok and sub.lost_mode_mass > 0 and np.isfinite(sub.probability)
+            and imp.probability > sub.probability):
+        return False
+    explained = sub.probability + sub.lost_mode_mass
+    return explained / MODE_LIMIT <= imp.probability <= MODE_LIMIT * explained
+
+
 def combine(sub, imp) -> RareEventResult:
-    """The cross-check of subset simulation and importance sampling (``method="rare"``)."""
+    """The cross-check of subset simulation and importance sampling (``method="rare"``).
+
+    Both ``ok`` and agreeing (:func:`agree`): their inverse-variance combination. Subset
+    simulation flagged for a lost failure mode that explains its gap
+    (:func:`lost_mode_explains`): importance sampling's result, ``ok``, its message naming
+    the subset simulation set aside. One flagged by its own diagnostics but agreeing with the
+    other: the other's result. Otherwise ``"estimators_disagree"`` (or the flag of a failing
+    one, when neither has a trusted number), both numbers in the message.
+    """
     both = (f"subset simulation {sub.probability:.3g} [{sub.ci_lower:.3g}, "
             f"{sub.ci_upper:.3g}], importance sampling {imp.probability:.3g} "
             f"[{imp.ci_lower:.3g}, {imp.ci_upper:.3g}]")
@@ -221,6 +252,14 @@ def combine(sub, imp) -> RareEventResult:
                        form_ratio=imp.form_ratio, ancestors=sub.ancestors,
                        level_independent_cv=sub.level_independent_cv)
     overlap = agree(sub, imp)
+    if lost_mode_explains(sub, imp):
+        # subset simulation lost a failure mode that FORM found and importance sampling
+        # sampled around, and the mass it lost accounts for the gap: subset is the suspect
+        return replace(imp, estimator="rare", evaluations=evaluations, message=(
+            f"subset simulation set aside ({sub.status}): {sub.message}; the design points' "
+            f"mass it lost, {sub.lost_mode_mass:.3g}, accounts for the gap: {both}"),
+            **{k: v for k, v in diagnostics.items()
+               if k not in ("ancestors", "level_independent_cv")})
     if sub.ok != imp.ok and overlap:
         # one flagged by its own diagnostic, but its number agrees with the other's, which
         # passed all of its own: the one that passed stands

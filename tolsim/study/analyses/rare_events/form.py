@@ -30,6 +30,11 @@ and is flagged otherwise (``converged`` False, ``message`` one line). beta = |u*
 estimate Phi(-beta), and the importance factors alpha_k^2, alpha = u* / beta (the shares of
 the tolerances in "the most likely way to fail"; the caller maps u* to physical units).
 
+Where g depends on some columns only (a component of a series event,
+:mod:`~tolsim.study.analyses.rare_events.series_form`), ``columns=`` takes the difference rows
+along those and verifies the structure at the end point (:func:`verified_stencil`), so the
+checks are those above.
+
 One search finds one local design point: the one whose basin holds the start. A limit state
 with several (a series system, a parabola bent towards the origin, |u_1| >= b) has more, and
 the one found from the origin need not be the global one. :func:`find_design_points`
@@ -78,6 +83,9 @@ GRADIENT_STEP = 1e-4
 #: the origin, where no design point is isolated), and the step of its second differences.
 SECOND_ORDER_TOLERANCE = 0.05
 HESSIAN_STEP = 1e-2
+#: Largest change of g along the columns a search left out, as a share of HESSIAN_STEP |grad g|
+#: (:func:`verified_stencil`).
+STRUCTURE_TOLERANCE = 1e-6
 #: Largest tangent dimension d - 1 with the full projected Hessian (above it, its diagonal).
 FULL_HESSIAN_DIMENSION = 12
 #: Searches of :func:`find_design_points` besides the one from the origin; after them it
@@ -157,7 +165,8 @@ class _Unevaluable(Exception):
 def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_STEP,
                       max_iterations=100, batch_size=None, start=None,
                       second_order=True, origin_values=None,
-                      ftol=SLSQP_FTOL, known=()) -> DesignPoint:
+                      ftol=SLSQP_FTOL, known=(), columns=None,
+                      coarse_distance=None) -> DesignPoint:
     """The most probable failure point u* by SLSQP, with the checks of the module docstring.
 
     Minimises |u|^2 / 2 subject to g(u) = 0 ([HasoferLind1974]) with
@@ -195,6 +204,19 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         at one of them (the same direction and beta, as :func:`find_design_points` tells
         them apart) stops there, flagged ``converged`` False with the message "already
         found", without the checks' rows (the point passed them before).
+    columns : array_like of int, optional
+        The columns g depends on (a sparse structure, e.g. one pair of a series event,
+        :mod:`~tolsim.study.analyses.rare_events.series_form`): the difference rows are taken
+        along these alone (2 m rows per gradient, the centre reused from the constraint's
+        row), the others' derivatives taken as 0. At the end point the structure is verified
+        (:func:`verified_stencil`: g unchanged, bit for bit, by a step of
+        :data:`HESSIAN_STEP` along every other column, 2 rows); where it is not, the missing
+        rows are evaluated and every check runs on the full stencil. Default: every column.
+    coarse_distance : float, optional
+        With ``columns``: at an iterate farther than this from g = 0 (|g| / |grad g| with the
+        last gradient, in u) the gradient is taken by forward differences (m rows, the
+        centre reused), central ones nearer; the checks at the end point always use the
+        central rows. Default: central differences throughout.
 
     Returns
     -------
@@ -217,20 +239,41 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
 
     def value_and_gradient(u):
         """g(u) and its gradient: the caller's, or central differences (one batch
-        [u, u + h e_k, u - h e_k])."""
+        [u, u + h e_k, u - h e_k], k over ``columns``)."""
         if gradient is not None:
             return values(u[None]), _user_gradient(gradient, u)
         g = last.get(u.tobytes())
-        if g is None:
+        if g is None and columns is not None and coarse_distance is not None:
+            centre = cache.get(u.tobytes())
+            if centre is None:
+                centre = values(u[None])[0]
+            if abs(centre) > coarse_distance * norm[0]:
+                basis = step * np.eye(d)[columns]
+                forward = np.zeros(d)
+                forward[columns] = (values(u + basis) - centre) / step
+                norm[0] = float(np.linalg.norm(forward))
+                return np.array([centre]), forward
+            g = _sparse_stencil(values, u, step, columns, centre)
+        elif g is None and columns is not None:
+            g = _sparse_stencil(values, u, step, columns, cache.get(u.tobytes()))
+        elif g is None:
             g = values(np.concatenate([u[None], u + step * np.eye(d), u - step * np.eye(d)]))
-            last.clear()
-            last[u.tobytes()] = g
-        return g, (g[1:d + 1] - g[d + 1:]) / (2 * step)
+        last.clear()
+        last[u.tobytes()] = g
+        grad = (g[1:d + 1] - g[d + 1:]) / (2 * step)
+        norm[0] = float(np.linalg.norm(grad))
+        return g, grad
 
     # the rows [u, u + h e_k, u - h e_k] of the last gradient, not evaluated twice: SLSQP's
     # first gradient is at the start (the origin, already evaluated) and its last one at its
     # result, where the checks below need the same rows
     last = {}
+    cache = {}            # g at the last point of the constraint (one row)
+    norm = [np.inf]       # |grad g| at the last gradient (coarse_distance)
+    if columns is not None:
+        columns = np.unique(np.asarray(columns, dtype=np.intp))
+        if columns.ndim != 1 or columns.size == 0 or columns[0] < 0 or columns[-1] >= d:
+            raise ValueError(f"columns must be column indices in [0, {d})")
 
     def fail(u, g_grad, why):
         beta = float(np.linalg.norm(u))
@@ -258,7 +301,6 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
     if not (np.isfinite(scale) and scale > 0):
         return fail(origin, grad0, "the gradient of the limit state vanishes at the origin: "
                                    "FORM can not start (several or no design points)")
-    cache = {}
 
     def constraint(u):
         key = u.tobytes()
@@ -292,17 +334,19 @@ def find_design_point(limit_state, dimension, *, gradient=None, step=GRADIENT_ST
         return fail(point, np.full(d, np.nan), "the search ended at a design point already "
                                                "found")
     g = last.get(point.tobytes())
-    if g is None:
+    if g is None and columns is None:
         g = values(np.concatenate([point[None], point + step * np.eye(d),
                                    point - step * np.eye(d)]))
+    elif columns is not None:
+        g, columns = verified_stencil(values, point, step, columns, g)
     central_user = None if gradient is None else _user_gradient(gradient, point)
     solver = "" if result.success else f" (SLSQP: {result.message})"
     return checked_design_point(values, point, g, step, second_order, calls,
-                                central_user=central_user, solver=solver)
+                                central_user=central_user, solver=solver, columns=columns)
 
 
 def checked_design_point(values, point, g, step, second_order, calls, *, central_user=None,
-                         solver="") -> DesignPoint:
+                         solver="", columns=None) -> DesignPoint:
     """The end point of a design-point search with the checks of the module docstring.
 
     Parameters
@@ -322,6 +366,9 @@ def checked_design_point(values, point, g, step, second_order, calls, *, central
         The caller's gradient at u* (default the central differences of ``g``).
     solver : str
         Appended to the messages of a point not on the limit state or not normal to it.
+    columns : ndarray of int, optional
+        The only columns g depends on around u* (verified, :func:`verified_stencil`): the
+        second differences along the other axes are 0 and not evaluated.
 
     Returns
     -------
@@ -364,7 +411,8 @@ def checked_design_point(values, point, g, step, second_order, calls, *, central
                                          f"step {step:g})")
     eigenvalues, sorm = None, float("nan")
     if second_order and d > 1:
-        eigenvalues, full = _projected_hessian(values, point, g_star, central_user, beta / norm)
+        eigenvalues, full = _projected_hessian(values, point, g_star, central_user, beta / norm,
+                                               columns)
         smallest = float(eigenvalues[0])
         if not smallest >= SECOND_ORDER_TOLERANCE:
             kind = "a maximum" if eigenvalues[-1] < SECOND_ORDER_TOLERANCE else "a saddle"
@@ -383,6 +431,58 @@ def checked_design_point(values, point, g, step, second_order, calls, *, central
                        eigenvalues, sorm, calls[1])
 
 
+def _sparse_stencil(values, u, step, columns, centre=None):
+    """g at [u, u + h e_k, u - h e_k] (2 d + 1) with the rows of k in ``columns`` evaluated
+    (and the centre, unless given) and g(u) in the others' places."""
+    d = u.size
+    basis = step * np.eye(d)[columns]
+    rows = np.concatenate([u + basis, u - basis])
+    if centre is None:
+        g = values(np.concatenate([u[None], rows]))
+        centre, g = g[0], g[1:]
+    else:
+        g = values(rows)
+    out = np.full(2 * d + 1, centre, dtype=float)
+    out[1 + columns] = g[:columns.size]
+    out[1 + d + columns] = g[columns.size:]
+    return out
+
+
+def verified_stencil(values, point, step, columns, g=None):
+    """The stencil at the end point of a search along ``columns`` alone, verified.
+
+    g at u* -+ :data:`HESSIAN_STEP` v, v = sum of +-e_k over the other columns (alternating
+    signs), must differ from g(u*) by at most :data:`STRUCTURE_TOLERANCE` times
+    HESSIAN_STEP |grad g(u*)| (a change in the last bits, e.g. through a sum over all balls'
+    positions, passes): then the derivatives along them are below that share of the gradient
+    (their effect on the checks' 1e-3 tolerances and the second-order check's 0.05 is
+    nil), their stencil rows are taken as g(u*) and their second differences as 0.
+    Otherwise the other rows are evaluated.
+
+    Returns
+    -------
+    (g at [u*, u* + h e_k, u* - h e_k] (2 d + 1), the columns verified, or None for all)
+    """
+    d = point.size
+    if g is None:
+        g = _sparse_stencil(values, point, step, columns)
+    others = np.setdiff1d(np.arange(d), columns)
+    if not others.size:
+        return g, None
+    v = np.zeros(d)
+    v[others] = np.where(np.arange(others.size) % 2 == 0, 1.0, -1.0)
+    check = values(np.stack([point + HESSIAN_STEP * v, point - HESSIAN_STEP * v]))
+    slope = float(np.linalg.norm(g[1:d + 1] - g[d + 1:])) / (2 * step)
+    if np.all(np.abs(check - g[0]) <= STRUCTURE_TOLERANCE * HESSIAN_STEP * slope):
+        return g, columns
+    basis = step * np.eye(d)[others]
+    rest = values(np.concatenate([point + basis, point - basis]))
+    g = g.copy()
+    g[1 + others] = rest[:others.size]
+    g[1 + d + others] = rest[others.size:]
+    return g, None
+
+
 def tangent_directions(normal, full) -> np.ndarray:
     """Directions (rows) of the tangent space of the plane with unit normal ``normal``.
 
@@ -399,13 +499,28 @@ def tangent_directions(normal, full) -> np.ndarray:
     return axes / np.linalg.norm(axes, axis=1, keepdims=True)
 
 
-def _projected_hessian(values, point, g_star, gradient, multiplier):
+def _projected_hessian(values, point, g_star, gradient, multiplier, columns=None):
     """Eigenvalues of A = I + lambda T' H_g T at u* (ascending) and whether A was taken
-    whole (module docstring); second differences of step :data:`HESSIAN_STEP`."""
+    whole (module docstring); second differences of step :data:`HESSIAN_STEP`. With
+    ``columns`` (diagonal only): the tangent directions along the other axes are those axes
+    (the normal has no component there), g is constant along them, and A's entry is 1
+    without evaluation."""
     d = point.size
     normal = gradient / float(np.linalg.norm(gradient))
     full = d - 1 <= FULL_HESSIAN_DIMENSION
     t = tangent_directions(normal, full)
+    if columns is not None and not full:
+        axes = np.delete(np.arange(d), int(np.argmax(np.abs(normal))))
+        inside = np.isin(axes, columns)
+        diagonal = np.ones(axes.size)
+        if inside.any():
+            t = t[inside]
+            g = values(np.concatenate([point + HESSIAN_STEP * t, point - HESSIAN_STEP * t]))
+            second = (g[:t.shape[0]] + g[t.shape[0]:] - 2.0 * g_star) / HESSIAN_STEP ** 2
+            diagonal[inside] = 1.0 + multiplier * second
+        if not np.all(np.isfinite(diagonal)):
+            return np.full(axes.size, np.nan), full
+        return np.sort(diagonal), full
     h = HESSIAN_STEP
     k = t.shape[0]
     rows = [point + h * t, point - h * t]

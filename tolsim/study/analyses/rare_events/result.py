@@ -98,7 +98,8 @@ class RareEventResult:
             and FORM's design points) disagree beyond their intervals; both numbers are in
             the message, ``probability`` is the first estimator's.
     message : str
-        One line: why the estimator is flagged ("" when ok).
+        One line: why the estimator is flagged ("" when ok; an ``ok`` result of
+        ``method="rare"`` that set subset simulation aside for a lost failure mode says so).
     unresolved : int
         Evaluated rows where g was NaN.
     failures : int
@@ -149,6 +150,11 @@ class RareEventResult:
     level_independent_cv : float
         Subset: the CV with the levels taken as independent (the family estimate of each
         level), for comparison with ``coefficient_of_variation``.
+    lost_mode_mass : float
+        Subset checked against FORM's design points: the probability those design points
+        hold beyond what the chains found around them, sum_k (P_k - subset's mass near
+        u*_k), when that flagged the result ``"diagnostic_failed"`` for a lost failure mode
+        (:func:`~tolsim.study.analyses.rare_events.subset.lost_modes`); 0 otherwise [-].
     """
 
     estimator: str
@@ -187,6 +193,7 @@ class RareEventResult:
     form_ratio: float = float("nan")
     ancestors: int = 0
     level_independent_cv: float = float("nan")
+    lost_mode_mass: float = 0.0
 
     @property
     def ok(self) -> bool:

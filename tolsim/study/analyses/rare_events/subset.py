@@ -405,11 +405,12 @@ def _check_modes(result, failing, design_points):
     if not lost or missing <= result.ci_upper - result.probability:
         return result
     beta, p_k, mass = max(lost, key=lambda x: x[1] / x[2])
-    return replace(result, status=STATUS_DIAGNOSTIC_FAILED, message=(
-        f"{len(lost)} FORM design point(s) hold more than {MODE_LIMIT:g} times what subset "
-        f"simulation found around them (beta {beta:.3g}: P_FORM {p_k:.3g} against at most "
-        f"{mass:.3g} from the chains): the chains lost a failure mode; use importance "
-        "sampling or method 'rare'"))
+    message = (f"{len(lost)} FORM design point(s) hold more than {MODE_LIMIT:g} times what "
+               f"subset simulation found around them (beta {beta:.3g}: P_FORM {p_k:.3g} "
+               f"against at most {mass:.3g} from the chains): the chains lost a failure mode; "
+               "use importance sampling or method 'rare'")
+    return replace(result, status=STATUS_DIAGNOSTIC_FAILED, message=message,
+                   lost_mode_mass=float(missing))
 
 
 def ancestral_log_variance(indicators, eves):
