@@ -169,3 +169,46 @@ def test_result_file_records_the_strata(tmp_path):
         assert float(back.spot_check_band_upper) == pytest.approx(1.2 * LIMIT)
         assert int(back.spot_check_band_balls) > 6
         assert "near the spec limit" in back.attrs["spot_check_status"]
+
+
+def test_pruned_prefix_gives_the_same_choice():
+    # select_spot_checks over all rows, against rows pruned after every prefix of blocks by
+    # near_limit_cut / near_limit_kept (the runner's pruning): the same balls.
+    rng = np.random.default_rng(3)
+    plan = sampling.SpotCheckPlan(np.array([5, 70, 400]), 9, 4, (0.1, 0.2), 12345)
+    free = [np.setdiff1d(np.arange(100 * b, 100 * b + 100), plan.uniform) for b in range(30)]
+    blocks = [np.sort(rng.choice(f, rng.integers(0, 8), replace=False)) for f in free]
+    strata = [np.ones(len(b), np.int8) for b in blocks]
+    for index in plan.uniform:  # the uniform candidates, in their blocks
+        k = index // 100
+        blocks[k], strata[k] = np.append(blocks[k], index), np.append(strata[k], 0)
+    full = np.concatenate(blocks)
+    chosen = full[sampling.select_spot_checks(plan, full, np.concatenate(strata))]
+    kept_b, kept_s = [], []
+    for b, s in zip(blocks, strata, strict=True):
+        kept_b.append(b), kept_s.append(s)
+        cut = sampling.near_limit_cut(plan, np.concatenate(kept_b), np.concatenate(kept_s))
+        masks = [sampling.near_limit_kept(plan, x, y, cut) for x, y in zip(kept_b, kept_s,
+                                                                          strict=True)]
+        kept_b = [x[m] for x, m in zip(kept_b, masks, strict=True)]
+        kept_s = [y[m] for y, m in zip(kept_s, masks, strict=True)]
+        assert np.count_nonzero(np.concatenate(kept_s) == 1) <= plan.near_limit
+    rows_b, rows_s = np.concatenate(kept_b), np.concatenate(kept_s)
+    assert_array_equal(rows_b[sampling.select_spot_checks(plan, rows_b, rows_s)], chosen)
+    assert np.count_nonzero(rows_s == 0) == 3  # the uniform rows are all kept
+
+
+def test_checkpoint_keeps_only_the_near_limit_rows_that_can_be_chosen(tmp_path):
+    # Each of the 12 blocks records up to 6 near-limit candidates; the committed state (and
+    # so its checkpoint) keeps the 6 that can still be chosen, not all of them.
+    config = make()
+    plan = sampling.spot_check_plan(config)
+    ckpt = tmp_path / "run.partial"
+    with pytest.raises(StudyInterrupted):
+        run_study(config, chunk_blocks=1, checkpoint_path=str(ckpt), checkpoint_interval=0,
+                  max_blocks=11)
+    with np.load(ckpt) as saved:
+        near = int(np.count_nonzero(saved["spot_stratum"] == 1))
+        assert near == plan.near_limit
+    resumed = run_study(config, checkpoint_path=str(ckpt))
+    assert_array_equal(resumed.spot_checks.ball_index, run_study(config).spot_checks.ball_index)

@@ -604,6 +604,37 @@ def near_limit_candidates(plan: SpotCheckPlan, velocity_deviation, fast, start_b
     return np.sort(local[keep]).astype(np.int64), in_band
 
 
+def near_limit_cut(plan: SpotCheckPlan, ball_index, stratum):
+    """The largest (priority, ball index) key of a near-limit row that can still be chosen.
+
+    ``ball_index``, ``stratum``: recorded candidates of consecutive blocks (from the first).
+    :func:`select_spot_checks` keeps the ``near_limit`` smallest keys of the near-limit
+    rows of all blocks; more blocks only add keys, so a row whose key is above the
+    ``near_limit``-th smallest of a prefix is never chosen by a run holding that prefix and
+    need not be kept. Returns None while the prefix holds no more than ``near_limit`` such
+    rows (every one can still be chosen).
+    """
+    ball_index = np.asarray(ball_index, dtype=np.int64)
+    near = ball_index[np.asarray(stratum) == 1]
+    if len(near) <= plan.near_limit:
+        return None
+    priority = spot_check_priority(plan.key, near)
+    last = _smallest(priority, near, plan.near_limit)[-1]
+    return priority[last], near[last]
+
+
+def near_limit_kept(plan: SpotCheckPlan, ball_index, stratum, cut) -> np.ndarray:
+    """Mask of the rows to keep under :func:`near_limit_cut`'s ``cut``: every uniform
+    row, and the near-limit rows whose key is not above it."""
+    ball_index = np.asarray(ball_index, dtype=np.int64)
+    near = np.asarray(stratum) == 1
+    if cut is None:
+        return np.ones(len(ball_index), dtype=bool)
+    priority = spot_check_priority(plan.key, ball_index)
+    above = (priority > cut[0]) | ((priority == cut[0]) & (ball_index > cut[1]))
+    return ~(near & above)
+
+
 def select_spot_checks(plan: SpotCheckPlan, ball_index, stratum) -> np.ndarray:
     """Rows of the recorded candidates that are spot-checked, sorted by ball index.
 
