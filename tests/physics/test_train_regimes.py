@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from tolsim.physics.geometry import TABLE1
+from tolsim.physics.geometry import TABLE1, paired_forces
 from tolsim.physics.trains import (
     cluster_velocities,
     net_push,
@@ -28,8 +28,10 @@ from tolsim.physics.trains.regimes import (
     two_point_rolling_rate,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
+from tolsim.physics.velocity.full import full
 from tolsim.physics.velocity.models import (
     BALL_REGIME_A,
+    BALL_REGIME_B,
     BALL_TWO_POINT,
     BALL_UNLOADED,
 )
@@ -317,3 +319,25 @@ def test_step_rule_with_anchors_is_the_event_driven_solution(rng):
     quiet = ~late.any(axis=1)
     assert quiet.mean() > 0.8 and (ref.contact_force[quiet] > 0).mean() > 0.2
     assert_allclose(q[quiet], ref.contact_force[quiet], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("rho", [-0.9, -0.95, -0.98])
+def test_regime_b_ball_is_an_anchor_with_its_own_friction(rho):
+    # [Lin2018] case (a): theta = 2 deg on the bottom groove, paired forces at N_y = 200 N;
+    # |rho| >= 0.9 is regime B (issue 25). Its columns: K = inf, c = 0, F_0 and
+    # Omega those of full's certified minimum (bit for bit); and F_0 is about mu sum F_light / 2
+    # (issue 25's estimate; 10 % here: measured 1.0 % to 7.7 %).
+    theta = np.radians(2.0)
+    dbeta = np.array([[-theta, theta, 0.0, 0.0]])
+    force = np.array([paired_forces(rho * 200.0, 200.0)])
+    ref = full(dbeta, force, TABLE1)
+    assert ref.regime[0] == 2  # one contact stuck (FullResult.regime)
+    load = np.full((1, len(LOAD_COLUMNS)), np.nan)
+    out = regime_creep_coefficients(load, [BALL_REGIME_B], dbeta, force, TABLE1)[0]
+    assert out[COL["creep_stiffness"]] == INF and out[COL["braking_sensitivity"]] == 0.0
+    assert out[COL["free_rolling_carriage_force"]] == ref.drag_force[0]
+    assert_allclose(out[COL["rolling_rate_x"]:], ref.angular_velocity[0, :2]
+                    * TABLE1.ball_radius / 0.01, rtol=1e-15)
+    light = min(force[0, 0] + force[0, 2], force[0, 1] + force[0, 3])
+    assert_allclose(out[COL["free_rolling_carriage_force"]],
+                    0.5 * TABLE1.friction_coefficient * light, rtol=0.1)

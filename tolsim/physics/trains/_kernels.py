@@ -57,8 +57,9 @@ def _pav(values, weight, tier, link, tolerance, block_start, block_weight, block
     more than ``tolerance``) or _BONDED (pooled unconditionally). A block's mean is the
     weighted mean over its balls of the highest tier it holds (the limit K_anchor -> inf,
     K_pushed -> 0 of eq. 5); two anchor blocks of equal mean (within ``tolerance``) are
-    compared by their next order, the soft balls' imbalance per anchor (eq. 6b). ``block_soft`` (n, 2) holds each
-    block's sum of kappa and of kappa * value over its soft balls.
+    compared by their next order, the soft balls' imbalance per anchor (eq. 6b).
+    ``block_soft`` (n, 2) holds each block's sums of kappa and of kappa * value over its soft
+    balls.
     """
     n = values.shape[0]
     top = -1

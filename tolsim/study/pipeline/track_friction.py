@@ -37,14 +37,11 @@ from tolsim.study.sampling import error_values
 from tolsim.study.statistics.friction import COLUMNS
 
 #: Columns of the per-ball creep coefficients
-# (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`).
-_K = LOAD_COLUMNS.index("creep_stiffness")
-_C = LOAD_COLUMNS.index("braking_sensitivity")
-_F0 = LOAD_COLUMNS.index("free_rolling_carriage_force")
-_A = LOAD_COLUMNS.index("carriage_force_per_push")
-_B = LOAD_COLUMNS.index("carriage_force_per_neighbour_force")
-_PCAP = LOAD_COLUMNS.index("traction_capacity")
-_BCAP = LOAD_COLUMNS.index("braking_capacity")
+# (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`, the first of TRAIN_COLUMNS).
+_K, _C, _F0, _A, _B, _PCAP, _BCAP = (LOAD_COLUMNS.index(name) for name in (
+    "creep_stiffness", "braking_sensitivity", "free_rolling_carriage_force",
+    "carriage_force_per_push", "carriage_force_per_neighbour_force", "traction_capacity",
+    "braking_capacity"))
 
 
 # --------------------------------------------------------------------------------------------
