@@ -206,9 +206,10 @@ def cluster_velocities(velocity_deviation, creep_stiffness, touching,
 
     **Anchors and balls pushed along (issue 25)**
 
-    An *anchor* (a ball in regime B, or an exactly two-point ball,
-    :mod:`tolsim.physics.trains.regimes`) keeps its epsilon under a push until its capacity:
-    K = inf. A ball *pushed along* (unloaded: no raceway contact, no epsilon of its own)
+    An *anchor* (an exactly two-point ball, or one whose two opposite contacts both stick,
+    :mod:`tolsim.physics.trains.regimes`; a ball in regime B is stiff, not rigid) keeps its
+    epsilon under a push until its capacity: K = inf. A ball *pushed along* (unloaded: no
+    raceway contact, no epsilon of its own)
     offers no resistance: K = 0. Both are limits of (2): give the anchors kappa_a = L k_a and
     the pushed balls kappa_u = k_u / L and let L -> inf. The problem (4) stays strictly convex
     for every L, so its limit is well defined, and PAV computes it with weights compared

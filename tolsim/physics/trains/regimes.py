@@ -1,30 +1,40 @@
 """The creep coefficients of a ball in a train from its own regime (issue 25, item 3).
 
-A ball in regime A creeps (finite K); a ball in regime B or an exactly two-point ball is an
-*anchor* (K = inf: it keeps its speed under a push until its capacity); an unloaded ball is
-*pushed along* (K = 0: no epsilon of its own). :func:`regime_creep_coefficients` overrides the
-creep model's columns for the anchors and the pushed balls and adds each ball's rolling
-angular velocity; :func:`pair_braking` gives the ball-ball friction of a pair from the two
-balls' actual rotations. The cluster rule with anchors is in the Notes of
+A ball in regime A creeps (finite K); a ball in regime B is stiff (K from its stick line,
+3e4 N and more); an exactly two-point ball is an *anchor* (K = inf: it keeps its speed under
+a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilon of its
+own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
+adds each ball's rolling angular velocity; :func:`pair_braking` gives the ball-ball friction
+of a pair from the two balls' actual rotations. The cluster rule with anchors is in the Notes of
 :func:`tolsim.physics.trains.cluster_velocities`.
 """
 
 import numpy as np
+from numba import prange
 
+from tolsim._jit import pjit
 from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, Bearing
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity._full_kernels import ball_loads_kernel
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.physics.velocity.ball_loads import ball_contact_slip
-from tolsim.physics.velocity.full import full
+from tolsim.physics.velocity.full import (
+    DEFAULT_ANGULAR_NODES,
+    DEFAULT_RADIAL_NODES,
+    full,
+    quadrature_grid,
+)
 from tolsim.physics.velocity.models import BALL_REGIME_B, BALL_TWO_POINT, BALL_UNLOADED
 
 #: Columns of a train's per-ball coefficients: those of the creep model
 #: (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`), then the ball's rolling angular
-#: velocity Omega_perp R_B / v (x and y; NaN where no ball of the batch needs it).
-TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y")
+#: velocity Omega_perp R_B / v (x and y; NaN where no ball of the batch needs it) and its
+#: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only).
+TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime")
 #: Creep stiffness of an anchor and of a ball pushed along [N].
 ANCHOR_STIFFNESS, PUSHED_STIFFNESS = np.inf, 0.0
-#: Regimes whose balls are anchors in a train.
-ANCHOR_REGIMES = (BALL_REGIME_B, BALL_TWO_POINT)
+#: Step along the stick line for its curvature, a fraction of v.
+STICK_STEP = 1e-5
 
 _COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
 
@@ -83,6 +93,93 @@ def two_point_rolling_rate(contact_angle_deviation, normal_force, bearing: Beari
     return 0.5 * np.stack([pt[:, 1], -pt[:, 0]], axis=-1)
 
 
+@pjit
+def stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo, tr, wr,
+                                step, out):
+    """K = (v / 2) d^2 D_others / dw^2 [N / mu] on the stick line of each ball; unchecked.
+
+    ``beta``, ``force`` (n, 4), ``stuck`` (n,) the stuck contact k (else inf: both contacts of
+    a pair stick, rigid), ``rate`` (n,) w [v] at the minimum, ``a``, ``b`` (n, 4) the
+    semi-axes [R]. Central difference of the line slope dD/dw = -(F_z + M . x_k) (the loads
+    of the other contacts, R = v = mu = 1) over w +- ``step``.
+    """
+    for n in prange(beta.shape[0]):
+        k = stuck[n]
+        if k < 0 or k > 3:
+            out[n] = np.inf
+            continue
+        px = np.empty(4)
+        py = np.empty(4)
+        others = np.empty(4)
+        for i in range(4):
+            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
+            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
+            others[i] = force[n, i] if i != k else 0.0
+        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
+        xx, xy = -py[k], px[k]
+        state = np.empty(4)
+        loads = np.empty(5)
+        contact = np.empty((4, 5))
+        zero = np.zeros(4)
+        slope = np.empty(2)
+        for side in range(2):
+            w = rate[n] + (step if side else -step)
+            state[0] = vgroove[k] + w
+            state[1] = w * xx
+            state[2] = w * xy
+            state[3] = 0.0
+            ball_loads_kernel(state, px, py, vgroove, others, a[n], b[n], 1.5 / np.pi, False,
+                              1.0, zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
+            slope[side] = -(loads[0] + loads[1] * xx + loads[2] * xy)
+        out[n] = 0.25 * (slope[1] - slope[0]) / step
+
+
+def stick_line_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+    """Creep stiffness K [N] of balls in regime B: the curvature of D on their stick line.
+
+    Parameters
+    ----------
+    contact_angle_deviation, normal_force : array_like, shape (n, 4)
+
+    Returns
+    -------
+    k : ndarray (n,)
+        K [N]; inf where both contacts of a pair stick (rigid), NaN where ``full`` does not
+        certify the ball in regime B.
+    result : tolsim.physics.velocity.full.FullResult
+        The free solve (epsilon, F_0, Omega).
+
+    Notes
+    -----
+    On the stick line of contact k the states are v_B = V_k + w, Omega = (w / R) x_k, and a
+    push P moves the minimum of D_others(w) - P v_B to dD_others/dw = P; with
+    epsilon = 2 v_B / v - 1, K = dP/d(epsilon) = (v / 2) d^2 D_others / dw^2, by central
+    differences of the line slope (``STICK_STEP`` v; D_others is smooth there: the other
+    contacts slip). 3-5e4 N against 110-750 N in regime A (issue 25).
+    """
+    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
+    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
+    v = 0.01
+    res = full(dbeta, force, bearing, groove_velocity=v)
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    radius = bearing.ball_radius
+    beta = bearing.nominal_contact_angle + dbeta
+    a = hc.semi_major_coefficient * np.cbrt(force) / radius
+    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
+    stuck = np.asarray(res.stuck_contact, dtype=np.int64)
+    p = _contact_directions(dbeta, bearing)
+    k = np.clip(stuck, 0, 3)
+    xk = np.stack([-p[np.arange(len(p)), k, 1], p[np.arange(len(p)), k, 0]], axis=-1)
+    rate = np.sum(res.angular_velocity[:, :2] * radius / v * xk, axis=1)
+    out = np.empty(len(dbeta))
+    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
+    stick_line_stiffness_kernel(beta, force, stuck, np.ascontiguousarray(rate), a, b, *grid,
+                                STICK_STEP, out)
+    out = bearing.friction_coefficient * out
+    return np.where(np.asarray(res.regime) == 2, out, np.nan), res
+
+
 def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
                               bearing: Bearing = TABLE1, *, ball_friction=0.1):
     """The train columns of balls from their regimes: anchors, soft balls, pushed balls.
@@ -102,8 +199,8 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     Returns
     -------
     ndarray, shape (n, len(TRAIN_COLUMNS))
-        ``load`` unchanged for every ball that is neither an anchor nor unloaded (bit for bit),
-        the columns of the Notes for those, and the rolling rates when the batch holds any.
+        ``load`` unchanged for every ball in regime A (bit for bit), the columns of the Notes
+        for the others, and the rolling rates and regimes when the batch holds any.
 
     Notes
     -----
@@ -120,15 +217,20 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
 
     **A ball in regime B** (one contact k stuck). Its states lie on the stick line
     v_B = V_k + w, Omega = (w / R) x_k; a push moves it along the line to the minimum of
-    D_others(w) - P v_B, so dP = D''_others dw and K = (v / 2) D''_others: 3-5e4 N against
-    110-750 N in regime A (issue 25). It is taken as an anchor, the limit K -> inf: a soft
-    neighbour's force K_s K_B / (K_s + K_B) d(epsilon) is then over-estimated by the factor
-    1 + K_s / K_B, at most 2.5 % (750 / 3e4). F_0 and Omega are those of its certified minimum
-    of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are the creep
-    model's (the loads split between the grooves about as in regime A), and it slides when
-    |P| / P_cap + S / S_cap >= 1, which lies inside the box |P| < P_cap, S < S_cap of a soft
-    ball (conservative). Not modelled: the push at which the stuck contact lets go before
-    P_cap (the ball then creeps as in regime A).
+    D_others(w) + mu_bb S |w| - P v_B, so dP - mu_bb dS = D''_others dw, and
+
+        K = (v / 2) D''_others,   c = d(epsilon)/dS = -mu_bb / K                     (R1)
+
+    (:func:`stick_line_stiffness`): 3.3e4 N on case (a) at rho = -0.9 .. -0.98, against
+    110-750 N in regime A (issue 25), so it is a stiff ball rather than a rigid anchor: two
+    balls in regime B of different epsilon pushed together share a finite force (as rigid
+    anchors they could not roll together), and a soft neighbour's force is
+    K_s K_B / (K_s + K_B) d(epsilon), 1-2 % below K_s d(epsilon). (Both contacts of a pair
+    stuck, equal angles: rigid, K = inf, an anchor.) F_0 and Omega are those of its certified
+    minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are
+    the creep model's (the loads split between the grooves about as in regime A). Not
+    modelled: the push at which the stuck contact lets go before P_cap (the ball then
+    creeps as in regime A).
 
     **An unloaded ball** has no raceway contact, so no raceway friction: F_c = 0 whatever the
     loads (F_0 = a = b = 0), no creep resistance (K = 0: it moves with whatever it touches,
@@ -166,16 +268,16 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
             out[two, _COL[name]] = value
         rate[two] = two_point_rolling_rate(dbeta[two], force[two], bearing)
     if stick.any():
-        v = 0.01
-        res = full(dbeta[stick], force[stick], bearing, groove_velocity=v)
-        solved = np.asarray(res.valid, dtype=bool)
+        stiffness, res = stick_line_stiffness(dbeta[stick], force[stick], bearing)
         rows = np.flatnonzero(stick)
-        out[rows, _COL["creep_stiffness"]] = np.where(solved, ANCHOR_STIFFNESS, np.nan)
-        out[rows, _COL["braking_sensitivity"]] = 0.0
+        out[rows, _COL["creep_stiffness"]] = stiffness
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[rows, _COL["braking_sensitivity"]] = np.where(np.isfinite(stiffness),
+                                                              -ball_friction / stiffness, 0.0)
         out[rows, _COL["free_rolling_velocity_deviation"]] = res.velocity_deviation
         out[rows, _COL["free_rolling_carriage_force"]] = res.drag_force
         out[rows, _COL["carriage_force"]] = res.drag_force
-        rate[stick] = res.angular_velocity[:, :2] * bearing.ball_radius / v
+        rate[stick] = res.angular_velocity[:, :2] * bearing.ball_radius / 0.01
     if pushed.any():
         values = {"free_rolling_velocity_deviation": np.nan, "creep_stiffness": PUSHED_STIFFNESS,
                   "braking_sensitivity": 0.0, "carriage_force": 0.0,
@@ -184,7 +286,8 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
                   "braking_capacity": np.inf}
         for name, value in values.items():
             out[pushed, _COL[name]] = value
-    out[:, _COL["rolling_rate_x"]:] = rate
+    out[:, _COL["rolling_rate_x"]:_COL["regime"]] = rate
+    out[:, _COL["regime"]] = regime
     return out
 
 
@@ -202,8 +305,9 @@ def pair_braking(coefficients, ball_friction=0.1):
     -------
     ndarray, shape (..., n - 1)
         B_j, so that pair j adds k_j Q_j = ((a_{j+1} - a_j) + B_j) Q_j to the carriage
-        friction: b_j + b_{j+1} (bit for bit) where both balls are soft, mu_bb |Omega_j +
-        Omega_{j+1}|_perp R_B / v where one is an anchor, 0 where one is pushed along.
+        friction: b_j + b_{j+1} (bit for bit) where both balls are in regime A,
+        mu_bb |Omega_j + Omega_{j+1}|_perp R_B / v where one is not (regime B, two-point),
+        0 where one is pushed along.
 
     Notes
     -----
@@ -235,20 +339,21 @@ def pair_braking(coefficients, ball_friction=0.1):
     coefficients = np.asarray(coefficients, dtype=np.float64)
     b = coefficients[..., _COL["carriage_force_per_neighbour_force"]]
     base = b[..., :-1] + b[..., 1:]
-    k = coefficients[..., _COL["creep_stiffness"]]
-    anchor = k == ANCHOR_STIFFNESS
-    pushed = k == PUSHED_STIFFNESS
-    mixed = anchor[..., :-1] | anchor[..., 1:]
+    code = coefficients[..., _COL["regime"]]
+    other = (code == BALL_REGIME_B) | (code == BALL_TWO_POINT)
+    pushed = coefficients[..., _COL["creep_stiffness"]] == PUSHED_STIFFNESS
+    mixed = other[..., :-1] | other[..., 1:]
     null = pushed[..., :-1] | pushed[..., 1:]
     if not (mixed.any() or null.any()):
         return base
     rate = np.zeros(coefficients.shape[:-1] + (3,))
-    rate[..., :2] = coefficients[..., _COL["rolling_rate_x"]:]
+    rate[..., :2] = coefficients[..., _COL["rolling_rate_x"]:_COL["regime"]]
     slip = np.linalg.norm(ball_contact_slip(rate[..., :-1, :], rate[..., 1:, :], 1.0), axis=-1)
     out = np.where(mixed, ball_friction * slip, base)
     return np.ascontiguousarray(np.where(null, 0.0, out))
 
 
-__all__ = ["ANCHOR_REGIMES", "ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "TRAIN_COLUMNS",
+__all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "STICK_STEP", "TRAIN_COLUMNS",
            "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
+           "stick_line_stiffness", "stick_line_stiffness_kernel",
            "two_point_rolling_rate"]

@@ -131,8 +131,8 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
     its slopes). The train's epsilon is always the study's epsilon of the ball.
 
     **By regime** (issue 25): the creep model's columns hold for a ball in regime A. A ball in
-    regime B or an exactly two-point ball is an anchor (K = inf), an unloaded ball is pushed
-    along (K = 0), with the columns of
+    regime B creeps with the stiffness of its stick line, an exactly two-point ball is an
+    anchor (K = inf), an unloaded ball is pushed along (K = 0), with the columns of
     :func:`tolsim.physics.trains.regimes.regime_creep_coefficients` (a three-point ball has
     no creep model yet: its train stays unresolved).
     """
@@ -368,13 +368,14 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
       coefficients are not finite (K <= 0, |c K| >= 1 where the train model does not apply, a
       ``full`` creep solve that failed), leaves its train unresolved: the train is not followed.
     * **Anchors and balls pushed along** (issue 25; the columns of
-      :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`): a ball in regime B or
-      an exactly two-point ball keeps its epsilon (K = inf) and slides when
-      |P| / P_cap + S / S_cap >= 1 (exact for the two-point ball: |P| + mu_bb S >= 2 mu F); an
+      :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`): a ball in regime B
+      creeps with the stiffness of its stick line (about 3e4 N); an exactly two-point ball
+      keeps its epsilon (K = inf) and slides when |P| / P_cap + S / S_cap >= 1 (exact:
+      |P| + mu_bb S >= 2 mu F); an
       unloaded ball gets the epsilon that closes both its gaps at once
       (:func:`tolsim.study.pipeline.propagation.pushed_velocity_deviation`), K = 0 and no
-      friction, and transmits the force. A pair with an anchor pays the ball-ball friction of
-      the two balls' actual rotations, one with a pushed ball none
+      friction, and transmits the force. A pair with a ball in regime B or two-point pays the
+      ball-ball friction of the two balls' actual rotations, one with a pushed ball none
       (:func:`tolsim.physics.trains.regimes.pair_braking`). Only ``constant`` propagation
       fills in the pushed balls: with ``along_track`` an unloaded ball still leaves its train
       unresolved.
