@@ -619,7 +619,7 @@ def test_invalid_trains_are_flagged(rng):
 @pytest.mark.parametrize("bad, match", [
     (dict(initial_gap=[[-1e-6]]), "initial_gap"),
     (dict(initial_gap=[[1e-6, 1e-6]]), "initial_gap"),
-    (dict(creep_stiffness=0.0), "creep_stiffness"),
+    (dict(creep_stiffness=-1.0), "creep_stiffness"),
     (dict(creep_stiffness=[1.0, 2.0, 3.0]), "creep_stiffness"),
     (dict(braking_sensitivity=1.0), "braking_sensitivity"),
     (dict(groove_velocity=0.0), "groove_velocity"),

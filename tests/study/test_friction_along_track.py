@@ -311,7 +311,8 @@ def test_step_friction_kernel_matches_numpy_twin(rng):
         ok = rng.random(rows) > 0.01
         contact, formed = rng.random(rows), rng.integers(0, 2, rows).astype(float)
         base, inc = np.empty(rows), np.empty(rows)
-        fr.step_friction_kernel(loaded, member, load, force, ok, contact, formed, 0.1,
+        pairs = load[:, :-1, fr._B] + load[:, 1:, fr._B]
+        fr.step_friction_kernel(loaded, member, load, pairs, force, ok, contact, formed, 0.1,
                                 kern["alive"], kern["sliding"], kern["baseline"],
                                 kern["increase"], kern["high"], kern["friction_high"],
                                 kern["friction_low"], kern["force"], kern["contact"],

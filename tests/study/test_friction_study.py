@@ -142,8 +142,9 @@ def test_stroke_kernel_matches_numpy_twin(rng):
     load[:, :, fr._BCAP] = rng.choice([2.0, 400.0, np.inf], (m, n), p=[0.05, 0.5, 0.45])
     out = {k: np.empty(m) for k in ("baseline", "mean", "max", "min", "rolling")}
     sliding = np.empty(m, dtype=bool)
+    pairs = load[:, :-1, fr._B] + load[:, 1:, fr._B]
     fr.stroke_friction_kernel(res.segment_start, res.segment_contact_force, res.valid, load,
-                              horizon, out["baseline"], out["mean"], out["max"], out["min"],
+                              pairs, horizon, out["baseline"], out["mean"], out["max"], out["min"],
                               sliding, out["rolling"])
     twin = stroke_friction_numpy(res.segment_start, res.segment_contact_force, res.valid,
                                  load, horizon)
@@ -577,8 +578,10 @@ friction_increase_limit_N = 0.1
 # Unresolved, sliding, several tracks
 # --------------------------------------------------------------------------------------------
 def test_train_inputs_kernel_matches_numpy_twin(rng):
-    # NaN K (and c = 0) for a ball that leaves its train unresolved: epsilon, K, c, F_0, a or
-    # b not finite, K <= 0 or |c K| >= 1 (tolsim.physics.trains refuses |c K| >= 1); exact.
+    # NaN K (and c = 0) for a ball that leaves its train unresolved: epsilon, c, F_0, a or
+    # b not finite, K NaN or < 0, or a finite K with |c K| >= 1 (tolsim.physics.trains refuses
+    # |c K| >= 1); an anchor (K = inf) and a pushed ball (K = 0, issue 25) keep K with c = 0;
+    # exact.
     m, n = 300, 6
     eps = rng.normal(0.0, 1e-3, (m, n))
     load = rng.normal(0.0, 1.0, (m, n, len(LOAD_COLUMNS)))
@@ -591,12 +594,13 @@ def test_train_inputs_kernel_matches_numpy_twin(rng):
     fr.train_inputs_kernel(eps, load, k, c)
     with np.errstate(invalid="ignore"):
         kk, cc = load[:, :, fr._K], load[:, :, fr._C]
-        ok = (np.isfinite(eps) & np.isfinite(kk) & (kk > 0) & np.isfinite(cc)
-              & (np.abs(cc * kk) < 1) & np.all(np.isfinite(load[:, :, [fr._F0, fr._A, fr._B]]),
-                                                axis=2))
-    assert 0.3 < ok.mean() < 0.9
+        fixed = (kk == np.inf) | (kk == 0.0)
+        ok = (np.isfinite(eps) & (fixed | (np.isfinite(kk) & (kk > 0) & (np.abs(cc * kk) < 1)))
+              & np.isfinite(cc)
+              & np.all(np.isfinite(load[:, :, [fr._F0, fr._A, fr._B]]), axis=2))
+    assert 0.3 < ok.mean() < 0.9 and (ok & fixed).any()
     assert_array_equal(k, np.where(ok, kk, np.nan))
-    assert_array_equal(c, np.where(ok, cc, 0.0))
+    assert_array_equal(c, np.where(ok, np.where(fixed, 0.0, cc), 0.0))
 
 
 def test_unresolved_ball_makes_the_assembly_unresolved():

@@ -65,10 +65,10 @@ def _train_arrays(velocity_deviation, creep_stiffness, braking_sensitivity):
             f"{np.shape(braking_sensitivity)} must broadcast to velocity_deviation "
             f"{eps.shape}") from None
     finite = np.isfinite(stiffness)
-    if np.any(stiffness[finite] <= 0.0):
-        bad = stiffness[finite][stiffness[finite] <= 0.0][0]
-        raise ValueError(f"creep_stiffness = {bad!r} must be > 0 (NaN marks an unresolved "
-                         "or sliding ball)")
+    if np.any(stiffness[~np.isnan(stiffness)] < 0.0):
+        bad = stiffness[stiffness < 0.0][0]
+        raise ValueError(f"creep_stiffness = {bad!r} must be >= 0 (inf: an anchor, 0: a ball "
+                         "pushed along, NaN: an unresolved or sliding ball)")
     with np.errstate(invalid="ignore"):
         out_of_range = np.isfinite(braking) & finite & (np.abs(braking * stiffness) >= 1.0)
     if np.any(out_of_range):
@@ -95,7 +95,8 @@ def cluster_velocities(velocity_deviation, creep_stiffness, touching,
     velocity_deviation : array_like, shape (..., balls)
         Free-rolling epsilon per ball [-], ball 0 trailing. A train with a NaN gets NaN.
     creep_stiffness : array_like, broadcastable to ``velocity_deviation``
-        K_i = dP/depsilon [N], > 0 (NaN marks an unresolved or sliding ball).
+        K_i = dP/depsilon [N], > 0; inf for an anchor, 0 for a ball pushed along (Notes,
+        "Anchors and balls pushed along"); NaN marks an unresolved or sliding ball.
     touching : array_like of bool, shape (..., balls - 1)
         True where the gap of pair j (balls j, j + 1) is closed.
     braking_sensitivity : array_like, optional
@@ -203,6 +204,45 @@ def cluster_velocities(velocity_deviation, creep_stiffness, touching,
     ``along_track`` propagation applies it at every step, where epsilon changes and clusters
     really do split.
 
+    **Anchors and balls pushed along (issue 25)**
+
+    An *anchor* (an exactly two-point ball, or one whose two opposite contacts both stick,
+    :mod:`tolsim.physics.trains.regimes`; a ball in regime B is stiff, not rigid) keeps its
+    epsilon under a push until its capacity: K = inf. A ball *pushed along* (unloaded: no
+    raceway contact, no epsilon of its own)
+    offers no resistance: K = 0. Both are limits of (2): give the anchors kappa_a = L k_a and
+    the pushed balls kappa_u = k_u / L and let L -> inf. The problem (4) stays strictly convex
+    for every L, so its limit is well defined, and PAV computes it with weights compared
+    lexicographically: a block's mean (5) tends to the k-weighted mean of the balls of its
+    *highest tier* (anchors > soft balls > pushed balls). For a block held by anchors that all
+    have the same epsilon e,
+
+        w_C = e + I / (L sum_a k_a) + O(L^-2),   I = sum_{soft i in C} kappa_i (epsilon_i - e),
+
+    so the balls roll at e, and the forces (6) have the limit
+
+        R_j = sum_{soft i <= j} kappa_i (epsilon_i - e) - I sum_{a <= j} k_a / sum_a k_a    (6a)
+
+    A soft ball's term is as before; each anchor takes the share k_a / sum k_a of the soft
+    balls' imbalance as its own net push (equal anchor stiffnesses: k_a = 1 / lambda_a, so
+    that the pushes P_a are equal in newtons). Pushed balls add nothing: they transmit the
+    force unchanged (P_u = 0) and move with their cluster; a block of pushed balls only keeps
+    their mean epsilon and carries no force. Examples: a soft ball (K, eps_1) touching an
+    anchor in front of it rolls at the anchor's e and pushes with Q = (eps_1 - e) / (1/K - c);
+    an anchor between a faster and a slower ball carries K_1 (eps_1 - e) - K_3 (e - eps_3).
+
+    PAV pools two blocks when the lower mean exceeds the upper one. Two anchor blocks of
+    equal e (two-point balls: e = 0 exactly) tie at leading order; the next order decides,
+
+        pool  iff  I_lower / sum_{a in lower} k_a  >  I_upper / sum_{a in upper} k_a,        (6b)
+
+    so a fast ball behind a chain of touching anchors and a slow one in front of it load
+    the whole chain, as the finite stiffness would. Anchors of *different* epsilon pooled into
+    one block cannot roll together: their terms kappa_a (epsilon_a - w) are infinite, the
+    block's forces are +inf, and the friction check reads the cluster as sliding (unresolved,
+    counted and bounded). The same rule serves the projection (7) of ``along_track``. With
+    only soft balls nothing changes: the same operations in the same order.
+
     **Ends of the loaded zone**
 
     The train is the loaded balls of one track. Ball 0 has no neighbour behind it and ball
@@ -260,7 +300,7 @@ class TrainResult:
     """Trains with constant epsilon over the horizon (:func:`train_contact_constant`).
 
     Shapes: m trains, n balls, n - 1 pairs, S grid samples. A train with an unresolved or
-    sliding ball (non-finite epsilon, K or c) has ``valid = False``. Its first contact follows
+    sliding ball (non-finite epsilon or c, NaN K) has ``valid = False``. Its first contact follows
     :func:`tolsim.study.pipeline.propagation.first_contact_constant` (resolved pairs only), and
     everything else is NaN or -1.
 
@@ -339,7 +379,9 @@ def train_contact_constant(initial_gap, velocity_deviation, creep_stiffness, gro
     velocity_deviation : array_like, shape (m, balls)
         Free-rolling epsilon per ball [-], ball 0 trailing.
     creep_stiffness : array_like, broadcastable to (m, balls)
-        K_i [N], > 0; NaN marks an unresolved or sliding ball (the train is not followed).
+        K_i [N], > 0; inf for an anchor, 0 for a ball pushed along (Notes of
+        :func:`cluster_velocities`); NaN marks an unresolved or sliding ball (the train is not
+        followed).
     groove_velocity : float
         v [m/s], > 0.
     horizon : float

@@ -17,22 +17,142 @@ _OPEN, _TOUCHING, _BONDED = 0, 1, 2
 # ----------------------------------------------------------------------------- kernels
 
 
+#: Tiers of a ball in the cluster rule (Notes of ``cluster_velocities``, "Anchors and balls
+#: pushed along"): an anchor (K = inf), a ball with a finite creep stiffness, a ball pushed
+#: along (K = 0, no epsilon of its own).
+ANCHOR, SOFT, PUSHED = 1, 0, -1
+
+
 @jit
-def _effective_stiffness(creep_stiffness, braking_sensitivity, out_weight, out_scale):
-    """kappa_i and lambda_j of (2) for one train (kappa = K, lambda = 1 exactly when c = 0)."""
+def _effective_stiffness(creep_stiffness, braking_sensitivity, out_weight, out_scale, out_tier):
+    """kappa_i, lambda_j of (2) and the tier of each ball of one train (kappa = K, lambda = 1
+    exactly when c = 0). An anchor (K = inf) gets weight 1 / lambda within its tier (equal
+    anchor stiffnesses, eq. 6a), a pushed ball (K = 0) weight 1; both leave lambda unchanged
+    (their c is ignored)."""
     scale = 1.0
     n = creep_stiffness.shape[0]
     for i in range(n):
-        ck = braking_sensitivity[i] * creep_stiffness[i]
-        out_weight[i] = creep_stiffness[i] / ((1.0 + ck) * scale)
-        scale = scale * (1.0 + ck) / (1.0 - ck)
+        k = creep_stiffness[i]
+        if k == np.inf:
+            out_tier[i] = ANCHOR
+            out_weight[i] = 1.0 / scale
+        elif k == 0.0:
+            out_tier[i] = PUSHED
+            out_weight[i] = 1.0
+        else:
+            out_tier[i] = SOFT
+            ck = braking_sensitivity[i] * k
+            out_weight[i] = k / ((1.0 + ck) * scale)
+            scale = scale * (1.0 + ck) / (1.0 - ck)
         if i < n - 1:
             out_scale[i] = scale
 
 
 @jit
-def _pool(eps, weight, scale, link, out_velocity, out_force, out_label,
-          block_start, block_weight, block_sum, block_mean):
+def _pav(values, weight, tier, link, tolerance, block_start, block_weight, block_sum,
+         block_mean, block_tier, block_soft):
+    """Pool adjacent violators of ``values`` on one train; returns the number of blocks.
+
+    ``link[j]``: _OPEN, _TOUCHING (pooled when the lower block's mean exceeds the upper's by
+    more than ``tolerance``) or _BONDED (pooled unconditionally). A block's mean is the
+    weighted mean over its balls of the highest tier it holds (the limit K_anchor -> inf,
+    K_pushed -> 0 of eq. 5); two anchor blocks of equal mean (within ``tolerance``) are
+    compared by their next order, the soft balls' imbalance per anchor (eq. 6b).
+    ``block_soft`` (n, 2) holds each block's sums of kappa and of kappa * value over its soft
+    balls.
+    """
+    n = values.shape[0]
+    top = -1
+    for i in range(n):
+        top += 1
+        block_start[top] = i
+        block_weight[top] = weight[i]
+        block_sum[top] = weight[i] * values[i]
+        block_mean[top] = values[i]
+        block_tier[top] = tier[i]
+        soft = tier[i] == SOFT
+        block_soft[top, 0] = weight[i] if soft else 0.0
+        block_soft[top, 1] = weight[i] * values[i] if soft else 0.0
+        while top > 0:
+            j = block_start[top] - 1
+            pool = link[j] == _BONDED
+            if link[j] == _TOUCHING:
+                lower_mean, upper_mean = block_mean[top - 1], block_mean[top]
+                pool = lower_mean - upper_mean > tolerance
+                if (not pool and abs(lower_mean - upper_mean) <= tolerance
+                        and block_tier[top - 1] == ANCHOR and block_tier[top] == ANCHOR):
+                    pool = ((block_soft[top - 1, 1] - lower_mean * block_soft[top - 1, 0])
+                            / block_weight[top - 1]
+                            > (block_soft[top, 1] - upper_mean * block_soft[top, 0])
+                            / block_weight[top])
+            if not pool:
+                break
+            lower, upper = block_tier[top - 1], block_tier[top]
+            block_soft[top - 1, 0] += block_soft[top, 0]
+            block_soft[top - 1, 1] += block_soft[top, 1]
+            if lower == upper:
+                same = block_mean[top - 1] == block_mean[top]
+                block_weight[top - 1] += block_weight[top]
+                block_sum[top - 1] += block_sum[top]
+                if upper == ANCHOR and same:  # agreeing anchors keep their speed exactly
+                    block_mean[top - 1] = block_mean[top]
+                else:
+                    block_mean[top - 1] = block_sum[top - 1] / block_weight[top - 1]
+            elif upper > lower:
+                block_weight[top - 1] = block_weight[top]
+                block_sum[top - 1] = block_sum[top]
+                block_mean[top - 1] = block_mean[top]
+                block_tier[top - 1] = upper
+            top -= 1
+    return top + 1
+
+
+@jit
+def _block_terms(first, last, values, weight, tier, mean, block_tier, tolerance, out_r):
+    """R_j of eq. (6) inside one block, j = first .. last - 1, into ``out_r[j]``.
+
+    A block of finite stiffnesses: the prefix sums of kappa_i (values_i - mean) over its soft
+    balls (pushed balls add nothing). A block held by anchors (eq. 6a of the Notes): the soft
+    balls as before and each anchor -I kappa_a / sum kappa_a, I the soft balls' sum; +inf
+    throughout when its anchors disagree by more than ``tolerance`` (they cannot roll
+    together: the cluster slides).
+    A block of pushed balls only: 0.
+    """
+    r = 0.0
+    if block_tier == SOFT:
+        for i in range(first, last):
+            if tier[i] == SOFT:
+                r += weight[i] * (values[i] - mean)
+            out_r[i] = r
+    elif block_tier == ANCHOR:
+        total = 0.0
+        anchors = 0.0
+        agree = True
+        for i in range(first, last + 1):
+            if tier[i] == SOFT:
+                total += weight[i] * (values[i] - mean)
+            elif tier[i] == ANCHOR:
+                anchors += weight[i]
+                if abs(values[i] - mean) > tolerance:
+                    agree = False
+        share = -total / anchors
+        for i in range(first, last):
+            if not agree:
+                out_r[i] = np.inf
+                continue
+            if tier[i] == SOFT:
+                r += weight[i] * (values[i] - mean)
+            elif tier[i] == ANCHOR:
+                r += share * weight[i]
+            out_r[i] = r
+    else:
+        for i in range(first, last):
+            out_r[i] = 0.0
+
+
+@jit
+def _pool(eps, weight, scale, tier, link, out_velocity, out_force, out_label,
+          block_start, block_weight, block_sum, block_mean, block_tier, block_soft, terms):
     """Pool adjacent violators on one train; returns the number of blocks.
 
     ``link[j]``: _OPEN, _TOUCHING (closed, may separate) or _BONDED (pooled
@@ -40,38 +160,28 @@ def _pool(eps, weight, scale, link, out_velocity, out_force, out_label,
     (eq. 6, rounding below zero clipped) and the label (trailing ball) of each ball's block.
     """
     n = eps.shape[0]
-    top = -1
-    for i in range(n):
-        top += 1
-        block_start[top] = i
-        block_weight[top] = weight[i]
-        block_sum[top] = weight[i] * eps[i]
-        block_mean[top] = eps[i]
-        while top > 0:
-            j = block_start[top] - 1
-            violates = link[j] == _TOUCHING and block_mean[top - 1] > block_mean[top]
-            if link[j] == _BONDED or violates:
-                block_weight[top - 1] += block_weight[top]
-                block_sum[top - 1] += block_sum[top]
-                block_mean[top - 1] = block_sum[top - 1] / block_weight[top - 1]
-                top -= 1
-            else:
-                break
+    top = _pav(eps, weight, tier, link, 0.0, block_start, block_weight, block_sum, block_mean,
+               block_tier, block_soft) - 1
     for b in range(top + 1):
         first = block_start[b]
         last = block_start[b + 1] - 1 if b < top else n - 1
         w = block_mean[b]
-        r = 0.0
+        _block_terms(first, last, eps, weight, tier, w, block_tier[b], 0.0, terms)
         for i in range(first, last + 1):
             out_velocity[i] = w
             out_label[i] = first
             if i < last:
-                r += weight[i] * (eps[i] - w)
-                q = scale[i] * r
+                q = scale[i] * terms[i]
                 out_force[i] = q if q > 0.0 else 0.0
         if last < n - 1:
             out_force[last] = 0.0
     return top + 1
+
+
+@jit(inline="always")
+def _usable(eps, stiffness, braking):
+    """A ball the cluster rule can take: epsilon and c finite, K not NaN (inf: an anchor)."""
+    return np.isfinite(eps) and not np.isnan(stiffness) and np.isfinite(braking)
 
 
 @pjit
@@ -88,28 +198,32 @@ def cluster_velocities_kernel(eps, creep_stiffness, braking_sensitivity, touchin
         block_weight = np.empty(n)
         block_sum = np.empty(n)
         block_mean = np.empty(n)
+        tier = np.empty(n, dtype=np.int8)
+        block_tier = np.empty(n, dtype=np.int8)
+        block_soft = np.empty((n, 2))
+        terms = np.empty(n)
         for t in range(chunk * CHUNK, min(m, (chunk + 1) * CHUNK)):
             ok = True
             for i in range(n):
-                if not (np.isfinite(eps[t, i]) and np.isfinite(creep_stiffness[t, i])
-                        and np.isfinite(braking_sensitivity[t, i])):
+                if not _usable(eps[t, i], creep_stiffness[t, i], braking_sensitivity[t, i]):
                     ok = False
             if not ok:
                 out_velocity[t, :] = np.nan
                 out_force[t, :] = np.nan
                 continue
-            _effective_stiffness(creep_stiffness[t], braking_sensitivity[t], weight, scale)
+            _effective_stiffness(creep_stiffness[t], braking_sensitivity[t], weight, scale,
+                                 tier)
             for j in range(n - 1):
                 link[j] = _TOUCHING if touching[t, j] else _OPEN
-            _pool(eps[t], weight, scale, link, out_velocity[t], out_force[t], label,
-                  block_start, block_weight, block_sum, block_mean)
+            _pool(eps[t], weight, scale, tier, link, out_velocity[t], out_force[t], label,
+                  block_start, block_weight, block_sum, block_mean, block_tier, block_soft, terms)
 
 
 # ------------------------------------------------------------- the step rule of along_track
 
 
 @jit
-def _step_weights(stiffness, braking, loaded, usable, work_k, work_c, weight, scale):
+def _step_weights(stiffness, braking, loaded, usable, work_k, work_c, weight, scale, tier):
     """kappa and lambda of one row: K and c of its loaded balls when ``usable``, the
     placeholders K = 1, c = 0 elsewhere (such balls are never pooled: their links are open)."""
     for i in range(stiffness.shape[0]):
@@ -119,7 +233,7 @@ def _step_weights(stiffness, braking, loaded, usable, work_k, work_c, weight, sc
         else:
             work_k[i] = 1.0
             work_c[i] = 0.0
-    _effective_stiffness(work_k, work_c, weight, scale)
+    _effective_stiffness(work_k, work_c, weight, scale, tier)
 
 
 @pjit
@@ -200,22 +314,25 @@ def step_clusters_kernel(eps, stiffness, braking, loaded, member, closed, active
         block_weight = np.empty(slots)
         block_sum = np.empty(slots)
         block_mean = np.empty(slots)
+        tier = np.empty(slots, dtype=np.int8)
+        block_tier = np.empty(slots, dtype=np.int8)
+        block_soft = np.empty((slots, 2))
+        terms = np.empty(slots)
         for r in range(chunk * CHUNK, min(rows, (chunk + 1) * CHUNK)):
             ok = active[r]
             if ok:
                 for i in range(slots):
-                    if loaded[r, i] and not (np.isfinite(eps[r, i])
-                                             and np.isfinite(stiffness[r, i])
-                                             and np.isfinite(braking[r, i])):
+                    if loaded[r, i] and not _usable(eps[r, i], stiffness[r, i], braking[r, i]):
                         ok = False
             out_ok[r] = ok
             _step_weights(stiffness[r], braking[r], loaded[r], ok, work_k, work_c, weight,
-                          scale)
+                          scale, tier)
             for j in range(slots - 1):
                 pooled = ok and closed[r, j] and member[r, j] and member[r, j + 1]
                 link[j] = _TOUCHING if pooled else _OPEN
-            _pool(eps[r], weight, scale, link, out_velocity[r], out_force[r], out_label[r],
-                  block_start, block_weight, block_sum, block_mean)
+            _pool(eps[r], weight, scale, tier, link, out_velocity[r], out_force[r],
+                  out_label[r], block_start, block_weight, block_sum, block_mean, block_tier,
+                  block_soft, terms)
 
 
 @pjit
@@ -249,6 +366,10 @@ def step_project_kernel(start, end, stiffness, braking, loaded, member, ok, labe
         block_weight = np.empty(slots)
         block_sum = np.empty(slots)
         block_mean = np.empty(slots)
+        tier = np.empty(slots, dtype=np.int8)
+        block_tier = np.empty(slots, dtype=np.int8)
+        block_soft = np.empty((slots, 2))
+        terms = np.empty(slots)
         for r in range(chunk * CHUNK, min(rows, (chunk + 1) * CHUNK)):
             for i in range(slots):
                 out_position[r, i] = end[r, i]
@@ -260,7 +381,7 @@ def step_project_kernel(start, end, stiffness, braking, loaded, member, ok, labe
                     out_closed[r, j] = False
                 continue
             _step_weights(stiffness[r], braking[r], loaded[r], True, work_k, work_c, weight,
-                          scale)
+                          scale, tier)
             held = False  # a stage-1 cluster pushes through the step
             for j in range(slots - 1):
                 if not (member[r, j] and member[r, j + 1]):
@@ -275,23 +396,8 @@ def step_project_kernel(start, end, stiffness, braking, loaded, member, ok, labe
                 s[i] = end[r, i] - i * diameter
             # PAV of s (weights kappa) under s_j <= s_{j+1}: pool a bonded pair always, a
             # constrained one when the overlap exceeds the tolerance
-            top = -1
-            for i in range(slots):
-                top += 1
-                block_start[top] = i
-                block_weight[top] = weight[i]
-                block_sum[top] = weight[i] * s[i]
-                block_mean[top] = s[i]
-                while top > 0:
-                    j = block_start[top] - 1
-                    if link[j] == _BONDED or (link[j] == _TOUCHING and
-                                              block_mean[top - 1] - block_mean[top] > tolerance):
-                        block_weight[top - 1] += block_weight[top]
-                        block_sum[top - 1] += block_sum[top]
-                        block_mean[top - 1] = block_sum[top - 1] / block_weight[top - 1]
-                        top -= 1
-                    else:
-                        break
+            top = _pav(s, weight, tier, link, tolerance, block_start, block_weight, block_sum,
+                       block_mean, block_tier, block_soft) - 1
             first_new = 1.0  # earliest closing in the step, as a fraction of it
             for b in range(top + 1):
                 first = block_start[b]
@@ -302,13 +408,13 @@ def step_project_kernel(start, end, stiffness, braking, loaded, member, ok, labe
                 if last == first:
                     continue
                 mean = block_mean[b]
-                impulse = 0.0
+                _block_terms(first, last, s, weight, tier, mean, block_tier[b], tolerance,
+                             terms)
                 formed = False
                 for i in range(first, last + 1):
                     out_position[r, i] = mean + i * diameter
                     if i < last:
-                        impulse += weight[i] * (s[i] - mean)
-                        q = scale[i] * impulse / half_step
+                        q = scale[i] * terms[i] / half_step
                         out_force[r, i] += q if q > 0.0 else 0.0
                         out_closed[r, i] = True
                         if not contact_before[r, i]:
@@ -376,11 +482,14 @@ def train_constant_kernel(
         u = np.empty(n)
         g = np.empty(npair)
         event_time = np.empty(npair)
+        tier = np.empty(n, dtype=np.int8)
+        block_tier = np.empty(n, dtype=np.int8)
+        block_soft = np.empty((n, 2))
+        terms = np.empty(n)
         for t_ in range(chunk * CHUNK, min(m, (chunk + 1) * CHUNK)):
             ok = True
             for i in range(n):
-                if not (np.isfinite(eps[t_, i]) and np.isfinite(creep_stiffness[t_, i])
-                        and np.isfinite(braking_sensitivity[t_, i])):
+                if not _usable(eps[t_, i], creep_stiffness[t_, i], braking_sensitivity[t_, i]):
                     ok = False
             if not ok:
                 ft, fp = _first_contact_pairwise(gap[t_], eps[t_], half_speed, horizon)
@@ -392,7 +501,8 @@ def train_constant_kernel(
                               out_segment_time, out_segment_force)
                 continue
             e = eps[t_]
-            _effective_stiffness(creep_stiffness[t_], braking_sensitivity[t_], weight, scale)
+            _effective_stiffness(creep_stiffness[t_], braking_sensitivity[t_], weight, scale,
+                                 tier)
             bonded = 0
             for i in range(n):
                 u[i] = 0.0
@@ -400,8 +510,8 @@ def train_constant_kernel(
                 g[j] = gap[t_, j]
                 link[j] = _TOUCHING if g[j] <= 0.0 else _OPEN
                 out_contact_time[t_, j] = np.inf
-            _pool(e, weight, scale, link, w, q, label,
-                  block_start, block_weight, block_sum, block_mean)
+            _pool(e, weight, scale, tier, link, w, q, label,
+                  block_start, block_weight, block_sum, block_mean, block_tier, block_soft, terms)
             first_time = np.inf
             first_pair = -1
             formed = 0
@@ -490,8 +600,8 @@ def train_constant_kernel(
                     else:
                         link[j] = _OPEN
                 t = t_next
-                _pool(e, weight, scale, link, w, q, label,
-                      block_start, block_weight, block_sum, block_mean)
+                _pool(e, weight, scale, tier, link, w, q, label, block_start, block_weight,
+                      block_sum, block_mean, block_tier, block_soft, terms)
                 last_label = -1
                 for j in range(n - 1):
                     if label[j] == label[j + 1] and link[j] != _BONDED:

@@ -4,6 +4,14 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import jit, pjit
+from tolsim.physics.velocity._curved_kernels import (
+    STUCK_CUT,
+    ZERO_SPIN,
+    curved_point,
+    curved_pole,
+    curved_zero_spin,
+    zero_spin_cut,
+)
 from tolsim.physics.velocity.ball_loads import (
     SIDE_SIGN_X_T,
     SIDE_SIGN_Y_T,
@@ -139,34 +147,6 @@ def contact_friction_kernel(offset_ratio, lateral_ratio, semi_major, semi_minor,
 
 
 @jit
-def _curved_pole(vrel, w, om, omz, a, b, rd, h):
-    """Zero of the slip on the curved surface, normalised (x0/a, z0/b); (0, 0) if none."""
-    # u_z(x) = vrel - (h + S) w - x om = 0, S = sqrt(rd^2 - x^2); squared: quadratic in x.
-    k = vrel - h * w
-    aa = om * om + w * w
-    best = 0.0
-    found = False
-    if aa > 0.0:
-        disc = w * w * (aa * rd * rd - k * k)
-        if disc >= 0.0:
-            sq = np.sqrt(disc)
-            for sgn in (-1.0, 1.0):
-                x = (k * om + sgn * sq) / aa
-                if abs(x) < rd and (k - x * om) * w >= 0.0:
-                    if (not found) or abs(x) < abs(best):
-                        best = x
-                        found = True
-    if not found:
-        return 0.0, 0.0, False
-    s = np.sqrt(rd * rd - best * best)
-    den = s * om - best * w
-    z = 0.0
-    if den != 0.0:
-        z = -omz * ((h + s) * s + best * best) / den
-    return best / a, z / b, True
-
-
-@jit
 def ball_loads_kernel(state, px, py, vgroove, force, semi_major, semi_minor, sigma_scale,
                       curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact):
     """Friction loads on one ball (R = 1, v = 1 units; mu = 1).
@@ -187,6 +167,7 @@ def ball_loads_kernel(state, px, py, vgroove, force, semi_major, semi_minor, sig
     mz = 0.0
     power = 0.0
     s3 = np.empty(4)
+    acc = np.empty(7)
     for i in range(4):
         f = force[i]
         a = semi_major[i]
@@ -241,16 +222,21 @@ def ball_loads_kernel(state, px, py, vgroove, force, semi_major, semi_minor, sig
             if with_power:
                 contact[i, 5] = power - power_before
         else:
-            pt, ps, ok = _curved_pole(vb - vgroove[i], wr_, om, wz, a, b, rd, hoff[i])
+            pt, ps, ok = curved_pole(vb - vgroove[i], wr_, om, wz, a, b, rd, hoff[i])
             pp = pt * pt + ps * ps
             sig0 = sigma_scale * f  # mu sigma_0 a b, with mu = 1
-            ffx = 0.0
-            ffy = 0.0
-            ffz = 0.0
-            gx = 0.0
-            gy = 0.0
-            gz = 0.0
-            if pp <= 1.0:
+            for k in range(6):
+                acc[k] = 0.0
+            acc[6] = power  # the running total, in the same order as a scalar
+            # zero spin (to round-off): the slip's zeros are lines, not a pole
+            zero_spin = max(abs(om), abs(wz)) <= ZERO_SPIN * abs(wr_)
+            cut = zero_spin_cut(vb - vgroove[i], wr_, a, rd, hoff[i]) if zero_spin else 2.0
+            stuck = zero_spin and cut <= STUCK_CUT and pp <= 1.0
+            if stuck:
+                nang = 2 * xo.shape[0]
+            elif zero_spin:
+                nang = 0
+            elif pp <= 1.0:
                 nang = cin.shape[0]
             else:
                 nang = xo.shape[0]
@@ -258,7 +244,17 @@ def ball_loads_kernel(state, px, py, vgroove, force, semi_major, semi_minor, sig
                 half = np.arcsin(1.0 / rp)
                 base = np.arctan2(ps, pt) + np.pi
             for j in range(nang):
-                if pp <= 1.0:
+                if stuck:  # Gauss-Legendre on each side of the zero line through the pole
+                    n_half = xo.shape[0]
+                    ang = 0.5 * np.pi * xo[j % n_half] + (0.0 if j < n_half else np.pi)
+                    e1 = np.cos(ang)
+                    e2 = np.sin(ang)
+                    beta = pt * e1 + ps * e2
+                    disc = beta * beta + 1.0 - pp
+                    wang = 0.5 * np.pi * wo[j % n_half]
+                    s0 = beta / np.sqrt(disc) if disc > 0.0 else 1.0
+                    s0 = min(1.0, max(-1.0, s0))
+                elif pp <= 1.0:
                     e1 = cin[j]
                     e2 = sin_[j]
                     beta = pt * e1 + ps * e2
@@ -285,35 +281,17 @@ def ball_loads_kernel(state, px, py, vgroove, force, semi_major, semi_minor, sig
                     st = np.sin(th)
                     r = m + hh * np.cos(th)
                     wgt = wang * th0 * wr[k] * disc * st * st * r  # sqrt(1-|u|^2) r dr dphi
-                    x = a * (pt + r * e1)
-                    z = b * (ps + r * e2)
-                    s = np.sqrt(rd * rd - x * x)
-                    rad = hoff[i] + s
-                    uz = vb - vgroove[i] - rad * wr_ - x * om
-                    ut = (wz * (rad * s + x * x) + z * (s * om - x * wr_)) / rd
-                    un = np.hypot(ut, uz)
-                    if un == 0.0:
-                        continue
-                    # tangent t = (s x_i - x p_i)/rd; traction -sig0 (ut t + uz z)/|u|
-                    tx = (s * xx - x * px[i]) / rd
-                    ty = (s * xy - x * py[i]) / rd
-                    q = -sig0 * wgt / un
-                    dfx = q * ut * tx
-                    dfy = q * ut * ty
-                    dfz = q * uz
-                    rx = rad * px[i] + x * xx
-                    ry = rad * py[i] + x * xy
-                    ffx += dfx
-                    ffy += dfy
-                    ffz += dfz
-                    power += sig0 * wgt * un
-                    gx += ry * dfz - z * dfy
-                    gy += z * dfx - rx * dfz
-                    gz += rx * dfy - ry * dfx
+                    curved_point(a * (pt + r * e1), b * (ps + r * e2), wgt, vb - vgroove[i],
+                                  wr_, om, wz, rd, hoff[i], xx, xy, px[i], py[i], sig0, acc)
+            if zero_spin and not stuck:
+                curved_zero_spin(vb - vgroove[i], wr_, om, wz, cut, a, b, rd, hoff[i], xx, xy,
+                                  px[i], py[i], sig0, xo, wo, acc)
+            ffz = acc[2]
+            power = acc[6]
             fz_tot += ffz
-            mx += gx
-            my += gy
-            mz += gz
+            mx += acc[3]
+            my += acc[4]
+            mz += acc[5]
             contact[i, 0] = pt if ok else np.nan
             contact[i, 1] = ps if ok else np.nan
             contact[i, 2] = ffz

@@ -421,6 +421,15 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     For the curved surface the pole is the exact zero of the slip field (a quadratic), the
     direction still varies along each ray, and the radial integral uses Gauss-Legendre in
     theta (s = cos theta, which absorbs the sqrt of the pressure at the edge).
+    Without spin (omega_i = omega_z = 0 to round-off: a contact rolling about its own x axis,
+    as the stuck contact of regime B) the slip vanishes on the lines u_z(x) = 0, x = +-x_0,
+    not at a point, and its direction jumps across them: the polar rule about one point of
+    them converged at first order, and not at all in the radial nodes (4 % between 8 and 32
+    at x_0 = a / 2; issue 25). There x is split at -x_0, 0 and x_0 and each piece integrated
+    by a Gauss-Legendre product rule (third order in the nodes, independent of the radial
+    ones), and a stuck contact (x_0 = 0, one double line through the pole) by the polar rule
+    split at that line, Gauss-Legendre on each side (exponential)
+    (:mod:`tolsim.physics.velocity._curved_kernels`, tests/physics/test_curved_zero_spin.py).
 
     The equilibrium is solved per ball by a damped Newton method (central-difference Jacobian,
     backtracking line search, Levenberg-Marquardt fallback) from pure rolling at the contact

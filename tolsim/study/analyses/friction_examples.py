@@ -10,6 +10,7 @@ import numpy as np
 from tolsim.physics.trains import (
     train_contact_constant,
 )
+from tolsim.physics.trains.regimes import pair_braking
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.study.pipeline.block import evaluate_block
 from tolsim.study.pipeline.track_friction import (
@@ -19,9 +20,8 @@ from tolsim.study.pipeline.track_friction import (
 )
 from tolsim.study.sampling import sample_block
 
-#: Columns of the carriage force per push and per neighbour force in the analytic loads.
+#: Column of the carriage force per push in the analytic loads.
 PUSH_COLUMN = LOAD_COLUMNS.index("carriage_force_per_push")
-NEIGHBOUR_COLUMN = LOAD_COLUMNS.index("carriage_force_per_neighbour_force")
 
 
 # --------------------------------------------------------------------------------------------
@@ -213,7 +213,7 @@ def _example_trajectories(config, block, figures, trains, chosen):
                                     samples=config.contact.travel_points)
     load = trains.load[rows]
     coefficient = ((load[:, 1:, PUSH_COLUMN] - load[:, :-1, PUSH_COLUMN])
-                   + (load[:, :-1, NEIGHBOUR_COLUMN] + load[:, 1:, NEIGHBOUR_COLUMN]))
+                   + pair_braking(load, config.contact.ball_friction_coefficient))
     baseline = figures.baseline[chosen]
     force = baseline[:, None] + np.einsum("ksj,kj->ks", result.grid_contact_force, coefficient)
     start = np.asarray(block.initial_position).reshape(-1, n)[rows]

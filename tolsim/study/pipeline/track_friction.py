@@ -11,9 +11,7 @@ balls' creep coefficients. The theory is in the Notes of those.
 from dataclasses import dataclass
 
 import numpy as np
-from numba import prange
 
-from tolsim._jit import pjit
 from tolsim.physics._fastmath import cbrt_nonnegative
 from tolsim.physics.geometry import K_F_PAPER
 from tolsim.physics.hertz import hertz_constants
@@ -22,26 +20,28 @@ from tolsim.physics.trains import (
     step_project_kernel,
     train_contact_constant,
 )
+from tolsim.physics.trains.regimes import TRAIN_COLUMNS, pair_braking, regime_creep_coefficients
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS, creep_coefficients_kernel
 from tolsim.study.pipeline.carriage_track import (
     carry_pairs_kernel,
     first_contact_carriage_track,
 )
 from tolsim.study.pipeline.evaluate import BallState, evaluate_balls, loads_at
-from tolsim.study.pipeline.propagation import first_contact_along_track
+from tolsim.study.pipeline.friction_kernels import (
+    step_friction_kernel,
+    stroke_friction_kernel,
+    train_inputs_kernel,
+)
+from tolsim.study.pipeline.propagation import first_contact_along_track, pushed_velocity_deviation
 from tolsim.study.sampling import error_values
 from tolsim.study.statistics.friction import COLUMNS
 
 #: Columns of the per-ball creep coefficients
-# (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`).
-_K = LOAD_COLUMNS.index("creep_stiffness")
-_C = LOAD_COLUMNS.index("braking_sensitivity")
-_F0 = LOAD_COLUMNS.index("free_rolling_carriage_force")
-_A = LOAD_COLUMNS.index("carriage_force_per_push")
-_B = LOAD_COLUMNS.index("carriage_force_per_neighbour_force")
-_PCAP = LOAD_COLUMNS.index("traction_capacity")
-_BCAP = LOAD_COLUMNS.index("braking_capacity")
-
+# (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`, the first of TRAIN_COLUMNS).
+_K, _C, _F0, _A, _B, _PCAP, _BCAP = (LOAD_COLUMNS.index(name) for name in (
+    "creep_stiffness", "braking_sensitivity", "free_rolling_carriage_force",
+    "carriage_force_per_push", "carriage_force_per_neighbour_force", "traction_capacity",
+    "braking_capacity"))
 
 
 # --------------------------------------------------------------------------------------------
@@ -107,10 +107,12 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (m * tracks * balls, len(LOAD_COLUMNS))
-        The columns of :data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS` at zero load (K [N],
-        c [1/N], F_0 [N], a, b [-], P_cap, braking capacity [N]); NaN for an unresolved ball
-        (``state.valid`` False: its contact state may be missing or partial).
+    ndarray, shape (m * tracks * balls, len(TRAIN_COLUMNS))
+        The columns of :data:`tolsim.physics.trains.regimes.TRAIN_COLUMNS`: those of
+        :data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS` at zero load (K [N], c [1/N],
+        F_0 [N], a, b [-], P_cap, braking capacity [N]) and the rolling rates; NaN for an
+        unresolved ball (neither ``state.valid`` nor unloaded: its contact state may be
+        missing or partial).
 
     Notes
     -----
@@ -127,99 +129,23 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
     :func:`tolsim.physics.velocity.full.full` at zero load (slow: about 1e4 balls/s); the
     carriage-force slopes a, b stay the analytic ones (the full model gives the force at a load, not
     its slopes). The train's epsilon is always the study's epsilon of the ball.
+
+    **By regime** (issue 25): the creep model's columns hold for a ball in regime A. A ball in
+    regime B creeps with the stiffness of its stick line, an exactly two-point ball is an
+    anchor (K = inf), an unloaded ball is pushed along (K = 0), with the columns of
+    :func:`tolsim.physics.trains.regimes.regime_creep_coefficients` (a three-point ball has
+    no creep model yet: its train stays unresolved).
     """
     dbeta = np.ascontiguousarray(state.contact_angle_deviation.reshape(-1, 4))
     force = np.ascontiguousarray(state.normal_force.reshape(-1, 4))
-    load = CREEP_MODELS[config.contact.creep_model](dbeta, force, config.bearing,
-                                                   config.contact.ball_friction_coefficient)
-    unresolved = ~np.asarray(state.valid).reshape(-1)
+    mu_bb = config.contact.ball_friction_coefficient
+    load = CREEP_MODELS[config.contact.creep_model](dbeta, force, config.bearing, mu_bb)
+    load = regime_creep_coefficients(load, np.asarray(state.regime).reshape(-1), dbeta, force,
+                                     config.bearing, ball_friction=mu_bb)
+    unresolved = ~np.asarray(state.accounted).reshape(-1)
     if unresolved.any():
         load[unresolved] = np.nan
     return load
-
-
-# --------------------------------------------------------------------------------------------
-# The stroke of a train: exact figures from the piecewise-constant segments (kernel)
-# --------------------------------------------------------------------------------------------
-@pjit
-def stroke_friction_kernel(segment_start, segment_force, valid, load, horizon, out_baseline,
-                           out_mean, out_max, out_min, out_sliding, out_max_rolling):
-    """Carriage friction of trains over the stroke from their segments; unchecked.
-
-    ``segment_start`` (trains, S) [s] padded with inf, ``segment_force`` (trains, S, n - 1)
-    [N], ``valid`` (trains,), ``load`` (trains, n, len(LOAD_COLUMNS)). Writes per train the
-    baseline sum_i F_0,i [N], the time mean, maximum and minimum over [0, horizon] of the
-    increase (1) [N] (NaN for an invalid train), whether a ball slides in some segment (the
-    capacities at zero neighbour force, Notes of :func:`evaluate_friction`) and the largest
-    increase before the first sliding segment (-inf if it slides from the start).
-    """
-    trains, segments = segment_start.shape
-    n = load.shape[1]
-    for t in prange(trains):
-        base = 0.0
-        for i in range(n):
-            base += load[t, i, _F0]
-        out_baseline[t] = base
-        if not valid[t]:
-            out_mean[t] = np.nan
-            out_max[t] = np.nan
-            out_min[t] = np.nan
-            out_sliding[t] = False
-            out_max_rolling[t] = np.nan
-            continue
-        total = 0.0
-        high = -np.inf
-        low = np.inf
-        slid = False
-        rolling = -np.inf
-        for s in range(segments):
-            start = segment_start[t, s]
-            if not start <= horizon:  # padding
-                break
-            end = horizon
-            if s + 1 < segments and segment_start[t, s + 1] < horizon:
-                end = segment_start[t, s + 1]
-            increase = 0.0
-            for j in range(n - 1):
-                k = ((load[t, j + 1, _A] - load[t, j, _A])
-                     + (load[t, j, _B] + load[t, j + 1, _B]))
-                increase += k * segment_force[t, s, j]
-            if not slid:
-                for i in range(n):
-                    back = segment_force[t, s, i - 1] if i > 0 else 0.0
-                    front = segment_force[t, s, i] if i < n - 1 else 0.0
-                    if (abs(back - front) >= load[t, i, _PCAP]
-                            or back + front >= load[t, i, _BCAP]):
-                        slid = True
-                if not slid and increase > rolling:
-                    rolling = increase
-            total += increase * (end - start)
-            if increase > high:
-                high = increase
-            if increase < low:
-                low = increase
-        out_mean[t] = total / horizon
-        out_max[t] = high
-        out_min[t] = low
-        out_sliding[t] = slid
-        out_max_rolling[t] = rolling
-
-
-@pjit
-def train_inputs_kernel(eps, load, out_stiffness, out_braking):
-    """K and c of the balls for :func:`tolsim.physics.trains.train_contact_constant`: NaN K
-    (and c = 0) for a ball that leaves its train unresolved (Notes of :func:`evaluate_friction`):
-    epsilon, K, c, F_0, a or b not finite, K <= 0 or |c K| >= 1."""
-    for t in prange(eps.shape[0]):
-        for i in range(eps.shape[1]):
-            k = load[t, i, _K]
-            c = load[t, i, _C]
-            usable = (np.isfinite(eps[t, i]) and np.isfinite(k) and k > 0.0
-                      and np.isfinite(c) and abs(c * k) < 1.0
-                      and np.isfinite(load[t, i, _F0]) and np.isfinite(load[t, i, _A])
-                      and np.isfinite(load[t, i, _B]))
-            out_stiffness[t, i] = k if usable else np.nan
-            out_braking[t, i] = c if usable else 0.0
 
 
 @dataclass
@@ -276,7 +202,7 @@ class FrictionState:
 class _Trains:
     """What :func:`follow_trains` computed per train (trains = m * tracks)."""
 
-    load: np.ndarray  # (trains, n, len(LOAD_COLUMNS))
+    load: np.ndarray  # (trains, n, len(TRAIN_COLUMNS))
     valid: np.ndarray  # (trains,) the train was followed
     velocity_deviation: np.ndarray  # (trains, n)
     stiffness: np.ndarray  # (trains, n), NaN for a ball that makes the train unresolved
@@ -330,8 +256,12 @@ def follow_trains(config, initial_gap, state):
     tracks, n = config.n_tracks, config.train.balls
     m = state.velocity_deviation.shape[0]
     trains = m * tracks
-    load = ball_creep_coefficients(config, state).reshape(trains, n, len(LOAD_COLUMNS))
-    eps = np.ascontiguousarray(state.velocity_deviation.reshape(trains, n))
+    load = ball_creep_coefficients(config, state).reshape(trains, n, len(TRAIN_COLUMNS))
+    eps = state.velocity_deviation
+    unloaded = state.unloaded
+    if unloaded.any():  # pushed along at the speed that closes both its gaps at once
+        eps = pushed_velocity_deviation(initial_gap, eps, unloaded, tracks)
+    eps = np.ascontiguousarray(eps.reshape(trains, n))
     stiffness, braking = np.empty((trains, n)), np.empty((trains, n))
     train_inputs_kernel(eps, load, stiffness, braking)
     horizon = config.motion.duration
@@ -341,8 +271,9 @@ def follow_trains(config, initial_gap, state):
     baseline, mean, high, low = (np.empty(trains) for _ in range(4))
     sliding = np.empty(trains, dtype=np.bool_)
     rolling = np.empty(trains)
+    pairs = pair_braking(load, config.contact.ball_friction_coefficient)
     stroke_friction_kernel(result.segment_start, result.segment_contact_force, result.valid,
-                           load, horizon, baseline, mean, high, low, sliding, rolling)
+                           load, pairs, horizon, baseline, mean, high, low, sliding, rolling)
     track_ok = result.valid & ~sliding & np.isfinite(baseline)
     figures = _worst_tracks(config, m, track_ok=track_ok, baseline=baseline, increase_max=high,
                             increase_mean=mean, ripple=high - low,
@@ -436,6 +367,18 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
     * A ball without epsilon (unresolved in :mod:`tolsim.study.pipeline.evaluate`), or whose creep
       coefficients are not finite (K <= 0, |c K| >= 1 where the train model does not apply, a
       ``full`` creep solve that failed), leaves its train unresolved: the train is not followed.
+    * **Anchors and balls pushed along** (issue 25; the columns of
+      :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`): a ball in regime B
+      creeps with the stiffness of its stick line (about 3e4 N); an exactly two-point ball
+      keeps its epsilon (K = inf) and slides when |P| / P_cap + S / S_cap >= 1 (exact:
+      |P| + mu_bb S >= 2 mu F); an
+      unloaded ball gets the epsilon that closes both its gaps at once
+      (:func:`tolsim.study.pipeline.propagation.pushed_velocity_deviation`), K = 0 and no
+      friction, and transmits the force. A pair with a ball in regime B or two-point pays the
+      ball-ball friction of the two balls' actual rotations, one with a pushed ball none
+      (:func:`tolsim.physics.trains.regimes.pair_braking`). Only ``constant`` propagation
+      fills in the pushed balls: with ``along_track`` an unloaded ball still leaves its train
+      unresolved.
     * **Sliding.** The linear creep law holds while each ball rolls. It stops when the push on a
       ball reaches its traction capacity, |P_i| >= P_cap,i, or the neighbour forces stall its
       rotation, S_i >= braking capacity (:mod:`tolsim.physics.velocity.ball_loads`). Every segment
@@ -471,77 +414,6 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
 #: Overlap below which the step rule leaves a pair alone, as a fraction of the ball diameter
 #: (1e-14 m for a 10 mm ball, some 700 ulps of a position of 0.1 m: rounding, not contact).
 STEP_TOLERANCE = 1e-12
-
-
-@pjit
-def step_friction_kernel(loaded, member, load, force, ok, contact, formed, weight, alive,
-                         sliding, baseline_sum, increase_sum, increase_high, friction_high,
-                         friction_low, force_high, contact_sum, formed_sum, rolling,
-                         out_baseline, out_increase):
-    """One step of the carriage friction of trains (``along_track``); unchecked.
-
-    ``loaded`` (R, S) the balls that carry load (their F_0 is the baseline), ``member``
-    (R, S) the balls of the train, ``load`` (R, S, len(LOAD_COLUMNS)) their creep
-    coefficients, ``force`` (R, S - 1) the step-mean contact forces [N], ``ok`` (R,) the row
-    was followed in this step, ``contact`` (R,) the fraction of the step with a force,
-    ``formed`` (R,) the clusters formed in it, ``weight`` dt / T. Updates, for the rows still
-    ``alive``: the running time means (baseline, increase, contact fraction), maxima and
-    minima, the clusters, and the largest increase before an onset (``rolling``); a row that
-    is not ``ok`` or in which a ball slides (capacities at zero neighbour force, as
-    :func:`stroke_friction_kernel`) is no longer alive from this step on (``sliding`` set
-    for the latter). Writes the step's baseline and increase [N] (NaN when not alive).
-    """
-    rows, slots = loaded.shape
-    for r in prange(rows):
-        out_baseline[r] = np.nan
-        out_increase[r] = np.nan
-        if not alive[r]:
-            continue
-        if not ok[r]:
-            alive[r] = False
-            continue
-        base = 0.0
-        for i in range(slots):
-            if loaded[r, i]:
-                base += load[r, i, _F0]
-        increase = 0.0
-        high = 0.0
-        for j in range(slots - 1):
-            if member[r, j] and member[r, j + 1]:
-                k = ((load[r, j + 1, _A] - load[r, j, _A])
-                     + (load[r, j, _B] + load[r, j + 1, _B]))
-                increase += k * force[r, j]
-                if force[r, j] > high:
-                    high = force[r, j]
-        slid = False
-        for i in range(slots):
-            if not member[r, i]:
-                continue
-            back = force[r, i - 1] if i > 0 and member[r, i - 1] else 0.0
-            front = force[r, i] if i < slots - 1 and member[r, i + 1] else 0.0
-            if abs(back - front) >= load[r, i, _PCAP] or back + front >= load[r, i, _BCAP]:
-                slid = True
-        if slid:
-            alive[r] = False
-            sliding[r] = True
-            continue
-        out_baseline[r] = base
-        out_increase[r] = increase
-        if increase > rolling[r]:
-            rolling[r] = increase
-        baseline_sum[r] += base * weight
-        increase_sum[r] += increase * weight
-        if increase > increase_high[r]:
-            increase_high[r] = increase
-        total = base + increase
-        if total > friction_high[r]:
-            friction_high[r] = total
-        if total < friction_low[r]:
-            friction_low[r] = total
-        if high > force_high[r]:
-            force_high[r] = high
-        contact_sum[r] += contact[r] * weight
-        formed_sum[r] += formed[r]
 
 
 def _flat_balls(state, index):
@@ -691,11 +563,11 @@ class TrackFriction:
         self.alive &= ~np.asarray(rows, dtype=bool)
 
     def coefficients(self, state, mask, rows=None) -> np.ndarray:
-        """(R, S, len(LOAD_COLUMNS)) creep coefficients of the balls ``mask`` (R, S), NaN
+        """(R, S, len(TRAIN_COLUMNS)) creep coefficients of the balls ``mask`` (R, S), NaN
         elsewhere. ``state``: the BallState of those balls (of shape ``mask.shape``, or
         flattened in ``mask`` order); only the rows ``rows`` (R,) when given."""
         mask = np.asarray(mask, dtype=bool)
-        load = np.full(mask.shape + (len(LOAD_COLUMNS),), np.nan)
+        load = np.full(mask.shape + (len(TRAIN_COLUMNS),), np.nan)
         select = mask if rows is None else mask & np.asarray(rows)[:, None]
         if select.any():
             flat_select = select[mask] if np.size(state.valid) != mask.size else \
@@ -754,7 +626,8 @@ class TrackFriction:
                             self.before, self.diameter, self.tolerance, self.half_step,
                             position, force, closed, formed, contact)
         baseline, increase = np.empty(rows), np.empty(rows)
-        step_friction_kernel(loaded, member, load, force, ok, contact, formed.astype(float),
+        pairs = pair_braking(load, self.config.contact.ball_friction_coefficient)
+        step_friction_kernel(loaded, member, load, pairs, force, ok, contact, formed.astype(float),
                              self.weight, self.alive, self.sliding, self.baseline_sum,
                              self.increase_sum, self.increase_high, self.friction_high,
                              self.friction_low, self.force_high, self.contact_sum,

@@ -1,0 +1,114 @@
+"""Trains with anchors and balls pushed along, through a study's friction (issue 25, item 3).
+
+Three balls of the paper's bearing (Table 1) under paired forces (side force ratios -0.3, 0,
++0.3, bottom groove turned 0.5 deg): ball 0 is faster than ball 2. The middle ball is made
+an exactly two-point ball (an anchor) or unloaded (pushed along) in the evaluated state, and
+the friction figures are checked against closed forms: the cluster rule with anchors (eqs. 6a,
+6b of tolsim.physics.trains), the two-point ball's F_c = (mu_bb S - P) / 2 (issue 25), the
+pair braking from the actual rotations (tolsim.physics.trains.regimes.pair_braking), and the
+single-ball coefficients of tolsim.physics.velocity.analytic.analytic. Tolerance 1e-12
+relative (the study runs the same arithmetic in another order).
+"""
+
+import numpy as np
+from numpy.testing import assert_allclose
+
+from tolsim.io.config import parse_config
+from tolsim.physics.geometry import TABLE1, paired_forces
+from tolsim.physics.trains.regimes import rigid_rolling_rate, two_point_rolling_rate
+from tolsim.physics.velocity.analytic import analytic
+from tolsim.physics.velocity.models import BALL_TWO_POINT, BALL_UNLOADED
+from tolsim.study.pipeline import track_friction as fr
+from tolsim.study.pipeline.block import evaluate_block
+from tolsim.study.sampling import sample_block
+
+THREE_BALLS = """\
+[bearing]
+ball_diameter_mm = 10.0
+conformity = 0.54
+friction_coefficient = 0.1
+[motion]
+groove_velocity_mm_per_s = 10.0
+duration_s = 10.0
+[train]
+balls = 3
+initial_gap = { distribution = "fixed", value_um = 5.0 }
+[loads]
+normal_load_N = 200.0
+side_force_ratio = [-0.3, 0.0, 0.3]
+[tolerances.bottom_rotation]
+distribution = "fixed"
+value_deg = 0.5
+[study]
+samples = 4
+seed = 5
+block_size = 4
+velocity_model = "analytic"
+static_model = "paired"
+[contact]
+ball_friction_coefficient = 0.1
+"""
+MU_BB = 0.1
+
+
+def _setup():
+    config = parse_config(THREE_BALLS, "three_balls.toml")
+    block = sample_block(config, 0)
+    state = evaluate_block(config, block, propagate=False).state
+    theta = np.radians(0.5)
+    dbeta = np.array([[-theta, theta, 0.0, 0.0]] * 2)  # balls 0 and 2, [Lin2018] Sec. 3.1
+    force = np.array([paired_forces(rho * 200.0, 200.0) for rho in (-0.3, 0.3)])
+    ref = analytic(dbeta, force, TABLE1, push=0.0, ball_friction=MU_BB)
+    assert ref.velocity_deviation[0] > 0 > ref.velocity_deviation[1]
+    return config, block, state, dbeta, force, ref
+
+
+def test_unloaded_middle_ball_is_pushed_along_and_resolves():
+    # The unloaded ball has no epsilon of its own: before issue 25's item 3 its train was
+    # unresolved. Pushed along (K = 0) it closes both gaps at once and transmits the force:
+    # the two soft balls act as a pair, Q = (eps_0 - eps_2) / (1/K_0 + 1/K_2 - c_0 + c_2); it
+    # has no raceway friction and its pairs no ball-ball braking (Notes of pair_braking), so
+    # the increase is (a_2 - a_0) Q (0 before contact: the maximum is max(0, that)).
+    config, block, state, _, _, ref = _setup()
+    state.velocity_deviation[:, 1] = np.nan
+    state.valid[:, 1] = False
+    state.regime[:, 1] = BALL_UNLOADED
+    state.normal_force[:, 1, :] = 0.0
+    out = fr.evaluate_friction(config, block.initial_gap, state)
+    assert out.resolved.all()
+    eps, k, c = ref.velocity_deviation, ref.creep_stiffness, ref.braking_sensitivity
+    a = ref.carriage_force_per_push
+    q = (eps[0] - eps[1]) / (1 / k[0] + 1 / k[1] - c[0] + c[1])
+    assert_allclose(out.contact_force_max, q, rtol=1e-12)
+    assert_allclose(out.increase_max, max((a[1] - a[0]) * q, 0.0), rtol=1e-12)
+    assert_allclose(out.baseline, ref.free_rolling_carriage_force.sum(), rtol=1e-12)
+
+
+def test_two_point_middle_ball_is_an_anchor():
+    # The middle ball exactly two-point (BL and TR at 45 deg, eps = 0): ball 0 pushes it with
+    # Q_01 = eps_0 / (1/K_0 - c_0), it pushes ball 2 with Q_12 = -eps_2 / (1/K_2 + c_2), and
+    # the friction rises by k_01 Q_01 + k_12 Q_12 with k_01 = (-1/2 - a_0) + B_01,
+    # k_12 = (a_2 + 1/2) + B_12, B = mu_bb |Omega + Omega'| R / v from the rotations.
+    config, block, state, dbeta, force, ref = _setup()
+    two = np.array([141.4, 0.0, 141.4, 0.0])
+    state.velocity_deviation[:, 1] = 0.0
+    state.valid[:, 1] = True
+    state.regime[:, 1] = BALL_TWO_POINT
+    state.normal_force[:, 1, :] = two
+    state.contact_angle_deviation[:, 1, :] = 0.0
+    out = fr.evaluate_friction(config, block.initial_gap, state)
+    assert out.resolved.all() and not out.sliding.any()
+    eps, k, c = ref.velocity_deviation, ref.creep_stiffness, ref.braking_sensitivity
+    a = ref.carriage_force_per_push
+    q01 = eps[0] / (1 / k[0] - c[0])
+    q12 = -eps[1] / (1 / k[1] + c[1])
+    spin = rigid_rolling_rate(dbeta, force, TABLE1)
+    middle = two_point_rolling_rate(np.zeros((1, 4)), two[None, :], TABLE1)[0]
+    b01 = MU_BB * np.hypot(*(spin[0] + middle))
+    b12 = MU_BB * np.hypot(*(spin[1] + middle))
+    first = ((-0.5 - a[0]) + b01) * q01
+    second = ((a[1] + 0.5) + b12) * q12
+    single = first if eps[0] > -eps[1] else second  # the pair that closes first
+    assert_allclose(out.contact_force_max, max(q01, q12), rtol=1e-12)
+    assert_allclose(out.increase_max, max(0.0, single, first + second), rtol=1e-12)
+    assert_allclose(out.baseline, ref.free_rolling_carriage_force.sum(), rtol=1e-12)

@@ -1,0 +1,359 @@
+"""The creep coefficients of a ball in a train from its own regime (issue 25, item 3).
+
+A ball in regime A creeps (finite K); a ball in regime B is stiff (K from its stick line,
+3e4 N and more); an exactly two-point ball is an *anchor* (K = inf: it keeps its speed under
+a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilon of its
+own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
+adds each ball's rolling angular velocity; :func:`pair_braking` gives the ball-ball friction
+of a pair from the two balls' actual rotations. The cluster rule with anchors is in the Notes of
+:func:`tolsim.physics.trains.cluster_velocities`.
+"""
+
+import numpy as np
+from numba import prange
+
+from tolsim._jit import pjit
+from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, Bearing
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity._full_kernels import ball_loads_kernel
+from tolsim.physics.velocity.analytic import LOAD_COLUMNS
+from tolsim.physics.velocity.ball_loads import ball_contact_slip
+from tolsim.physics.velocity.full import (
+    DEFAULT_ANGULAR_NODES,
+    DEFAULT_RADIAL_NODES,
+    full,
+    quadrature_grid,
+)
+from tolsim.physics.velocity.models import BALL_REGIME_B, BALL_TWO_POINT, BALL_UNLOADED
+
+#: Columns of a train's per-ball coefficients: those of the creep model
+#: (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`), then the ball's rolling angular
+#: velocity Omega_perp R_B / v (x and y; NaN where no ball of the batch needs it) and its
+#: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only).
+TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime")
+#: Creep stiffness of an anchor and of a ball pushed along [N].
+ANCHOR_STIFFNESS, PUSHED_STIFFNESS = np.inf, 0.0
+#: Step along the stick line for its curvature, a fraction of v.
+STICK_STEP = 1e-5
+
+_COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
+
+
+def _contact_directions(contact_angle_deviation, bearing):
+    """p_i = (sx sin beta_i, sy cos beta_i), shape (n, 4, 2)."""
+    beta = bearing.nominal_contact_angle + np.asarray(contact_angle_deviation, dtype=float)
+    return np.stack([SIDE_SIGN_X * np.sin(beta), SIDE_SIGN_Y * np.cos(beta)], axis=-1)
+
+
+def rigid_rolling_rate(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+    """Omega_perp R_B / v of rigid rolling at the loaded contact centres (least squares).
+
+    The rows v_B + w_x p_y - w_y p_x = V_i (V = 0 bottom, 1 top; R_B = v = 1) over the
+    contacts with F_i > 0, as :func:`tolsim.physics.velocity.ball_loads.rolling_axis` but
+    keeping the rate: (1 / (2 cos beta_0), 0) for the nominal ball. NaN where the rows do not
+    fix (w_x, w_y) (fewer than three loaded contacts).
+
+    Parameters
+    ----------
+    contact_angle_deviation, normal_force : array_like, shape (n, 4)
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+    """
+    p = _contact_directions(contact_angle_deviation, bearing)
+    on = (np.asarray(normal_force, dtype=float) > 0.0)[..., None]
+    rows = np.concatenate([np.ones(p.shape[:-1] + (1,)), p[..., 1:2], -p[..., 0:1]], axis=-1)
+    rows = rows * on
+    target = np.array([0.0, 0.0, 1.0, 1.0])[None, :, None] * on
+    ata = np.einsum("nki,nkj->nij", rows, rows)
+    atb = np.einsum("nki,nk->ni", rows, target[..., 0])
+    out = np.full((len(p), 2), np.nan)
+    good = np.abs(np.linalg.det(ata)) > 1e-12
+    if good.any():
+        out[good] = np.linalg.solve(ata[good], atb[good][..., None])[:, 1:, 0]
+    return out
+
+
+def two_point_rolling_rate(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+    """Omega R_B / v = (p_t,y, -p_t,x) / 2 of an exactly two-point ball (issue 25).
+
+    p_t the direction to its loaded top contact: (cos beta, -sin beta) / 2 on the diagonal
+    BL-TR, (cos beta, sin beta) / 2 on BR-TL. Both contacts stick, Omega . p = 0 (no spin),
+    and the top contact moves at v: v_B + R (Omega x p_t)_z = v with v_B = v / 2.
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+    """
+    p = _contact_directions(contact_angle_deviation, bearing)
+    force = np.asarray(normal_force, dtype=float)
+    top = np.where(force[:, 2] > 0.0, 2, 3)
+    pt = p[np.arange(len(p)), top]
+    return 0.5 * np.stack([pt[:, 1], -pt[:, 0]], axis=-1)
+
+
+@pjit
+def stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo, tr, wr,
+                                step, out):
+    """K = (v / 2) d^2 D_others / dw^2 [N / mu] on the stick line of each ball; unchecked.
+
+    ``beta``, ``force`` (n, 4), ``stuck`` (n,) the stuck contact k (else inf: both contacts of
+    a pair stick, rigid), ``rate`` (n,) w [v] at the minimum, ``a``, ``b`` (n, 4) the
+    semi-axes [R]. Central difference of the line slope dD/dw = -(F_z + M . x_k) (the loads
+    of the other contacts, R = v = mu = 1) over w +- ``step``.
+    """
+    for n in prange(beta.shape[0]):
+        k = stuck[n]
+        if k < 0 or k > 3:
+            out[n] = np.inf
+            continue
+        px = np.empty(4)
+        py = np.empty(4)
+        others = np.empty(4)
+        for i in range(4):
+            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
+            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
+            others[i] = force[n, i] if i != k else 0.0
+        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
+        xx, xy = -py[k], px[k]
+        state = np.empty(4)
+        loads = np.empty(5)
+        contact = np.empty((4, 5))
+        zero = np.zeros(4)
+        slope = np.empty(2)
+        for side in range(2):
+            w = rate[n] + (step if side else -step)
+            state[0] = vgroove[k] + w
+            state[1] = w * xx
+            state[2] = w * xy
+            state[3] = 0.0
+            ball_loads_kernel(state, px, py, vgroove, others, a[n], b[n], 1.5 / np.pi, False,
+                              1.0, zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
+            slope[side] = -(loads[0] + loads[1] * xx + loads[2] * xy)
+        out[n] = 0.25 * (slope[1] - slope[0]) / step
+
+
+def stick_line_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+    """Creep stiffness K [N] of balls in regime B: the curvature of D on their stick line.
+
+    Parameters
+    ----------
+    contact_angle_deviation, normal_force : array_like, shape (n, 4)
+
+    Returns
+    -------
+    k : ndarray (n,)
+        K [N]; inf where both contacts of a pair stick (rigid), NaN where ``full`` does not
+        certify the ball in regime B.
+    result : tolsim.physics.velocity.full.FullResult
+        The free solve (epsilon, F_0, Omega).
+
+    Notes
+    -----
+    On the stick line of contact k the states are v_B = V_k + w, Omega = (w / R) x_k, and a
+    push P moves the minimum of D_others(w) - P v_B to dD_others/dw = P; with
+    epsilon = 2 v_B / v - 1, K = dP/d(epsilon) = (v / 2) d^2 D_others / dw^2, by central
+    differences of the line slope (``STICK_STEP`` v; D_others is smooth there: the other
+    contacts slip). 3-5e4 N against 110-750 N in regime A (issue 25).
+    """
+    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
+    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
+    v = 0.01
+    res = full(dbeta, force, bearing, groove_velocity=v)
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    radius = bearing.ball_radius
+    beta = bearing.nominal_contact_angle + dbeta
+    a = hc.semi_major_coefficient * np.cbrt(force) / radius
+    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
+    stuck = np.asarray(res.stuck_contact, dtype=np.int64)
+    p = _contact_directions(dbeta, bearing)
+    k = np.clip(stuck, 0, 3)
+    xk = np.stack([-p[np.arange(len(p)), k, 1], p[np.arange(len(p)), k, 0]], axis=-1)
+    rate = np.sum(res.angular_velocity[:, :2] * radius / v * xk, axis=1)
+    out = np.empty(len(dbeta))
+    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
+    stick_line_stiffness_kernel(beta, force, stuck, np.ascontiguousarray(rate), a, b, *grid,
+                                STICK_STEP, out)
+    out = bearing.friction_coefficient * out
+    return np.where(np.asarray(res.regime) == 2, out, np.nan), res
+
+
+def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
+                              bearing: Bearing = TABLE1, *, ball_friction=0.1):
+    """The train columns of balls from their regimes: anchors, soft balls, pushed balls.
+
+    Parameters
+    ----------
+    load : ndarray, shape (n, len(LOAD_COLUMNS))
+        The creep model's columns (regime A), NaN where it has none.
+    regime : array_like of int, shape (n,)
+        :data:`tolsim.physics.velocity.models.BALL_REGIMES` codes.
+    contact_angle_deviation, normal_force : array_like, shape (n, 4)
+        dbeta_i [rad], F_i [N].
+    bearing : Bearing
+    ball_friction : float
+        mu_bb [-].
+
+    Returns
+    -------
+    ndarray, shape (n, len(TRAIN_COLUMNS))
+        ``load`` unchanged for every ball in regime A (bit for bit), the columns of the Notes
+        for the others, and the rolling rates and regimes when the batch holds any.
+
+    Notes
+    -----
+    **An exactly two-point ball** (both contacts stick, rolling at v / 2 with D = 0;
+    :func:`tolsim.physics.velocity.regimes.two_point_loaded`). Under a push P and a
+    neighbour-force sum S its force row f_b + f_t + P = 0 and its moment about the rolling
+    axis -R (f_b - f_t) - mu_bb S R = 0 give F_c = f_t = (mu_bb S - P) / 2, and epsilon stays
+    0 while |P| + mu_bb S <= 2 mu F. So its columns are exact: epsilon_free = 0, K = inf,
+    c = 0, F_0 = 0, a = dF_c/dP = -1/2, b = dF_c/dS = mu_bb / 2, and the capacities
+    P_cap = 2 mu F, S_cap = 2 mu F / mu_bb, between which the rolling range is the *line*
+    |P| / P_cap + S / S_cap < 1 (the sliding check of an anchor in
+    :mod:`tolsim.study.pipeline.track_friction`). F = the smaller of its two forces (they are
+    equal in static equilibrium).
+
+    **A ball in regime B** (one contact k stuck). Its states lie on the stick line
+    v_B = V_k + w, Omega = (w / R) x_k; a push moves it along the line to the minimum of
+    D_others(w) + mu_bb S |w| - P v_B, so dP - mu_bb dS = D''_others dw, and
+
+        K = (v / 2) D''_others,   c = d(epsilon)/dS = -mu_bb / K                     (R1)
+
+    (:func:`stick_line_stiffness`): 3.3e4 N on case (a) at rho = -0.9 .. -0.98, against
+    110-750 N in regime A (issue 25), so it is a stiff ball rather than a rigid anchor: two
+    balls in regime B of different epsilon pushed together share a finite force (as rigid
+    anchors they could not roll together), and a soft neighbour's force is
+    K_s K_B / (K_s + K_B) d(epsilon), 1-2 % below K_s d(epsilon). (Both contacts of a pair
+    stuck, equal angles: rigid, K = inf, an anchor.) F_0 and Omega are those of its certified
+    minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are
+    the creep model's (the loads split between the grooves about as in regime A). Not
+    modelled: the push at which the stuck contact lets go before P_cap (the ball then
+    creeps as in regime A).
+
+    **An unloaded ball** has no raceway contact, so no raceway friction: F_c = 0 whatever the
+    loads (F_0 = a = b = 0), no creep resistance (K = 0: it moves with whatever it touches,
+    a null weight in the cluster rule) and nothing to slide on (capacities inf).
+    """
+    load = np.asarray(load, dtype=np.float64)
+    n = len(load)
+    regime = np.asarray(regime).reshape(n)
+    out = np.full((n, len(TRAIN_COLUMNS)), np.nan)
+    out[:, :len(LOAD_COLUMNS)] = load
+    two = regime == BALL_TWO_POINT
+    stick = regime == BALL_REGIME_B
+    pushed = regime == BALL_UNLOADED
+    if not (two.any() or stick.any() or pushed.any()):
+        return out
+    dbeta = np.asarray(contact_angle_deviation, dtype=np.float64).reshape(n, 4)
+    force = np.asarray(normal_force, dtype=np.float64).reshape(n, 4)
+    mu = bearing.friction_coefficient
+    rate = np.full((n, 2), np.nan)
+    soft = ~(two | stick | pushed)
+    if soft.any():
+        rate[soft] = rigid_rolling_rate(dbeta[soft], force[soft], bearing)
+    if two.any():
+        loaded = np.where(force[two] > 0.0, force[two], np.inf).min(axis=1)
+        capacity = 2.0 * mu * loaded
+        with np.errstate(divide="ignore"):
+            braking_capacity = (capacity / ball_friction if ball_friction > 0
+                                else np.full(len(capacity), np.inf))
+        values = {"free_rolling_velocity_deviation": 0.0, "creep_stiffness": ANCHOR_STIFFNESS,
+                  "braking_sensitivity": 0.0, "carriage_force": 0.0,
+                  "free_rolling_carriage_force": 0.0, "carriage_force_per_push": -0.5,
+                  "carriage_force_per_neighbour_force": 0.5 * ball_friction,
+                  "traction_capacity": capacity, "braking_capacity": braking_capacity}
+        for name, value in values.items():
+            out[two, _COL[name]] = value
+        rate[two] = two_point_rolling_rate(dbeta[two], force[two], bearing)
+    if stick.any():
+        stiffness, res = stick_line_stiffness(dbeta[stick], force[stick], bearing)
+        rows = np.flatnonzero(stick)
+        out[rows, _COL["creep_stiffness"]] = stiffness
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[rows, _COL["braking_sensitivity"]] = np.where(np.isfinite(stiffness),
+                                                              -ball_friction / stiffness, 0.0)
+        out[rows, _COL["free_rolling_velocity_deviation"]] = res.velocity_deviation
+        out[rows, _COL["free_rolling_carriage_force"]] = res.drag_force
+        out[rows, _COL["carriage_force"]] = res.drag_force
+        rate[stick] = res.angular_velocity[:, :2] * bearing.ball_radius / 0.01
+    if pushed.any():
+        values = {"free_rolling_velocity_deviation": np.nan, "creep_stiffness": PUSHED_STIFFNESS,
+                  "braking_sensitivity": 0.0, "carriage_force": 0.0,
+                  "free_rolling_carriage_force": 0.0, "carriage_force_per_push": 0.0,
+                  "carriage_force_per_neighbour_force": 0.0, "traction_capacity": np.inf,
+                  "braking_capacity": np.inf}
+        for name, value in values.items():
+            out[pushed, _COL[name]] = value
+    out[:, _COL["rolling_rate_x"]:_COL["regime"]] = rate
+    out[:, _COL["regime"]] = regime
+    return out
+
+
+def pair_braking(coefficients, ball_friction=0.1):
+    """The ball-ball friction term of each pair's carriage-friction slope [-].
+
+    Parameters
+    ----------
+    coefficients : ndarray, shape (..., n, len(TRAIN_COLUMNS))
+        The train columns of the balls of trains (or of a carriage track's slots).
+    ball_friction : float
+        mu_bb [-].
+
+    Returns
+    -------
+    ndarray, shape (..., n - 1)
+        B_j, so that pair j adds k_j Q_j = ((a_{j+1} - a_j) + B_j) Q_j to the carriage
+        friction: b_j + b_{j+1} (bit for bit) where both balls are in regime A,
+        mu_bb |Omega_j + Omega_{j+1}|_perp R_B / v where one is not (regime B, two-point),
+        0 where one is pushed along.
+
+    Notes
+    -----
+    **Braking from the actual rotations.** The surfaces of a pair slide at the contact with
+    s = (Omega_j + Omega_{j+1}) x (R_B z) (:func:`tolsim.physics.velocity.ball_loads.
+    ball_contact_slip`), |s| = R_B |W_perp|, W = Omega_j + Omega_{j+1}. The Coulomb force
+    mu_bb Q opposes s, so its moment on *each* ball is -mu_bb Q R_B W_perp / |W_perp|: the
+    direction of the sum of the rotations, not of the ball's own axis. For the power balance
+    of ball i (Notes of :class:`tolsim.physics.velocity.ball_loads.BallLoadFields`,
+    v F_c + P v_B = sum D + D_bb, where D at the minimum is stationary in the state) the
+    first-order change of v F_c from that moment is its power, mu_bb Q R_B W_hat . Omega_i;
+    summed over the two balls, mu_bb Q R_B |W_perp|. So the pair costs the carriage
+
+        B_j = mu_bb R_B |Omega_j + Omega_{j+1}|_perp / v  per newton of Q_j.
+
+    Two nominal balls (parallel axes, 0.707 v / R_B each): 1.414 mu_bb = mu_bb / cos(beta_0),
+    the soft balls' b_j + b_{j+1}. A four-point ball (0.707 v / R_B about x) and a two-point
+    one (0.5 v / R_B, tilted by 45 deg): |W| R_B = |(1.0607, -0.3536)| v = 1.118 v, not the
+    1.207 v of parallel axes (issue 25). Between two soft balls the creep model's b's are kept
+    (their axes differ by O(dbeta), and the hard requirement is regime A unchanged to the
+    bit).
+
+    **A ball pushed along** turns freely: its moment balance with Q_back = Q_front = Q asks
+    W_back_hat = -W_front_hat, met by Omega_u = -(Omega_back + Omega_front) / 2, which leaves
+    the run slipping at |Omega_front - Omega_back| R_B / 2 on each side: O(dbeta) between two
+    balls of one regime. B = 0 is taken for its pairs (not modelled: a run of two or more
+    pushed balls, whose alternating rotations slip at |Omega_a + Omega_b| R_B at one contact).
+    """
+    coefficients = np.asarray(coefficients, dtype=np.float64)
+    b = coefficients[..., _COL["carriage_force_per_neighbour_force"]]
+    base = b[..., :-1] + b[..., 1:]
+    code = coefficients[..., _COL["regime"]]
+    other = (code == BALL_REGIME_B) | (code == BALL_TWO_POINT)
+    pushed = coefficients[..., _COL["creep_stiffness"]] == PUSHED_STIFFNESS
+    mixed = other[..., :-1] | other[..., 1:]
+    null = pushed[..., :-1] | pushed[..., 1:]
+    if not (mixed.any() or null.any()):
+        return base
+    rate = np.zeros(coefficients.shape[:-1] + (3,))
+    rate[..., :2] = coefficients[..., _COL["rolling_rate_x"]:_COL["regime"]]
+    slip = np.linalg.norm(ball_contact_slip(rate[..., :-1, :], rate[..., 1:, :], 1.0), axis=-1)
+    out = np.where(mixed, ball_friction * slip, base)
+    return np.ascontiguousarray(np.where(null, 0.0, out))
+
+
+__all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "STICK_STEP", "TRAIN_COLUMNS",
+           "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
+           "stick_line_stiffness", "stick_line_stiffness_kernel",
+           "two_point_rolling_rate"]
