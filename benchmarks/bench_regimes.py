@@ -19,21 +19,11 @@ import time
 
 import numba
 import numpy as np
-from bench_full import timed  # the best of a few wall times (run from benchmarks/)
+from bench_full import regime_balls as random_balls  # run from benchmarks/
+from bench_full import timed
 
-from tolsim.physics.static.solve import GrooveErrors, solve_static
 from tolsim.physics.velocity.full import full
 from tolsim.physics.velocity.regimes import minimise_dissipation
-
-
-def random_balls(n, seed=25):
-    rng = np.random.default_rng(seed)
-    rho = rng.uniform(-0.985, 0.985, n)
-    errors = GrooveErrors(bottom_rotation=np.deg2rad(rng.uniform(-3, 3, n)),
-                          top_rotation=np.deg2rad(rng.uniform(-1, 1, n)))
-    st = solve_static(200.0 * rho, np.full(n, 200.0), errors)
-    keep = st.converged & (st.contact_count >= 3)
-    return st.contact_angle_deviation[keep], st.normal_force[keep]
 
 
 def main(argv=None):

@@ -116,8 +116,9 @@ def _random_balls(n, seed):
 
 
 def test_regime_a_unchanged_on_random_balls():
-    # Every ball the smooth Newton solves today keeps its answer to round-off (1e-12 in eps;
-    # a ball that is certified in regime B first, chi < 1, would differ by the tolerance).
+    # Every ball the smooth solve alone (nonsmooth=False) solves keeps its answer to round-off
+    # (1e-12 in eps; a ball that is certified in regime B first, chi < 1, would differ by the
+    # tolerance).
     dbeta, force = _random_balls(300, 1)
     old = full(dbeta, force, nonsmooth=False)
     new = full(dbeta, force)
@@ -126,6 +127,20 @@ def test_regime_a_unchanged_on_random_balls():
     assert (new.regime[ok] == 1).all()
     assert_allclose(new.velocity_deviation[ok], old.velocity_deviation[ok], rtol=0, atol=1e-12)
     assert_allclose(new.drag_force[ok], old.drag_force[ok], rtol=1e-12)
+
+
+def test_regime_a_is_the_root_to_round_off():
+    # The smooth solve (quasi-Newton, issue 25's fast path) polishes to 1e-2 tol: its epsilon is
+    # the root of the equations to 1e-11 (measured 1.2e-12 on these balls), taken as the
+    # answer at tol = 1e-15 (the damped Newton, 200 iterations). Before the fast path the
+    # Newton stopped anywhere below tol = 1e-10 and was off by up to 5.9e-9 here.
+    dbeta, force = _random_balls(300, 1)
+    res = full(dbeta, force)
+    root = full(dbeta, force, nonsmooth=False, tol=1e-15, max_iter=200)
+    ok = (res.regime == 1) & root.converged
+    assert ok.sum() > 100
+    assert (res.residual[ok] <= 1e-12).all()
+    assert_allclose(res.velocity_deviation[ok], root.velocity_deviation[ok], rtol=0, atol=1e-11)
 
 
 def test_certificate_no_descent_direction_on_random_balls():

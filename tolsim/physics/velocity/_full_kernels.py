@@ -12,18 +12,11 @@ from tolsim.physics.velocity._curved_kernels import (
     curved_zero_spin,
     zero_spin_cut,
 )
-from tolsim.physics.velocity.ball_loads import (
-    SIDE_SIGN_X_T,
-    SIDE_SIGN_Y_T,
-    point_traction_capacity,
-    rolling_axis,
-    stall_moment,
-)
 
 #: |pole|/a beyond which a contact is treated as pure sliding (uniform slip direction).
 SLIDING_POLE = 1e7
 #: Relative step of the central-difference Jacobian (unknowns scaled by v and v/R).
-_FD_STEP = 1e-6
+FD_STEP = 1e-6
 
 
 # --------------------------------------------------------------------------------------------
@@ -339,7 +332,7 @@ def solve_small(jac, rhs, n, out):
 
 
 @jit
-def _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major, semi_minor,
+def residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major, semi_minor,
               sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, contact, res):
     """Normalised equilibrium residual (F_z, M_x, M_y[, M_z]) / sum F; returns max |res|.
 
@@ -372,6 +365,30 @@ def _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_ma
 
 
 @jit
+def rolling_start(beta, force, px, py, vgroove, state):
+    """Pure rolling at the contact centres, v_B + w_x p_y - w_y p_x = V_i (least squares over
+    the contacts that carry load), written into ``state``: the Newton solvers' start."""
+    ata = np.zeros((3, 3))
+    atb = np.zeros(3)
+    for i in range(4):
+        if force[i] > 0.0:
+            row = (1.0, py[i], -px[i])
+            for r in range(3):
+                atb[r] += row[r] * vgroove[i]
+                for c in range(3):
+                    ata[r, c] += row[r] * row[c]
+    x0 = np.zeros(3)
+    state[:] = 0.0
+    if solve_small(ata, atb, 3, x0):
+        state[0] = x0[0]
+        state[1] = x0[1]
+        state[2] = x0[2]
+    else:
+        state[0] = 0.5
+        state[1] = 0.5 / np.cos(beta[0])
+
+
+@jit
 def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff, free_spin,
                tol, max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
                first=0, push=0.0, braking=0.0, groove_speed=1.0, given_start=False):
@@ -380,7 +397,7 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
     Writes the solution into ``state`` (v_B, omega_x, omega_y, omega_z), the per-contact
     quantities into ``contact`` and (residual, iterations, converged) into ``info``.
 
-    Options for external loads (:func:`_residual`): ``push`` = P / mu and ``braking`` =
+    Options for external loads (:func:`residual`): ``push`` = P / mu and ``braking`` =
     (mu_bb / mu)(Q_back + Q_front). ``first`` = 1 fixes v_B = state[0] and solves the moment
     rows for Omega only; ``groove_speed`` is the top groove's velocity (0: both grooves at
     rest, the sliding state of the traction capacity); ``given_start`` starts from ``state``
@@ -397,26 +414,7 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
     nunk = (4 if free_spin else 3) - first
     total = force[0] + force[1] + force[2] + force[3]
     if not given_start:
-        # Start: pure rolling at the contact centres, v_B + w_x p_y - w_y p_x = V_i (least
-        # squares over the contacts that carry load).
-        ata = np.zeros((3, 3))
-        atb = np.zeros(3)
-        for i in range(4):
-            if force[i] > 0.0:
-                row = (1.0, py[i], -px[i])
-                for r in range(3):
-                    atb[r] += row[r] * vgroove[i]
-                    for c in range(3):
-                        ata[r, c] += row[r] * row[c]
-        x0 = np.zeros(3)
-        state[:] = 0.0
-        if solve_small(ata, atb, 3, x0):
-            state[0] = x0[0]
-            state[1] = x0[1]
-            state[2] = x0[2]
-        else:
-            state[0] = 0.5
-            state[1] = 0.5 / np.cos(beta[0])
+        rolling_start(beta, force, px, py, vgroove, state)
     loads = np.empty(5)
     res = np.empty(4)
     res_new = np.empty(4)
@@ -426,7 +424,7 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
     rp = np.empty(4)
     rm = np.empty(4)
     work = np.empty((4, 5))
-    worst = _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major,
+    worst = residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major,
                       semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
                       loads, contact, res)
     dis = loads[4]
@@ -437,14 +435,14 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
         # central-difference Jacobian
         for c in range(nunk):
             k = first + c
-            hstep = _FD_STEP * max(1.0, abs(state[k]))
+            hstep = FD_STEP * max(1.0, abs(state[k]))
             trial[:] = state
             trial[k] = state[k] + hstep
-            _residual(trial, nunk, first, push, braking, px, py, vgroove, force, semi_major,
+            residual(trial, nunk, first, push, braking, px, py, vgroove, force, semi_major,
                       semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
                       loads, work, rp)
             trial[k] = state[k] - hstep
-            _residual(trial, nunk, first, push, braking, px, py, vgroove, force, semi_major,
+            residual(trial, nunk, first, push, braking, px, py, vgroove, force, semi_major,
                       semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
                       loads, work, rm)
             for r in range(nunk):
@@ -467,7 +465,7 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
                     trial[first + c] = state[first + c] + t * step[c]
                 if first + nunk < 4:
                     trial[3] = 0.0
-                new = _residual(trial, nunk, first, push, braking, px, py, vgroove, force,
+                new = residual(trial, nunk, first, push, braking, px, py, vgroove, force,
                                 semi_major, semi_minor, sigma_scale, curved, rd, hoff, cin,
                                 sin_, win, xo, wo, tr, wr, loads, work, res_new)
                 msum = 0.0
@@ -508,7 +506,7 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
                         trial[first + c] = state[first + c] + step[c]
                     if first + nunk < 4:
                         trial[3] = 0.0
-                    new = _residual(trial, nunk, first, push, braking, px, py, vgroove, force,
+                    new = residual(trial, nunk, first, push, braking, px, py, vgroove, force,
                                     semi_major, semi_minor, sigma_scale, curved, rd, hoff, cin,
                                     sin_, win, xo, wo, tr, wr, loads, work, res_new)
                     msum = 0.0
@@ -529,7 +527,7 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
         dis = loads[4]
         converged = worst <= tol
     # final per-contact quantities at the accepted state
-    worst = _residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major,
+    worst = residual(state, nunk, first, push, braking, px, py, vgroove, force, semi_major,
                       semi_minor, sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr,
                       loads, contact, res)
     info[0] = worst
@@ -552,220 +550,3 @@ def contact_ellipses(dbeta, force, nominal_angle, semi_major_coefficient,
         # curved surface: centre of the deformed arc at h p_i (edges on the ball)
         hoff[i] = np.sqrt(max(0.0, 1.0 - a[i] * a[i])) - np.sqrt(max(0.0, rd * rd
                                                                       - a[i] * a[i]))
-
-
-@pjit
-def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_coefficient,
-                curved, rd, free_spin, tol, max_iter, cin, sin_, win, xo, wo, tr, wr,
-                out_state, out_contact, out_info):
-    """Solve the full model for n balls in parallel (R = 1, v = 1, mu = 1 units).
-
-    Lengths are in units of R_B (``semi_*_coefficient`` and ``rd`` already divided by R_B).
-    """
-    sigma_scale = 1.5 / np.pi  # mu sigma_0 a b / F with mu = 1
-    for n in prange(dbeta.shape[0]):
-        beta = np.empty(4)
-        a = np.empty(4)
-        b = np.empty(4)
-        hoff = np.empty(4)
-        contact_ellipses(dbeta[n], force[n], nominal_angle, semi_major_coefficient,
-                         semi_minor_coefficient, rd, beta, a, b, hoff)
-        state = np.zeros(4)
-        contact = np.empty((4, 5))
-        info = np.zeros(3)
-        npos = 0
-        for i in range(4):
-            if force[n, i] > 0.0:
-                npos += 1
-        if npos < 3:
-            for k in range(4):
-                out_state[n, k] = np.nan
-                for m in range(5):
-                    out_contact[n, k, m] = np.nan
-            out_info[n, 0] = np.inf
-            out_info[n, 1] = 0.0
-            out_info[n, 2] = 0.0
-            continue
-        solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                   max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
-        for k in range(4):
-            out_state[n, k] = state[k]
-            for m in range(5):
-                out_contact[n, k, m] = contact[k, m]
-        out_info[n, 0] = info[0]
-        out_info[n, 1] = info[1]
-        out_info[n, 2] = info[2]
-
-
-@jit
-def _load_sensitivities(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff,
-                        free_spin, push, braking, cin, sin_, win, xo, wo, tr, wr, state):
-    """d(epsilon)/d(push) and d(epsilon)/d(braking) at an equilibrium ``state`` (internal units).
-
-    The equilibrium res(x; push, braking) = 0 (res = loads / sum F, x = (v_B, Omega)) moves
-    by dx = -J^-1 (d res / d load) d load, J the central-difference Jacobian of the solver;
-    d res / d push = e_z / sum F and d res / d braking = -(0, e_x, e_y[, 0]) / sum F with e =
-    Omega_perp / |Omega_perp|. epsilon = 2 v_B - 1 (v = 1). NaN if J is singular.
-    """
-    px = np.empty(4)
-    py = np.empty(4)
-    vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-    sxs = (-1.0, 1.0, 1.0, -1.0)
-    sys_ = (-1.0, -1.0, 1.0, 1.0)
-    for i in range(4):
-        px[i] = sxs[i] * np.sin(beta[i])
-        py[i] = sys_[i] * np.cos(beta[i])
-    nunk = 4 if free_spin else 3
-    total = force[0] + force[1] + force[2] + force[3]
-    loads = np.empty(5)
-    work = np.empty((4, 5))
-    rp = np.empty(4)
-    rm = np.empty(4)
-    trial = np.empty(4)
-    jac = np.empty((nunk, nunk))
-    for c in range(nunk):
-        hstep = _FD_STEP * max(1.0, abs(state[c]))
-        trial[:] = state
-        trial[c] = state[c] + hstep
-        _residual(trial, nunk, 0, push, braking, px, py, vgroove, force, semi_major, semi_minor,
-                  sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rp)
-        trial[c] = state[c] - hstep
-        _residual(trial, nunk, 0, push, braking, px, py, vgroove, force, semi_major, semi_minor,
-                  sigma_scale, curved, rd, hoff, cin, sin_, win, xo, wo, tr, wr, loads, work, rm)
-        for r in range(nunk):
-            jac[r, c] = (rp[r] - rm[r]) / (2.0 * hstep)
-    unit = np.zeros(nunk)
-    sol = np.zeros(4)
-    unit[0] = 1.0 / total
-    deps_dpush = np.nan
-    if solve_small(jac, unit, nunk, sol):
-        deps_dpush = -2.0 * sol[0]
-    deps_dbraking = np.nan
-    spin_perp = np.hypot(state[1], state[2])
-    if spin_perp > 0.0:
-        unit[0] = 0.0
-        unit[1] = -state[1] / spin_perp / total
-        unit[2] = -state[2] / spin_perp / total
-        if solve_small(jac, unit, nunk, sol):
-            deps_dbraking = -2.0 * sol[0]
-    return deps_dpush, deps_dbraking
-
-
-#: Columns of ``out_load`` of :func:`full_loaded_kernel` (internal units, over mu).
-FULL_LOAD_COLUMNS = ("traction_capacity", "saturated_carriage_force", "capacity_residual",
-                     "velocity_deviation_per_push", "velocity_deviation_per_braking",
-                     "sliding", "stall_moment")
-
-
-@pjit
-def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_coefficient,
-                       semi_minor_coefficient, curved, rd, free_spin, tol, max_iter, cin, sin_,
-                       win, xo, wo, tr, wr, out_state, out_contact, out_info, out_load):
-    """The full model under external loads, n balls in parallel (R = 1, v = 1, mu = 1 units).
-
-    ``push`` (n,) = P / mu [N] and ``braking`` (n,) = (mu_bb / mu)(Q_back + Q_front) [N]
-    (:mod:`tolsim.physics.velocity.ball_loads`). Per ball:
-
-    1. the traction capacity P_cap / mu = min over Omega of Phi_0, the ball sliding at
-       v_B = 1 between grooves at rest (Newton on the moment rows from the point-contact
-       minimiser, :func:`~tolsim.physics.velocity.ball_loads.point_traction_capacity`; exactly
-       sum F_i with Omega = 0 when the pure-sliding moment sum F_i x_i is within the braking,
-       the kink of |Omega_perp|); P_cap is D + braking |Omega_perp| there, the saturated
-       carriage force F_c / mu = f_TR + f_TL of that state;
-    2. if |push| < P_cap, the loaded equilibrium (F_z + push = 0, moments with the braking)
-       from pure rolling, and d(epsilon)/d(push), d(epsilon)/d(braking) from its Jacobian
-       (:func:`_load_sensitivities`); otherwise the ball slides (no state: NaN). Likewise
-       when ``braking`` >= :func:`~tolsim.physics.velocity.ball_loads.stall_moment` (the braking
-       stalls
-       the rotation; sliding = 2.0).
-
-    ``out_contact`` (n, 4, 6): as :func:`full_kernel` plus the contact power D_i. ``out_load``
-    (n, 7): the columns ``FULL_LOAD_COLUMNS`` (capacity residual 0 when exact; sliding 0.0,
-    1.0 for |push| >= capacity, 2.0 for a stall; stall moment over mu). ``out_info`` of a
-    sliding ball is that of the capacity solve.
-    """
-    sigma_scale = 1.5 / np.pi
-    for n in prange(dbeta.shape[0]):
-        beta = np.empty(4)
-        a = np.empty(4)
-        b = np.empty(4)
-        hoff = np.empty(4)
-        contact_ellipses(dbeta[n], force[n], nominal_angle, semi_major_coefficient,
-                         semi_minor_coefficient, rd, beta, a, b, hoff)
-        for k in range(4):
-            out_state[n, k] = np.nan
-            for m in range(6):
-                out_contact[n, k, m] = np.nan
-        for m in range(7):
-            out_load[n, m] = np.nan
-        out_info[n, 0] = np.inf
-        out_info[n, 1] = 0.0
-        out_info[n, 2] = 0.0
-        npos = 0
-        for i in range(4):
-            if force[n, i] > 0.0:
-                npos += 1
-        if npos < 3:
-            continue
-        # 1) traction capacity
-        state = np.zeros(4)
-        contact = np.empty((4, 6))
-        info = np.zeros(3)
-        total = force[n, 0] + force[n, 1] + force[n, 2] + force[n, 3]
-        mx0 = 0.0
-        my0 = 0.0
-        for i in range(4):
-            # moment of pure forward sliding, F_i x_i, x_i = (-p_y, p_x)
-            mx0 -= force[n, i] * SIDE_SIGN_Y_T[i] * np.cos(beta[i])
-            my0 += force[n, i] * SIDE_SIGN_X_T[i] * np.sin(beta[i])
-        brake = braking[n]
-        if np.hypot(mx0, my0) <= brake:
-            capacity = total
-            saturated = -(force[n, 2] + force[n, 3])
-            cap_residual = 0.0
-            cap_ok = True
-        else:
-            ex, ey = rolling_axis(beta, force[n])
-            _, wx0, wy0 = point_traction_capacity(beta, force[n], brake, ex, ey)
-            state[0] = 1.0
-            state[1] = wx0
-            state[2] = wy0
-            state[3] = 0.0
-            solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                       max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
-                       1, 0.0, brake, 0.0, True)
-            capacity = brake * np.hypot(state[1], state[2])
-            for i in range(4):
-                capacity += contact[i, 5]
-            saturated = contact[2, 2] + contact[3, 2]
-            cap_residual = info[0]
-            cap_ok = info[2] > 0.5
-        out_load[n, 0] = capacity
-        out_load[n, 1] = saturated
-        out_load[n, 2] = cap_residual
-        load_p = push[n]
-        stall = stall_moment(beta, force[n])
-        out_load[n, 6] = stall
-        if (cap_ok and abs(load_p) >= capacity) or brake >= stall:
-            out_load[n, 5] = 1.0 if cap_ok and abs(load_p) >= capacity else 2.0
-            out_info[n, 0] = cap_residual
-            out_info[n, 2] = 1.0 if cap_ok else 0.0
-            continue
-        out_load[n, 5] = 0.0
-        # 2) the loaded equilibrium
-        state[:] = 0.0
-        solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                   max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,
-                   0, load_p, brake, 1.0, False)
-        for k in range(4):
-            out_state[n, k] = state[k]
-            for m in range(6):
-                out_contact[n, k, m] = contact[k, m]
-        out_info[n, 0] = info[0]
-        out_info[n, 1] = info[1]
-        out_info[n, 2] = info[2]
-        dp, db = _load_sensitivities(beta, force[n], a, b, sigma_scale, curved, rd, hoff,
-                                     free_spin, load_p, brake, cin, sin_, win, xo, wo, tr, wr,
-                                     state)
-        out_load[n, 3] = dp
-        out_load[n, 4] = db

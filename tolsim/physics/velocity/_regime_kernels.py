@@ -16,6 +16,7 @@ from tolsim.physics.velocity._full_kernels import (
     planar_contact_integrals,
     solve_one,
 )
+from tolsim.physics.velocity._smooth_kernels import smooth_solve
 
 #: Regime codes of :func:`regime_kernel` (``out_regime[:, 0]``).
 REGIME_UNSOLVED = 0
@@ -23,7 +24,11 @@ REGIME_SMOOTH = 1
 REGIME_STICK = 2
 REGIME_TWO_POINT = 3
 #: Directions of the certificate's first scan over the stuck contact's (slip, spin) plane.
-CERTIFICATE_DIRECTIONS = 96
+CERTIFICATE_DIRECTIONS = 32
+#: Iteration cap of the certificate's refinement of each local minimum.
+_CERTIFICATE_MAX_ITER = 30
+#: Directions of the first scan of :func:`spin_capacity` (a half circle).
+CAPACITY_DIRECTIONS = 96
 #: Two loaded contacts of one diagonal whose angles differ by at most this [rad] are exactly
 #: opposite: the ball rolls at v/2 with both contacts stuck (D = 0).
 TWO_POINT_ANGLE_TOLERANCE = 1e-9
@@ -32,6 +37,8 @@ TWO_POINT_ANGLE_TOLERANCE = 1e-9
 CHI_STICK_FIRST = 1.0
 #: Iteration cap of the line search along the stick line.
 _LINE_MAX_ITER = 200
+#: First half-width of the stick line's bracket about pure rolling at v/2 (units of v).
+_LINE_BRACKET = 2e-3
 #: Contact layout (BL, BR, TR, TL): side signs and the groove each contact belongs to.
 _SX = (-1.0, 1.0, 1.0, -1.0)
 _SY = (-1.0, -1.0, 1.0, 1.0)
@@ -59,45 +66,87 @@ def _slope(phi, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3):
 
 
 @jit
+def _slope_and_derivative(phi, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3):
+    """f(phi) = q . s + D_k(s) at s = (cos phi, sin phi / a), and df/dphi.
+
+    The gradient of D_k comes from the same contact integral: dD_k/du = -f_z and dD_k/dw =
+    -M_n, the contact's friction force along z and its spin moment (Eqs. 12-13), i.e.
+    -sigma F sgn(w) (S_z, S_n) of ``planar_contact_integrals``; (F sgn(u), 0) when w = 0.
+    """
+    u = np.cos(phi)
+    w = np.sin(phi) / a
+    if abs(w) * SLIDING_POLE * a > abs(u):
+        planar_contact_integrals(u / w / a, 0.0, a, b, cin, sin_, win, xo, wo, s3)
+        scale = sigma_scale * force
+        power = scale * abs(w) * s3[3]
+        sign = 1.0 if w > 0.0 else -1.0
+        du = -scale * sign * s3[1]
+        dw = -scale * sign * s3[2]
+    else:
+        power = force * abs(u)
+        du = force if u > 0.0 else -force
+        dw = 0.0
+    value = qu * u + qw * w + power
+    deriv = -(qu + du) * np.sin(phi) + (qw + dw) * np.cos(phi) / a
+    return value, deriv
+
+
+@jit
 def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
     """min over directions s = (cos phi, sin phi / a) of q . s + D_k(s) [N].
 
     >= 0 iff -q lies in the subdifferential of D_k at zero slip and spin, i.e. the stuck
     contact can carry the friction force q_u and spin moment q_w it has to (every directional
-    slope of D at the stick point is >= 0). A scan over ``CERTIFICATE_DIRECTIONS`` angles,
-    refined by golden sections about the lowest one.
+    slope of D at the stick point is >= 0). A scan over ``CERTIFICATE_DIRECTIONS`` angles of
+    the value f and its derivative f' (one contact integral gives both,
+    :func:`_slope_and_derivative`); every interval where f' turns from negative to positive
+    holds a local minimum, which regula falsi on f' locates (``_CERTIFICATE_MAX_ITER`` steps
+    at most, to a relative change of f below 1e-15).
     """
     s3 = np.empty(4)
     n = CERTIFICATE_DIRECTIONS
+    vals = np.empty(n)
+    ders = np.empty(n)
+    step = 2.0 * np.pi / n
     best = np.inf
-    jbest = 0
+    scale = abs(qu) + abs(qw) / a + force
     for j in range(n):
-        val = _slope(2.0 * np.pi * j / n, qu, qw, force, a, b, sigma_scale, cin, sin_, win,
-                     xo, wo, s3)
-        if val < best:
-            best = val
-            jbest = j
-    lo = 2.0 * np.pi * (jbest - 1) / n
-    hi = 2.0 * np.pi * (jbest + 1) / n
-    g = 0.5 * (np.sqrt(5.0) - 1.0)
-    x1 = hi - g * (hi - lo)
-    x2 = lo + g * (hi - lo)
-    f1 = _slope(x1, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
-    f2 = _slope(x2, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
-    for _ in range(40):
-        if f1 < f2:
-            hi = x2
-            x2 = x1
-            f2 = f1
-            x1 = hi - g * (hi - lo)
-            f1 = _slope(x1, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
-        else:
-            lo = x1
-            x1 = x2
-            f1 = f2
-            x2 = lo + g * (hi - lo)
-            f2 = _slope(x2, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3)
-    return min(best, f1, f2)
+        vals[j], ders[j] = _slope_and_derivative(step * j, qu, qw, force, a, b, sigma_scale,
+                                                 cin, sin_, win, xo, wo, s3)
+        best = min(best, vals[j])
+    for j in range(n):
+        k = (j + 1) % n
+        if not (ders[j] < 0.0 <= ders[k]):
+            continue
+        lo = step * j
+        hi = lo + step
+        dlo = ders[j]
+        dhi = ders[k]
+        side = 0
+        prev = min(vals[j], vals[k])
+        for _ in range(_CERTIFICATE_MAX_ITER):
+            x = hi - dhi * (hi - lo) / (dhi - dlo)
+            if not (lo < x < hi):
+                x = 0.5 * (lo + hi)
+            val, der = _slope_and_derivative(x, qu, qw, force, a, b, sigma_scale, cin, sin_,
+                                             win, xo, wo, s3)
+            best = min(best, val)
+            if der == 0.0 or abs(val - prev) <= 1e-15 * scale:
+                break
+            prev = val
+            if der > 0.0:
+                hi = x
+                dhi = der
+                if side == 1:
+                    dlo *= 0.5
+                side = 1
+            else:
+                lo = x
+                dlo = der
+                if side == -1:
+                    dhi *= 0.5
+                side = -1
+    return best
 
 
 @jit
@@ -117,7 +166,7 @@ def spin_capacity(pu, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
     iff |p_w| <= W(p_u). Negative when |p_u| > F_k (no moment can help).
     """
     s3 = np.empty(4)
-    n = CERTIFICATE_DIRECTIONS
+    n = CAPACITY_DIRECTIONS
     best = np.inf
     jbest = 1
     for j in range(1, n):
@@ -227,31 +276,44 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
     xy = px[k]
     vk = vgroove[k]
     loads = np.empty(5)
+    # the minimum is near pure rolling at v/2 (|epsilon| ~ tan^2(Delta/2) is small): the sign
+    # of the slope there gives the side, and a bracket of ``_LINE_BRACKET`` (widened by 4x
+    # until the slope changes sign) holds the root
     w0 = 0.5 - vk
-    h = 0.02
-    lo = w0 - h
-    hi = w0 + h
-    glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin,
-                      sin_, win, xo, wo, tr, wr, state, loads, contact)
-    ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin,
-                      sin_, win, xo, wo, tr, wr, state, loads, contact)
-    evals = 2
-    while glo > 0.0 and evals < 40:
-        hi = lo
-        ghi = glo
-        h *= 2.0
+    g0 = _line_slope(w0, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin,
+                     sin_, win, xo, wo, tr, wr, state, loads, contact)
+    evals = 1
+    h = _LINE_BRACKET
+    if g0 > 0.0:
+        hi = w0
+        ghi = g0
         lo = w0 - h
         glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff,
                           cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
         evals += 1
-    while ghi < 0.0 and evals < 40:
-        lo = hi
-        glo = ghi
-        h *= 2.0
+        while glo > 0.0 and evals < 40:
+            hi = lo
+            ghi = glo
+            h *= 4.0
+            lo = w0 - h
+            glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd,
+                              hoff, cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
+            evals += 1
+    else:
+        lo = w0
+        glo = g0
         hi = w0 + h
         ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff,
                           cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
         evals += 1
+        while ghi < 0.0 and evals < 40:
+            lo = hi
+            glo = ghi
+            h *= 4.0
+            hi = w0 + h
+            ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd,
+                              hoff, cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
+            evals += 1
     w = 0.5 * (lo + hi)
     g = np.inf
     collapsed = False
@@ -285,8 +347,11 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
                 if side == -1:
                     ghi *= 0.5
                 side = -1
-    g = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin, sin_,
-                    win, xo, wo, tr, wr, state, loads, contact)
+    if not np.isfinite(g):
+        # no bracket: the state, loads and contact rows at the midpoint (else they are those
+        # of the last evaluation, at w)
+        g = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin,
+                        sin_, win, xo, wo, tr, wr, state, loads, contact)
     # the stuck contact: pole at its centre, no spin, the reaction that balances the others
     qu = -loads[0]
     yx = -px[k]
@@ -486,8 +551,8 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
                 done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win,
                                    xo, wo, tr, wr, s_state, s_contact, s_info, regime)
             if not done:
-                solve_one(beta, fb, a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                          max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
+                smooth_solve(beta, fb, a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
+                             max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
                 if info[2] > 0.5:
                     regime[0] = REGIME_SMOOTH
                     regime[1] = -1.0

@@ -25,14 +25,13 @@ import numpy as np
 
 from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, ZERO_VELOCITY_SIGN, Bearing
 from tolsim.physics.hertz import hertz_constants
-from tolsim.physics.velocity._full_kernels import (
+from tolsim.physics.velocity._full_kernels import ball_loads_kernel, contact_friction_kernel
+from tolsim.physics.velocity._regime_kernels import REGIME_SMOOTH, REGIME_UNSOLVED, regime_kernel
+from tolsim.physics.velocity._smooth_kernels import (
     FULL_LOAD_COLUMNS,
-    ball_loads_kernel,
-    contact_friction_kernel,
     full_kernel,
     full_loaded_kernel,
 )
-from tolsim.physics.velocity._regime_kernels import REGIME_SMOOTH, REGIME_UNSOLVED, regime_kernel
 from tolsim.physics.velocity.analytic import VelocityResult, as_ball_arrays
 from tolsim.physics.velocity.ball_loads import DEFAULT_BALL_FRICTION, BallLoadFields, as_ball_loads
 
@@ -436,7 +435,12 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     centres (least squares over the four contacts). The equations are the gradient of the
     dissipated power D(v_B, Omega) = sum int mu sigma |slip| dA, which is convex, so a step is
     also accepted when it decreases D (Armijo). Non-convergence is a flag (``converged``), never
-    an exception.
+    an exception. Without loads on the planar surface with omega_z = 0 (issue 25's fast path)
+    the same equations, start and step acceptance are first iterated by Broyden's method, on a
+    coarse angular grid and then on the given one, to 1e-2 ``tol`` (one evaluation of the loads
+    per step instead of seven; its answer is the root to about 1e-12 in epsilon, where the
+    Newton's, which stops anywhere below ``tol``, is within about 1e-8); the Newton is the
+    fallback (:func:`~tolsim.physics.velocity._smooth_kernels.quasi_newton_solve`).
 
     Near two-point contact (|rho| above about 0.87-0.90 with paired forces, issue 25; the
     switch is set by the criterion chi of :func:`tolsim.physics.velocity.regimes.stick_criterion`)

@@ -77,9 +77,11 @@ def stick_criterion(normal_force, bearing: Bearing = TABLE1):
 
     i.e. -q, the friction force and spin moment contact k has to carry, lies in the set
     of those it can carry (the subdifferential of D_k at zero, whose support function is
-    D_k). (B3) is checked on a scan of s = (cos phi, sin phi / a_k) refined by golden
-    sections (``stick_certificate``), and ``converged`` means max(|r|, -min (B3)) <= tol
-    (both over sum F).
+    D_k). (B3) is checked on a scan of s = (cos phi, sin phi / a_k) of its value and slope in
+    phi (the gradient of D_k is the contact's friction force and spin moment, from the same
+    integral), every local minimum located by regula falsi on the slope
+    (``stick_certificate``), and ``converged`` means max(|r|, -min (B3)) <= tol (both over
+    sum F).
 
     Where the two contacts of one diagonal are exactly opposite (equal angles: a perfect
     bearing, or [Lin2018] case (b)), the lines of both meet at v_B = v/2 and both contacts
