@@ -163,6 +163,28 @@ def _strata_text(ds) -> str:
     return ("; " + "; ".join(parts)) if parts else ""
 
 
+def _circuit_text(ds) -> list:
+    """The along-track carriage's lines: where first contacts happen, and the circuit's
+    figures (issue 24)."""
+    lines = []
+    if "contact_zone_end_fraction" in ds and math.isfinite(float(ds.contact_zone_end_fraction)):
+        lines.append(f"first contacts at the ends of the loaded zone (first or last pair): "
+                     f"{100 * float(ds.contact_zone_end_fraction):.1f} %")
+    if "circuit_balls" in ds:
+        counts = ", ".join(f"{str(name)} {int(n)}" for name, n in zip(
+            ds.circuit_contact_where_name.values, ds.circuit_contact_count.values,
+            strict=True))
+        mean, peak = ds.circuit_column_force_mean.values, ds.circuit_column_force_max.values
+        lines.append(
+            f"circuit: {int(ds.circuit_balls)} balls, slack {1e3 * float(ds.circuit_slack):g}"
+            f" mm, drag {float(ds.circuit_return_drag):g} N per unloaded ball; contact "
+            f"events over the stroke: {counts}; column force at the entry mean "
+            f"{mean[0]:.3g} N (max {peak[0]:.3g} N), at the exit mean {mean[1]:.3g} N (max "
+            f"{peak[1]:.3g} N); sum of gaps - slack at most "
+            f"{float(ds.circuit_slack_error_max):.1e} m")
+    return lines
+
+
 def _carriage_text(ds) -> str:
     """One line on the carriage of a study with one: preload, displacement, stiffness."""
     t = ds.carriage_translation_nominal.values
@@ -329,6 +351,7 @@ def summary(ds, output, elapsed) -> str:
     lines.append(f"propagation: {a['propagation_assumption']}")
     if a.get("propagation_caveat"):
         lines.append(f"  note: {a['propagation_caveat']}")
+    lines.extend(_circuit_text(ds))
     if "friction_increase_quantile" in ds:  # [contact]: after the first contact
         lines.extend(_friction_text(ds))
     if int(ds.n_contact):
