@@ -30,6 +30,10 @@ from tolsim.study.sampling import entering_capacity, moving_ball_values
 from tolsim.study.spec import ContactSettings
 
 _K = LOAD_COLUMNS.index("creep_stiffness")
+#: Gaps at the start of the stroke at or below this are closed [m]: the positions are sums
+#: of diameters and gaps (about 0.3 m, ulp 6e-17 m), so a zero gap comes out within a few
+#: 1e-17 m of 0.
+CLOSED_AT_START = 1e-15
 #: The circuit's contact events by where they form, in the order of the result file's
 #: ``circuit_contact_where`` (:data:`tolsim.physics.circuit.WHERE`).
 WHERE_NAMES = tuple(WHERE[k] for k in sorted(WHERE))
@@ -142,7 +146,8 @@ class CircuitFrame(CarriageFrame):
         shape = self.sigma.shape
         self.ring_loaded = np.mod(self.sigma, self.length[:, None]) < self.zone
         self.ring_closed = np.zeros(shape, dtype=bool)
-        self.ring_closed[:] = self.gaps() <= 0.0
+        # touching at the start: a gap of the filling's rounding (a few 1e-17 m) is closed
+        self.ring_closed[:] = self.gaps() <= CLOSED_AT_START
         self.ring_speed = np.full(shape, 0.5)
         self.ring_ok = np.ones(shape, dtype=bool)
         self.slot_ring = np.full(self.ball_id.shape, -1, dtype=np.int64)
