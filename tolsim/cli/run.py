@@ -166,23 +166,9 @@ def _strata_text(ds) -> str:
 def _circuit_text(ds) -> list:
     """The along-track carriage's lines: where first contacts happen, and the circuit's
     figures (issue 24)."""
-    lines = []
-    if "contact_zone_end_fraction" in ds and math.isfinite(float(ds.contact_zone_end_fraction)):
-        lines.append(f"first contacts at the ends of the loaded zone (first or last pair): "
-                     f"{100 * float(ds.contact_zone_end_fraction):.1f} %")
-    if "circuit_balls" in ds:
-        counts = ", ".join(f"{str(name)} {int(n)}" for name, n in zip(
-            ds.circuit_contact_where_name.values, ds.circuit_contact_count.values,
-            strict=True))
-        mean, peak = ds.circuit_column_force_mean.values, ds.circuit_column_force_max.values
-        lines.append(
-            f"circuit: {int(ds.circuit_balls)} balls, slack {1e3 * float(ds.circuit_slack):g}"
-            f" mm, drag {float(ds.circuit_return_drag):g} N per unloaded ball; contact "
-            f"events over the stroke: {counts}; column force at the entry mean "
-            f"{mean[0]:.3g} N (max {peak[0]:.3g} N), at the exit mean {mean[1]:.3g} N (max "
-            f"{peak[1]:.3g} N); sum of gaps - slack at most "
-            f"{float(ds.circuit_slack_error_max):.1e} m")
-    return lines
+    from tolsim.reports.result_view import circuit_rows  # noqa: PLC0415
+
+    return [f"{label}: {text}" for label, text in circuit_rows(ds)]
 
 
 def _carriage_text(ds) -> str:
