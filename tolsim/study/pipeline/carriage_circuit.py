@@ -341,7 +341,8 @@ class CircuitContact(StepObserver):
         self.total_gap_end[rows] = total
         error = np.abs(total - frame.slack[frame._circuits(rows)].reshape(k, tracks))
         self.slack_error[rows] = np.maximum(self.slack_error[rows], error.max(axis=1))
-        self.valid[rows] &= ~step.overflow
+        searching = self.searching  # as without the circuit: up to the first contact
+        self.valid[rows[searching]] &= ~step.overflow[searching]
 
     @staticmethod
     def _ring_pair(inside, pair, travel, pressed):
