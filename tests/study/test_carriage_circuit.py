@@ -257,7 +257,9 @@ def test_a_long_return_without_drag_approaches_the_open_trains():
     # about 0.9 mm, wider than any closing in the stroke, as the open model's (draw U(0, 100
     # um) ahead of a ball that enters with a fresh epsilon): the first contacts are those of
     # the initial trains, so P(contact) agrees with the open model's within 2 assemblies of
-    # 24 (measured: see the report of issue 24), and a short return with no drag does not.
+    # 24. (Measured on configs/carriage_preload.toml along the track, 2 000 assemblies, seed
+    # 12, 50 steps: 0.2345 [0.216, 0.254] against the open model's 0.256 [0.237, 0.276];
+    # with a 1 mm slack and no drag 0.638.)
     with pytest.warns(ConfigWarning, match="slack_mm = 9.9 mm is unusual"):
         c = config(slack=9.9, drag=0.0, samples=24)
     open_ = config(circuit=False, samples=24)
