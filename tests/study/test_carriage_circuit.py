@@ -289,3 +289,35 @@ def test_a_study_with_a_circuit_writes_its_figures():
     open_ = result_to_dataset(run_study(replace(config(circuit=False, samples=4, steps=10))))
     assert "ignores the ball circuit" in open_.attrs["propagation_caveat"]
     assert "circuit_balls" not in open_ and "contact_zone_end_fraction" in open_
+
+
+def test_a_mirrored_carriage_gives_the_mirrored_result():
+    # Issue 24, "Mirror": the carriage mirrored left-right (x -> -x, each track's orientation
+    # negated) and its load mirrored (lateral force, yaw and roll moments negated; vertical
+    # force and pitch kept): listing the two tracks in the other order puts each set of
+    # draws (gaps, ball sizes, which a mirror leaves alone) on the mirror image of its track,
+    # so every assembly is the mirror image of the original one and its first contact, pair,
+    # contact events and column forces are the same, to 1e-9 of the time (the solver's
+    # tolerance; measured equal). Negative control: the tracks swapped without mirroring the
+    # load move the contact times by up to 0.28 % (measured), so the test can fail.
+    sizes = TOLERANCES.split("[tolerances.arc_centre")[0]  # ball sizes only
+    c = config(tolerances=sizes, samples=16)
+    load = "lateral_N = {f}\nroll_moment_N_m = {r}\nyaw_moment_N_m = {y}\n"
+    text = c.text.replace("vertical_N = 300.0\n", "vertical_N = 300.0\n" + load.format(
+        f=60.0, r=1.5, y=0.5))
+    swapped = text.replace("x_mm = -20.0\norientation_deg = 90.0", "X").replace(
+        "x_mm = 20.0\norientation_deg = -90.0", "x_mm = -20.0\norientation_deg = 90.0").replace(
+        "X", "x_mm = 20.0\norientation_deg = -90.0")
+    mirrored = swapped.replace(load.format(f=60.0, r=1.5, y=0.5),
+                               load.format(f=-60.0, r=-1.5, y=-0.5))
+    assert len({text, swapped, mirrored}) == 3
+    c, mirrored = parse_config(text, "circuit.toml"), parse_config(mirrored, "mirror.toml")
+    a = first_contact_carriage_circuit(c, sample_block(c, 0))
+    b = first_contact_carriage_circuit(mirrored, sample_block(mirrored, 0))
+    hit = np.isfinite(a[0])
+    assert_array_equal(np.isfinite(b[0]), hit)
+    assert hit.sum() > 0
+    assert_allclose(b[0][hit], a[0][hit], rtol=1e-9, atol=0)
+    assert_array_equal(b[1], a[1])
+    assert_array_equal(b[-1].where_count, a[-1].where_count)
+    assert_allclose(b[-1].column_max, a[-1].column_max, rtol=1e-9, atol=1e-12)
