@@ -170,8 +170,10 @@ def test_bad_carriage_config_cli_exit_2(case, tmp_path, capsys):
 
 
 def test_every_existing_config_still_has_no_carriage():
-    # but the carriage config and its preload sweep (issue 25)
-    carriages = (CONFIG, CONFIG.parent / "sweep_preload.toml")
+    # but the carriage config and its preload sweep (issue 25), the circuit config and its
+    # sweep (issue 24)
+    carriages = (CONFIG, CONFIG.parent / "sweep_preload.toml",
+                 CONFIG.parent / "carriage_circuit.toml", CONFIG.parent / "sweep_circuit.toml")
     for path in [None, *sorted(CONFIG.parent.glob("*.toml"))]:
         c = load_config(path)
         assert (c.carriage is not None) == (path in carriages)

@@ -26,9 +26,10 @@ SAMPLES = {
 #: Configs with a [carriage] (issue 12): their studies are checked in
 #: tests/study/test_carriage_study.py (and tests/io/test_cf_compliance.py runs them); here their
 #: `tolsim carriage` load distribution.
-CARRIAGE_CONFIGS = ("carriage_preload.toml",)
+CARRIAGE_CONFIGS = ("carriage_preload.toml", "carriage_circuit.toml")
 #: What-if sweeps (issue 14): run, seeded, in tests/io/test_sweep.py.
-SWEEP_CONFIGS = ("sweep_preload.toml", "sweep_rail_roll.toml", "sweep_yaw_moment.toml")
+SWEEP_CONFIGS = ("sweep_circuit.toml", "sweep_preload.toml", "sweep_rail_roll.toml",
+                 "sweep_yaw_moment.toml")
 
 
 def run(name, samples="default"):

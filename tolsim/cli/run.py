@@ -163,6 +163,14 @@ def _strata_text(ds) -> str:
     return ("; " + "; ".join(parts)) if parts else ""
 
 
+def _circuit_text(ds) -> list:
+    """The along-track carriage's lines: where first contacts happen, and the circuit's
+    figures (issue 24)."""
+    from tolsim.reports.result_view import circuit_rows  # noqa: PLC0415
+
+    return [f"{label}: {text}" for label, text in circuit_rows(ds)]
+
+
 def _carriage_text(ds) -> str:
     """One line on the carriage of a study with one: preload, displacement, stiffness."""
     t = ds.carriage_translation_nominal.values
@@ -329,6 +337,7 @@ def summary(ds, output, elapsed) -> str:
     lines.append(f"propagation: {a['propagation_assumption']}")
     if a.get("propagation_caveat"):
         lines.append(f"  note: {a['propagation_caveat']}")
+    lines.extend(_circuit_text(ds))
     if "friction_increase_quantile" in ds:  # [contact]: after the first contact
         lines.extend(_friction_text(ds))
     if int(ds.n_contact):

@@ -137,6 +137,33 @@ def regime_counts_text(ds) -> str:
                      if count)
 
 
+def circuit_rows(ds) -> list:
+    """(label, text) of an along-track carriage result (issue 24): the fraction of first
+    contacts at the ends of the loaded zone, and a ``[carriage.circuit]``'s figures; [] for
+    a file without them."""
+    rows = []
+    if "contact_zone_end_fraction" in ds.variables:
+        fraction = float(ds["contact_zone_end_fraction"])
+        if np.isfinite(fraction):
+            rows.append(("first contacts at the ends of the loaded zone (first or last pair)",
+                         f"{100 * fraction:.1f} %"))
+    if "circuit_balls" in ds.variables:
+        counts = ", ".join(f"{name} {int(n):,}" for name, n in zip(
+            np.asarray(ds["circuit_contact_where_name"]).tolist(),
+            np.asarray(ds["circuit_contact_count"]).tolist(), strict=True))
+        mean = np.asarray(ds["circuit_column_force_mean"], dtype=float)
+        peak = np.asarray(ds["circuit_column_force_max"], dtype=float)
+        rows.append(("ball circuit", f"{int(ds['circuit_balls'])} balls, slack "
+                     f"{1e3 * float(ds['circuit_slack']):g} mm, drag "
+                     f"{float(ds['circuit_return_drag']):g} N per unloaded ball; contact "
+                     f"events over the stroke: {counts}"))
+        rows.append(("column force at the zone's entry / exit (mean over the stroke; max)",
+                     f"{mean[0]:.3g} N / {mean[1]:.3g} N; {peak[0]:.3g} N / {peak[1]:.3g} N"))
+        rows.append(("sum of a circuit's gaps - its slack, at most",
+                     f"{float(ds['circuit_slack_error_max']):.1e} m"))
+    return rows
+
+
 def attribute(ds, name, default="?"):
     """The global attribute ``name`` as stored, ``default`` when the file has not got it."""
     return ds.attrs.get(name, default)

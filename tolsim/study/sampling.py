@@ -271,10 +271,18 @@ def entering_capacity(config) -> int:
     Relative to the carriage the balls move at (1 - epsilon) v / 2 (:mod:`tolsim.study.
     carriage_track`), so over the stroke s the balls of a track travel (1 - epsilon) s / 2
     and, spaced at least a diameter D apart, at most that over D enter; with |epsilon| <=
-    5 %: floor(1.05 s / (2 D)) + 2.
+    5 %: floor(1.05 s / (2 D)) + 2. With a ``[carriage.circuit]`` of B balls the balls
+    that enter are the circuit's own (issue 24): its B - n balls outside the zone at the start
+    take these draws (sizes and tolerances) and their gaps, and the B - n + 1 gaps outside the
+    zone share the rest of the slack in proportion to the draws
+    (:class:`tolsim.study.pipeline.carriage_circuit.CircuitFrame`); at least that many.
     """
     diameter = 2.0 * config.bearing.ball_radius
-    return int(np.floor(1.05 * config.motion.stroke / (2.0 * diameter))) + 2
+    open_trains = int(np.floor(1.05 * config.motion.stroke / (2.0 * diameter))) + 2
+    circuit = config.carriage.circuit if config.carriage is not None else None
+    if circuit is None:
+        return open_trains
+    return max(open_trains, circuit.balls - config.train.balls + 1)
 
 
 def _draw(config, index, widths, out, row):

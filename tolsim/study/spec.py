@@ -355,6 +355,37 @@ class Loads:
 
 
 @dataclass(frozen=True)
+class Circuit:
+    """The recirculating ball circuit of each carriage track (``[carriage.circuit]``, issue 24;
+    the physics in :mod:`tolsim.physics.circuit`, the defaults' derivation in the Notes of
+    :func:`tolsim.physics.circuit.circuit_length`).
+
+    Attributes
+    ----------
+    balls : int
+        Balls per circuit (loaded zone, turnarounds and return channel), more than the loaded
+        zone holds.
+    slack : float
+        The circuit's total clearance [m] (its length minus the balls' diameters), >= 0.
+    return_drag : float
+        Resistance of one unloaded ball moving through the turnarounds and the return
+        channel [N], >= 0.
+    """
+
+    balls: int = 30
+    slack: float = 1.0e-3
+    return_drag: float = 0.02
+
+    def __post_init__(self):
+        if int(self.balls) != self.balls or self.balls < 2:
+            raise ValueError(f"circuit balls = {self.balls!r} must be an integer >= 2")
+        for name in ("slack", "return_drag"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"circuit {name} = {value!r} must be >= 0")
+
+
+@dataclass(frozen=True)
 class Carriage:
     """A rigid carriage on its ball tracks, with preload, under the loads a user knows
     (tolsim issue 12; conventions in :mod:`tolsim.physics.carriage`).
@@ -378,6 +409,9 @@ class Carriage:
         Length of the relieved part at each end of the loaded zone [m] (config key
         ``end_relief_length_mm``), > 0 with a depth (at most half the loaded zone, checked
         with the train); 0 without.
+    circuit : Circuit or None
+        The closed ball circuit of every track (``[carriage.circuit]``, ``along_track``
+        only); None: the open trains (fresh independent balls enter the loaded zone).
     """
 
     layout: CarriageLayout
@@ -386,6 +420,7 @@ class Carriage:
     ball_oversize_deviation: tuple = ()
     end_relief_depth: float = 0.0
     end_relief_length: float = 0.0
+    circuit: Circuit | None = None
 
     def __post_init__(self):
         for name in ("end_relief_depth", "end_relief_length"):

@@ -30,6 +30,7 @@ from tolsim.io.config.sections import (
     FRACTION_KEYS,
     MIN_EMPIRICAL_VALUES,
     check_carriage_propagation,
+    check_circuit,
     read_bearing,
     read_carriage,
     read_contact,
@@ -146,6 +147,9 @@ def _build(data: dict, source: "Source", text: str, path: str,
         if not bearing.friction_coefficient > 0:
             raise source.error("bearing", "friction_coefficient", "= 0: a study with [contact] "
                                "needs raceway friction (> 0) to carry the balls' pushes")
+    if carriage is not None and carriage.circuit is not None:  # issue 24
+        check_circuit(Table(data["carriage"]["circuit"], "carriage.circuit", source), carriage,
+                      train, study, bearing, contact is not None)
     allocation = None
     if root.has("allocate"):  # read by `tolsim allocate` (issue 14); `tolsim run` ignores it
         allocation = parse_allocation(root.table("allocate"), tolerances)

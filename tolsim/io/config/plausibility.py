@@ -160,6 +160,21 @@ RANGES = {
                               "0.2 m high"),
     "carriage.track.orientation": Range(-360.0 * DEG, 360.0 * DEG, None, None,
                                         "one turn either way"),
+    # The recirculating circuit of a track (issue 24): the loaded zone, two turnarounds and a
+    # return channel about as long as the zone, so about 2.5 times the loaded balls
+    # (catalogue cross-sections; Notes of tolsim.physics.circuit.circuit_length).
+    "carriage.circuit.balls": Range(2, 1000, 5, 200, "a circuit holds the loaded zone, two "
+                                    "turnarounds and a return channel: about 2.5 times the "
+                                    "loaded balls"),
+    # A circuit is filled ball by ball until no further ball fits: its total clearance is
+    # less than one ball; designers keep it small (0.1 D proposed, 0 to 0.3 D plausible).
+    "carriage.circuit.slack": Range(0.0, 1.0, 0.0, 0.3, "less than one ball, or another "
+                                    "ball would fit; a small fraction of it by design",
+                                    open_high=True, per="ball diameter"),
+    # Weight friction of an unloaded ball on the channel wall and grease: 0.004 to 0.05 N
+    # for a 10 mm ball (estimate, Notes of tolsim.physics.circuit.circuit_length).
+    "carriage.circuit.return_drag": Range(0.0, 10.0, 0.0, 0.2, "weight friction and grease: "
+                                          "about 0.004 to 0.05 N per 10 mm ball"),
 }
 
 
@@ -175,6 +190,8 @@ DISPLAY_UNITS = {
     "carriage.balls_per_track": ("", 1.0), "carriage.ball_pitch": ("D", 1.0),
     "carriage.preload_oversize": ("um", UM), "carriage.track.x": ("m", 1.0),
     "carriage.track.y": ("m", 1.0), "carriage.track.orientation": ("deg", DEG),
+    "carriage.circuit.balls": ("", 1.0), "carriage.circuit.slack": ("D", 1.0),
+    "carriage.circuit.return_drag": ("N", 1.0),
 }
 
 

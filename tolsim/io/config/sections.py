@@ -38,6 +38,7 @@ from tolsim.study.spec import (
     STATIC_MODELS,
     VELOCITY_MODELS,
     Carriage,
+    Circuit,
     ContactSettings,
     Correlation,
     Distribution,
@@ -362,6 +363,9 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
     if relief_length > 0 and not relief_depth > 0:
         raise t.error(length_key, "has no effect without end_relief_depth_<unit> > 0")
 
+    circuit_table = t.table("circuit", required=False)
+    circuit = None if circuit_table is None else read_circuit(circuit_table, bearing)
+
     load_table = t.table("load", required=False)
     if load_table is None:
         load = CarriageLoad()
@@ -436,7 +440,23 @@ def read_carriage(t: Table, bearing: Bearing) -> Carriage:
         check_carriage_load(load_table, load, layout, bearing)
     return Carriage(layout=layout, load=load, preload_oversize=preload,
                     ball_oversize_deviation=tuple(map(float, deviation)),
-                    end_relief_depth=relief_depth, end_relief_length=relief_length)
+                    end_relief_depth=relief_depth, end_relief_length=relief_length,
+                    circuit=circuit)
+
+
+def read_circuit(t: Table, bearing: Bearing) -> Circuit:
+    """``[carriage.circuit]`` (issue 24): balls per circuit, its total clearance and the drag
+    of an unloaded ball; a key left out takes the default of :class:`Circuit`."""
+    default = Circuit()
+    balls = t.integer("balls", default=default.balls, minimum=2)
+    check_count(t, "balls", balls, "carriage.circuit.balls")
+    slack = t.quantity("slack", "length", default=default.slack, minimum=0.0)
+    check_quantity(t, "slack", "length", slack, "carriage.circuit.slack",
+                   2.0 * bearing.ball_radius)
+    drag = t.quantity("return_drag", "force", default=default.return_drag, minimum=0.0)
+    check_quantity(t, "return_drag", "force", drag, "carriage.circuit.return_drag")
+    t.finish()
+    return Circuit(balls=balls, slack=slack, return_drag=drag)
 
 
 def check_carriage_propagation(t: Table, carriage: Carriage, train: Train, study_table: Table,
@@ -465,6 +485,26 @@ def check_carriage_propagation(t: Table, carriage: Carriage, train: Train, study
                       "fixes the size of the balls at their slots, but with propagation = "
                       "'along_track' the balls roll through the carriage: give the size "
                       "scatter as [tolerances.ball_oversize] instead")
+
+
+def check_circuit(t: Table, carriage: Carriage, train: Train, study: StudySettings,
+                  bearing: Bearing, has_contact: bool):
+    """Raise for a ``[carriage.circuit]`` (``t``) a study cannot run: without along_track,
+    with no more balls than the loaded zone holds, or with ``[contact]`` (not built yet)."""
+    circuit = carriage.circuit
+    if study.propagation != "along_track":
+        raise t.error(None, "moves the balls round their circuit: it needs "
+                            "study.propagation = 'along_track'")
+    diameter = 2.0 * bearing.ball_radius
+    holds = max(int(np.floor(train.loaded_zone_length / diameter * (1 + 1e-12))) + 1,
+                train.balls)
+    if circuit.balls <= holds:
+        raise t.error("balls", f"= {circuit.balls} is not more than the loaded zone holds "
+                               f"({holds} balls of {diameter * 1e3:g} mm in "
+                               f"{train.loaded_zone_length * 1e3:g} mm)")
+    if has_contact:
+        raise t.error(None, "with [contact]: the trains after contact in a circuit are not "
+                            "built yet (issue 24); remove one of the two")
 
 
 def read_tolerances(t: Table | None, bearing: Bearing) -> tuple:

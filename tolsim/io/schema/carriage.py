@@ -7,6 +7,7 @@ from tolsim.io.schema.declaration import Section
 from tolsim.physics.carriage import DOFS
 from tolsim.physics.hertz import hertz_constants
 from tolsim.study.pipeline.carriage import CarriageResult
+from tolsim.study.pipeline.carriage_circuit import WHERE_NAMES
 
 _TRANSLATION = ("carriage_translation",)
 _ROTATION = ("carriage_rotation",)
@@ -43,6 +44,27 @@ for _dims, _what, _units, _stiff_units in (
         CARRIAGE_VARIABLES[f"carriage_{_what}al_stiffness_{_stat}"] = (
             _dims, _stiff_units, f"{_label} carriage {_what}al stiffness over the solved "
                                  "assemblies", "f")
+# along the track (issue 24): where first contacts happen; a [carriage.circuit]'s figures
+CARRIAGE_VARIABLES.update({
+    "contact_zone_end_fraction": ((), "1", "fraction of the first contacts that happen at a "
+                                  "pair at either end of a track's loaded zone (its first or "
+                                  "last pair)", "f"),
+    "circuit_balls": ((), "1", "balls per circuit of each track", "i"),
+    "circuit_slack": ((), "m", "total clearance of each circuit (its length minus the "
+                               "balls' diameters)", "f"),
+    "circuit_return_drag": ((), "N", "drag of one unloaded ball moving through the circuit",
+                            "f"),
+    "circuit_contact_count": (("circuit_contact_where",), "1", "contact events of the "
+                              "circuits over the stroke, by where they formed", "i"),
+    "circuit_column_force_max": (("zone_end",), "N", "largest force between the column of "
+                                 "unloaded balls and the loaded zone at its end, at the ends "
+                                 "of the steps", "f"),
+    "circuit_column_force_mean": (("zone_end",), "N", "mean over the assemblies of the "
+                                  "column force at the end of the loaded zone averaged over "
+                                  "the stroke (the larger track's)", "f"),
+    "circuit_slack_error_max": ((), "m", "largest departure of a circuit's total gap from "
+                                "its slack at any step", "f"),
+})
 #: Coordinates of the carriage dimensions (index and name label, as ``contact``).
 CARRIAGE_COORDINATES = {
     "track": (_TRACK, "1", "track (row of balls) of the carriage, in config order", "i"),
@@ -64,6 +86,14 @@ CARRIAGE_COORDINATES = {
                                   "i"),
     "carriage_moment_component_name": (("carriage_moment_component",), "1",
                                        "carriage moment component (about +x, +y, +z)", "U"),
+    "circuit_contact_where": (("circuit_contact_where",), "1", "where a contact event of "
+                              "the circuit formed (names in circuit_contact_where_name)", "i"),
+    "circuit_contact_where_name": (("circuit_contact_where",), "1", "where a contact event "
+                                   "formed: inside the loaded zone, at its entry or exit "
+                                   "(a loaded and an unloaded ball), in the return path", "U"),
+    "zone_end": (("zone_end",), "1", "end of the loaded zone (names in zone_end_name)", "i"),
+    "zone_end_name": (("zone_end",), "1", "end of the loaded zone (entry: leading, exit: "
+                                          "trailing)", "U"),
 }
 #: Names along ``carriage_force_component`` and ``carriage_moment_component`` (the
 #: generalised load Q, conjugate to the DOFS).
@@ -128,6 +158,55 @@ def carriage_variables(config, statistics, nominal: CarriageResult | None) -> tu
             v = np.asarray(values, dtype=float) if solved else np.full(10, np.nan)
             data[f"carriage_{what}_{stat}"] = (dims, v[:5][sl])
             data[f"carriage_{what}al_stiffness_{stat}"] = (dims, v[5:][sl])
+    if config.is_along_track:
+        coords_circuit, data_circuit = circuit_variables(config, acc)
+        coords.update(coords_circuit)
+        data.update(data_circuit)
+    return coords, data
+
+
+def zone_end_fraction(pair_count, tracks: int) -> float:
+    """Fraction of the first contacts at the first or last pair of a track's loaded zone
+    (``pair_count``: first contacts per pair, track by track; NaN without contacts)."""
+    pairs = np.asarray(pair_count, dtype=float).reshape(tracks, -1)
+    total = pairs.sum()
+    if pairs.shape[1] == 0 or total == 0:
+        return np.nan
+    ends = pairs[:, 0].sum() + (pairs[:, -1].sum() if pairs.shape[1] > 1 else 0.0)
+    return float(ends / total)
+
+
+def circuit_variables(config, acc) -> tuple:
+    """(coordinates, data variables) of an along-track carriage study: the fraction of first
+    contacts at the zone's ends, and with ``[carriage.circuit]`` the circuit's figures
+    (:meth:`tolsim.study.statistics.accumulator.Accumulator.add_circuit`)."""
+    tracks, balls = config.n_tracks, config.train.balls
+    data = {"contact_zone_end_fraction": zone_end_fraction(
+        acc.pair_count[: tracks * max(balls - 1, 0)], tracks)}
+    circuit = config.carriage.circuit
+    if circuit is None:
+        return {}, data
+    where, end = ("circuit_contact_where",), ("zone_end",)
+    coords = {"circuit_contact_where": (where, np.arange(len(WHERE_NAMES), dtype=np.int64)),
+              "circuit_contact_where_name": (where, np.array(WHERE_NAMES)),
+              "zone_end": (end, np.arange(2, dtype=np.int64)),
+              "zone_end_name": (end, np.array(("entry", "exit")))}
+    figures = acc.circuit
+    count = 0 if figures is None else int(figures["circuit_count"])
+    data.update({
+        "circuit_balls": np.int64(circuit.balls),
+        "circuit_slack": float(circuit.slack),
+        "circuit_return_drag": float(circuit.return_drag),
+        "circuit_contact_count": (where, np.zeros(len(WHERE_NAMES), np.int64) if not count
+                                  else np.asarray(figures["circuit_where_count"], np.int64)),
+        "circuit_column_force_max": (end, np.full(2, np.nan) if not count
+                                     else np.asarray(figures["circuit_column_max"], float)),
+        "circuit_column_force_mean": (end, np.full(2, np.nan) if not count else
+                                      np.asarray(figures["circuit_column_mean_sum"], float)
+                                      / count),
+        "circuit_slack_error_max": np.nan if not count else float(
+            figures["circuit_slack_error"]),
+    })
     return coords, data
 
 

@@ -32,6 +32,10 @@ SAMPLE_VARIABLES = {
     f"{PREFIX}contact_pair": (("sample",), "1", "adjacent pair of the first contact, named "
                               "by its trailing ball; with a carriage track * (balls - 1) + "
                               "trailing ball (-1: none within the horizon)", "i"),
+    **{f"{PREFIX}circuit_total_gap_{when}": (("sample", "track"), "m", "sum of the gaps of "
+                                             f"the track's ball circuit at the {when} of the "
+                                             "stroke (equals the circuit's slack)", "f")
+       for when in ("start", "end")},
 }
 
 

@@ -4,7 +4,7 @@ a glance, the quality table, the linear stack-up, the ranked Sobol' tables and t
 
 import numpy as np
 
-from tolsim.reports.result_view import integer, number, regime_counts_text
+from tolsim.reports.result_view import circuit_rows, integer, number, regime_counts_text
 from tolsim.reports.study.figures import OUTPUT_SHORT, output_titles
 from tolsim.reports.study.friction import without_output
 from tolsim.reports.study.sections import ReportTable
@@ -108,6 +108,7 @@ def glance_rows(ds) -> list:
     rows += [
         ("propagation model", a.get("propagation_assumption", a.get("propagation", "?")),
          False),
+        *((label, text, False) for label, text in circuit_rows(ds)),
         ("earliest / median first contact (given contact)",
          f"{number(ds, 'time_to_contact_min'):.4g} s / {med:.4g} s"
          if integer(ds, "n_contact") else "no contact", True),

@@ -135,12 +135,15 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
                 acc.add_carriage(outcome.carriage.rows(sl))
             if outcome.friction is not None:
                 acc.add_friction(outcome.friction.rows(sl))
+            if outcome.circuit is not None:  # a [carriage.circuit] (issue 24)
+                acc.add_circuit({k: v[sl] for k, v in outcome.circuit.items()})
             if offset == 0:  # the group's re-solves, counted once
                 acc.resolve_seconds = state.resolve_seconds + outcome.resolve_seconds
             start = index * config.study.block_size
             rows = spot_rows(sub, start * balls, spot_indices)
             rows.update(saved_samples.sample_rows(config, save_samples, start, values,
-                                                  block.initial_gap, state, t, pair, sl))
+                                                  block.initial_gap, state, t, pair, sl,
+                                                  circuit=outcome.circuit))
             out.append((index, acc, rows))
             offset += size
     return out

@@ -28,7 +28,7 @@ MODEL_FLAGS = {-1: "unresolved", 0: "fast_model", 1: "full_model"}
 
 
 def sample_rows(config, save_samples, start, values, initial_gap, state, contact_time,
-                contact_pair, rows=slice(None)) -> dict:
+                contact_pair, rows=slice(None), *, circuit=None) -> dict:
     """The saved rows of one block: the part of its assemblies among the first N.
 
     Parameters
@@ -47,6 +47,10 @@ def sample_rows(config, save_samples, start, values, initial_gap, state, contact
         First contact (inf / -1: none).
     rows : slice
         The block's assemblies among the m.
+    circuit : dict, optional
+        The circuit figures of the m assemblies (a ``[carriage.circuit]``,
+        :meth:`tolsim.study.pipeline.carriage_circuit.CircuitContact.figures`): each
+        circuit's total gap at the start and at the end of the stroke is kept.
 
     Returns
     -------
@@ -72,6 +76,10 @@ def sample_rows(config, save_samples, start, values, initial_gap, state, contact
     out[f"{PREFIX}model"] = np.array(state.model[first], dtype=np.int8)
     out[f"{PREFIX}contact_time"] = np.array(contact_time[first], dtype=np.float64)
     out[f"{PREFIX}contact_pair"] = np.array(contact_pair[first], dtype=np.int64)
+    if circuit is not None:  # (keep, tracks) [m]
+        for when in ("start", "end"):
+            out[f"{PREFIX}circuit_total_gap_{when}"] = np.array(
+                circuit[f"total_gap_{when}"][first], dtype=np.float64)
     return out
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tolsim.study.pipeline.carriage import CarriageState, evaluate_carriage
+from tolsim.study.pipeline.carriage_circuit import first_contact_carriage_circuit
 from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
 from tolsim.study.pipeline.evaluate import BallState, evaluate_balls, loads_at, loads_per_ball
 from tolsim.study.pipeline.propagation import (
@@ -82,6 +83,9 @@ class BlockOutcome:
         The carriages at the start of the stroke (a ``[carriage]``).
     friction : FrictionState or None
         The friction figures of the trains after contact (``[contact]``).
+    circuit : dict or None
+        The circuit figures of a ``[carriage.circuit]`` (:meth:`tolsim.study.pipeline.
+        carriage_circuit.CircuitContact.figures`).
     """
 
     values: dict
@@ -92,6 +96,7 @@ class BlockOutcome:
     resolve_seconds: float = 0.0
     carriage: CarriageState | None = None
     friction: FrictionState | None = None
+    circuit: dict | None = None
 
     @property
     def resolved(self) -> np.ndarray:
@@ -166,7 +171,12 @@ def _free_along_track(config, block, values):
 
 
 def _carriage_along_track(config, block, values):
-    # balls rolling through the carriage (issue 12)
+    # balls rolling through the carriage (issue 12), in their circuits (issue 24)
+    if config.carriage.circuit is not None:
+        t, pair, ok, seconds, state, carriage, contact = first_contact_carriage_circuit(
+            config, block)
+        return BlockOutcome(values, state, t, pair, ok, seconds, carriage,
+                            circuit=contact.figures())
     trains = _track_friction(config)
     t, pair, ok, seconds, state, carriage = first_contact_carriage_track(config, block,
                                                                          friction=trains)

@@ -71,8 +71,14 @@ def propagation_assumption(propagation: str) -> str:
 def propagation_caveat(config) -> str:
     """A sentence for studies whose epsilon changes along the track but which use
     ``constant``: rail random fields (a rail-scope source with a correlation length) or loads
-    that vary between the balls. Empty otherwise."""
+    that vary between the balls; for an ``along_track`` carriage without
+    ``[carriage.circuit]``, that it ignores the circuit (issue 24). Empty otherwise."""
     if config.study.propagation != "constant":
+        if config.carriage is not None and config.carriage.circuit is None:
+            return ("This carriage study ignores the ball circuit: every ball that enters the "
+                    "loaded zone is a fresh, independent draw with a fresh gap, and nothing "
+                    "resists at the zone's ends (open trains). [carriage.circuit] follows "
+                    "the balls round their circuit.")
         return ""
     fields = [t.source for t in config.tolerances
               if t.scope == "rail" and t.correlation_length > 0 and t.distribution.is_random]

@@ -54,6 +54,11 @@ from tolsim.study.statistics.intervals import (
 QUANTILES = (0.001, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99, 0.999)
 
 
+#: The accumulator's circuit figures (:meth:`Accumulator.add_circuit`), in a checkpoint.
+CIRCUIT_FIELDS = ("circuit_count", "circuit_where_count", "circuit_column_max",
+                  "circuit_column_mean_sum", "circuit_slack_error")
+
+
 def merge_moments(n_a, mean_a, m2_a, n_b, mean_b, m2_b):
     """Chan et al. merge of (count, mean, M2); elementwise on arrays."""
     n = n_a + n_b
@@ -163,6 +168,8 @@ class Accumulator:
         self.carriage_m2 = np.zeros(c)
         self.carriage_min = np.full(c, np.inf)
         self.carriage_max = np.full(c, -np.inf)
+        # the figures of a [carriage.circuit] (add_circuit), None without one
+        self.circuit = None
 
     @classmethod
     def for_config(cls, config):
@@ -201,6 +208,35 @@ class Accumulator:
         self.carriage_failed = self.carriage_failed + other.carriage_failed
         self.carriage_min = np.minimum(self.carriage_min, other.carriage_min)
         self.carriage_max = np.maximum(self.carriage_max, other.carriage_max)
+
+    def add_circuit(self, figures: dict):
+        """Add the circuit figures of a block of assemblies (``[carriage.circuit]``;
+        :meth:`tolsim.study.pipeline.carriage_circuit.CircuitContact.figures`): contact events
+        by where they form, the column forces at the zone's entry and exit (largest, and the
+        sum of each assembly's mean over the stroke) and the largest slack error."""
+        block = {
+            "circuit_count": np.int64(len(figures["slack_error"])),
+            "circuit_where_count": figures["where_count"].sum(axis=0).astype(np.int64),
+            "circuit_column_max": (figures["column_max"].max(axis=0) if
+                                   len(figures["column_max"]) else np.zeros(2)),
+            "circuit_column_mean_sum": figures["column_mean"].sum(axis=0),
+            "circuit_slack_error": np.float64(figures["slack_error"].max(initial=0.0)),
+        }
+        self._merge_circuit(block)
+
+    def _merge_circuit(self, other):
+        if other is None:
+            return
+        if self.circuit is None:
+            self.circuit = {k: np.copy(v) for k, v in other.items()}
+            return
+        c = self.circuit
+        for name in ("circuit_count", "circuit_where_count", "circuit_column_mean_sum"):
+            c[name] = c[name] + other[name]
+        c["circuit_column_max"] = np.maximum(c["circuit_column_max"],
+                                             other["circuit_column_max"])
+        c["circuit_slack_error"] = np.maximum(c["circuit_slack_error"],
+                                              other["circuit_slack_error"])
 
     @property
     def carriage_std(self) -> np.ndarray:
@@ -299,6 +335,7 @@ class Accumulator:
         self.time_max = max(self.time_max, other.time_max)
         self.cluster = self.cluster.merge(other.cluster)
         self._merge_carriage(other)
+        self._merge_circuit(other.circuit)
 
     def merged(self, other) -> "Accumulator":
         """A new accumulator: self followed by ``other`` (:meth:`merge` on a deep copy).
@@ -321,6 +358,8 @@ class Accumulator:
         out["cluster_count"] = np.int64(self.cluster.count)
         out["cluster_mean"] = self.cluster.mean
         out["cluster_comoment"] = self.cluster.comoment
+        if self.circuit is not None:
+            out.update({name: np.asarray(v) for name, v in self.circuit.items()})
         return out
 
     @classmethod
@@ -337,6 +376,8 @@ class Accumulator:
             setattr(acc, name, value.copy() if value.ndim else value[()])
         for name in ("eps_mean", "eps_m2", "eps_min", "eps_max", "time_min", "time_max"):
             setattr(acc, name, float(getattr(acc, name)))
+        if "circuit_count" in state:
+            acc.circuit = {name: np.array(state[name]) for name in CIRCUIT_FIELDS}
         return acc
 
     # ---------------------------------------------------------------------------------------

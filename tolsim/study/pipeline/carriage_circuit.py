@@ -1,0 +1,457 @@
+r"""Along-track propagation with a carriage whose balls recirculate (issue 24).
+
+With ``[carriage.circuit]`` each track's balls run in a closed circuit (the loaded zone, two
+turnarounds and a return channel; :mod:`tolsim.physics.circuit`): the balls that leave the
+loaded zone come back in their order, with their sizes and tolerances, and the column of
+unloaded balls pushes against a drag. :func:`first_contact_carriage_circuit` integrates a
+block of assemblies with the one along-track loop
+(:func:`tolsim.study.pipeline.propagation.integrate`) in the carriage frame of
+:mod:`tolsim.study.pipeline.carriage_track`, extended by :class:`CircuitFrame` (the balls
+move by the circuit's step, not by the free motion and fresh entering balls) and observed by
+:class:`CircuitContact`. The theory is in the Notes of
+:func:`first_contact_carriage_circuit`.
+"""
+
+import numpy as np
+
+from tolsim._jit import jit
+from tolsim.physics.circuit import (
+    STATUS_ITERATIONS,
+    STATUS_JAMMED,
+    WHERE,
+    circuit_length,
+    step_circuit_kernel,
+)
+from tolsim.physics.velocity.analytic import LOAD_COLUMNS
+from tolsim.study.pipeline.carriage_track import CarriageFrame
+from tolsim.study.pipeline.propagation import StepObserver, integrate
+from tolsim.study.pipeline.track_friction import CREEP_MODELS
+from tolsim.study.sampling import entering_capacity, moving_ball_values
+from tolsim.study.spec import ContactSettings
+
+_K = LOAD_COLUMNS.index("creep_stiffness")
+#: Gaps at the start of the stroke at or below this are closed [m]: the positions are sums
+#: of diameters and gaps (about 0.3 m, ulp 6e-17 m), so a zero gap comes out within a few
+#: 1e-17 m of 0.
+CLOSED_AT_START = 1e-15
+#: The circuit's contact events by where they form, in the order of the result file's
+#: ``circuit_contact_where`` (:data:`tolsim.physics.circuit.WHERE`).
+WHERE_NAMES = tuple(WHERE[k] for k in sorted(WHERE))
+
+
+def circuit_ball_ids(balls: int, circuit_balls: int) -> np.ndarray:
+    """The study ball id of each ball of a circuit, in ring order (the direction of flow).
+
+    Ring ball c < n (n = ``balls``, the train) is the train's ball n - 1 - c (the train is
+    numbered from the trailing end, the ring from the entry); ring ball c >= n is the study's
+    entering ball c (draw 5 k = c - n: :func:`tolsim.study.sampling.moving_ball_values`).
+    """
+    ring = np.arange(circuit_balls, dtype=np.int64)
+    return np.where(ring < balls, balls - 1 - ring, ring)
+
+
+@jit
+def slots_kernel(position, loaded, length, half_zone, ring_id, out_z, out_id, out_ring,
+                 out_count):
+    """The loaded balls of circuits (C, N) as carriage slots (C, S) in z order (trailing
+    first): z = L_z / 2 - (sigma mod L_c), the study id and the ring index of each (NaN, -1
+    past ``out_count``); ``out_count`` is set to -1 where a circuit has more loaded balls than
+    slots."""
+    circuits, n = position.shape
+    slots = out_z.shape[1]
+    for c in range(circuits):
+        count = 0
+        for r in range(n):
+            if loaded[c, r]:
+                x = position[c, r] % length[c]
+                z = half_zone - x
+                if count >= slots:
+                    count = -1
+                    break
+                # insertion in z order
+                j = count
+                while j > 0 and out_z[c, j - 1] > z:
+                    out_z[c, j] = out_z[c, j - 1]
+                    out_id[c, j] = out_id[c, j - 1]
+                    out_ring[c, j] = out_ring[c, j - 1]
+                    j -= 1
+                out_z[c, j] = z
+                out_id[c, j] = ring_id[r]
+                out_ring[c, j] = r
+                count += 1
+        out_count[c] = count
+        for j in range(max(count, 0), slots):
+            out_z[c, j] = np.nan
+            out_id[c, j] = -1
+            out_ring[c, j] = -1
+
+
+def initial_circuits(config, block):
+    """Positions (M, N), diameters (M, N) and lengths (M,) of the block's circuits at t = 0
+    (M = assemblies x tracks, N = ``carriage.circuit.balls``), in ring order (Notes of
+    :func:`first_contact_carriage_circuit`, "Filling")."""
+    circuit = config.carriage.circuit
+    m, tracks, n, nb = block.size, config.n_tracks, config.train.balls, circuit.balls
+    count = m * tracks
+    nominal = 2.0 * config.bearing.ball_radius
+    ids = np.broadcast_to(circuit_ball_ids(n, nb), (m, tracks, nb))
+    diameter = np.full((count, nb), nominal)
+    if "ball_oversize" in {t.source for t in config.tolerances if t.scope == "ball"}:
+        values = moving_ball_values(config, block, np.ascontiguousarray(ids),
+                                    np.zeros((m, tracks, nb)))
+        diameter += values["ball_oversize"].reshape(count, nb)
+    # the zone's gaps in ring order (the train's gaps reversed), and those outside it
+    zone = block.initial_gap.reshape(count, n - 1)[:, ::-1]
+    slack = circuit.slack
+    total = zone.sum(axis=1)
+    scale = np.where(total > slack, slack / np.where(total > 0, total, 1.0), 1.0)
+    zone = zone * scale[:, None]
+    rest = np.maximum(slack - zone.sum(axis=1), 0.0)
+    draws = block.entering_gap.reshape(count, -1)[:, : nb - n + 1]
+    weight = draws.sum(axis=1)
+    share = np.where(weight[:, None] > 0, draws / np.where(weight > 0, weight, 1.0)[:, None],
+                     1.0 / (nb - n + 1))
+    gaps = np.concatenate([zone, rest[:, None] * share], axis=1)  # gap c: balls c, c + 1
+    step = 0.5 * (diameter + np.roll(diameter, -1, axis=1)) + gaps
+    # the train's leading ball (ring 0) where the block put it
+    lead = block.initial_position.reshape(count, n)[:, -1]
+    first = 0.5 * config.train.loaded_zone_length - lead
+    position = first[:, None] + np.concatenate(
+        [np.zeros((count, 1)), np.cumsum(step[:, :-1], axis=1)], axis=1)
+    return position, diameter, circuit_length(diameter, gaps.sum(axis=1))
+
+
+class CircuitFrame(CarriageFrame):
+    """The carriage frame with the balls in circuits (Notes of
+    :func:`first_contact_carriage_circuit`): the slots of :class:`CarriageFrame` are the
+    circuit's loaded balls, re-read from the circuit at every step; :meth:`advance` moves the
+    circuits by the step's travel with each loaded ball's epsilon and creep stiffness of the
+    step (:func:`tolsim.physics.circuit.step_circuit_kernel`) instead of the free motion.
+
+    Circuit arrays (C = assemblies x tracks rows, N balls in ring order): ``sigma``,
+    ``diameter``, ``ring_loaded``, ``ring_closed``, ``ring_speed``, ``length`` (C,),
+    ``ring_ok`` (resolved at every evaluation so far); ``ring_id`` the study id of each ring
+    ball (:func:`circuit_ball_ids`); ``slot_ring`` (size, tracks, slots) the ring ball in each
+    slot.
+    """
+
+    def __init__(self, config, block):
+        super().__init__(config, block)
+        circuit = config.carriage.circuit
+        self.drag = circuit.return_drag
+        self.zone = config.train.loaded_zone_length
+        self.ring_id = circuit_ball_ids(self.balls, circuit.balls)
+        self.sigma, self.diameter_ring, self.length = initial_circuits(config, block)
+        self.slack = self.length - self.diameter_ring.sum(axis=1)
+        shape = self.sigma.shape
+        self.ring_loaded = np.mod(self.sigma, self.length[:, None]) < self.zone
+        self.ring_closed = np.zeros(shape, dtype=bool)
+        # touching at the start: a gap of the filling's rounding (a few 1e-17 m) is closed
+        self.ring_closed[:] = self.gaps() <= CLOSED_AT_START
+        self.ring_speed = np.full(shape, 0.5)
+        self.ring_ok = np.ones(shape, dtype=bool)
+        self.slot_ring = np.full(self.ball_id.shape, -1, dtype=np.int64)
+        self.status = np.zeros(block.size, dtype=np.int64)
+        self.model = CREEP_MODELS[ContactSettings().creep_model]
+        self._slots(np.arange(block.size))
+
+    def gaps(self, rows=None) -> np.ndarray:
+        """Gaps (C_k, N) of the circuits of assemblies ``rows`` (all: None) [m], ring order
+        (gap c between balls c and c + 1; they sum to the slack)."""
+        circuits = slice(None) if rows is None else self._circuits(rows)
+        sigma, d, length = self.sigma[circuits], self.diameter_ring[circuits], \
+            self.length[circuits]
+        ahead = np.roll(sigma, -1, axis=1)
+        ahead[:, -1] += length
+        return ahead - sigma - 0.5 * (d + np.roll(d, -1, axis=1))
+
+    def _circuits(self, rows):
+        return (np.asarray(rows)[:, None] * self.tracks + np.arange(self.tracks)).reshape(-1)
+
+    def _slots(self, rows):
+        """Re-read the slots of assemblies ``rows`` from their circuits."""
+        circuits = self._circuits(rows)
+        k, tracks, slots = len(rows), self.tracks, self.slots
+        z = np.empty((k * tracks, slots))
+        ids = np.empty((k * tracks, slots), dtype=np.int64)
+        ring = np.empty((k * tracks, slots), dtype=np.int64)
+        count = np.empty(k * tracks, dtype=np.int64)
+        slots_kernel(self.sigma[circuits], self.ring_loaded[circuits], self.length[circuits],
+                     self.half_zone, self.ring_id, z, ids, ring, count)
+        self.position[rows] = z.reshape(k, tracks, slots)
+        self.ball_id[rows] = ids.reshape(k, tracks, slots)
+        self.slot_ring[rows] = ring.reshape(k, tracks, slots)
+        self.count[rows] = np.maximum(count, 0).reshape(k, tracks)
+        ok = np.take_along_axis(self.ring_ok[circuits], np.maximum(ring, 0), axis=1)
+        self.ball_ok[rows] = np.where(ring >= 0, ok, True).reshape(k, tracks, slots)
+        overflow = (count < 0).reshape(k, tracks).any(axis=1)
+        self.status[np.asarray(rows)[overflow]] |= STATUS_OVERFLOW_SLOTS
+
+    def stiffness(self, balls, loaded):
+        """Creep stiffness K [N] of the loaded slots (NaN elsewhere and where unresolved):
+        the analytic model at each ball's own contact state (:data:`tolsim.study.pipeline.
+        track_friction.CREEP_MODELS`), as the trains after contact."""
+        out = np.full(loaded.shape, np.nan)
+        if loaded.any():
+            dbeta = np.ascontiguousarray(balls.contact_angle_deviation.reshape(-1, 4))
+            force = np.ascontiguousarray(balls.normal_force.reshape(-1, 4))
+            k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
+            out[loaded] = np.where(np.asarray(balls.valid).reshape(-1), k, np.nan)
+        return out
+
+    def advance(self, step, new):
+        # the circuits' step: the loaded balls at their epsilon and K of the step (the free
+        # motion ``new`` is not used)
+        rows = step.rows
+        circuits = self._circuits(rows)
+        state1, state2 = step.state1, step.state2
+        eps = self.velocity(state1, state2)
+        stiff = self.stiffness(state2.balls, state2.loaded)
+        stiff = np.where(np.isfinite(stiff), stiff, self.stiffness(state1.balls,
+                                                                   state1.loaded))
+        finite = np.isfinite(stiff) & (stiff > 0)
+        fallback = float(np.mean(stiff[finite])) if finite.any() else 1.0
+        unresolved = ~(state1.valid & state2.valid)
+        c, n = len(circuits), self.sigma.shape[1]
+        ring = self.slot_ring[rows].reshape(c, -1)
+        ring_eps = np.zeros((c, n))
+        ring_k = np.full((c, n), fallback)
+        line, slot = np.nonzero(ring >= 0)
+        target = ring[line, slot]
+        ring_eps[line, target] = eps.reshape(c, -1)[line, slot]
+        ring_k[line, target] = np.where(finite, stiff, fallback).reshape(c, -1)[line, slot]
+        ok = self.ring_ok[circuits]
+        ok[line, target] &= ~unresolved.reshape(c, -1)[line, slot]
+        self.ring_ok[circuits] = ok
+        sigma, loaded = self.sigma[circuits], self.ring_loaded[circuits]
+        closed, speed = self.ring_closed[circuits], self.ring_speed[circuits]
+        velocity, force, mean_force = (np.empty((c, n)) for _ in range(3))
+        column = np.empty((c, 4))
+        count = np.empty(c, dtype=np.int64)
+        capacity = n
+        pair = np.full((c, capacity), -1, dtype=np.int64)
+        where = np.full((c, capacity), -1, dtype=np.int8)
+        when = np.full((c, capacity), np.nan)
+        status = np.empty(c, dtype=np.int64)
+        travel = self.v * step.dt
+        step_circuit_kernel(sigma, np.ascontiguousarray(self.diameter_ring[circuits]),
+                            ring_eps, ring_k, loaded, closed,
+                            np.ascontiguousarray(self.length[circuits]), float(self.zone),
+                            float(self.drag), float(travel), float(self.v * step.t), speed,
+                            velocity, force, mean_force, column, count, pair, where, when,
+                            status)
+        self.sigma[circuits], self.ring_loaded[circuits] = sigma, loaded
+        self.ring_closed[circuits], self.ring_speed[circuits] = closed, speed
+        self.status[rows] |= np.bitwise_or.reduce(status.reshape(len(rows), -1), axis=1)
+        step.previous_id = step.ball_id.copy()
+        self._slots(rows)
+        bad = (self.status[rows] & (STATUS_JAMMED | STATUS_ITERATIONS
+                                    | STATUS_OVERFLOW_SLOTS)) != 0
+        step.overflow = bad
+        empty = np.full(step.position.shape, -1, dtype=np.int64)
+        step.events = [empty, np.full(step.position.shape, np.nan), empty.copy(),
+                       np.full(step.position.shape, np.nan)]
+        step.circuit = {"ok": ok, "loaded": loaded, "closed": closed, "force": force,
+                        "mean_force": mean_force, "column": column, "count": count,
+                        "pair": pair, "where": where, "travel": when,
+                        "circuits": circuits}
+
+
+#: Status bit of an assembly whose loaded balls outnumbered the carriage's slots.
+STATUS_OVERFLOW_SLOTS = 8
+
+
+class CircuitContact(StepObserver):
+    """The contacts of each assembly's circuits (:class:`CircuitFrame`), over the whole
+    stroke: the first contact between loaded balls (``time``, ``pair``, ``valid`` as
+    :class:`tolsim.study.pipeline.carriage_track.CarriageFirstContact`), the circuit's
+    contact events by where they form (``where_count`` (size, 4), :data:`WHERE_NAMES`), the
+    column forces at the ends of the zone (``column_max``, ``column_mean`` (size, 2):
+    entry, exit, the largest over the tracks at the ends of the steps and the mean over the
+    stroke of the larger track's), each circuit's total gap at the start and end of the
+    stroke (``total_gap_start``, ``total_gap_end`` (size, tracks)) and the largest departure
+    of the total gap from the slack at any step (``slack_error`` (size,)) [m]."""
+
+    def __init__(self, frame):
+        self.frame = frame
+        self.half_zone, self.slots, self.balls = frame.half_zone, frame.slots, frame.balls
+
+    def begin(self, block, position):
+        m, tracks = block.size, self.frame.tracks
+        self.time = np.full(m, np.inf)
+        self.pair = np.full(m, -1, dtype=np.int64)
+        self.valid = np.ones(m, dtype=bool)
+        self.where_count = np.zeros((m, len(WHERE_NAMES)), dtype=np.int64)
+        self.column_max = np.zeros((m, 2))
+        self.column_mean = np.zeros((m, 2))
+        self.total_gap_start = self.frame.gaps().sum(axis=1).reshape(m, tracks)
+        self.total_gap_end = self.total_gap_start.copy()
+        self.slack_error = np.zeros(m)
+        self.travel = 0.0
+
+    def following(self):
+        return True  # every assembly over the whole stroke
+
+    def observe(self, step):
+        searching = ~np.isfinite(self.time[step.rows])
+        self.searching = searching
+        resolved = step.state1.valid & step.state2.valid
+        self.valid[step.rows[searching]] &= resolved.all(axis=(1, 2))[searching]
+
+    def moved(self, step):
+        frame, rows, circ = self.frame, step.rows, step.circuit
+        tracks, k = frame.tracks, len(rows)
+        ok, loaded, closed = circ["ok"], circ["loaded"], circ["closed"]
+        ahead_loaded = np.roll(loaded, -1, axis=1)
+        ahead_ok = np.roll(ok, -1, axis=1)
+        both_ok = ok & ahead_ok
+        # contact events: where they formed; a first contact is an event inside the zone
+        # (both balls loaded) of resolved balls
+        pair, where, travel = circ["pair"], circ["where"], circ["travel"]
+        for code in range(len(WHERE_NAMES)):
+            hits = (where == code).sum(axis=1).reshape(k, tracks).sum(axis=1)
+            self.where_count[rows, code] += hits
+        safe = np.maximum(pair, 0)
+        pair_ok = np.take_along_axis(both_ok, safe, axis=1) & (pair >= 0)
+        inside = (where == 0) & pair_ok
+        t_event = np.where(inside, travel / frame.v, np.inf)
+        # a closed pair of loaded, resolved balls that carries force at the end of the step
+        # (pushed in closed by the column, or closed before the step)
+        pressed = closed & loaded & ahead_loaded & both_ok & (circ["force"] > 0.0)
+        t_end = step.t + step.dt
+        t_pressed = np.where(pressed, t_end, np.inf)
+        t_all = np.minimum(t_event.min(axis=1) if t_event.shape[1] else np.inf,
+                           t_pressed.min(axis=1)).reshape(k, tracks)
+        first_track = np.argmin(t_all, axis=1)
+        t_first = t_all[np.arange(k), first_track]
+        new = np.isfinite(t_first) & ~np.isfinite(self.time[rows]) & (t_first <= t_end)
+        if new.any():
+            for a in np.flatnonzero(new):
+                line = a * tracks + first_track[a]
+                ring_pair = self._ring_pair(inside[line], pair[line], travel[line],
+                                            pressed[line])
+                self.time[rows[a]] = t_first[a]
+                self.pair[rows[a]] = first_track[a] * (self.balls - 1) + self._slot_index(
+                    rows[a], first_track[a], (ring_pair + 1) % loaded.shape[1])
+        column = circ["column"].reshape(k, tracks, 4)
+        self.column_max[rows] = np.maximum(self.column_max[rows], column[:, :, :2].max(axis=1))
+        self.column_mean[rows] += column[:, :, 2:].max(axis=1) * (frame.v * step.dt)
+        self.travel = max(self.travel, frame.v * t_end)
+        total = frame.gaps(rows).sum(axis=1).reshape(k, tracks)
+        self.total_gap_end[rows] = total
+        error = np.abs(total - frame.slack[frame._circuits(rows)].reshape(k, tracks))
+        self.slack_error[rows] = np.maximum(self.slack_error[rows], error.max(axis=1))
+        searching = self.searching  # as without the circuit: up to the first contact
+        self.valid[rows[searching]] &= ~step.overflow[searching]
+
+    @staticmethod
+    def _ring_pair(inside, pair, travel, pressed):
+        """The ring pair of a circuit's first contact in the step: its first inside event,
+        else its first pressed pair."""
+        if inside.any():
+            slots = np.flatnonzero(inside)
+            return int(pair[slots[np.argmin(travel[slots])]])
+        return int(np.flatnonzero(pressed)[0])
+
+    def _slot_index(self, row, track, ring_ball):
+        """The zone position j (from the trailing end, at most balls - 2) of ring ball
+        ``ring_ball`` (the pair's trailing ball) at the end of the step; 0 if it has left."""
+        slots = np.flatnonzero(self.frame.slot_ring[row, track] == ring_ball)
+        j = int(slots[0]) if len(slots) else 0
+        return min(j, max(self.balls - 2, 0))
+
+    def figures(self):
+        """The circuit figures of the block (:meth:`tolsim.study.statistics.accumulator.
+        Accumulator.add_circuit`)."""
+        travel = self.travel if self.travel > 0 else 1.0
+        return {"where_count": self.where_count, "column_max": self.column_max,
+                "column_mean": self.column_mean / travel,
+                "total_gap_start": self.total_gap_start, "total_gap_end": self.total_gap_end,
+                "slack_error": self.slack_error}
+
+
+def first_contact_carriage_circuit(config, block, observers=()):
+    r"""First contact of a block's carriage assemblies whose balls run in circuits.
+
+    Parameters
+    ----------
+    config : StudyConfig
+        With ``[carriage]``, ``[carriage.circuit]`` and ``propagation = "along_track"``.
+    block : tolsim.study.sampling.Block
+        With the circuits' balls outside the zone as its entering draws
+        (:func:`tolsim.study.sampling.entering_capacity`).
+    observers : sequence of StepObserver
+        More observers (a :class:`tolsim.study.pipeline.carriage_track.TrackTrace`).
+
+    Returns
+    -------
+    time, pair, train_valid, resolve_seconds, state, carriage
+        As :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`.
+    contact : CircuitContact
+        The circuit figures (:meth:`CircuitContact.figures`).
+
+    Notes
+    -----
+    **The circuit in the carriage frame.** Each track's N balls run round a closed circuit
+    (:mod:`tolsim.physics.circuit`, its state, rules and what it neglects in the Notes of
+    :func:`tolsim.physics.circuit.step`): arc length sigma from the entry of the loaded zone
+    (z = +L/2) in the direction of flow, so a loaded ball sits at z = L/2 - (sigma mod L_c).
+    The carriage frame of :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`
+    holds the loaded balls in slots; here the slots are re-read from the circuits at the end
+    of every step (:func:`slots_kernel`), and the carriage is solved with those balls at
+    their own z as there. Each ball keeps its study id (:func:`circuit_ball_ids`), so its
+    ``ball`` tolerances (its size among them) and its track's rail and carriage values go with
+    it, and it reads the rail fields at its rail position s = z + v t.
+
+    **Filling.** At t = 0 the train's balls are where the block put them (the loaded zone's
+    gaps are the sampled ``initial_gap`` of the train) and the N - n balls outside the zone are
+    the block's entering balls; the N - n + 1 gaps outside the zone share the rest of the slack,
+    slack - sum of the zone's gaps, in proportion to the block's entering gaps (equally if those
+    are all 0). Should the zone's gaps exceed the slack, they are scaled down to it and the
+    balls outside the zone touch. The diameters are D + the ball's ``ball_oversize`` (if a
+    source), so the slack is the circuit's length minus the true diameters. The total gap of
+    every circuit equals the slack at every step (by construction of the circuit's state; the
+    ``slack_error`` of :class:`CircuitContact` records the rounding).
+
+    **The step.** The one loop, :func:`tolsim.study.pipeline.propagation.integrate`, evaluates
+    the loaded balls at the start and at the midpoint of each step as without the circuit
+    (epsilon_1, the midpoint positions on the free motion, epsilon_2; a ball outside the zone
+    at the midpoint keeps epsilon_1); then the circuits move by the step's carriage travel
+    v dt with each loaded ball's epsilon of the step and its creep stiffness K (the analytic
+    model at its own contact state at the midpoint, as the trains after contact; the block's
+    mean K for a ball without one), by :func:`tolsim.physics.circuit.step_circuit_kernel`:
+    exact for constant epsilon and K in the step, contacts located at their exact travel,
+    balls crossing the zone's ends at their exact travel. A ball that enters the zone within
+    a step moves at epsilon = 0 for the rest of it (it was not evaluated): a position error of
+    at most |epsilon| v dt / 2. An unresolved ball moves at epsilon = 0 (as without the circuit)
+    and makes its assembly invalid if it happens before the first contact.
+
+    **Contact.** P(contact) and the time to first contact keep their meaning: the first contact
+    between two loaded balls that are resolved so far, either a gap between them closing inside
+    the zone (an ``inside`` event of the circuit, at its exact travel), or a closed pair of loaded
+    balls that carries force at the end of a step (balls pushed into the zone in contact by the
+    column; its time the end of the step, at most dt late). Contacts of unloaded balls (at the
+    entry, the exit or in the return channel) carry no friction of loaded balls and are counted
+    apart, by where they form (``where_count``). The pair index is that of the open model,
+    track * (balls - 1) + j, j the position of the pair's trailing ball from the trailing end at
+    the end of the step (at most balls - 2). Every assembly is followed over the whole stroke.
+
+    Cost: the evaluation of the open model plus one circuit step per assembly and step
+    (O(N) per event, a few events per step), and every assembly is followed to the end.
+    """
+    if config.carriage is None or config.carriage.circuit is None:
+        raise ValueError("first_contact_carriage_circuit needs a config with "
+                         "[carriage.circuit]")
+    if block.entering_gap is None or block.entering_gap.shape[1] < config.n_tracks * (
+            entering_capacity(config)):
+        raise ValueError("the block holds no circuit balls: draw it with sample_block from a "
+                         "config with [carriage.circuit]")
+    frame = CircuitFrame(config, block)
+    contact = CircuitContact(frame)
+    integrate(config, frame, [contact, *observers])
+    return (contact.time, contact.pair, contact.valid, frame.resolve_seconds,
+            frame.initial_state, frame.initial_carriage, contact)
+
+
+__all__ = ["WHERE_NAMES", "CircuitContact", "CircuitFrame", "circuit_ball_ids",
+           "first_contact_carriage_circuit", "initial_circuits", "slots_kernel"]
