@@ -279,7 +279,7 @@ def entering_capacity(config) -> int:
     """
     diameter = 2.0 * config.bearing.ball_radius
     open_trains = int(np.floor(1.05 * config.motion.stroke / (2.0 * diameter))) + 2
-    circuit = config.carriage.circuit if config.carriage is not None else None
+    circuit = config.circuit
     if circuit is None:
         return open_trains
     return max(open_trains, circuit.balls - config.train.balls + 1)

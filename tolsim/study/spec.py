@@ -629,6 +629,11 @@ class StudyConfig:
         return self.contact is not None
 
     @property
+    def circuit(self):
+        """The carriage's ball circuit (``[carriage.circuit]``), or None."""
+        return self.carriage.circuit if self.carriage is not None else None
+
+    @property
     def n_tracks(self) -> int:
         """Tracks (trains) per assembly: the carriage's rows of balls, or 1."""
         return self.carriage.layout.n_tracks if self.has_carriage else 1
