@@ -1,20 +1,87 @@
 """Numba jit defaults, in one place.
 
 Kernels are compiled lazily on first call and cached on disk (``cache=True``), so a CLI call
-pays compilation once per machine, not once per call.
+pays compilation once per machine, not once per call. A cached kernel is valid while every
+kernel source of the package is unchanged (:class:`KernelTreeStamp`), not only its own file.
 """
 
+import functools
+import hashlib
+import re
 import threading
 import time
+from pathlib import Path
 
 import numba
 import numpy as np
+from numba.core import caching as numba_caching
 from numba.core import event as numba_event
 
 #: Options for every scalar/serial kernel.
 JIT = dict(nogil=True, cache=True, fastmath=False, error_model="numpy")
 #: Options for kernels that loop over balls with ``numba.prange``.
 PJIT = dict(JIT, parallel=True)
+
+
+#: A line that makes a function a kernel: ``@jit``, ``@pjit`` (with or without options).
+_KERNEL_LINE = re.compile(rb"^@p?jit\b", re.M)
+
+
+@functools.cache
+def kernel_sources_digest(root: str) -> bytes:
+    """SHA-256 over the kernel sources below ``root``: every ``.py`` file with a line ``@jit``
+    or ``@pjit``, and this one (the jit options), by path relative to ``root`` and content.
+    Read once per process."""
+    digest = hashlib.sha256()
+    for path in sorted(Path(root).rglob("*.py")):
+        text = path.read_bytes()
+        if _KERNEL_LINE.search(text) or path.resolve() == Path(__file__).resolve():
+            digest.update(path.relative_to(root).as_posix().encode() + b"\0" + text + b"\0")
+    return digest.digest()
+
+
+class KernelTreeStamp:
+    """Mixin of a Numba cache locator: a kernel's cache is stale when *any* kernel source
+    below :attr:`root` changed, not only its own file.
+
+    Numba stamps a cached kernel with its own file's hash, but the machine code it saves
+    holds the code of every jitted function the kernel calls, from other modules too: after
+    a change to a callee's module (a ``git checkout`` in a working tree, an editable
+    install), the caller's cache was loaded with the old callee inside and gave the old
+    numbers without a word. Here the stamp also holds :func:`kernel_sources_digest`, so a
+    change to any kernel source compiles the package's kernels again. Files outside
+    ``root`` keep Numba's own stamp.
+    """
+
+    #: The package folder whose kernel sources make up the stamp.
+    root = str(Path(__file__).resolve().parent)
+
+    def get_source_stamp(self):
+        own = super().get_source_stamp()
+        if not Path(self._py_file).resolve().is_relative_to(self.root):
+            return own
+        return own, kernel_sources_digest(self.root)
+
+
+def _stamped(locator):
+    return type(f"KernelTree{locator.__name__}", (KernelTreeStamp, locator), {})
+
+
+def _install_locators():
+    """Put the :class:`KernelTreeStamp` variants of Numba's file-backed locators first. The
+    locator list is Numba's private API: if a release moves it, kernels keep Numba's own
+    stamps (the gap this closes) rather than fail to load."""
+    impl = getattr(numba_caching, "CacheImpl", getattr(numba_caching, "_CacheImpl", None))
+    classes = getattr(impl, "_locator_classes", None)
+    names = ("UserProvidedCacheLocator", "InTreeCacheLocator", "UserWideCacheLocator")
+    found = [getattr(numba_caching, n, None) for n in names]
+    if not isinstance(classes, list) or None in found:
+        return
+    if not any(issubclass(c, KernelTreeStamp) for c in classes):
+        classes[:0] = [_stamped(c) for c in found]
+
+
+_install_locators()
 
 
 def jit(func=None, **overrides):
