@@ -270,11 +270,7 @@ def combine_replicates(first, second) -> RareEventResult:
     evaluations = first.evaluations + second.evaluations
     ancestors = first.ancestors + second.ancestors
     if not first.ok or not second.ok:
-        bad = first if not first.ok else second
-        other = second if bad is first else first
-        keep = other if other.ok else bad
-        status = bad.status if not np.isfinite(bad.probability) or not other.ok \
-            else STATUS_ESTIMATORS_DISAGREE
+        bad, keep, status = flagged_pair(first, second)
         which = "first" if bad is first else "second"
         return replace(keep, status=status, evaluations=evaluations, ancestors=ancestors,
                        message=f"{which} subset simulation run not ok: {bad.message}; {both}")
@@ -333,6 +329,19 @@ def lost_mode_explains(sub, imp) -> bool:
     return explained / MODE_LIMIT <= imp.probability <= MODE_LIMIT * explained
 
 
+def flagged_pair(a, b):
+    """(the failing one, the one whose number is kept, the status) of two estimates of which
+    at least one is not ``ok``: the other's number when it is ``ok``, with status
+    ``"estimators_disagree"`` when the failing one has a number too (it does not back the
+    other), else the failing one's status (and its number when neither is ``ok``)."""
+    bad = a if not a.ok else b
+    other = b if bad is a else a
+    keep = other if other.ok else bad
+    status = bad.status if not np.isfinite(bad.probability) or not other.ok \
+        else STATUS_ESTIMATORS_DISAGREE
+    return bad, keep, status
+
+
 def combine(sub, imp) -> RareEventResult:
     """The cross-check of subset simulation and importance sampling (``method="rare"``).
 
@@ -373,11 +382,7 @@ def combine(sub, imp) -> RareEventResult:
                           if (k == "ancestors") == (good is sub) or k not in
                           ("ancestors", "level_independent_cv")})
     if not sub.ok or not imp.ok:
-        bad = sub if not sub.ok else imp
-        other = imp if bad is sub else sub
-        keep = other if other.ok else bad
-        status = bad.status if not np.isfinite(bad.probability) or not other.ok \
-            else STATUS_ESTIMATORS_DISAGREE
+        bad, keep, status = flagged_pair(sub, imp)
         message = (f"{'subset simulation' if bad is sub else 'importance sampling'} not ok: "
                    f"{bad.message}; {both}")
         return replace(keep, estimator="rare", status=status, message=message,
