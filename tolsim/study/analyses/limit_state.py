@@ -711,9 +711,10 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     that a failure mode the chains lost flags the number (``diagnostic_failed``) instead of
     leaving a wrong ``ok``. On the others (``along_track``, friction; with every estimator)
     there is no design point: subset simulation runs twice instead, from the two children of
-    :func:`~tolsim.study.analyses.rare_events.api.estimator_seeds`, each at :func:`rare_size`
-    (half the configured samples per level where that gives whole chains: about the cost of
-    one run), and :func:`~tolsim.study.analyses.rare_events.api.replicated_subset` gives their
+    :func:`~tolsim.study.analyses.rare_events.api.estimator_seeds`, each at the configured
+    samples per level (twice the cost of one run: at half size each run loses a mode more
+    often, and on RPRepo's RP110 two half-size runs were no better than one full run), and
+    :func:`~tolsim.study.analyses.rare_events.api.replicated_subset` gives their
     mean when both are ``ok`` and agree, else ``estimators_disagree`` with both numbers (the
     report's verdict undecided); :attr:`EventEstimate.mode_check` ``"replicates"``. This
     catches a failure mode that one run finds and the other misses; a mode that both miss
@@ -769,9 +770,9 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     note, design, components, parts = "", None, None, {}
     mode_check = MODE_CHECK_NONE
     if st.estimator in ("subset", "importance", "rare") and not g.smooth:
-        # no design point: two independent runs at half size check each other
+        # no design point: two independent full-size runs check each other
         result, runs = replicated_subset(
-            g, g.dimension, seed, samples_per_level=rare_size(st.samples_per_level, st.p0),
+            g, g.dimension, seed, samples_per_level=st.samples_per_level,
             p0=st.p0, max_levels=st.max_levels, batch_size=batch_size)
         parts, mode_check = dict(zip(REPLICATE_PARTS, runs, strict=True)), MODE_CHECK_REPLICATES
         if st.estimator != "subset":
