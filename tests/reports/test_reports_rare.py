@@ -186,3 +186,23 @@ def test_an_unchecked_subset_number_says_so(subset_file):
     assert "unchecked for a lost failure mode" in verdict.reason
     assert "unchecked for a lost mode (no FORM design points)" in "".join(
         rare_events_html(unchecked))
+
+
+def test_replicated_subset_numbers_say_so(subset_file):
+    # estimator_mode_check "replicates" (issue 23): two independent subset simulation runs
+    # checked each other (a limit state that is not smooth). Agreeing: the verdict as
+    # checked, the table names the check; disagreeing: UNDECIDED, as for estimator = "rare"
+    from tolsim.reports.study import rare_events_html
+    from tolsim.reports.verdict import UNDECIDED, contact_check
+
+    ds = subset_file.copy()
+    ds["contact_probability"].attrs = {**subset_file.contact_probability.attrs,
+                                       "estimator_mode_check": "replicates"}
+    verdict = contact_check(ds)
+    assert verdict.status == contact_check(subset_file).status
+    assert "unchecked" not in verdict.reason
+    assert "checked for a lost mode by two independent runs" in "".join(rare_events_html(ds))
+    ds["contact_probability"].attrs.update(estimator_status="estimators_disagree",
+                                           estimator_message="first run 1e-7, second 1e-5")
+    assert contact_check(ds).status == UNDECIDED
+    assert "estimators_disagree: first run 1e-7" in contact_check(ds).reason

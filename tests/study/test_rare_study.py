@@ -450,10 +450,10 @@ def test_importance_falls_back_to_subset_where_the_limit_state_is_not_smooth():
                                     "state jumps")
     assert estimate.design_point is None
     assert "[importance sampling not attempted" in estimate.describe()
-    # no FORM on a limit state that is not smooth: subset's number is unchecked for a lost
-    # mode, and says so
-    assert estimate.mode_check == limit_state.MODE_CHECK_NONE
-    assert "unchecked for a lost failure mode" in estimate.describe()
+    # no FORM on a limit state that is not smooth: two independent runs of subset simulation
+    # check each other for a lost mode (issue 23), and it says so
+    assert estimate.mode_check == limit_state.MODE_CHECK_REPLICATES
+    assert "checked for a lost failure mode by two independent runs" in estimate.describe()
 
 
 def test_no_number_without_backing(tmp_path):

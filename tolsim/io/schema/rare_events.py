@@ -108,7 +108,8 @@ DIAGNOSTICS = {
         "estimate with its levels taken as independent", ("subset", "rare")),
 }
 #: ``estimator = "rare"``: each estimator's own estimate, suffix ``_subset`` /
-#: ``_importance`` after the probability's name and before these.
+#: ``_importance`` after the probability's name and before these; on an event that is not
+#: smooth, the two subset simulation runs, ``_replicate_1`` / ``_replicate_2``.
 PART_VALUES = {"": ("probability", "f", "estimate"),
                "_ci_lower": ("ci_lower", "f", "lower end of the 95 % interval"),
                "_ci_upper": ("ci_upper", "f", "upper end of the 95 % interval"),
@@ -117,7 +118,13 @@ PART_VALUES = {"": ("probability", "f", "estimate"),
                "_evaluations": ("evaluations", "i", "assemblies evaluated"),
                "_status": ("status", "i", "status (flag_meanings; the message in the "
                                           "estimator_message attribute)")}
-PART_TITLES = {"subset": "subset simulation", "importance": "importance sampling"}
+PART_TITLES = {"subset": "subset simulation", "importance": "importance sampling",
+               "replicate_1": "the first subset simulation run",
+               "replicate_2": "the second subset simulation run"}
+#: When each part is written.
+PART_WHEN = {"subset": "estimator = rare", "importance": "estimator = rare",
+             "replicate_1": "a limit state that is not smooth",
+             "replicate_2": "a limit state that is not smooth"}
 for _event, _prefix in EVENT_PROBABILITY.items():
     _what = _prefix.replace("_", " ")
     RARE_EVENT_VARIABLES[f"{_prefix}_status"] = (
@@ -129,7 +136,7 @@ for _event, _prefix in EVENT_PROBABILITY.items():
     for _part, _title in PART_TITLES.items():
         for _suffix, (_, _kind, _long) in PART_VALUES.items():
             RARE_EVENT_VARIABLES[f"{_prefix}_{_part}{_suffix}"] = (
-                (), "1", f"{_title}'s {_long} of the {_what} (estimator = rare)", _kind)
+                (), "1", f"{_title}'s {_long} of the {_what} ({PART_WHEN[_part]})", _kind)
 
 
 def status_flag(status) -> np.int8:
@@ -170,8 +177,10 @@ def rare_event_variables(result) -> tuple:
     ``estimator_message`` (why the estimate is not ``ok``: no number, or a number kept with
     a failed diagnostic or a disagreement), and where subset simulation gave or checked the
     number ``estimator_mode_check``: ``design_points`` (checked for a lost failure mode against
-    FORM's design points of the event's components) or ``none`` (unchecked: a limit state
-    that is not smooth, or no design point found); the plain run's counts (``n_contact`` ...) stay.
+    FORM's design points of the event's components), ``replicates`` (a limit state that is not
+    smooth: checked by the agreement of two independent runs, ``*_replicate_1``,
+    ``*_replicate_2``) or ``none`` (unchecked: no design point found); the plain run's counts
+    (``n_contact`` ...) stay.
     Per event also ``*_status`` (the status as a CF flag) and the diagnostics of the
     estimator (:data:`DIAGNOSTICS`); with ``estimator = "rare"`` each estimator's own
     estimate (``*_subset``, ``*_importance``: :data:`PART_VALUES`). Importance sampling adds

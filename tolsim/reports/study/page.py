@@ -187,6 +187,15 @@ DIAGNOSTIC_FORMATS = {
 }
 
 
+#: The report's words for the ``estimator_mode_check`` attribute.
+MODE_CHECK_TEXT = {
+    "design_points": "checked for a lost mode against FORM design points",
+    "replicates": "checked for a lost mode by two independent runs (a mode both miss is not "
+                  "seen)",
+    "none": "unchecked for a lost mode (no FORM design points)",
+}
+
+
 def diagnostics_text(ds, name) -> str:
     """The diagnostics of the estimate ``name`` in one line, and with ``estimator = "rare"``
     each estimator's number with its interval and status ("" when the file has none)."""
@@ -196,10 +205,9 @@ def diagnostics_text(ds, name) -> str:
              if np.isfinite(value) and (suffix != "ancestors" or value > 0)]
     check = ds[name].attrs.get("estimator_mode_check", "") if name in ds.variables else ""
     if check:
-        parts.append("checked for a lost mode against FORM design points"
-                     if check == "design_points" else "unchecked for a lost mode (no FORM "
-                                                      "design points)")
-    for part, title in (("subset", "subset simulation"), ("importance", "importance sampling")):
+        parts.append(MODE_CHECK_TEXT.get(check, f"lost-mode check {check}"))
+    for part, title in (("subset", "subset simulation"), ("importance", "importance sampling"),
+                        ("replicate_1", "first run"), ("replicate_2", "second run")):
         var = f"{name}_{part}"
         if var in ds.variables:
             value = format_fraction(number(ds, var), number(ds, f"{var}_ci_lower"),

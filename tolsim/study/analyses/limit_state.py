@@ -31,7 +31,12 @@ from tolsim.study.analyses.rare_events import (
     series_importance_sampling,
     subset_simulation,
 )
-from tolsim.study.analyses.rare_events.api import combine, estimator_seeds, form_cross_check
+from tolsim.study.analyses.rare_events.api import (
+    combine,
+    estimator_seeds,
+    form_cross_check,
+    replicated_subset,
+)
 from tolsim.study.analyses.rare_events.importance import series_design_points
 from tolsim.study.analyses.sensitivity import study_factors
 from tolsim.study.pipeline.block import (
@@ -68,9 +73,13 @@ EVENT_TITLES = {"contact": "P(contact)", "velocity_deviation_exceedance": "P(an 
                 "|epsilon| > limit)", "friction_exceedance": "P(friction increase > limit)"}
 #: Units of each event's g.
 EVENT_UNITS = {"contact": "m", "velocity_deviation_exceedance": "1", "friction_exceedance": "1"}
-#: :attr:`EventEstimate.mode_check` of a subset simulation run without design points.
+#: :attr:`EventEstimate.mode_check`: subset simulation unchecked for a lost failure mode,
+#: checked against FORM design points, or checked by two independent replicates.
 MODE_CHECK_NONE = "none"
 MODE_CHECK_DESIGN_POINTS = "design_points"
+MODE_CHECK_REPLICATES = "replicates"
+#: :attr:`EventEstimate.parts` keys of the two replicates.
+REPLICATE_PARTS = ("replicate_1", "replicate_2")
 #: Name of the gap factor (as :data:`tolsim.study.analyses.sensitivity.INITIAL_GAP`).
 INITIAL_GAP = "initial_gap"
 
@@ -650,13 +659,17 @@ class EventEstimate:
         Wall time [s].
     parts : dict
         ``rare`` on a smooth event: ``subset`` and ``importance`` -> each estimator's
-        RareEventResult, which ``result`` combines or sets side by side; empty otherwise.
+        RareEventResult, which ``result`` combines or sets side by side; on an event that is
+        not smooth (:data:`REPLICATE_PARTS`) ``replicate_1`` and ``replicate_2`` -> the two
+        subset simulation runs; empty otherwise.
     mode_check : str
-        Whether subset simulation's number was checked for a lost failure mode against FORM
-        design points (:func:`~tolsim.study.analyses.rare_events.subset.lost_modes`):
-        ``"design_points"`` (the components' design points), ``"none"`` (subset simulation
-        ran without design points: its number is unchecked for a lost mode), "" when no
-        subset simulation gave or checked the number.
+        How subset simulation's number was checked for a lost failure mode:
+        ``"design_points"`` against FORM design points
+        (:func:`~tolsim.study.analyses.rare_events.subset.lost_modes`), ``"replicates"`` by
+        the agreement of two independent runs (a limit state that is not smooth,
+        :func:`~tolsim.study.analyses.rare_events.api.replicated_subset`: a mode one run
+        finds and the other misses, not one both miss), ``"none"`` (unchecked: no design
+        point found), "" when no subset simulation gave or checked the number.
     """
 
     event: str
@@ -676,6 +689,8 @@ class EventEstimate:
             line += f" [{self.note}]"
         if self.mode_check == MODE_CHECK_NONE:
             line += " [no FORM design points: unchecked for a lost failure mode]"
+        elif self.mode_check == MODE_CHECK_REPLICATES:
+            line += " [checked for a lost failure mode by two independent runs]"
         return line
 
 
@@ -694,9 +709,17 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     ``subset``: :func:`~tolsim.study.analyses.rare_events.subset_simulation` on g, for every event.
     On a smooth series event FORM on its components comes first (:func:`checked_subset`), so
     that a failure mode the chains lost flags the number (``diagnostic_failed``) instead of
-    leaving a wrong ``ok``; on the others (``along_track``, friction) there is no design
-    point, and :attr:`EventEstimate.mode_check` ``"none"`` records (in the result file and
-    the report's verdict) that the number is unchecked for a lost mode. ``rare`` and the
+    leaving a wrong ``ok``. On the others (``along_track``, friction; with every estimator)
+    there is no design point: subset simulation runs twice instead, from the two children of
+    :func:`~tolsim.study.analyses.rare_events.api.estimator_seeds`, each at the configured
+    samples per level (twice the cost of one run: at half size each run loses a mode more
+    often, and on RPRepo's RP110 two half-size runs were no better than one full run), and
+    :func:`~tolsim.study.analyses.rare_events.api.replicated_subset` gives their
+    mean when both are ``ok`` and agree, else ``estimators_disagree`` with both numbers (the
+    report's verdict undecided); :attr:`EventEstimate.mode_check` ``"replicates"``. This
+    catches a failure mode that one run finds and the other misses; a mode that both miss
+    (with a per-run miss probability q, about q^2 of the time; q grows as the runs shrink)
+    gives two agreeing, wrong numbers and stays ``ok``. ``rare`` and the
     fallback of ``importance`` pass importance sampling's design points to subset simulation
     (no extra cost).
     ``importance``: on a smooth series event (``contact`` with ``constant`` propagation,
@@ -724,8 +747,8 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     costs plus half a subset simulation (on ``configs/rare_contact.toml`` FORM on the
     components, 2 471 evaluations for the nine pairs, :mod:`~tolsim.study.analyses.
     rare_events.series_form`). Where importance
-    sampling is not attempted (not smooth), subset simulation's result stands alone at full
-    size, with a note; where it gives no number,
+    sampling is not attempted (not smooth), the two replicates of ``subset`` stand in for it,
+    with a note; where it gives no number,
     ``combine`` keeps subset simulation's with importance sampling's flag (not ``ok``).
     """
     st = config.study
@@ -747,12 +770,17 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
     note, design, components, parts = "", None, None, {}
     mode_check = MODE_CHECK_NONE
     if st.estimator in ("subset", "importance", "rare") and not g.smooth:
-        result = subset()
+        # no design point: two independent full-size runs check each other
+        result, runs = replicated_subset(
+            g, g.dimension, seed, samples_per_level=st.samples_per_level,
+            p0=st.p0, max_levels=st.max_levels, batch_size=batch_size)
+        parts, mode_check = dict(zip(REPLICATE_PARTS, runs, strict=True)), MODE_CHECK_REPLICATES
         if st.estimator != "subset":
             why = ("along_track propagation gives a limit state that is not smooth (the "
                    "smallest gap over the time steps)" if is_along_track(config) else
                    "the friction limit state jumps where the balls start to touch")
-            note = f"importance sampling not attempted: {why}; subset simulation used"
+            note = (f"importance sampling not attempted: {why}; subset simulation used (two "
+                    "independent runs)")
     elif st.estimator == "subset":
         result, mode_check = checked_subset(g, sub_seed, samples_per_level=st.samples_per_level,
                                             p0=st.p0, max_levels=st.max_levels,
