@@ -107,15 +107,23 @@ def kernel_array(a, dtype=np.float64):
 
 
 class _CompileClock(numba_event.Listener):
-    """Seconds Numba spent compiling in this process, per thread (``numba:compile`` events).
+    """Seconds Numba spent compiling kernels or loading them from its disk cache, in this
+    process.
 
-    Only the outermost compilation of a thread is timed (a kernel's callees compile inside
-    it). Loading a kernel from the disk cache sends no event and costs nothing here.
+    Numba sends ``numba:compile`` around a compilation only; loading a cached kernel (about
+    1 s for a study's kernels in a fresh process) sends nothing of its own. Both happen while
+    Numba holds (or waits for) its compiler lock, and it sends ``numba:compiler_lock`` around
+    that, so this listens to both, on one nesting count: only the outermost span of a thread
+    is timed (a kernel's callees compile or load inside it). Per thread it is the sum of that
+    thread's spans; for the process, the time during which any thread was in one (the union
+    of the spans, so that two threads waiting for the same lock do not count it twice).
     """
 
     def __init__(self):
         self._local = threading.local()
         self._lock = threading.Lock()
+        self._active = 0  # threads inside a span
+        self._process_started = 0.0
         self._process_total = 0.0
 
     def _state(self):
@@ -127,33 +135,46 @@ class _CompileClock(numba_event.Listener):
     def on_start(self, event):
         state = self._state()
         if state.depth == 0:
-            state.started = time.perf_counter()
+            now = time.perf_counter()
+            state.started = now
+            with self._lock:
+                if self._active == 0:
+                    self._process_started = now
+                self._active += 1
         state.depth += 1
 
     def on_end(self, event):
         state = self._state()
         state.depth -= 1
         if state.depth == 0:
-            spent = time.perf_counter() - state.started
-            state.total += spent
+            now = time.perf_counter()
+            state.total += now - state.started
             with self._lock:
-                self._process_total += spent
+                self._active -= 1
+                if self._active == 0:
+                    self._process_total += now - self._process_started
 
     def seconds(self, thread: bool = True) -> float:
-        """Compile seconds so far (a running total) of the calling thread, or with
-        ``thread=False`` of every thread of the process."""
-        return self._state().total if thread else self._process_total
+        """Seconds so far (a running total) of the calling thread, or with ``thread=False``
+        of the process (time in which any thread compiled or loaded a kernel)."""
+        if thread:
+            return self._state().total
+        with self._lock:
+            running = time.perf_counter() - self._process_started if self._active else 0.0
+            return self._process_total + running
 
 
 _CLOCK = _CompileClock()
 numba_event.register("numba:compile", _CLOCK)
+numba_event.register("numba:compiler_lock", _CLOCK)
 
 
 def compile_seconds(thread: bool = True) -> float:
-    """Seconds spent compiling Numba kernels so far (a running total), by the calling thread
-    or, with ``thread=False``, by every thread of this process.
+    """Seconds spent compiling Numba kernels or loading them from Numba's disk cache so far (a
+    running total), by the calling thread or, with ``thread=False``, by this process.
 
-    The difference of two readings is the compilation inside a timed section: subtract it
-    to book model time apart from compilation (a first run with a cold kernel cache).
+    The difference of two readings is the compilation and loading inside a timed section:
+    subtract it to book model time apart from them (compilation: a first run with a cold
+    kernel cache; loading: the first call of each kernel in a process).
     """
     return _CLOCK.seconds(thread)

@@ -410,9 +410,10 @@ def summary(ds, output, elapsed) -> str:
                 lines.append(f"drivers of {what} (total Sobol' index): " + ", ".join(
                     f"{name} {value:.2f}" for name, value in ranked.items()))
     compiled = float(a.get("compile_seconds", 0.0))
-    if compiled > 0:  # a cold kernel cache: once per machine (tolsim warmup does it ahead)
-        lines.append(f"compiled kernels: {compiled:.1f} s (first run only; not in the times "
-                     "above and below)")
+    if compiled > 0:  # compiling: a cold kernel cache, once per machine (tolsim warmup does
+        # it ahead); loading from Numba's cache: the first call of each kernel in a process
+        lines.append(f"compiled kernels: {compiled:.1f} s (compiling on a first run, loading "
+                     "from the kernel cache after it; not in the times above and below)")
     # over the work done in this process (after a resume, only that), compilation excluded
     rate = float(a.get("balls_per_second", float("nan")))
     if not math.isfinite(rate):  # a file from before the attribute

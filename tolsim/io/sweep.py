@@ -173,7 +173,7 @@ class SweepWork:
     elapsed : float
         Wall time of the points run here [s], compilation included.
     compile_seconds : float
-        Numba compilation inside ``elapsed`` [s].
+        Numba compilation and kernel-cache loading inside ``elapsed`` [s].
     balls_run : int
         Balls of the assemblies evaluated here.
     """

@@ -379,7 +379,8 @@ def collect(result, history=None) -> tuple:
         "propagation_assumption": propagation_assumption(st.propagation),
         "propagation_caveat": propagation_caveat(cfg),
         "elapsed_seconds": float(result.elapsed),
-        # Numba compilation (a cold kernel cache) in the run, not part of the times above;
+        # Numba compilation (a cold kernel cache) and kernel-cache loading in the run, not part
+        # of the times above;
         # the throughput of the work done in this process (after a resume, only that)
         "compile_seconds": float(getattr(result, "compile_seconds", 0.0)),
         "balls_per_second": float(getattr(result, "balls_per_second", float("nan"))),

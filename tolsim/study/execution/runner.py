@@ -108,7 +108,8 @@ class StudyResult:
     # a rare-event estimator (study.estimator): event ->
     # tolsim.study.analyses.limit_state.EventEstimate
     rare_events: dict | None = None
-    # Numba compilation in this process [s]: in the whole run, and inside ``elapsed``
+    # Numba compilation and kernel-cache loading in this process [s]: in the whole run, and
+    # inside ``elapsed``
     compile_seconds: float = 0.0
     loop_compile_seconds: float = 0.0
     assemblies_run: int | None = None  # evaluated in this process (None: all of them)
