@@ -96,7 +96,7 @@ def test_the_rows_read_the_benchmarks_output():
         rows = [row for row in timings.ROWS if row.command[0] == script]
         assert rows
         for row in rows:
-            assert row.measured(out) > 0
+            assert np.isfinite(row.measured(out))
 
 
 def test_the_cold_start_benchmark_is_named_with_the_first_run_time():
