@@ -121,6 +121,75 @@ def initial_circuits(config, block):
     return position, diameter, circuit_length(diameter, gaps.sum(axis=1))
 
 
+def circuit_events(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id, previous_id,
+                   slot_ring, t, dt):
+    """The exits and entries of a step of circuits, as the open carriage's
+    (:func:`tolsim.study.pipeline.carriage_track.advance_kernel`, for a
+    :class:`tolsim.study.pipeline.carriage_track.TrackTrace`).
+
+    Parameters
+    ----------
+    sigma0, sigma1 : ndarray (C, N)
+        Circuit positions at the start and the end of the step [m], ring order; C = k x
+        tracks circuits of k assemblies.
+    loaded0, loaded1 : ndarray of bool (C, N)
+        Loaded there.
+    length : ndarray (C,)
+        L_c [m].
+    zone : float
+        L_z [m].
+    ring_id : ndarray of int (N,)
+        Study id of each ring ball (:func:`circuit_ball_ids`).
+    previous_id : ndarray of int (k, tracks, slots)
+        The slots' ids at the start of the step.
+    slot_ring : ndarray of int (k, tracks, slots)
+        The ring ball in each slot at the end of the step (-1: empty).
+    t, dt : float
+        Start and length of the step [s].
+
+    Returns
+    -------
+    list of ndarray (k, tracks, slots)
+        Exit ids at the slot the ball left, exit times [s], entry ids at the slot it took,
+        entry times [s] (-1 / NaN elsewhere).
+
+    Notes
+    -----
+    A ball leaves when its sigma mod L_c passes L_z, enters when it passes L_c (= 0); the
+    time is interpolated linearly on the ball's sigma within the step, as the open
+    carriage's (exact while the ball's speed is constant in the step).
+    """
+    shape = previous_id.shape
+    slots = shape[-1]
+    exit_id = np.full(shape, -1, dtype=np.int64)
+    entry_id = np.full(shape, -1, dtype=np.int64)
+    exit_time, entry_time = np.full(shape, np.nan), np.full(shape, np.nan)
+    flat = (exit_id.reshape(-1, slots), exit_time.reshape(-1, slots),
+            entry_id.reshape(-1, slots), entry_time.reshape(-1, slots))
+    length = np.asarray(length)[:, None]
+    x0 = np.mod(sigma0, length)
+    span = sigma1 - sigma0
+    for leaving, boundary, (ids, times, where) in (
+            (loaded0 & ~loaded1, zone, (flat[0], flat[1], previous_id.reshape(-1, slots))),
+            (~loaded0 & loaded1, length, (flat[2], flat[3], None))):
+        line, ring = np.nonzero(leaving)
+        if line.size == 0:
+            continue
+        crossing = np.broadcast_to(boundary, sigma0.shape)[line, ring] - x0[line, ring]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(span[line, ring] > 0, crossing / span[line, ring], 1.0)
+        when = t + np.clip(frac, 0.0, 1.0) * dt
+        if where is None:  # the slot it took
+            match = slot_ring.reshape(-1, slots)[line] == ring[:, None]
+        else:  # the slot it left
+            match = where[line] == ring_id[ring][:, None]
+        found = match.any(axis=1)
+        slot = np.argmax(match, axis=1)
+        ids[line[found], slot[found]] = ring_id[ring[found]]
+        times[line[found], slot[found]] = when[found]
+    return [exit_id, exit_time, entry_id, entry_time]
+
+
 class CircuitFrame(CarriageFrame):
     """The carriage frame with the balls in circuits (Notes of
     :func:`first_contact_carriage_circuit`): the slots of :class:`CarriageFrame` are the
@@ -240,6 +309,7 @@ class CircuitFrame(CarriageFrame):
                             float(self.drag), float(travel), float(self.v * step.t), speed,
                             velocity, force, mean_force, column, count, pair, where, when,
                             status)
+        before = self.sigma[circuits], self.ring_loaded[circuits]  # copies
         self.sigma[circuits], self.ring_loaded[circuits] = sigma, loaded
         self.ring_closed[circuits], self.ring_speed[circuits] = closed, speed
         self.status[rows] |= np.bitwise_or.reduce(status.reshape(len(rows), -1), axis=1)
@@ -248,9 +318,9 @@ class CircuitFrame(CarriageFrame):
         bad = (self.status[rows] & (STATUS_JAMMED | STATUS_ITERATIONS
                                     | STATUS_OVERFLOW_SLOTS)) != 0
         step.overflow = bad
-        empty = np.full(step.position.shape, -1, dtype=np.int64)
-        step.events = [empty, np.full(step.position.shape, np.nan), empty.copy(),
-                       np.full(step.position.shape, np.nan)]
+        step.events = circuit_events(before[0], sigma, before[1], loaded, self.length[circuits],
+                                     self.zone, self.ring_id, step.previous_id,
+                                     self.slot_ring[rows], step.t, step.dt)
         step.circuit = {"ok": ok, "loaded": loaded, "closed": closed, "force": force,
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
@@ -454,4 +524,4 @@ def first_contact_carriage_circuit(config, block, observers=()):
 
 
 __all__ = ["WHERE_NAMES", "CircuitContact", "CircuitFrame", "circuit_ball_ids",
-           "first_contact_carriage_circuit", "initial_circuits", "slots_kernel"]
+           "circuit_events", "first_contact_carriage_circuit", "initial_circuits", "slots_kernel"]
