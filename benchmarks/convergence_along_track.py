@@ -230,11 +230,15 @@ def main(argv=None):
         contact = args.contact and not has_circuit(path)
         # warm-up: load or compile the kernels outside the timings
         run_study(study_config(path, 2, samples=1, seed=args.seed, contact=contact))
-        rows = [measure(study_config(path, h, samples=args.samples, seed=args.seed,
-                                     contact=contact)) for h in sorted(args.steps)]
+        rows = []
         reference = measure(study_config(path, args.reference, samples=args.samples,
                                          seed=args.seed, contact=contact))
-        print(_text(name, rows, reference, compare(rows, reference)), flush=True)
+        print(f"{name}: reference {args.reference} steps, P = {reference['p']:.4f} "
+              f"({reference['seconds']:.0f} s)", flush=True)
+        for h in sorted(args.steps):  # the table so far after each (a partial run says it)
+            rows.append(measure(study_config(path, h, samples=args.samples, seed=args.seed,
+                                             contact=contact)))
+            print(_text(name, rows, reference, compare(rows, reference)), flush=True)
     return 0
 
 
