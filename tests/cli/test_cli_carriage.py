@@ -296,6 +296,34 @@ def test_text_output_and_plot(capsys, tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def png_size(data: bytes) -> tuple:
+    """(width, height) of a PNG from its IHDR chunk (PNG spec, sec. 11.2.2)."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+def test_the_readme_circuit_figure_is_drawn_by_the_tool(capsys, tmp_path):
+    # The README's figure of the balls round their circuit
+    # (reports/examples/carriage_circuit/circuit.png) is the output of
+    # `tolsim carriage configs/carriage_circuit.toml --seed 1 --circuit-figure FILE`: the
+    # command writes a PNG of the same size (the pixels depend on the fonts of the machine).
+    png = tmp_path / "circuit.png"
+    circuit = CONFIG.parent / "carriage_circuit.toml"
+    assert main(["carriage", str(circuit), "--seed", "1", "--circuit-figure", str(png)]) == 0
+    assert f"wrote {png}" in capsys.readouterr().out
+    readme = CONFIG.parents[1] / "reports/examples/carriage_circuit/circuit.png"
+    assert png_size(png.read_bytes()) == png_size(readme.read_bytes())
+    assert "reports/examples/carriage_circuit/circuit.png" in (
+        CONFIG.parents[1] / "README.md").read_text(encoding="utf-8")
+
+
+def test_a_circuit_figure_needs_a_circuit(capsys, tmp_path):
+    png = tmp_path / "circuit.png"
+    err = one_line_error(capsys, ["carriage", str(CONFIG), "--circuit-figure", str(png)])
+    assert "--circuit-figure" in err and "no [carriage.circuit]" in err
+    assert not png.exists()
+
+
 SINGLE_TRACK = """
 [carriage]
 balls_per_track = 3

@@ -37,6 +37,12 @@ Examples:
   tolsim carriage configs/carriage_preload.toml --json
   tolsim carriage configs/carriage_preload.toml --plot load_distribution.png
   tolsim carriage configs/carriage_preload.toml --seed 7   # one sampled assembly
+  tolsim carriage configs/carriage_circuit.toml --circuit-figure circuit.png
+
+With --circuit-figure (a config with [carriage.circuit]) it also follows the first assembly
+of `tolsim run CONFIG` (or of --seed N) along the stroke, its balls round their circuits, and
+draws one circuit: every ball's place round it against the carriage travel, the loaded zone
+shaded and the contacts marked by where they form.
 """
 
 #: JSON names of the displacement, in DOFS order, and the factor from SI.
@@ -60,7 +66,26 @@ def add_parser(subparsers, formatter_class=None):
     p.add_argument("--plot", metavar="FILE.png",
                    help="also write the load distribution (ball force against position, per "
                         "track) to this PNG file")
+    p.add_argument("--circuit-figure", metavar="FILE.png",
+                   help="also write the balls of one circuit (track 0) against the carriage "
+                        "travel over the stroke to this PNG file (a config with "
+                        "[carriage.circuit]: the first assembly of the study, or of --seed N)")
     return p
+
+
+def _circuit_figure(config, args):
+    """Write ``--circuit-figure``: one assembly traced round its circuits."""
+    from tolsim.reports.carriage import plot_circuit  # noqa: PLC0415
+    from tolsim.study.pipeline.circuit_trace import trace_circuit  # noqa: PLC0415
+
+    if config.carriage.circuit is None:
+        raise UsageError(f"--circuit-figure: {args.config} has no [carriage.circuit] section "
+                         "(see configs/carriage_circuit.toml)")
+    try:
+        plot_circuit(trace_circuit(config, args.seed), args.circuit_figure)
+    except OSError as exc:
+        raise UsageError(f"--circuit-figure: cannot write {args.circuit_figure}: "
+                         f"{exc.strerror or exc}") from None
 
 
 def _finite(value):
@@ -221,6 +246,8 @@ def run(args) -> int:
     if args.seed is not None and args.seed < 0:
         raise UsageError(f"--seed = {args.seed} must be >= 0")
     out = evaluate(config, args.seed)
+    if args.circuit_figure:
+        _circuit_figure(config, args)
     if args.plot:
         from tolsim.reports.carriage import plot_load_distribution  # noqa: PLC0415
 
@@ -233,6 +260,7 @@ def run(args) -> int:
         print(json.dumps(out, indent=2, allow_nan=False))
     else:
         print(_text(out))
-        if args.plot:
-            print(f"wrote {args.plot}")
+        for written in (args.plot, args.circuit_figure):
+            if written:
+                print(f"wrote {written}")
     return 0

@@ -121,6 +121,113 @@ def initial_circuits(config, block):
     return position, diameter, circuit_length(diameter, gaps.sum(axis=1))
 
 
+def entering_velocity(eps, stiffness, loaded):
+    """Give the unloaded balls of circuits the epsilon and creep stiffness of the zone's entry
+    ball (in place), for a ball that enters the zone within the step.
+
+    Parameters
+    ----------
+    eps, stiffness : ndarray (C, N)
+        Each ring ball's epsilon [-] and K [N] of the step (those of the unloaded balls are
+        replaced).
+    loaded : ndarray of bool (C, N)
+        Loaded at the start of the step (one run of ring balls per circuit).
+
+    Notes
+    -----
+    The step of :func:`tolsim.physics.circuit.step_circuit_kernel` uses a ball's epsilon and K
+    only while it is loaded, so only a ball that enters within the step is affected: it was
+    outside the zone at the step's evaluations, so it has none of its own, and moves for the
+    rest of the step with those of the ball ahead of it (the zone's entry ball, the last to
+    have entered), as the open carriage's entering ball
+    (:func:`tolsim.study.pipeline.carriage_track.advance_kernel`). Its position error is at
+    most |epsilon_k - epsilon_ahead| v dt / 2, against |epsilon_k| v dt / 2 at epsilon = 0:
+    neighbours at the zone's entry share the carriage's load there and their track's rail and
+    carriage errors, so only the ball's own part of epsilon remains. (Measured with
+    ``benchmarks/convergence_along_track.py`` on ``configs/carriage_circuit.toml``, 300
+    assemblies, seed 12, paired against the 800-step reference: at epsilon = 0 the entering
+    balls added 27 contacts and removed 1 at 25 steps, added 10 at 50 steps; with the ball
+    ahead's epsilon 2 and 3 at 25 steps, 1 and 2 at 50.)
+    """
+    entry = loaded & ~np.roll(loaded, 1, axis=1)  # its upstream neighbour is unloaded
+    rows = np.flatnonzero(entry.any(axis=1))
+    first = np.argmax(entry[rows], axis=1)
+    fill = ~loaded[rows]
+    for values in (eps, stiffness):
+        sub = values[rows]
+        sub[fill] = np.broadcast_to(sub[np.arange(len(rows)), first][:, None], sub.shape)[fill]
+        values[rows] = sub
+
+
+def circuit_events(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id, previous_id,
+                   slot_ring, t, dt):
+    """The exits and entries of a step of circuits, as the open carriage's
+    (:func:`tolsim.study.pipeline.carriage_track.advance_kernel`, for a
+    :class:`tolsim.study.pipeline.carriage_track.TrackTrace`).
+
+    Parameters
+    ----------
+    sigma0, sigma1 : ndarray (C, N)
+        Circuit positions at the start and the end of the step [m], ring order; C = k x
+        tracks circuits of k assemblies.
+    loaded0, loaded1 : ndarray of bool (C, N)
+        Loaded there.
+    length : ndarray (C,)
+        L_c [m].
+    zone : float
+        L_z [m].
+    ring_id : ndarray of int (N,)
+        Study id of each ring ball (:func:`circuit_ball_ids`).
+    previous_id : ndarray of int (k, tracks, slots)
+        The slots' ids at the start of the step.
+    slot_ring : ndarray of int (k, tracks, slots)
+        The ring ball in each slot at the end of the step (-1: empty).
+    t, dt : float
+        Start and length of the step [s].
+
+    Returns
+    -------
+    list of ndarray (k, tracks, slots)
+        Exit ids at the slot the ball left, exit times [s], entry ids at the slot it took,
+        entry times [s] (-1 / NaN elsewhere).
+
+    Notes
+    -----
+    A ball leaves when its sigma mod L_c passes L_z, enters when it passes L_c (= 0); the
+    time is interpolated linearly on the ball's sigma within the step, as the open
+    carriage's (exact while the ball's speed is constant in the step).
+    """
+    shape = previous_id.shape
+    slots = shape[-1]
+    exit_id = np.full(shape, -1, dtype=np.int64)
+    entry_id = np.full(shape, -1, dtype=np.int64)
+    exit_time, entry_time = np.full(shape, np.nan), np.full(shape, np.nan)
+    flat = (exit_id.reshape(-1, slots), exit_time.reshape(-1, slots),
+            entry_id.reshape(-1, slots), entry_time.reshape(-1, slots))
+    length = np.asarray(length)[:, None]
+    x0 = np.mod(sigma0, length)
+    span = sigma1 - sigma0
+    for leaving, boundary, (ids, times, where) in (
+            (loaded0 & ~loaded1, zone, (flat[0], flat[1], previous_id.reshape(-1, slots))),
+            (~loaded0 & loaded1, length, (flat[2], flat[3], None))):
+        line, ring = np.nonzero(leaving)
+        if line.size == 0:
+            continue
+        crossing = np.broadcast_to(boundary, sigma0.shape)[line, ring] - x0[line, ring]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(span[line, ring] > 0, crossing / span[line, ring], 1.0)
+        when = t + np.clip(frac, 0.0, 1.0) * dt
+        if where is None:  # the slot it took
+            match = slot_ring.reshape(-1, slots)[line] == ring[:, None]
+        else:  # the slot it left
+            match = where[line] == ring_id[ring][:, None]
+        found = match.any(axis=1)
+        slot = np.argmax(match, axis=1)
+        ids[line[found], slot[found]] = ring_id[ring[found]]
+        times[line[found], slot[found]] = when[found]
+    return [exit_id, exit_time, entry_id, entry_time]
+
+
 class CircuitFrame(CarriageFrame):
     """The carriage frame with the balls in circuits (Notes of
     :func:`first_contact_carriage_circuit`): the slots of :class:`CarriageFrame` are the
@@ -224,6 +331,7 @@ class CircuitFrame(CarriageFrame):
         ok[line, target] &= ~unresolved.reshape(c, -1)[line, slot]
         self.ring_ok[circuits] = ok
         sigma, loaded = self.sigma[circuits], self.ring_loaded[circuits]
+        entering_velocity(ring_eps, ring_k, loaded)  # a ball that enters within the step
         closed, speed = self.ring_closed[circuits], self.ring_speed[circuits]
         velocity, force, mean_force = (np.empty((c, n)) for _ in range(3))
         column = np.empty((c, 4))
@@ -240,6 +348,7 @@ class CircuitFrame(CarriageFrame):
                             float(self.drag), float(travel), float(self.v * step.t), speed,
                             velocity, force, mean_force, column, count, pair, where, when,
                             status)
+        before = self.sigma[circuits], self.ring_loaded[circuits]  # copies
         self.sigma[circuits], self.ring_loaded[circuits] = sigma, loaded
         self.ring_closed[circuits], self.ring_speed[circuits] = closed, speed
         self.status[rows] |= np.bitwise_or.reduce(status.reshape(len(rows), -1), axis=1)
@@ -248,9 +357,9 @@ class CircuitFrame(CarriageFrame):
         bad = (self.status[rows] & (STATUS_JAMMED | STATUS_ITERATIONS
                                     | STATUS_OVERFLOW_SLOTS)) != 0
         step.overflow = bad
-        empty = np.full(step.position.shape, -1, dtype=np.int64)
-        step.events = [empty, np.full(step.position.shape, np.nan), empty.copy(),
-                       np.full(step.position.shape, np.nan)]
+        step.events = circuit_events(before[0], sigma, before[1], loaded, self.length[circuits],
+                                     self.zone, self.ring_id, step.previous_id,
+                                     self.slot_ring[rows], step.t, step.dt)
         step.circuit = {"ok": ok, "loaded": loaded, "closed": closed, "force": force,
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
@@ -422,9 +531,10 @@ def first_contact_carriage_circuit(config, block, observers=()):
     mean K for a ball without one), by :func:`tolsim.physics.circuit.step_circuit_kernel`:
     exact for constant epsilon and K in the step, contacts located at their exact travel,
     balls crossing the zone's ends at their exact travel. A ball that enters the zone within
-    a step moves at epsilon = 0 for the rest of it (it was not evaluated): a position error of
-    at most |epsilon| v dt / 2. An unresolved ball moves at epsilon = 0 (as without the circuit)
-    and makes its assembly invalid if it happens before the first contact.
+    a step was not evaluated in it: it moves for the rest of the step with the epsilon and K
+    of the ball ahead of it (:func:`entering_velocity`), a position error of at most
+    |epsilon_k - epsilon_ahead| v dt / 2. An unresolved ball moves at epsilon = 0 (as without
+    the circuit) and makes its assembly invalid if it happens before the first contact.
 
     **Contact.** P(contact) and the time to first contact keep their meaning: the first contact
     between two loaded balls that are resolved so far, either a gap between them closing inside
@@ -454,4 +564,5 @@ def first_contact_carriage_circuit(config, block, observers=()):
 
 
 __all__ = ["WHERE_NAMES", "CircuitContact", "CircuitFrame", "circuit_ball_ids",
-           "first_contact_carriage_circuit", "initial_circuits", "slots_kernel"]
+           "circuit_events", "entering_velocity", "first_contact_carriage_circuit",
+           "initial_circuits", "slots_kernel"]

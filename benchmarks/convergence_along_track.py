@@ -1,0 +1,246 @@
+"""Step-size convergence of the along-track studies (tolsim issue 24, item 4).
+
+For each config the study runs at several ``study.time_steps`` and at a fine-step reference,
+with the same seed and samples (so the same assemblies: the comparison is paired), and the
+script prints, per step count:
+
+* P(contact) with its 95 % Clopper-Pearson interval, and whether the reference's P lies in
+  that interval ("ok": the step-size error is smaller than the estimate's own statistical
+  uncertainty);
+* the paired change against the reference: assemblies that touch at this step and not at the
+  reference (+) and the other way (-), and the mean |change| of the time to first contact
+  over the assemblies that touch in both [s] (the step-size error of the integration, free
+  of sampling noise), with its observed order between successive step counts,
+  log2(err(h) / err(h/2)) (2 for the midpoint rule on smooth epsilon);
+* with ``[contact]`` (``--contact`` adds one where the config has none) the friction figures'
+  means with their 95 % intervals (mean +- 1.96 s / sqrt(n)) and the same check;
+* for an along-track carriage the fraction of first contacts at the zone's ends, and with
+  ``[carriage.circuit]`` the column forces at the zone's entry and exit (means over the
+  assemblies of their stroke means [N]).
+
+It drives the study only through config keys set in the config's text, which the loader
+then validates (``study.time_steps``, and ``study.propagation = "along_track"`` for
+configs/carriage_preload.toml, which is ``constant`` as packaged), and through the public
+:func:`tolsim.run_study`, so it follows whatever step rule the integrator has.
+
+Run: ``python benchmarks/convergence_along_track.py [--configs whatif_along_track
+carriage_preload carriage_circuit] [--steps 25 50 100 200 400] [--reference 1600]
+[--samples N] [--seed S] [--contact]``. The defaults (800 assemblies) run in a few minutes on
+two idle cores; ``--samples`` sets the size.
+"""
+
+import argparse
+import math
+import os
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from tolsim import parse_config, run_study
+from tolsim.io.schema.carriage import zone_end_fraction
+from tolsim.study.spec import set_study_value
+
+ROOT = Path(__file__).resolve().parent.parent
+#: The studies of the issue: free balls, the open carriage, the circuit.
+CONFIGS = {
+    "whatif_along_track": ROOT / "configs" / "whatif_along_track.toml",
+    "carriage_preload": ROOT / "configs" / "carriage_preload.toml",
+    "carriage_circuit": ROOT / "configs" / "carriage_circuit.toml",
+}
+STEPS = (25, 50, 100, 200, 400)
+REFERENCE = 1600
+#: Friction figures compared (names of :data:`tolsim.study.statistics.friction.COLUMNS`).
+FRICTION_FIGURES = ("increase_max", "increase_mean", "ripple")
+#: z of the two-sided 95 % normal interval of a mean.
+Z95 = 1.959963984540054
+
+
+def with_study_keys(text: str, **keys) -> str:
+    """The config ``text`` with ``[study]`` keys set (replaced where present, added after the
+    ``[study]`` header otherwise; a ``[study]`` table is added if there is none)."""
+    for key, value in keys.items():
+        value = f'"{value}"' if isinstance(value, str) else value
+        try:
+            text = set_study_value(text, key, value)
+        except ValueError:  # not in the text: add it to [study]
+            header = re.search(r"^\s*\[study\]\s*(#.*)?$", text, flags=re.MULTILINE)
+            if header is None:
+                text = text.rstrip("\n") + f"\n\n[study]\n{key} = {value}\n"
+            else:
+                end = header.end()
+                text = text[:end] + f"\n{key} = {value}" + text[end:]
+    return text
+
+
+def study_config(path, time_steps: int, *, samples=None, seed=None, contact=False):
+    """The study of ``path`` along the track at ``time_steps`` (and ``samples``, ``seed`` if
+    given), spot checks and sensitivity off, ``[contact]`` added if ``contact`` and the config
+    has none."""
+    text = Path(path).read_text(encoding="utf-8")
+    keys = {"propagation": "along_track", "time_steps": int(time_steps), "spot_checks": 0,
+            "sensitivity_samples": 0}
+    if samples is not None:
+        keys["samples"] = int(samples)
+    if seed is not None:
+        keys["seed"] = int(seed)
+    text = with_study_keys(text, **keys)
+    if contact and not re.search(r"^\s*\[contact\]", text, flags=re.MULTILINE):
+        text = text.rstrip("\n") + "\n\n[contact]\n"
+    return parse_config(text, str(path))
+
+
+def has_circuit(path) -> bool:
+    """The config has ``[carriage.circuit]`` (whose study takes no ``[contact]``)."""
+    text = Path(path).read_text(encoding="utf-8")
+    return re.search(r"^\s*\[carriage\.circuit\]", text, flags=re.MULTILINE) is not None
+
+
+def measure(config) -> dict:
+    """Run the study and keep what the comparison needs."""
+    samples = config.study.samples
+    start = time.perf_counter()
+    result = run_study(config, save_samples=samples)
+    seconds = time.perf_counter() - start
+    acc = result.statistics
+    p, low, high = acc.contact_probability()
+    out = {"time_steps": config.study.time_steps, "p": p, "low": low, "high": high,
+           "n_contact": int(acc.n_contact), "n_unresolved": int(acc.n_unresolved),
+           "n": int(acc.n_assemblies), "seconds": seconds,
+           "contact_time": np.asarray(result.samples["sample_contact_time"], dtype=float)}
+    friction = result.friction
+    if friction is not None:
+        n = int(friction.count)
+        out["friction"] = {name: (friction.column_mean(name),
+                                  Z95 * friction.column_std(name) / math.sqrt(max(n, 1)))
+                           for name in FRICTION_FIGURES}
+    if config.carriage is not None and config.is_along_track:
+        tracks, balls = config.n_tracks, config.train.balls
+        out["zone_end_fraction"] = zone_end_fraction(
+            acc.pair_count[: tracks * max(balls - 1, 0)], tracks)
+        if acc.circuit is not None:
+            c = acc.circuit
+            count = max(int(c["circuit_count"]), 1)
+            entry, exit_ = np.asarray(c["circuit_column_mean_sum"], dtype=float) / count
+            out["column"] = {"entry": float(entry), "exit": float(exit_)}
+    return out
+
+
+def paired(row: dict, reference: dict) -> dict:
+    """The paired change of ``row`` against ``reference`` (same assemblies): assemblies that
+    touch only in the row (``gained``) or only in the reference (``lost``), and the mean
+    |change| of the contact time over those that touch in both [s] (NaN if none)."""
+    t, t_ref = row["contact_time"], reference["contact_time"]
+    if t.shape != t_ref.shape:
+        raise ValueError("the runs must have the same samples")
+    hit, hit_ref = np.isfinite(t), np.isfinite(t_ref)
+    both = hit & hit_ref
+    change = float(np.mean(np.abs(t[both] - t_ref[both]))) if both.any() else float("nan")
+    return {"gained": int(np.count_nonzero(hit & ~hit_ref)),
+            "lost": int(np.count_nonzero(~hit & hit_ref)), "time_change": change}
+
+
+def within(value: float, low: float, high: float) -> bool:
+    """``value`` in [low, high] (the row's own 95 % interval)."""
+    return bool(low <= value <= high)
+
+
+def observed_order(errors) -> list:
+    """log2(err_i / err_{i+1}) between successive step counts that double (NaN where an error
+    is 0 or NaN); the first entry is NaN."""
+    out = [float("nan")]
+    for a, b in zip(errors[:-1], errors[1:], strict=True):
+        ok = np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0
+        out.append(float(np.log2(a / b)) if ok else float("nan"))
+    return out
+
+
+def compare(rows: list, reference: dict) -> list:
+    """Per row (coarse step counts, in increasing order): the checks of the module docstring
+    against ``reference``."""
+    table = []
+    for row in rows:
+        entry = {"time_steps": row["time_steps"],
+                 "p_ok": within(reference["p"], row["low"], row["high"]),
+                 **paired(row, reference)}
+        if "friction" in row:
+            entry["friction_ok"] = {
+                name: within(reference["friction"][name][0], mean - half, mean + half)
+                for name, (mean, half) in row["friction"].items()}
+        table.append(entry)
+    orders = observed_order([e["time_change"] for e in table])
+    for entry, order in zip(table, orders, strict=True):
+        entry["order"] = order
+    return table
+
+
+def _text(name, rows, reference, table) -> str:
+    lines = [f"{name}: {reference['n']} assemblies, reference {reference['time_steps']} "
+             f"steps ({reference['seconds']:.0f} s)",
+             "  steps  P(contact) [95 %]           ref in it  +/- vs ref  "
+             "mean|dt| [ms]  order  ends   column entry/exit [N]  s"]
+
+    def line(row, entry):
+        ok = "" if entry is None else ("yes" if entry["p_ok"] else "NO")
+        pm = "" if entry is None else f"+{entry['gained']}/-{entry['lost']}"
+        dt = "" if entry is None else f"{1e3 * entry['time_change']:.4g}"
+        order = "" if entry is None or not np.isfinite(entry["order"]) else \
+            f"{entry['order']:.2f}"
+        ends = f"{row['zone_end_fraction']:.3f}" if "zone_end_fraction" in row else ""
+        column = (f"{row['column']['entry']:.4f}/{row['column']['exit']:.4f}"
+                  if "column" in row else "")
+        return (f"  {row['time_steps']:>5}  {row['p']:.4f} [{row['low']:.4f}, "
+                f"{row['high']:.4f}]  {ok:>9}  {pm:>10}  {dt:>13}  {order:>5}  {ends:>5}  "
+                f"{column:>21}  {row['seconds']:.0f}")
+
+    for row, entry in zip(rows, table, strict=True):
+        lines.append(line(row, entry))
+    lines.append(line(reference, None) + "   (reference)")
+    if "friction" in reference:
+        lines.append("  friction figures [N], mean [95 %], reference in it:")
+        for row, entry in [*zip(rows, table, strict=True), (reference, None)]:
+            parts = []
+            for figure, (mean, half) in row["friction"].items():
+                ok = "" if entry is None else (" ok" if entry["friction_ok"][figure] else " NO")
+                parts.append(f"{figure} {mean:.4g} [{mean - half:.4g}, {mean + half:.4g}]{ok}")
+            lines.append(f"  {row['time_steps']:>5}  " + "; ".join(parts))
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--configs", nargs="+", default=list(CONFIGS), choices=list(CONFIGS))
+    parser.add_argument("--steps", nargs="+", type=int, default=list(STEPS))
+    parser.add_argument("--reference", type=int, default=REFERENCE,
+                        help="time_steps of the fine-step reference")
+    parser.add_argument("--samples", type=int, default=800)
+    parser.add_argument("--seed", type=int, default=None, help="default: the config's")
+    parser.add_argument("--contact", action="store_true",
+                        help="add [contact] (friction figures) where the config has none and "
+                             "allows it")
+    args = parser.parse_args(argv)
+    if min(args.steps) < 1 or args.reference <= max(args.steps):
+        parser.error("--steps must be >= 1 and below --reference")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"load average {load:.2f} at the start")
+    for name in args.configs:
+        path = CONFIGS[name]
+        contact = args.contact and not has_circuit(path)
+        # warm-up: load or compile the kernels outside the timings
+        run_study(study_config(path, 2, samples=1, seed=args.seed, contact=contact))
+        rows = []
+        reference = measure(study_config(path, args.reference, samples=args.samples,
+                                         seed=args.seed, contact=contact))
+        print(f"{name}: reference {args.reference} steps, P = {reference['p']:.4f} "
+              f"({reference['seconds']:.0f} s)", flush=True)
+        for h in sorted(args.steps):  # the table so far after each (a partial run says it)
+            rows.append(measure(study_config(path, h, samples=args.samples, seed=args.seed,
+                                             contact=contact)))
+            print(_text(name, rows, reference, compare(rows, reference)), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,83 @@
+"""The step-size convergence study of the along-track propagation (issue 24, item 4).
+
+CI-sized: ``benchmarks/convergence_along_track.py`` on a few dozen assemblies and short step
+ladders (the script prints the full table; the README and the issue's closing note quote
+it). Nothing here depends on the machine's speed.
+"""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+_spec = importlib.util.spec_from_file_location(
+    "convergence_along_track", Path(__file__).resolve().parents[2] / "benchmarks"
+    / "convergence_along_track.py")
+convergence = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(convergence)
+
+
+def row(steps, p, low, high, times):
+    return {"time_steps": steps, "p": p, "low": low, "high": high,
+            "contact_time": np.asarray(times, dtype=float)}
+
+
+def test_the_checks_against_the_reference():
+    # By hand: the reference P = 0.30 lies in [0.25, 0.35] (ok) and not in [0.31, 0.40];
+    # the paired change counts the assemblies that touch only in the row (+) or only in the
+    # reference (-), and the mean |change| of the contact time over those that touch in both
+    # (|0.2 - 0.1| and |0.5 - 0.5|: 0.05 s; then 0.025 s, an observed order of 1).
+    inf = np.inf
+    reference = row(400, 0.30, 0.2, 0.4, [0.1, 0.5, inf, 0.3])
+    rows = [row(100, 0.35, 0.31, 0.40, [0.2, 0.5, 0.4, inf]),
+            row(200, 0.30, 0.25, 0.35, [0.15, 0.5, inf, 0.3])]
+    table = convergence.compare(rows, reference)
+    assert [e["p_ok"] for e in table] == [False, True]
+    assert (table[0]["gained"], table[0]["lost"]) == (1, 1)
+    assert (table[1]["gained"], table[1]["lost"]) == (0, 0)
+    assert table[0]["time_change"] == pytest.approx(0.05, abs=1e-15)
+    assert table[1]["time_change"] == pytest.approx(0.025 * 2 / 3, abs=1e-15)
+    assert np.isnan(table[0]["order"])
+    assert table[1]["order"] == pytest.approx(np.log2(0.05 / (0.025 * 2 / 3)), abs=1e-12)
+
+
+def test_the_study_keys_are_set_in_the_config_text():
+    # Replaced where present (layout and comment kept), added to [study] otherwise.
+    text = "[bearing]\nx = 1\n\n[study]\nsamples = 2000   # note\n"
+    out = convergence.with_study_keys(text, samples=64, time_steps=50,
+                                      propagation="along_track")
+    assert "samples = 64     # note" in out
+    assert "\ntime_steps = 50" in out and '\npropagation = "along_track"' in out
+    assert convergence.with_study_keys("[bearing]\n", seed=3).endswith("[study]\nseed = 3\n")
+
+
+def test_a_finer_step_moves_p_by_less_than_its_interval():
+    # configs/whatif_along_track.toml (free balls, a rail field of 20 mm correlation length)
+    # on 64 assemblies: at 100 steps P(contact) is within its own 95 % interval of the
+    # 200-step reference, the paired change is at most one assembly (of 64), and the
+    # contact times move less from 100 to 200 steps than from 50 (the step-size error falls).
+    path = convergence.CONFIGS["whatif_along_track"]
+    rows = [convergence.measure(convergence.study_config(path, h, samples=64))
+            for h in (50, 100)]
+    reference = convergence.measure(convergence.study_config(path, 200, samples=64))
+    table = convergence.compare(rows, reference)
+    assert table[1]["p_ok"]
+    assert abs(rows[1]["p"] - reference["p"]) <= 0.5 * (rows[1]["high"] - rows[1]["low"])
+    assert table[1]["gained"] + table[1]["lost"] <= 1
+    assert table[1]["time_change"] < table[0]["time_change"]
+    assert reference["n"] == 64 and reference["time_steps"] == 200
+    text = convergence._text("whatif_along_track", rows, reference, table)
+    assert "(reference)" in text and text.count("\n") == 4
+
+
+def test_the_circuit_study_reports_its_column_and_ends():
+    # configs/carriage_circuit.toml on 4 assemblies and 10 steps: the circuit's figures come
+    # out (column forces >= 0 at the entry and the exit, the fraction of first contacts at
+    # the zone's ends within [0, 1] or NaN without contacts).
+    path = convergence.CONFIGS["carriage_circuit"]
+    out = convergence.measure(convergence.study_config(path, 10, samples=4))
+    assert out["time_steps"] == 10 and out["n"] == 4
+    assert out["column"]["entry"] >= 0 and out["column"]["exit"] >= 0
+    fraction = out["zone_end_fraction"]
+    assert np.isnan(fraction) or 0 <= fraction <= 1
