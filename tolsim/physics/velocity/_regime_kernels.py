@@ -9,6 +9,7 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import jit, pjit
+from tolsim.physics.velocity._contact_tables import table_ball_loads, table_integrals
 from tolsim.physics.velocity._full_kernels import (
     SLIDING_POLE,
     ball_loads_kernel,
@@ -66,22 +67,25 @@ def _slope(phi, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3):
 
 
 @jit
-def _slope_and_derivative(phi, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3):
+def _slope_and_derivative(phi, qu, qw, force, a, b, sigma_scale, table, cin, sin_, win, xo, wo,
+                          s3):
     """f(phi) = q . s + D_k(s) at s = (cos phi, sin phi / a), and df/dphi.
 
     The gradient of D_k comes from the same contact integral: dD_k/du = -f_z and dD_k/dw =
     -M_n, the contact's friction force along z and its spin moment (Eqs. 12-13), i.e.
-    -sigma F sgn(w) (S_z, S_n) of ``planar_contact_integrals``; (F sgn(u), 0) when w = 0.
+    -sigma F sgn(w) (S_z, S_n) of ``planar_contact_integrals`` (from the tables,
+    :func:`~tolsim.physics.velocity._contact_tables.table_integrals`, into ``s3`` (6,));
+    (F sgn(u), 0) when w = 0.
     """
     u = np.cos(phi)
     w = np.sin(phi) / a
     if abs(w) * SLIDING_POLE * a > abs(u):
-        planar_contact_integrals(u / w / a, 0.0, a, b, cin, sin_, win, xo, wo, s3)
+        table_integrals(u / w / a, a, b, table, cin, sin_, win, xo, wo, s3)
         scale = sigma_scale * force
-        power = scale * abs(w) * s3[3]
+        power = scale * abs(w) * s3[2]
         sign = 1.0 if w > 0.0 else -1.0
-        du = -scale * sign * s3[1]
-        dw = -scale * sign * s3[2]
+        du = -scale * sign * s3[0]
+        dw = -scale * sign * s3[1]
     else:
         power = force * abs(u)
         du = force if u > 0.0 else -force
@@ -92,7 +96,7 @@ def _slope_and_derivative(phi, qu, qw, force, a, b, sigma_scale, cin, sin_, win,
 
 
 @jit
-def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
+def stick_certificate(qu, qw, force, a, b, sigma_scale, table, cin, sin_, win, xo, wo):
     """min over directions s = (cos phi, sin phi / a) of q . s + D_k(s) [N].
 
     >= 0 iff -q lies in the subdifferential of D_k at zero slip and spin, i.e. the stuck
@@ -103,7 +107,7 @@ def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
     holds a local minimum, which regula falsi on f' locates (``_CERTIFICATE_MAX_ITER`` steps
     at most, to a relative change of f below 1e-15).
     """
-    s3 = np.empty(4)
+    s3 = np.empty(6)
     n = CERTIFICATE_DIRECTIONS
     vals = np.empty(n)
     ders = np.empty(n)
@@ -112,7 +116,7 @@ def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
     scale = abs(qu) + abs(qw) / a + force
     for j in range(n):
         vals[j], ders[j] = _slope_and_derivative(step * j, qu, qw, force, a, b, sigma_scale,
-                                                 cin, sin_, win, xo, wo, s3)
+                                                 table, cin, sin_, win, xo, wo, s3)
         best = min(best, vals[j])
     for j in range(n):
         k = (j + 1) % n
@@ -128,8 +132,8 @@ def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
             x = hi - dhi * (hi - lo) / (dhi - dlo)
             if not (lo < x < hi):
                 x = 0.5 * (lo + hi)
-            val, der = _slope_and_derivative(x, qu, qw, force, a, b, sigma_scale, cin, sin_,
-                                             win, xo, wo, s3)
+            val, der = _slope_and_derivative(x, qu, qw, force, a, b, sigma_scale, table, cin,
+                                             sin_, win, xo, wo, s3)
             best = min(best, val)
             if der == 0.0 or abs(val - prev) <= 1e-15 * scale:
                 break
@@ -246,21 +250,22 @@ def double_stick_solve(i, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, c
 
 
 @jit
-def _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin, sin_,
-                win, xo, wo, tr, wr, state, loads, contact):
-    """dD/dw along the stick line of contact k: v_B = V_k + w, Omega = w x_k (D without k)."""
+def _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table, cin, sin_,
+                win, xo, wo, state, loads, contact, jac, o):
+    """dD/dw along the stick line of contact k: v_B = V_k + w, Omega = w x_k (D without k),
+    from the tables (:func:`~tolsim.physics.velocity._contact_tables.table_ball_loads`)."""
     state[0] = vk + w
     state[1] = w * xx
     state[2] = w * xy
     state[3] = 0.0
-    ball_loads_kernel(state, px, py, vgroove, fk0, a, b, sigma_scale, False, rd, hoff, cin,
-                      sin_, win, xo, wo, tr, wr, loads, contact)
+    table_ball_loads(state, px, py, vgroove, fk0, a, b, sigma_scale, table, cin, sin_, win, xo,
+                     wo, loads, contact, jac, o)
     return -(loads[0] + loads[1] * xx + loads[2] * xy)
 
 
 @jit
-def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin, sin_, win,
-                     xo, wo, tr, wr, tol, state, contact, out):
+def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, table, cin, sin_, win, xo,
+                     wo, tol, state, contact, out):
     """Minimise D on the stick line of contact k (no slip and no spin at its centre).
 
     The line is v_B = V_k + w, Omega = w x_k: the ball pivots about the axis x_k through the
@@ -276,43 +281,45 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
     xy = px[k]
     vk = vgroove[k]
     loads = np.empty(5)
+    jac = np.empty((3, 3))
+    o = np.empty(6)
     # the minimum is near pure rolling at v/2 (|epsilon| ~ tan^2(Delta/2) is small): the sign
     # of the slope there gives the side, and a bracket of ``_LINE_BRACKET`` (widened by 4x
     # until the slope changes sign) holds the root
     w0 = 0.5 - vk
-    g0 = _line_slope(w0, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin,
-                     sin_, win, xo, wo, tr, wr, state, loads, contact)
+    g0 = _line_slope(w0, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table, cin,
+                     sin_, win, xo, wo, state, loads, contact, jac, o)
     evals = 1
     h = _LINE_BRACKET
     if g0 > 0.0:
         hi = w0
         ghi = g0
         lo = w0 - h
-        glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff,
-                          cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
+        glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table,
+                          cin, sin_, win, xo, wo, state, loads, contact, jac, o)
         evals += 1
         while glo > 0.0 and evals < 40:
             hi = lo
             ghi = glo
             h *= 4.0
             lo = w0 - h
-            glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd,
-                              hoff, cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
+            glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale,
+                              table, cin, sin_, win, xo, wo, state, loads, contact, jac, o)
             evals += 1
     else:
         lo = w0
         glo = g0
         hi = w0 + h
-        ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff,
-                          cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
+        ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table,
+                          cin, sin_, win, xo, wo, state, loads, contact, jac, o)
         evals += 1
         while ghi < 0.0 and evals < 40:
             lo = hi
             glo = ghi
             h *= 4.0
             hi = w0 + h
-            ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd,
-                              hoff, cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
+            ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale,
+                              table, cin, sin_, win, xo, wo, state, loads, contact, jac, o)
             evals += 1
     w = 0.5 * (lo + hi)
     g = np.inf
@@ -324,8 +331,8 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
                 w = hi - ghi * (hi - lo) / (ghi - glo)
             if not (lo < w < hi):
                 w = 0.5 * (lo + hi)
-            g = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff,
-                            cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
+            g = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table,
+                            cin, sin_, win, xo, wo, state, loads, contact, jac, o)
             evals += 1
             if abs(g) <= 0.01 * tol * total:
                 break
@@ -350,8 +357,8 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
     if not np.isfinite(g):
         # no bracket: the state, loads and contact rows at the midpoint (else they are those
         # of the last evaluation, at w)
-        g = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin,
-                        sin_, win, xo, wo, tr, wr, state, loads, contact)
+        g = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table, cin,
+                        sin_, win, xo, wo, state, loads, contact, jac, o)
     # the stuck contact: pole at its centre, no spin, the reaction that balances the others
     qu = -loads[0]
     yx = -px[k]
@@ -370,8 +377,8 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
 
 
 @jit
-def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, xo, wo, tr, wr,
-                state, contact, info, regime):
+def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_, win, xo, wo,
+                tr, wr, state, contact, info, regime):
     """Regime B: the first certified stick line of a loaded contact (else the one of least D).
 
     An opposite pair with equal angles (a perfect or case (b) bearing) is tried first with
@@ -418,11 +425,11 @@ def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, x
         k = order[m]
         if force[k] <= 0.0:
             continue
-        stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin, sin_,
-                         win, xo, wo, tr, wr, tol, trial, tcontact, out)
+        stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, table, cin, sin_, win,
+                         xo, wo, tol, trial, tcontact, out)
         evals += out[2]
-        cert = stick_certificate(out[3], out[4], force[k], a[k], b[k], sigma_scale, cin, sin_,
-                                 win, xo, wo) / total
+        cert = stick_certificate(out[3], out[4], force[k], a[k], b[k], sigma_scale, table, cin,
+                                 sin_, win, xo, wo) / total
         residual = max(out[1], -cert)
         if residual <= tol or (best_res > tol and out[0] < best_d):
             best_d = out[0]
@@ -485,7 +492,7 @@ def stick_criterion_one(force, a, ellip):
 @pjit
 def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_coefficient,
                   ellip, curved, rd, free_spin, tol, max_iter, cin, sin_, win, xo, wo, tr, wr,
-                  out_state, out_contact, out_info, out_regime):
+                  table, out_state, out_contact, out_info, out_regime):
     """The full model of n balls in every regime (R = 1, v = 1, mu = 1 units).
 
     Per ball: fewer than two loaded contacts: unsolved (NaN). Two opposite contacts with
@@ -538,8 +545,8 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
             state[:] = np.nan
             info[0] = np.inf
         elif npos == 2:
-            stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, xo, wo, tr,
-                        wr, state, contact, info, regime)
+            stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_, win, xo,
+                        wo, tr, wr, state, contact, info, regime)
         else:
             done = False
             tried = False
@@ -548,11 +555,12 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
             s_info = np.empty(3)
             if nonsmooth and stick_criterion_one(fb, a, ellip) < CHI_STICK_FIRST:
                 tried = True
-                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win,
-                                   xo, wo, tr, wr, s_state, s_contact, s_info, regime)
+                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_,
+                                   win, xo, wo, tr, wr, s_state, s_contact, s_info, regime)
             if not done:
                 smooth_solve(beta, fb, a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                             max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
+                             max_iter, cin, sin_, win, xo, wo, tr, wr, table, state, contact,
+                             info)
                 if info[2] > 0.5:
                     regime[0] = REGIME_SMOOTH
                     regime[1] = -1.0
@@ -560,8 +568,8 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
                     done = True
             if not done and nonsmooth and not tried:
                 tried = True
-                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win,
-                                   xo, wo, tr, wr, s_state, s_contact, s_info, regime)
+                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_,
+                                   win, xo, wo, tr, wr, s_state, s_contact, s_info, regime)
             if done and regime[0] == REGIME_STICK:
                 state[:] = s_state
                 contact[:, :] = s_contact
