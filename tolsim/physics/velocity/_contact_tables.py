@@ -95,7 +95,8 @@ def near_kernel(q, cin, sin_, win, xo, wo, out):
 def table_integrals(p, a, b, table, cin, sin_, win, xo, wo, out):
     """S = (S_z, S_n, S_d) of :func:`planar_contact_integrals` at the pole (p a, 0) and dS/dp.
 
-    Writes (S_z, S_n, S_d, dS_z/dp, dS_n/dp, dS_d/dp) into ``out``: from ``table``
+    Writes (S_z, S_n, S_d, dS_z/dp, dS_n/dp, dS_d/dp) into ``out`` (only the first three when
+    ``out`` has three entries): from ``table``
     (:func:`tolsim.physics.velocity.full.contact_table`); within 2^-TABLE_PIECES of |p| = 1
     the stored :func:`direct_integrals` of that float.
     """
@@ -108,19 +109,24 @@ def table_integrals(p, a, b, table, cin, sin_, win, xo, wo, out):
     if y < 1.0:
         k = -math.frexp(y)[1]
     ndeg = table.shape[3]
+    with_derivative = out.shape[0] > 3
     if y <= 0.0 or k >= TABLE_PIECES:
         m = int((1.0 - ap) * 2.0**53) if inside else int((ap - 1.0) * 2.0**52)
         if m >= NEAR_FLOATS:
-            direct_integrals(p, a, b, cin, sin_, win, xo, wo, out)
+            full6 = np.empty(6)
+            direct_integrals(p, a, b, cin, sin_, win, xo, wo, full6)
+            for c in range(out.shape[0]):
+                out[c] = full6[c]
             return
         near = table[t, TABLE_PIECES * TABLE_SUBPIECES + m // ndeg]
         col = m % ndeg
         out[0] = near[0, col]
         out[1] = a * near[1, col]
         out[2] = a * near[2, col]
-        out[3] = near[3, col]
-        out[4] = a * near[4, col]
-        out[5] = a * near[5, col]
+        if with_derivative:
+            out[3] = near[3, col]
+            out[4] = a * near[4, col]
+            out[5] = a * near[5, col]
         return
     u = (y * math.ldexp(1.0, k + 1) - 1.0) * TABLE_SUBPIECES
     j = min(int(u), TABLE_SUBPIECES - 1)
@@ -130,27 +136,41 @@ def table_integrals(p, a, b, table, cin, sin_, win, xo, wo, out):
     f0 = coef[0, 0]
     f1 = coef[1, 0]
     f2 = coef[2, 0]
-    g0 = coef[3, 0]
-    g1 = coef[4, 0]
-    g2 = coef[5, 0]
+    g0 = 0.0
+    g1 = 0.0
+    g2 = 0.0
     tm = 1.0
     tj = s
-    for c in range(1, ndeg):
-        f0 += coef[0, c] * tj
-        f1 += coef[1, c] * tj
-        f2 += coef[2, c] * tj
-        g0 += coef[3, c] * tj
-        g1 += coef[4, c] * tj
-        g2 += coef[5, c] * tj
-        tn = 2.0 * s * tj - tm
-        tm = tj
-        tj = tn
+    if with_derivative:
+        g0 = coef[3, 0]
+        g1 = coef[4, 0]
+        g2 = coef[5, 0]
+        for c in range(1, ndeg):
+            f0 += coef[0, c] * tj
+            f1 += coef[1, c] * tj
+            f2 += coef[2, c] * tj
+            g0 += coef[3, c] * tj
+            g1 += coef[4, c] * tj
+            g2 += coef[5, c] * tj
+            tn = 2.0 * s * tj - tm
+            tm = tj
+            tj = tn
+    else:
+        for c in range(1, ndeg):
+            f0 += coef[0, c] * tj
+            f1 += coef[1, c] * tj
+            f2 += coef[2, c] * tj
+            tn = 2.0 * s * tj - tm
+            tm = tj
+            tj = tn
     sgn = 1.0 if x >= 0.0 else -1.0
     if inside:
         # y = 1 - sgn p
         out[0] = f0
         out[1] = a * f1
         out[2] = a * f2
+        if not with_derivative:
+            return
         out[3] = -sgn * g0
         out[4] = -sgn * a * g1
         out[5] = -sgn * a * g2
@@ -159,6 +179,8 @@ def table_integrals(p, a, b, table, cin, sin_, win, xo, wo, out):
         out[0] = f0
         out[1] = a * f1 * sgn * p
         out[2] = a * f2 * sgn * p
+        if not with_derivative:
+            return
         out[3] = sgn * x * x * g0
         # d(f / |x|)/dp = d(f sgn p)/dp = sgn (p df/dp + f), df/dp = sgn x^2 g
         out[4] = a * (x * g1 + sgn * f1)

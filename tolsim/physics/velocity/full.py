@@ -511,11 +511,17 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     dissipated power D(v_B, Omega) = sum int mu sigma |slip| dA, which is convex, so a step is
     also accepted when it decreases D (Armijo). Non-convergence is a flag (``converged``), never
     an exception. Without loads on the planar surface with omega_z = 0 (issue 25's fast path)
-    the same equations, start and step acceptance are first iterated by Broyden's method, on a
-    coarse angular grid and then on the given one, to 1e-2 ``tol`` (one evaluation of the loads
-    per step instead of seven; its answer is the root to about 1e-12 in epsilon, where the
-    Newton's, which stops anywhere below ``tol``, is within about 1e-8); the Newton is the
-    fallback (:func:`~tolsim.physics.velocity._smooth_kernels.quasi_newton_solve`).
+    every pole lies on its contact's semi-major axis, and the contact integrals of the given
+    grid are taken from a piecewise Chebyshev fit of them in c/a (:func:`contact_table`; the
+    quadrature's values to round-off, 20 times cheaper, with their exact derivative). The same
+    equations, start and step acceptance are then iterated by Newton's method with the exact
+    Jacobian of the fit to 1e-2 ``tol``, plus one step that takes the answer to the root to
+    round-off (median 3 steps of one evaluation each, against 7 steps and ~20 evaluations of
+    the quadrature before;
+    :func:`~tolsim.physics.velocity._contact_tables.table_newton_solve`); Broyden's method on
+    the quadrature (:func:`~tolsim.physics.velocity._smooth_kernels.quasi_newton_solve`) and
+    the damped Newton are the fallbacks. Regime B's stick line and certificate use the same
+    tables.
 
     Near two-point contact (|rho| above about 0.87-0.90 with paired forces, issue 25; the
     switch is set by the criterion chi of :func:`tolsim.physics.velocity.regimes.stick_criterion`)
