@@ -141,9 +141,16 @@ def main(argv=None):
           f"{median_single * 1e3:.3f} ms")
     numba.set_num_threads(cores)
 
-    # SciPy reference on a few balls
+    # SciPy reference on a few balls (--reference-balls 0 skips it: ~150 s per ball)
+    if args.reference_balls > 0:
+        scipy_reference(args.reference_balls, dbeta, force, median_single, rates, cores)
+    regimes_target(args.regime_balls, args.regime_reference_balls, cores)
+
+
+def scipy_reference(n_reference, dbeta, force, median_single, rates, cores):
+    """The Fig. 7 balls solved by the SciPy twin of tests/physics/test_full.py."""
     ref_times, errors = [], []
-    for k in range(args.reference_balls):
+    for k in range(n_reference):
         t0 = time.perf_counter()
         vb, _ = reference_solve(dbeta[k], force[k], rtol=1e-8, xtol=1e-10)
         ref_times.append(time.perf_counter() - t0)
@@ -154,7 +161,6 @@ def main(argv=None):
           f"max |d epsilon| vs full {max(errors):.1e}")
     print(f"  speed-up vs SciPy reference: single call {ref_time / median_single:.0f}x, "
           f"batch on {cores} cores {ref_time * rates['planar', cores]:.0f}x")
-    regimes_target(args.regime_balls, args.regime_reference_balls, cores)
 
 
 if __name__ == "__main__":
