@@ -9,6 +9,7 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import jit, pjit
+from tolsim.physics.velocity._contact_tables import table_ball_loads, table_integrals
 from tolsim.physics.velocity._full_kernels import (
     SLIDING_POLE,
     ball_loads_kernel,
@@ -66,22 +67,25 @@ def _slope(phi, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3):
 
 
 @jit
-def _slope_and_derivative(phi, qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo, s3):
+def _slope_and_derivative(phi, qu, qw, force, a, b, sigma_scale, table, cin, sin_, win, xo, wo,
+                          s3):
     """f(phi) = q . s + D_k(s) at s = (cos phi, sin phi / a), and df/dphi.
 
     The gradient of D_k comes from the same contact integral: dD_k/du = -f_z and dD_k/dw =
     -M_n, the contact's friction force along z and its spin moment (Eqs. 12-13), i.e.
-    -sigma F sgn(w) (S_z, S_n) of ``planar_contact_integrals``; (F sgn(u), 0) when w = 0.
+    -sigma F sgn(w) (S_z, S_n) of ``planar_contact_integrals`` (from the tables,
+    :func:`~tolsim.physics.velocity._contact_tables.table_integrals`, into ``s3`` (3,));
+    (F sgn(u), 0) when w = 0.
     """
     u = np.cos(phi)
     w = np.sin(phi) / a
     if abs(w) * SLIDING_POLE * a > abs(u):
-        planar_contact_integrals(u / w / a, 0.0, a, b, cin, sin_, win, xo, wo, s3)
+        table_integrals(u / w / a, a, b, table, cin, sin_, win, xo, wo, s3)
         scale = sigma_scale * force
-        power = scale * abs(w) * s3[3]
+        power = scale * abs(w) * s3[2]
         sign = 1.0 if w > 0.0 else -1.0
-        du = -scale * sign * s3[1]
-        dw = -scale * sign * s3[2]
+        du = -scale * sign * s3[0]
+        dw = -scale * sign * s3[1]
     else:
         power = force * abs(u)
         du = force if u > 0.0 else -force
@@ -92,7 +96,35 @@ def _slope_and_derivative(phi, qu, qw, force, a, b, sigma_scale, cin, sin_, win,
 
 
 @jit
-def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
+def scan_constants(ellipticity, table, cin, sin_, win, xo, wo):
+    """The contact integrals of the certificate's scan directions, for every ball at once.
+
+    In direction j, s = (cos phi_j, sin phi_j / a), the pole is at p = cot phi_j whatever a,
+    and the integrals are (S_z, a S_n', a S_d') with S_n', S_d' those of a = 1. Returns
+    (CERTIFICATE_DIRECTIONS, 6) = (cos phi_j, sin phi_j, S_z, S_n', S_d', usable): not usable
+    where the contact slides (sin phi_j = 0 to round-off) or |p| is within 1e-9 of 1, where
+    the quadrature changes rule and the few floats p rounds to from a ball's a matter.
+    """
+    n = CERTIFICATE_DIRECTIONS
+    out = np.zeros((n, 6))
+    o = np.empty(3)
+    step = 2.0 * np.pi / n
+    for j in range(n):
+        u = np.cos(step * j)
+        w = np.sin(step * j)
+        out[j, 0] = u
+        out[j, 1] = w
+        if abs(w) * SLIDING_POLE > abs(u) and abs(abs(u / w) - 1.0) > 1e-9:
+            table_integrals(u / w, 1.0, ellipticity, table, cin, sin_, win, xo, wo, o)
+            out[j, 2] = o[0]
+            out[j, 3] = o[1]
+            out[j, 4] = o[2]
+            out[j, 5] = 1.0
+    return out
+
+
+@jit
+def stick_certificate(qu, qw, force, a, b, sigma_scale, table, cin, sin_, win, xo, wo, scan):
     """min over directions s = (cos phi, sin phi / a) of q . s + D_k(s) [N].
 
     >= 0 iff -q lies in the subdifferential of D_k at zero slip and spin, i.e. the stuck
@@ -101,9 +133,10 @@ def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
     the value f and its derivative f' (one contact integral gives both,
     :func:`_slope_and_derivative`); every interval where f' turns from negative to positive
     holds a local minimum, which regula falsi on f' locates (``_CERTIFICATE_MAX_ITER`` steps
-    at most, to a relative change of f below 1e-15).
+    at most, to a relative change of f below 1e-15). The scan takes the integrals of
+    :func:`scan_constants` where usable (they do not depend on the ball).
     """
-    s3 = np.empty(4)
+    s3 = np.empty(3)
     n = CERTIFICATE_DIRECTIONS
     vals = np.empty(n)
     ders = np.empty(n)
@@ -111,8 +144,20 @@ def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
     best = np.inf
     scale = abs(qu) + abs(qw) / a + force
     for j in range(n):
-        vals[j], ders[j] = _slope_and_derivative(step * j, qu, qw, force, a, b, sigma_scale,
-                                                 cin, sin_, win, xo, wo, s3)
+        if scan[j, 5] > 0.5:
+            cs = scan[j, 0]
+            sn = scan[j, 1]
+            w = sn / a
+            sig = sigma_scale * force
+            sign = 1.0 if w > 0.0 else -1.0
+            du = -sig * sign * scan[j, 2]
+            dw = -sig * sign * a * scan[j, 3]
+            vals[j] = qu * cs + qw * w + sig * abs(w) * (a * scan[j, 4])
+            ders[j] = -(qu + du) * sn + (qw + dw) * cs / a
+        else:
+            vals[j], ders[j] = _slope_and_derivative(step * j, qu, qw, force, a, b,
+                                                     sigma_scale, table, cin, sin_, win, xo, wo,
+                                                     s3)
         best = min(best, vals[j])
     for j in range(n):
         k = (j + 1) % n
@@ -128,8 +173,8 @@ def stick_certificate(qu, qw, force, a, b, sigma_scale, cin, sin_, win, xo, wo):
             x = hi - dhi * (hi - lo) / (dhi - dlo)
             if not (lo < x < hi):
                 x = 0.5 * (lo + hi)
-            val, der = _slope_and_derivative(x, qu, qw, force, a, b, sigma_scale, cin, sin_,
-                                             win, xo, wo, s3)
+            val, der = _slope_and_derivative(x, qu, qw, force, a, b, sigma_scale, table, cin,
+                                             sin_, win, xo, wo, s3)
             best = min(best, val)
             if der == 0.0 or abs(val - prev) <= 1e-15 * scale:
                 break
@@ -246,27 +291,37 @@ def double_stick_solve(i, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, c
 
 
 @jit
-def _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin, sin_,
-                win, xo, wo, tr, wr, state, loads, contact):
-    """dD/dw along the stick line of contact k: v_B = V_k + w, Omega = w x_k (D without k)."""
+def _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table, cin, sin_,
+                win, xo, wo, state, loads, contact, jac, o):
+    """dD/dw and d2D/dw2 along the stick line of contact k: v_B = V_k + w, Omega = w x_k (D
+    without k), from the tables (:func:`~tolsim.physics.velocity._contact_tables.table_ball_loads`,
+    whose Jacobian is -Hess D)."""
     state[0] = vk + w
     state[1] = w * xx
     state[2] = w * xy
     state[3] = 0.0
-    ball_loads_kernel(state, px, py, vgroove, fk0, a, b, sigma_scale, False, rd, hoff, cin,
-                      sin_, win, xo, wo, tr, wr, loads, contact)
-    return -(loads[0] + loads[1] * xx + loads[2] * xy)
+    table_ball_loads(state, px, py, vgroove, fk0, a, b, sigma_scale, table, cin, sin_, win, xo,
+                     wo, loads, contact, jac, o)
+    curvature = 0.0
+    for r in range(3):
+        dr = 1.0 if r == 0 else (xx if r == 1 else xy)
+        curvature -= dr * (jac[r, 0] + jac[r, 1] * xx + jac[r, 2] * xy)
+    return -(loads[0] + loads[1] * xx + loads[2] * xy), curvature
 
 
 @jit
-def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin, sin_, win,
-                     xo, wo, tr, wr, tol, state, contact, out):
+def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, table, cin, sin_, win, xo,
+                     wo, tol, state, contact, out):
     """Minimise D on the stick line of contact k (no slip and no spin at its centre).
 
     The line is v_B = V_k + w, Omega = w x_k: the ball pivots about the axis x_k through the
-    centre of contact k. D restricted to it is convex in w, so its slope is non-decreasing:
-    a bracket and Illinois regula falsi find the root. Writes the state, the contact rows (the
-    stuck contact's z force is the reaction that balances the others) and
+    centre of contact k. D restricted to it is convex in w, so its slope g is non-decreasing:
+    Newton's method on g from pure rolling at v/2, with its exact curvature from the tables,
+    kept inside the bracket that the signs of g give (bisection when a step leaves it; until
+    both ends are known, steps of ``_LINE_BRACKET`` widened by 4x). It stops at |g| <= 1e-2
+    ``tol`` sum F, after one more step if that lowers |g| (the minimum to round-off), or
+    when the bracket collapses to round-off. Writes the state, the contact rows (the stuck
+    contact's z force is the reaction that balances the others) and
     ``out`` = (D, |slope| / sum F, evaluations, q_u, q_w).
     """
     fk0 = force.copy()
@@ -276,82 +331,58 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
     xy = px[k]
     vk = vgroove[k]
     loads = np.empty(5)
-    # the minimum is near pure rolling at v/2 (|epsilon| ~ tan^2(Delta/2) is small): the sign
-    # of the slope there gives the side, and a bracket of ``_LINE_BRACKET`` (widened by 4x
-    # until the slope changes sign) holds the root
-    w0 = 0.5 - vk
-    g0 = _line_slope(w0, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin,
-                     sin_, win, xo, wo, tr, wr, state, loads, contact)
+    jac = np.empty((3, 3))
+    o = np.empty(6)
+    # the minimum is near pure rolling at v/2 (|epsilon| ~ tan^2(Delta/2) is small)
+    w = 0.5 - vk
+    g, curv = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table, cin,
+                          sin_, win, xo, wo, state, loads, contact, jac, o)
     evals = 1
+    lo = -np.inf
+    hi = np.inf
     h = _LINE_BRACKET
-    if g0 > 0.0:
-        hi = w0
-        ghi = g0
-        lo = w0 - h
-        glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff,
-                          cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
-        evals += 1
-        while glo > 0.0 and evals < 40:
-            hi = lo
-            ghi = glo
-            h *= 4.0
-            lo = w0 - h
-            glo = _line_slope(lo, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd,
-                              hoff, cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
-            evals += 1
-    else:
-        lo = w0
-        glo = g0
-        hi = w0 + h
-        ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff,
-                          cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
-        evals += 1
-        while ghi < 0.0 and evals < 40:
-            lo = hi
-            glo = ghi
-            h *= 4.0
-            hi = w0 + h
-            ghi = _line_slope(hi, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd,
-                              hoff, cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
-            evals += 1
-    w = 0.5 * (lo + hi)
-    g = np.inf
     collapsed = False
-    if glo <= 0.0 <= ghi:
-        side = 0
-        for _ in range(_LINE_MAX_ITER):
-            if ghi > glo:
-                w = hi - ghi * (hi - lo) / (ghi - glo)
-            if not (lo < w < hi):
-                w = 0.5 * (lo + hi)
-            g = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff,
-                            cin, sin_, win, xo, wo, tr, wr, state, loads, contact)
-            evals += 1
-            if abs(g) <= 0.01 * tol * total:
+    target = 0.01 * tol * total
+    polished = False
+    while evals < _LINE_MAX_ITER and np.isfinite(g):
+        if abs(g) <= target:
+            if polished or abs(g) <= 1e-2 * target or not curv > 0.0:
                 break
-            if hi - lo <= 4e-16 * max(1.0, abs(w)):
-                # the slope changes sign between neighbouring floats: the minimum on the line
-                # is located to round-off (a nearly stuck second contact makes the slope jump
-                # by ~2 mu F over ~|dbeta| a, too steep to resolve |slope| below tol)
-                collapsed = True
-                break
-            if g > 0.0:
-                hi = w
-                ghi = g
-                if side == 1:
-                    glo *= 0.5
-                side = 1
+            polished = True
+        if g > 0.0:
+            hi = w
+        elif g < 0.0:
+            lo = w
+        else:
+            break
+        if hi - lo <= 4e-16 * max(1.0, abs(w)):
+            # the slope changes sign between neighbouring floats: the minimum on the line is
+            # located to round-off (a nearly stuck second contact makes the slope jump by
+            # ~2 mu F over ~|dbeta| a, too steep to resolve |slope| below tol)
+            collapsed = True
+            break
+        step = -g / curv if curv > 0.0 else np.nan
+        wn = w + step
+        if not (lo < wn < hi):
+            if np.isfinite(lo) and np.isfinite(hi):
+                wn = 0.5 * (lo + hi)
             else:
-                lo = w
-                glo = g
-                if side == -1:
-                    ghi *= 0.5
-                side = -1
-    if not np.isfinite(g):
-        # no bracket: the state, loads and contact rows at the midpoint (else they are those
-        # of the last evaluation, at w)
-        g = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, rd, hoff, cin,
-                        sin_, win, xo, wo, tr, wr, state, loads, contact)
+                wn = w - h if g > 0.0 else w + h
+                h *= 4.0
+        g_old = g
+        w_old = w
+        w = wn
+        g, curv = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale, table,
+                              cin, sin_, win, xo, wo, state, loads, contact, jac, o)
+        evals += 1
+        if polished:
+            if not abs(g) <= abs(g_old):
+                w = w_old
+                g, curv = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale,
+                                      table, cin, sin_, win, xo, wo, state, loads, contact, jac,
+                                      o)
+                evals += 1
+            break
     # the stuck contact: pole at its centre, no spin, the reaction that balances the others
     qu = -loads[0]
     yx = -px[k]
@@ -370,8 +401,8 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin
 
 
 @jit
-def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, xo, wo, tr, wr,
-                state, contact, info, regime):
+def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_, win, xo, wo,
+                tr, wr, scan, state, contact, info, regime):
     """Regime B: the first certified stick line of a loaded contact (else the one of least D).
 
     An opposite pair with equal angles (a perfect or case (b) bearing) is tried first with
@@ -418,11 +449,11 @@ def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, x
         k = order[m]
         if force[k] <= 0.0:
             continue
-        stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, rd, hoff, cin, sin_,
-                         win, xo, wo, tr, wr, tol, trial, tcontact, out)
+        stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, table, cin, sin_, win,
+                         xo, wo, tol, trial, tcontact, out)
         evals += out[2]
-        cert = stick_certificate(out[3], out[4], force[k], a[k], b[k], sigma_scale, cin, sin_,
-                                 win, xo, wo) / total
+        cert = stick_certificate(out[3], out[4], force[k], a[k], b[k], sigma_scale, table, cin,
+                                 sin_, win, xo, wo, scan) / total
         residual = max(out[1], -cert)
         if residual <= tol or (best_res > tol and out[0] < best_d):
             best_d = out[0]
@@ -485,7 +516,7 @@ def stick_criterion_one(force, a, ellip):
 @pjit
 def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_coefficient,
                   ellip, curved, rd, free_spin, tol, max_iter, cin, sin_, win, xo, wo, tr, wr,
-                  out_state, out_contact, out_info, out_regime):
+                  table, out_state, out_contact, out_info, out_regime):
     """The full model of n balls in every regime (R = 1, v = 1, mu = 1 units).
 
     Per ball: fewer than two loaded contacts: unsolved (NaN). Two opposite contacts with
@@ -498,6 +529,8 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
     """
     sigma_scale = 1.5 / np.pi
     nonsmooth = not curved and not free_spin
+    scan = scan_constants(semi_minor_coefficient / semi_major_coefficient, table, cin, sin_, win,
+                          xo, wo)
     for n in prange(dbeta.shape[0]):
         beta = np.empty(4)
         a = np.empty(4)
@@ -538,8 +571,8 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
             state[:] = np.nan
             info[0] = np.inf
         elif npos == 2:
-            stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win, xo, wo, tr,
-                        wr, state, contact, info, regime)
+            stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_, win, xo,
+                        wo, tr, wr, scan, state, contact, info, regime)
         else:
             done = False
             tried = False
@@ -548,11 +581,13 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
             s_info = np.empty(3)
             if nonsmooth and stick_criterion_one(fb, a, ellip) < CHI_STICK_FIRST:
                 tried = True
-                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win,
-                                   xo, wo, tr, wr, s_state, s_contact, s_info, regime)
+                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_,
+                                   win, xo, wo, tr, wr, scan, s_state, s_contact, s_info,
+                                   regime)
             if not done:
                 smooth_solve(beta, fb, a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                             max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
+                             max_iter, cin, sin_, win, xo, wo, tr, wr, table, state, contact,
+                             info)
                 if info[2] > 0.5:
                     regime[0] = REGIME_SMOOTH
                     regime[1] = -1.0
@@ -560,8 +595,9 @@ def regime_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_mino
                     done = True
             if not done and nonsmooth and not tried:
                 tried = True
-                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, cin, sin_, win,
-                                   xo, wo, tr, wr, s_state, s_contact, s_info, regime)
+                done = stick_solve(beta, fb, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_,
+                                   win, xo, wo, tr, wr, scan, s_state, s_contact, s_info,
+                                   regime)
             if done and regime[0] == REGIME_STICK:
                 state[:] = s_state
                 contact[:, :] = s_contact

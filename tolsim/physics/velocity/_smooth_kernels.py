@@ -10,6 +10,7 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import jit, pjit
+from tolsim.physics.velocity._contact_tables import table_newton_solve
 from tolsim.physics.velocity._full_kernels import (
     FD_STEP,
     ball_loads_kernel,
@@ -201,11 +202,15 @@ def quasi_newton_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, max_iter, 
 
 @jit
 def smooth_solve(beta, force, a, b, sigma_scale, curved, rd, hoff, free_spin, tol, max_iter,
-                 cin, sin_, win, xo, wo, tr, wr, state, contact, info):
-    """Regime A of one unloaded ball: :func:`quasi_newton_solve` on the planar surface with
-    omega_z = 0, else (or where it fails) the damped Newton
+                 cin, sin_, win, xo, wo, tr, wr, table, state, contact, info):
+    """Regime A of one unloaded ball: on the planar surface with omega_z = 0 the Newton on the
+    tables (:func:`~tolsim.physics.velocity._contact_tables.table_newton_solve`), then
+    :func:`quasi_newton_solve`; else (or where they fail) the damped Newton
     :func:`~tolsim.physics.velocity._full_kernels.solve_one` from pure rolling."""
     if not curved and not free_spin:
+        if table_newton_solve(beta, force, a, b, sigma_scale, tol, max_iter, table, cin, sin_,
+                              win, xo, wo, state, contact, info):
+            return
         if quasi_newton_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, max_iter, cin, sin_,
                               win, xo, wo, tr, wr, state, contact, info):
             return
@@ -215,7 +220,7 @@ def smooth_solve(beta, force, a, b, sigma_scale, curved, rd, hoff, free_spin, to
 
 @pjit
 def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_coefficient,
-                curved, rd, free_spin, tol, max_iter, cin, sin_, win, xo, wo, tr, wr,
+                curved, rd, free_spin, tol, max_iter, cin, sin_, win, xo, wo, tr, wr, table,
                 out_state, out_contact, out_info):
     """Solve the full model for n balls in parallel (R = 1, v = 1, mu = 1 units).
 
@@ -246,7 +251,7 @@ def full_kernel(dbeta, force, nominal_angle, semi_major_coefficient, semi_minor_
             out_info[n, 2] = 0.0
             continue
         smooth_solve(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                     max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
+                     max_iter, cin, sin_, win, xo, wo, tr, wr, table, state, contact, info)
         for k in range(4):
             out_state[n, k] = state[k]
             for m in range(5):
@@ -319,7 +324,7 @@ FULL_LOAD_COLUMNS = ("traction_capacity", "saturated_carriage_force", "capacity_
 @pjit
 def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_coefficient,
                        semi_minor_coefficient, curved, rd, free_spin, tol, max_iter, cin, sin_,
-                       win, xo, wo, tr, wr, out_state, out_contact, out_info, out_load):
+                       win, xo, wo, tr, wr, table, out_state, out_contact, out_info, out_load):
     """The full model under external loads, n balls in parallel (R = 1, v = 1, mu = 1 units).
 
     ``push`` (n,) = P / mu [N] and ``braking`` (n,) = (mu_bb / mu)(Q_back + Q_front) [N]
@@ -416,7 +421,7 @@ def full_loaded_kernel(dbeta, force, push, braking, nominal_angle, semi_major_co
         if load_p == 0.0 and brake == 0.0:
             # the unloaded problem: solved as in full_kernel, so the fields are its bit for bit
             smooth_solve(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
-                         max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info)
+                         max_iter, cin, sin_, win, xo, wo, tr, wr, table, state, contact, info)
         else:
             solve_one(beta, force[n], a, b, sigma_scale, curved, rd, hoff, free_spin, tol,
                       max_iter, cin, sin_, win, xo, wo, tr, wr, state, contact, info,

@@ -60,10 +60,11 @@ def stick_criterion(normal_force, bearing: Bearing = TABLE1):
 
     the ball pivoting about the axis x_k through the centre of contact k. On it D_k = 0 and
     D = sum_{i != k} D_i is convex and smooth in w (the other contacts slip), so its
-    minimum is the root of the non-decreasing slope dD/dw, found by bracketing and Illinois
-    regula falsi (``stick_line_solve``). The kernel solves the line of every loaded contact and
-    keeps the one of least D (the minimum of D lies on the line of the contact that sticks,
-    and no line goes below it).
+    minimum is the root of the non-decreasing slope dD/dw, found by Newton's method with the
+    exact curvature from the tables of the contact integrals, safeguarded by the bracket the
+    slope's signs give (``stick_line_solve``). The kernel solves the line of every loaded
+    contact, heaviest first, and stops at the first certified one (the minimum of D lies on
+    the line of the contact that sticks, and no line goes below it).
 
     **Certificate.** At a point of (B1) the directional derivative of D along any d is
 
