@@ -62,10 +62,9 @@ from tolsim.physics.velocity.ball_loads import DEFAULT_BALL_FRICTION, BallLoadFi
 # A ball is *valid* for a fast model when its epsilon is within VALIDITY_ERROR_BUDGET of the
 # comprehensive model (tolsim.physics.velocity.full.full) fed the same dbeta_i and F_i. In a study
 # an invalid ball is re-solved with ``full`` (tolsim.study.pipeline.evaluate), so the thresholds
-# trade
-# speed (the share of balls the fast model keeps; full solves ~24 000 balls/s against ~15 M/s
-# for analytic and ~90 M/s for eq24) against accuracy (the error on the balls it keeps), not
-# truth against bias.
+# trade speed (the share of balls the fast model keeps; ``full`` is about a hundred times slower
+# per ball than ``analytic``, the README's timing table) against accuracy (the error on the
+# balls it keeps), not truth against bias.
 #
 # Measured by ``python benchmarks/validity_budget.py`` (under a minute), on a grid of the
 # Table 1 bearing: rho = N_x/N_y -0.95..0.95 step 0.05; rail and carriage groove rotations
