@@ -80,8 +80,9 @@ def study(balls_total, static_model="solved", config=CONFIG, along_track=None):
     c = load_config(config)
     if along_track == "contact" and c.contact is None:
         c = parse_config(c.text + "\n[contact]\n", str(config))
-    if along_track == "circuit" and c.carriage.circuit is None:
-        c = parse_config(c.text + "\n[carriage.circuit]\n", str(config))
+    if along_track == "circuit" and c.carriage.circuit is None:  # (needs along_track to parse)
+        text = c.text.replace("[study]\n", '[study]\npropagation = "along_track"\n', 1)
+        c = parse_config(text + "\n[carriage.circuit]\n", str(config))
     c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0,
                                  static_model=static_model))
     if along_track is not None:
