@@ -33,18 +33,23 @@ stroke, each ball's creep coefficients, the carriage friction and its statistics
 same study without ``[contact]`` in the same run, at each size (target: >= 1.5 M balls/s on 2
 cores, peak memory flat from 1e6 to 1e7 balls).
 
-With ``--along-track`` it times the study after contact with ``along_track`` propagation
-(the trains followed at every time step,
-:class:`tolsim.study.pipeline.track_friction.TrackFriction`):
-``configs/friction_yaw.toml`` (free balls, 10 per train) and ``configs/carriage_preload.toml``
-(a carriage, 2 x 12 balls, balls entering and leaving its loaded zone), both switched to
-``along_track`` with their ``time_steps`` (200), each with and without ``[contact]`` in the
-same run, one worker. Without ``[contact]`` a carriage assembly is followed only up to its
-first contact, with it over the whole stroke, which is most of the difference there. Sizes
-default to 2e4 and 1e5 balls (along_track costs two evaluations of every ball per step).
+With ``--along-track`` it times the along-track studies against the constant study of the
+same config in the same run (issue 24, "Speed": along_track at most 5x the cost per ball of
+constant; targets >= 500 k balls/s free balls, >= 200 k balls/s carriage, on 2 cores):
+``configs/whatif_along_track.toml`` (free balls, 6 per train, its 100 steps),
+``configs/carriage_preload.toml`` (a carriage, 2 x 12 balls entering and leaving its loaded
+zone, 200 steps) and the same with a default ``[carriage.circuit]`` (the constant study of a
+circuit is that of the config without it: a circuit needs along_track). Each line gives
+balls/s of the along_track study, of the constant one, and their ratio (the cost per ball of
+along_track over that of constant). The along_track studies follow an assembly until its
+first contact (the circuit: over the whole stroke). Then ``configs/friction_yaw.toml`` and
+``configs/carriage_preload.toml`` along the track with ``[contact]`` against the same without
+it. Sizes are assemblies (default 2000: a few 10^4 balls; the constant studies run
+``--constant-factor`` times more assemblies, so that they last long enough to be timed);
+one worker. Report the load average with the numbers (the machine is shared).
 
 Run: ``python benchmarks/bench_study.py [--sizes 1e6 1e7] [--workers 1 2]
-[--static solved paired] [--friction] [--along-track]``
+[--static solved paired] [--friction] [--along-track [--sizes 2000] [--constant-factor 20]]``
 """
 
 import argparse
@@ -67,17 +72,22 @@ RESOLVE_STUDIES = {"default": ROOT / "tolsim" / "data" / "default.toml",
 
 
 def study(balls_total, static_model="solved", config=CONFIG, along_track=None):
-    """The benchmark's study; ``along_track``: None (as the config), or "contact" /
-    "free" for along_track propagation with or without [contact]."""
+    """The benchmark's study; ``along_track``: None (as the config), "contact" / "free" for
+    along_track propagation with or without [contact], "circuit" along_track with a default
+    ``[carriage.circuit]``, "constant" constant propagation."""
     from tolsim.io.config import load_config, parse_config
 
     c = load_config(config)
     if along_track == "contact" and c.contact is None:
         c = parse_config(c.text + "\n[contact]\n", str(config))
+    if along_track == "circuit" and c.carriage.circuit is None:  # (needs along_track to parse)
+        text = c.text.replace("[study]\n", '[study]\npropagation = "along_track"\n', 1)
+        c = parse_config(text + "\n[carriage.circuit]\n", str(config))
     c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0,
                                  static_model=static_model))
     if along_track is not None:
-        c = replace(c, study=replace(c.study, propagation="along_track"),
+        propagation = "constant" if along_track == "constant" else "along_track"
+        c = replace(c, study=replace(c.study, propagation=propagation),
                     contact=c.contact if along_track == "contact" else None)
     return c.with_overrides(samples=max(1, int(balls_total) // c.balls))
 
@@ -136,7 +146,8 @@ def child(balls_total, workers, baseline, static_model, config=CONFIG, along_tra
     from tolsim.study.execution.runner import run_study
 
     c = study(balls_total, static_model, config, along_track)
-    warm = 2048 if along_track is None else min(c.study.block_size, c.study.samples)
+    warm = 2048 if along_track in (None, "constant") else min(c.study.block_size,
+                                                               c.study.samples)
     run_study(c.with_overrides(samples=warm), workers=workers)  # load / compile kernels
     start = time.perf_counter()
     if baseline:
@@ -202,8 +213,12 @@ def main():
                    help="time the study after contact (configs/friction_yaw.toml) against "
                         "the same study without [contact], at --sizes with one worker")
     p.add_argument("--along-track", action="store_true",
-                   help="time along_track studies (configs/friction_yaw.toml, "
-                        "configs/carriage_preload.toml) with and without [contact]")
+                   help="time along_track studies against constant ones of the same config "
+                        "(whatif_along_track, carriage_preload, with a circuit) and with "
+                        "against without [contact]; --sizes in assemblies")
+    p.add_argument("--constant-factor", type=float, default=20.0,
+                   help="with --along-track: the constant studies run this many times more "
+                        "assemblies than the along_track ones")
     p.add_argument("--config", help=argparse.SUPPRESS)
     p.add_argument("--along-track-child", help=argparse.SUPPRESS)
     args = p.parse_args()
@@ -218,7 +233,7 @@ def main():
         friction(args.sizes)
         return
     if args.along_track:
-        along_track(args.sizes if "--sizes" in sys.argv else [2e4, 1e5])
+        along_track(args.sizes if "--sizes" in sys.argv else [2000], args.constant_factor)
         return
     print(f"tolsim study pipeline: {CONFIG.name} (solved static, analytic epsilon, "
           f"propagation a), {os.cpu_count()} cores")
@@ -265,20 +280,50 @@ def friction(sizes):
               "(target: >= 1.5 M balls/s)")
 
 
-def along_track(sizes):
-    """Print along_track studies with [contact] against the same without it."""
+def along_track(sizes, constant_factor=20.0):
+    """Print along_track studies against constant ones, and with [contact] against without
+    it; ``sizes`` in assemblies."""
+    load = os.getloadavg()
+    print(f"tolsim along_track studies against constant; one worker, {os.cpu_count()} cores, "
+          f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+    carriage = ROOT / "configs" / "carriage_preload.toml"
+    cases = ((ROOT / "configs" / "whatif_along_track.toml", "free", "free balls"),
+             (carriage, "free", "carriage"),
+             (carriage, "circuit", "carriage with [carriage.circuit]"))
+    for config, kind, label in cases:
+        balls = _balls_per_assembly(config)
+        for size in sizes:
+            along = measure(size * balls, config=config, along_track=kind)
+            const = measure(size * constant_factor * balls, config=config,
+                            along_track="constant")
+            rate_a = along["balls"] / along["seconds"]
+            rate_c = const["balls"] / const["seconds"]
+            print(f"  {config.name} ({label}): {along['balls'] // balls:.0f} assemblies "
+                  f"{along['balls']:.2e} balls along_track {along['seconds']:7.2f} s "
+                  f"{rate_a:9.0f} balls/s; constant {rate_c:9.0f} balls/s "
+                  f"({const['balls']:.2e} balls); cost per ball {rate_c / rate_a:6.1f}x "
+                  f"constant (target <= 5x)")
     print(f"tolsim along_track study after contact, with and without [contact]; one worker, "
           f"{os.cpu_count()} cores")
-    for config in (FRICTION_CONFIG, ROOT / "configs" / "carriage_preload.toml"):
+    for config in (FRICTION_CONFIG, carriage):
+        balls = _balls_per_assembly(config)
         for size in sizes:
-            free = measure(size, config=config, along_track="free")
-            contact = measure(size, config=config, along_track="contact")
+            free = measure(size * balls, config=config, along_track="free")
+            contact = measure(size * balls, config=config, along_track="contact")
             for label, r in (("without [contact]", free), ("with [contact]   ", contact)):
                 print(f"  {config.name}: {r['balls']:.2e} balls {label}: {r['seconds']:7.2f} s "
                       f" {r['balls'] / r['seconds']:9.0f} balls/s  peak RSS "
                       f"{max(r['peak_mib'], r['child_peak_mib']):.0f} MiB")
             print(f"  throughput with [contact]: {free['seconds'] / contact['seconds']:.2f}x "
                   "the study without it")
+    load = os.getloadavg()
+    print(f"load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+
+
+def _balls_per_assembly(config):
+    from tolsim.io.config import load_config
+
+    return load_config(config).balls
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ kernel source of the package is unchanged (:class:`KernelTreeStamp`), not only i
 
 import functools
 import hashlib
+import os
 import re
 import threading
 import time
@@ -16,6 +17,16 @@ import numba
 import numpy as np
 from numba.core import caching as numba_caching
 from numba.core import event as numba_event
+
+#: How idle OpenMP threads wait between parallel kernels, unless the environment says
+#: otherwise. GNU OpenMP (Numba's ``omp`` threading layer) spins by default; on a machine whose
+#: cores are busy with other processes a spinning thread holds a core that the thread it waits
+#: for needs, and each launch of a parallel kernel took 2.5-14 ms instead of about 20 us
+#: (measured on the 2-core VM at load average 8). Along-track studies launch tens of kernels
+#: per step, so this decided their speed (issue 24, "Speed"). Read once, when the OpenMP
+#: runtime loads (the first parallel kernel), so it is set here, before any kernel runs.
+OMP_WAIT_POLICY = "PASSIVE"
+os.environ.setdefault("OMP_WAIT_POLICY", OMP_WAIT_POLICY)
 
 #: Options for every scalar/serial kernel.
 JIT = dict(nogil=True, cache=True, fastmath=False, error_model="numpy")

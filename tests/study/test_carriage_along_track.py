@@ -40,6 +40,7 @@ from tolsim.study.sampling import (
     entering_capacity,
     error_values,
     field_grid,
+    fixed_ball_values,
     moving_ball_values,
     sample_block,
 )
@@ -515,6 +516,30 @@ def test_moving_ball_values_at_the_start_are_the_study_values():
     for source, v in ref.items():
         assert_array_equal(values[source][:, :, :n].reshape(16, 2 * n),
                            np.broadcast_to(v, (16, 2 * n)), err_msg=source)
+
+
+def test_fixed_ball_values_give_the_same_values_bit_for_bit():
+    # The carriage frame transforms the sources that do not move with the balls once per block
+    # (fixed_ball_values) and reads them at every step: the values of moving_ball_values
+    # without them, bit for bit, for initial and entering balls, empty slots and a subset of
+    # the rows (the transforms are elementwise; correlated sources are left to it).
+    group = ('[[correlation]]\nsources = ["arc_centre_offset_tangential_TR", '
+             '"arc_centre_offset_tangential_TL"]\ncoefficient = 0.8\n')
+    c = config(tolerances=ALL_KINDS + group, gap='{ distribution = "uniform", low_um = 0.0, '
+               'high_um = 60.0 }', samples=16)
+    block = sample_block(c, 0)
+    fixed = fixed_ball_values(c, block)
+    assert set(fixed) == {"ball_oversize", "top_rotation", "arc_centre_offset_tangential_BL"}
+    rng = np.random.default_rng(3)
+    rows = np.array([1, 4, 5, 11, 15])
+    slots = slot_capacity(c)
+    ids = rng.integers(-1, c.train.balls + entering_capacity(c), size=(len(rows), 2, slots))
+    pos = rng.uniform(-0.05, 0.05, size=(len(rows), 2, slots))
+    ref = moving_ball_values(c, block, ids, pos, rows)
+    got = moving_ball_values(c, block, ids, pos, rows, fixed)
+    assert list(got) == list(ref)
+    for source, v in ref.items():
+        assert_array_equal(got[source], v, err_msg=source)
 
 
 def advance_twin(z0, z1, ids, ok, count, entered, gap, half, d, balls, t0, dt):

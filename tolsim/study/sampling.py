@@ -414,7 +414,7 @@ def error_values(config, block: Block, rail_position=None):
     return {t.source: t.distribution.from_normal(z[t.source]) for t in config.tolerances}
 
 
-def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None):
+def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, fixed=None):
     """Error source values of balls moving through a carriage, in SI (``along_track``).
 
     Each ball keeps its own ``ball`` draws (the initial ball j of a track those of the block,
@@ -433,6 +433,10 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None):
         Ball centres along the rail [m] (finite).
     rows : array_like of int, optional
         The block's assemblies of the m rows (default all, m = ``block.size``).
+    fixed : dict, optional
+        :func:`fixed_ball_values` of the block, for a caller that reads the same block at
+        every step: those sources are taken from it instead of being transformed again (the
+        same values, bit for bit: the transforms are elementwise).
 
     Returns
     -------
@@ -443,8 +447,11 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None):
     rows = np.arange(block.size) if rows is None else np.asarray(rows)
     shape = np.shape(ball_id)
     ids = np.maximum(ball_id, 0)
+    fixed = {} if fixed is None else fixed
     z = {}
     for t in config.tolerances:
+        if t.source in fixed:
+            continue
         if t.source in block.fields:
             z[t.source] = _field_at(block.fields[t.source], rows, rail_position)
         elif t.scope == "ball":
@@ -456,7 +463,36 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None):
             z[t.source] = np.broadcast_to(per_track, shape)
     for group in config.correlations:
         _correlate(group, z)
-    return {t.source: t.distribution.from_normal(z[t.source]) for t in config.tolerances}
+    out = {}
+    for t in config.tolerances:
+        if t.source not in fixed:
+            out[t.source] = t.distribution.from_normal(z[t.source])
+        elif t.scope == "ball":
+            out[t.source] = np.take_along_axis(fixed[t.source][rows], ids, axis=2)
+        else:
+            out[t.source] = np.broadcast_to(fixed[t.source][rows], shape).copy()
+    return out
+
+
+def fixed_ball_values(config, block: Block) -> dict:
+    """The values of a carriage block's sources that do not change as its balls move, in SI:
+    ``ball`` sources (m, T, n + entering balls, by ball id) and per-track ones (m, T, 1); not
+    rail fields, nor sources of a correlation group (:func:`moving_ball_values` takes them)."""
+    tracks, balls = config.n_tracks, config.train.balls
+    correlated = {source for group in config.correlations for source in group.sources}
+    size = block.size
+    out = {}
+    for t in config.tolerances:
+        if t.source in block.fields or t.source in correlated:
+            continue
+        if t.scope == "ball":
+            own = block.normals[t.source].reshape(size, tracks, balls)
+            new = block.entering[t.source].reshape(size, tracks, -1)
+            z = np.concatenate([own, new], axis=2)
+        else:
+            z = block.normals[t.source].reshape(size, tracks, -1)[:, :, :1]
+        out[t.source] = t.distribution.from_normal(z)
+    return out
 
 
 def _field_at(rail_field: RailField, rows, position):

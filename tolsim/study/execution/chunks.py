@@ -112,8 +112,8 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
     """
     out = []
     balls = config.balls
-    # constant: one pass over the whole chunk, then split per block; along_track: block by
-    # block
+    # one pass over the whole chunk, then split per block, unless an assembly's result
+    # depends on its batch (evaluates_blocks_together): then block by block
     if evaluates_blocks_together(config):
         groups = [list(block_indices)]
     else:

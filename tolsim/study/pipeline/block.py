@@ -47,15 +47,22 @@ def has_contact(config) -> bool:
     return config.has_contact
 
 
-#: Whether a chunk's blocks are evaluated together as one block (the same rows as each
-#: alone), by propagation; ``along_track`` integrates block by block.
-BLOCKS_TOGETHER = {"constant": True, "along_track": False}
-
-
 def evaluates_blocks_together(config) -> bool:
-    """Whether :func:`evaluate_block` may take several consecutive blocks drawn as one
-    (:data:`BLOCKS_TOGETHER`)."""
-    return BLOCKS_TOGETHER[config.study.propagation]
+    """Whether :func:`evaluate_block` may take several consecutive blocks drawn as one (the
+    same rows as each alone, bit for bit).
+
+    ``constant``: always. ``along_track``: when an assembly's integration does not depend on
+    the other assemblies it is integrated with: every evaluation is per ball (free balls) or
+    per assembly (the carriage solve), each warm start the assembly's own, so one integration
+    over a chunk's blocks costs the per-step overhead once instead of once per block. Not
+    with ``static_model = "linearised"`` (more distinct loads than it linearises about share
+    the batch's mean load) nor with ``[carriage.circuit]`` (a ball without a creep stiffness
+    takes the batch's mean, :class:`tolsim.study.pipeline.carriage_circuit.CircuitFrame`).
+    """
+    if config.study.propagation == "constant":
+        return True
+    return (config.study.static_model != "linearised"
+            and (config.carriage is None or config.carriage.circuit is None))
 
 
 @dataclass

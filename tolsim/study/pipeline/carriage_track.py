@@ -38,7 +38,7 @@ from tolsim.study.pipeline.evaluate import (
     serial_if_small,
 )
 from tolsim.study.pipeline.propagation import AlongTrackFrame, Step, StepObserver, integrate
-from tolsim.study.sampling import entering_capacity, moving_ball_values
+from tolsim.study.sampling import entering_capacity, fixed_ball_values, moving_ball_values
 
 
 def slot_capacity(config) -> int:
@@ -216,6 +216,7 @@ class _Evaluation:
         except ValueError:
             q0 = np.zeros(5)
         self.start = np.tile(q0, (block.size, 1))
+        self.fixed = fixed_ball_values(config, block)  # transformed once, read every step
         self.resolve_seconds = 0.0
 
     def __call__(self, ball_z, ball_id, t, rows):
@@ -232,7 +233,7 @@ class _Evaluation:
             loaded = occupied & (np.abs(ball_z) <= self.half_zone)
         z = np.where(occupied, ball_z, 0.0)
         values = moving_ball_values(config, self.block, ball_id,
-                                    z + config.motion.groove_velocity * t, rows)
+                                    z + config.motion.groove_velocity * t, rows, self.fixed)
         fields = groove_error_fields(values, shape)
         if carriage.end_relief_depth > 0:  # the carriage flanks TR, TL recede at the ends
             h = end_relief(z, config.train.loaded_zone_length, carriage.end_relief_depth,
