@@ -517,7 +517,7 @@ class CarriageTrains(StepObserver):
     over the whole stroke."""
 
     def __init__(self, frame, friction):
-        self.friction = friction
+        self.friction, self.frame = friction, frame
         self.tracks, self.slots, self.balls = frame.tracks, frame.slots, frame.balls
         self.half_zone, self.v = frame.half_zone, frame.v
 
@@ -532,10 +532,12 @@ class CarriageTrains(StepObserver):
         friction, trains = self.friction, (-1, self.slots)
         loaded = state.loaded.reshape(trains)
         load = friction.coefficients(state.balls, loaded, friction.touching())
-        out = np.nan_to_num(friction.predict(state.velocity_deviation.reshape(trains), load,
-                                             loaded, loaded)).reshape(w.shape)
-        unloaded = state.unloaded  # pushed along as without the trains (``w``)
-        return np.where(unloaded, w, out) if unloaded.any() else out
+        eps = state.velocity_deviation
+        unloaded = self.frame.unloaded(state)  # pushed along as without the trains (``w``)
+        if unloaded is not None:
+            eps = np.where(unloaded, w, eps)
+        return np.nan_to_num(friction.predict(eps.reshape(trains), load, loaded, loaded)
+                             ).reshape(w.shape)
 
     def advance(self, step, new):
         # the step of the trains: cluster rule, then projection; the trains: balls loaded
@@ -548,7 +550,11 @@ class CarriageTrains(StepObserver):
             member = (state1.loaded & state2.loaded
                       & (np.abs(step.free) <= self.half_zone)).reshape(trains)
         free = np.where(state2.loaded, state2.velocity_deviation,
-                        np.nan_to_num(state1.velocity_deviation)).reshape(trains)  # NaN: unresolved
+                        np.nan_to_num(state1.velocity_deviation))  # NaN: unresolved
+        unloaded = self.frame.unloaded(state1, state2)
+        if unloaded is not None:  # pushed along, as in the free motion
+            free = np.where(unloaded, self.frame.velocity(state1, state2), free)
+        free = free.reshape(trains)
         w2 = np.nan_to_num(friction.velocity(free, friction.coefficients(state2.balls, loaded2),
                                              loaded2, member))
         return friction.advance(z0.reshape(trains),

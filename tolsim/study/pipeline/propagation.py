@@ -688,15 +688,20 @@ class TrainMotion(StepObserver):
     def predict(self, state, w):
         friction, everyone = self.friction, self.everyone
         load = friction.coefficients(state, everyone, friction.touching())
-        out = friction.predict(state.velocity_deviation, load, everyone, everyone)
+        eps = state.velocity_deviation
         unloaded = state.unloaded  # pushed along as without the trains (``w``)
-        return np.where(unloaded, w, out) if unloaded.any() else out
+        if unloaded.any():
+            eps = np.where(unloaded, w, eps)
+        return friction.predict(eps, load, everyone, everyone)
 
     def advance(self, step, new):
         # the step of the trains: cluster rule, then projection
         friction, everyone = self.friction, self.everyone
         position, dt, v = step.position, step.dt, self.v
         eps2 = step.state2.velocity_deviation
+        unloaded = step.state2.unloaded
+        if unloaded.any():  # pushed along, as in the free motion
+            eps2 = pushed_along(np.diff(position, axis=1) - friction.diameter, eps2, unloaded)
         w2 = friction.velocity(eps2, friction.coefficients(step.state2, everyone), everyone,
                                everyone)
         return friction.advance(position, position + dt * (1.0 + np.nan_to_num(w2)) * 0.5 * v)
