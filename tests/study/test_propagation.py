@@ -5,10 +5,17 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import parse_config
+from tolsim.physics.velocity.models import BALL_UNLOADED
 from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
 from tolsim.study.pipeline.propagation import (
+    FirstContact,
+    FreeBalls,
+    StepObserver,
     first_contact_along_track,
     first_contact_constant,
+    force_gaps,
+    integrate,
+    pushed_along,
     pushed_velocity_deviation,
 )
 from tolsim.study.sampling import error_values, sample_block
@@ -197,3 +204,95 @@ def test_unloaded_runs_ends_and_whole_trains():
     out = pushed_velocity_deviation(gap[:, :2], np.array([[np.nan, 9.0, 0.0]]),
                                     np.array([[False, True, False]]))
     assert np.isnan(out[0, 1])
+
+
+class FixedBalls(FreeBalls):
+    """Free balls whose evaluation is the same ``state`` wherever they are: epsilon constant
+    per ball along the track, with its unloaded balls (the limit in which mode (b) must be
+    mode (a))."""
+
+    def __init__(self, config, block, state):
+        super().__init__(config, block, state)
+        self.fixed = state
+
+    def evaluate(self, position, t):
+        return self.fixed
+
+
+class Positions(StepObserver):
+    """The positions at the end of every step."""
+
+    def begin(self, block, position):
+        self.seen = [position.copy()]
+
+    def moved(self, step):
+        self.seen.append(step.free.copy())
+
+
+def _group(pair, unloaded):
+    """The contact of ``pair`` that carries force: the loaded ball behind its run."""
+    j = int(pair)
+    while j > 0 and unloaded[j]:
+        j -= 1
+    return j
+
+
+@pytest.mark.parametrize("where", [[2], [2, 3], [0], [5], [1, 4]])
+def test_along_track_with_unloaded_balls_equals_constant_propagation(where):
+    # issue 25: an unloaded ball is pushed along in mode (b) as in mode (a). With epsilon
+    # constant per ball (the same evaluation at every position) and unloaded balls inside the
+    # train (a run of one or two) or at its ends, the first contact that carries force along
+    # the track is the constant propagation's (pushed_velocity_deviation, first_contact_constant)
+    # to round-off: both are exact for constant velocities (the gaps of a run close together,
+    # linearly within the step). Tolerance 1e-9 relative, as
+    # test_along_track_equals_constant_when_epsilon_is_constant. Before, every such train was
+    # unresolved (ok False) and had no contact.
+    per_ball = ('[tolerances.arc_centre_offset_tangential_TL]\ndistribution = "normal"\n'
+                'std_um = 1.0\nscope = "ball"')
+    c = parse_config(TRAIN.format(loads="", field=per_ball, steps=50).replace(
+        "balls = 3", "balls = 6"))
+    b = sample_block(c, 0)
+    nx, ny = loads_at(c, b.initial_position)
+    state = evaluate_balls(c, error_values(c, b), nx, ny)
+    state.velocity_deviation[:, where] = np.nan
+    state.valid[:, where] = False
+    state.regime[:, where] = BALL_UNLOADED
+    frame, first, seen = FixedBalls(c, b, state), FirstContact(), Positions()
+    integrate(c, frame, [first, seen])
+    eps = pushed_velocity_deviation(b.initial_gap, state.velocity_deviation, state.unloaded)
+    t_a, pair_a = first_contact_constant(b.initial_gap, eps, c.motion.groove_velocity,
+                                         c.motion.duration)
+    assert frame.ball_ok.all()
+    hit = np.isfinite(t_a)
+    assert 5 <= hit.sum() <= b.size - 5  # both outcomes exercised
+    assert_array_equal(np.isfinite(first.time), hit)
+    assert_allclose(first.time[hit], t_a[hit], rtol=1e-9)
+    unloaded = state.unloaded[0]
+    for m in np.flatnonzero(hit):
+        assert _group(first.pair[m], unloaded) == _group(pair_a[m], unloaded)
+    # the unloaded balls stay between their neighbours: no gap below -1e-15 m before contact
+    d = 2 * c.bearing.ball_radius
+    for k, z in enumerate(seen.seen):
+        before = k * c.motion.duration / c.study.time_steps <= np.where(hit, first.time, np.inf)
+        assert (np.diff(z, axis=1)[before] - d >= -1e-15).all()
+
+
+def test_force_gaps_by_hand():
+    # gaps 1, 2, 3, 4 mm, ball 2 unloaded: pairs 1 and 2 carry force when 2 + 3 mm have
+    # closed; ball 0 unloaded (an end): pair 0 never; a run with an unresolved neighbour: NaN
+    gap = np.array([[1.0, 2.0, 3.0, 4.0]])
+    out = force_gaps(gap, np.array([[True, False, True, False, False]]),
+                     ok=np.array([[True] * 5]))
+    assert_array_equal(out, [[np.inf, 5.0, 5.0, 4.0]])
+    out = force_gaps(gap, np.array([[False, False, True, False, False]]),
+                     ok=np.array([[True, True, True, False, True]]))
+    assert_array_equal(out, [[1.0, np.nan, np.nan, 4.0]])
+    assert force_gaps(gap, np.zeros((1, 5), bool)) is gap  # nothing unloaded: untouched
+    # an edge ball (outside the zone) ends the run like the end of the train
+    out = force_gaps(gap, np.array([[False, False, True, False, False]]),
+                     edge=np.array([[False, False, False, True, False]]))
+    assert_array_equal(out, [[1.0, np.inf, np.inf, 4.0]])
+    eps = pushed_along(gap, np.array([[0.1, 0.2, 9.0, 0.3, 0.4]]),
+                       np.array([[False, False, True, False, False]]),
+                       np.array([[False, False, False, True, False]]))
+    assert_array_equal(eps, [[0.1, 0.2, 0.2, 0.3, 0.4]])

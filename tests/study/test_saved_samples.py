@@ -8,9 +8,11 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from tolsim.cli import main
-from tolsim.io.config import load_config
+from tolsim.io.config import load_config, parse_config
 from tolsim.io.netcdf import read_result, write_result
+from tolsim.physics.velocity.models import BALL_THREE_POINT, BALL_TWO_POINT
 from tolsim.study.execution.runner import StudyInterrupted, run_study
+from tolsim.study.pipeline.block import evaluate_block
 from tolsim.study.pipeline.evaluate import evaluate_balls, loads_per_ball
 from tolsim.study.pipeline.propagation import first_contact_constant
 from tolsim.study.sampling import error_values, sample_block
@@ -46,6 +48,7 @@ def test_saved_assemblies_equal_an_independent_evaluation(config, saved):
     state = evaluate_balls(config, values, nx, ny)
     assert_array_equal(saved["sample_velocity_deviation"], state.velocity_deviation[:SAVED])
     assert_array_equal(saved["sample_model"], state.model[:SAVED])
+    assert_array_equal(saved["sample_regime"], state.regime[:SAVED])
     assert_array_equal(saved["sample_contact_angle_deviation"],
                        state.contact_angle_deviation[:SAVED])
     assert_array_equal(saved["sample_normal_force"], state.normal_force[:SAVED])
@@ -125,6 +128,10 @@ def test_result_file_round_trip(config, saved, tmp_path):
     assert_array_equal(np.isnan(back["sample_contact_time"].values), ~np.isfinite(t))
     assert_array_equal(back["sample_contact_time"].values[np.isfinite(t)], t[np.isfinite(t)])
     assert back["sample_model"].attrs["flag_meanings"] == "unresolved fast_model full_model"
+    assert back["sample_regime"].dims == ("sample", "ball")
+    assert back["sample_regime"].attrs["flag_meanings"].split()[:3] == [
+        "unresolved", "four_point_regime_A", "four_point_regime_B"]
+    assert_array_equal(back["sample_regime"].values, saved["sample_regime"])
     # without the flag the file has no sample dimension
     assert "sample" not in write_result(run_study(small_default(64)), tmp_path / "s.nc",
                                         history="test").dims
@@ -142,6 +149,26 @@ def test_along_track_run_saves_samples():
     assert rows["sample_velocity_deviation"].shape == (4, config.train.balls)
     block = sample_block(config, 0)
     assert_array_equal(rows["sample_initial_gap"], block.initial_gap[:4])
+
+
+@pytest.mark.parametrize("oversize_um, regimes", [(-5.0, {BALL_TWO_POINT}),
+                                                  (0.0, {BALL_TWO_POINT, BALL_THREE_POINT})])
+def test_saved_samples_record_each_balls_regime(oversize_um, regimes):
+    # issue 25: the saved rows hold each ball's regime, that of the study's own evaluation of
+    # the same assemblies (evaluate_block without propagation). configs/carriage_preload.toml
+    # with clearance (-5 um: every ball two-point, `tolsim carriage` on the nominal carriage)
+    # and without preload (two- and three-point balls side by side, issue 25's 0 to 16 of 24
+    # three- or four-point balls per assembly).
+    text = (ROOT / "configs" / "carriage_preload.toml").read_text().replace(
+        "preload_oversize_um = 2.0", f"preload_oversize_um = {oversize_um}")
+    config = parse_config(text, "carriage_preload.toml")
+    config = replace(config, study=replace(config.study, samples=6, block_size=6,
+                                           spot_checks=0, sensitivity_samples=0))
+    rows = run_study(config, save_samples=5).samples
+    state = evaluate_block(config, sample_block(config, 0), propagate=False).state
+    assert rows["sample_regime"].shape == (5, config.balls)
+    assert_array_equal(rows["sample_regime"], state.regime[:5])
+    assert regimes <= set(np.unique(rows["sample_regime"]).tolist())
 
 
 def test_cli_save_samples(tmp_path, capsys):

@@ -4,6 +4,7 @@
 import numpy as np
 
 from tolsim.io.schema.declaration import Section
+from tolsim.physics.velocity.models import BALL_REGIMES
 from tolsim.study.execution.saved_samples import MODEL_FLAGS, PREFIX
 from tolsim.study.spec import SOURCES
 
@@ -27,6 +28,8 @@ SAMPLE_VARIABLES = {
                                     "the ball (missing: unresolved)", "f"),
     f"{PREFIX}model": (("sample", "ball"), "1", "model that gave epsilon (flag_meanings)",
                        "i"),
+    f"{PREFIX}regime": (("sample", "ball"), "1", "regime of the ball at the start of the "
+                        "stroke (flag_meanings)", "i"),
     f"{PREFIX}contact_time": (("sample",), "s", "time of the first ball-to-ball contact of "
                               "the train (missing: none within the horizon)", "f"),
     f"{PREFIX}contact_pair": (("sample",), "1", "adjacent pair of the first contact, named "
@@ -73,9 +76,13 @@ def assign(result, ds):
 
 
 def finish(result, ds) -> None:
-    """The CF 3.5 flags of ``sample_model``."""
+    """The CF 3.5 flags of ``sample_model`` and ``sample_regime``."""
     if "sample_model" in ds:
         ds["sample_model"].attrs.update(flag_attributes())  # CF 3.5 flags
+    if "sample_regime" in ds:
+        ds["sample_regime"].attrs.update(
+            flag_values=np.array(list(BALL_REGIMES), dtype=np.int8),
+            flag_meanings=" ".join(BALL_REGIMES.values()))
 
 
 SECTION = Section(assign=assign, finish=finish)

@@ -6,7 +6,8 @@ a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilo
 own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
 adds each ball's rolling angular velocity; :func:`pair_braking` gives the ball-ball friction
 of a pair from the two balls' actual rotations. The cluster rule with anchors is in the Notes of
-:func:`tolsim.physics.trains.cluster_velocities`.
+:func:`tolsim.physics.trains.cluster_velocities`. :func:`three_point_stiffness` gives a
+three-point ball's K from its own minimum of D (not yet used by the trains).
 """
 
 import numpy as np
@@ -178,6 +179,104 @@ def stick_line_stiffness(contact_angle_deviation, normal_force, bearing: Bearing
                                 STICK_STEP, out)
     out = bearing.friction_coefficient * out
     return np.where(np.asarray(res.regime) == 2, out, np.nan), res
+
+
+@pjit
+def minimum_stiffness_kernel(beta, force, state, a, b, cin, sin_, win, xo, wo, tr, wr, step,
+                             out):
+    """K = (v / 2) / (H^-1)_vv [N / mu] at a smooth minimum of D; unchecked.
+
+    ``state`` (n, 3): (v_B, Omega_x R, Omega_y R) / v at the minimum; H the Hessian of D over
+    them by central differences of its gradient -(F_z, M_x, M_y) (R = v = mu = 1) over
+    +- ``step``, symmetrised.
+    """
+    for n in prange(beta.shape[0]):
+        px = np.empty(4)
+        py = np.empty(4)
+        for i in range(4):
+            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
+            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
+        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
+        x = np.empty(4)
+        loads = np.empty(5)
+        contact = np.empty((4, 5))
+        zero = np.zeros(4)
+        h = np.empty((3, 3))
+        for j in range(3):
+            for side in range(2):
+                for i in range(3):
+                    x[i] = state[n, i]
+                x[3] = 0.0
+                x[j] += step if side else -step
+                ball_loads_kernel(x, px, py, vgroove, force[n], a[n], b[n], 1.5 / np.pi, False,
+                                  1.0, zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
+                sign = 1.0 if side else -1.0
+                for i in range(3):
+                    if side == 0:
+                        h[i, j] = 0.0
+                    h[i, j] -= sign * loads[i] / (2.0 * step)
+        for i in range(3):
+            for j in range(i + 1, 3):
+                m = 0.5 * (h[i, j] + h[j, i])
+                h[i, j] = m
+                h[j, i] = m
+        # (H^-1)_00 = det(H_11..22) / det(H)
+        minor = h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1]
+        det = (h[0, 0] * minor - h[0, 1] * (h[1, 0] * h[2, 2] - h[1, 2] * h[2, 0])
+               + h[0, 2] * (h[1, 0] * h[2, 1] - h[1, 1] * h[2, 0]))
+        out[n] = 0.5 * det / minor if minor != 0.0 else np.nan
+
+
+def three_point_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+    """Creep stiffness K [N] of three-point balls from their own minimum of D (issue 25).
+
+    Parameters
+    ----------
+    contact_angle_deviation, normal_force : array_like, shape (n, 4)
+        One force 0 (the open contact).
+
+    Returns
+    -------
+    k : ndarray (n,)
+        K [N]; NaN where ``full`` does not certify the ball.
+    result : tolsim.physics.velocity.full.FullResult
+        The free solve (epsilon, F_0, Omega).
+
+    Notes
+    -----
+    A push P moves the minimum of D(x) - P v_B, x = (v_B, Omega_x, Omega_y), to
+    grad D = P e_v. Where the three contacts slip the minimum is smooth, dx/dP = H^-1 e_v with
+    H the Hessian of D there, so dv_B / dP = (H^-1)_vv and, with epsilon = 2 v_B / v - 1,
+
+        K = dP/d(epsilon) = (v / 2) / (H^-1)_vv = (v / 2) (H_vv - H_vw H_ww^-1 H_wv)   (R2)
+
+    the curvature of D along v_B with the rotation at its best (the Schur complement); H by
+    central differences of the loads of :func:`tolsim.physics.velocity._full_kernels.
+    ball_loads_kernel` (``STICK_STEP`` v). Where a heavy contact sticks (``full``'s stick
+    regime) the minimum sits on the stick line and K is regime B's, (v / 2) D''_others on
+    it (:func:`stick_line_stiffness`). (R2) is regime B's (R1) with the rotation free instead
+    of held on the stick line; for a four-point ball in regime A it is the creep stiffness of
+    the exact model.
+    """
+    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
+    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
+    stick, res = stick_line_stiffness(dbeta, force, bearing)
+    v = 0.01
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    beta = bearing.nominal_contact_angle + dbeta
+    a = hc.semi_major_coefficient * np.cbrt(force) / bearing.ball_radius
+    b = hc.semi_minor_coefficient * np.cbrt(force) / bearing.ball_radius
+    state = np.empty((len(dbeta), 3))
+    state[:, 0] = 0.5 * (1.0 + np.asarray(res.velocity_deviation))
+    state[:, 1:] = np.asarray(res.angular_velocity)[:, :2] * bearing.ball_radius / v
+    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
+    out = np.empty(len(dbeta))
+    minimum_stiffness_kernel(beta, force, np.ascontiguousarray(state), a, b, *grid,
+                             STICK_STEP, out)
+    smooth = bearing.friction_coefficient * out
+    code = np.asarray(res.regime)
+    return np.where(code == 2, stick, np.where(code == 1, smooth, np.nan)), res
 
 
 def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
@@ -355,5 +454,6 @@ def pair_braking(coefficients, ball_friction=0.1):
 
 __all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "STICK_STEP", "TRAIN_COLUMNS",
            "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
-           "stick_line_stiffness", "stick_line_stiffness_kernel",
+           "minimum_stiffness_kernel", "stick_line_stiffness", "stick_line_stiffness_kernel",
+           "three_point_stiffness",
            "two_point_rolling_rate"]

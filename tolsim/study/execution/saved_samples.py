@@ -2,8 +2,9 @@
 
 ``run_study(config, save_samples=N)`` (``tolsim run --save-samples N``) keeps, for the first
 N assemblies in block order, every tolerance source's value at each ball, the initial gaps,
-each ball's loaded contact angles and forces, its epsilon and which model gave it, and the
-train's first contact (time and pair), so the user can do their own analysis of exactly the
+each ball's loaded contact angles and forces, its epsilon, which model gave it and its regime
+(four-point A or B, three-point, two-point, unloaded or unresolved), and the train's first
+contact (time and pair), so the user can do their own analysis of exactly the
 assemblies behind the statistics. The rows are cut from the blocks as the runner merges them
 (:func:`sample_rows`), so they are bit-identical whatever the chunking or workers; blocks
 whose rows a resumed run does not have are evaluated again (:func:`take`). The result file
@@ -22,6 +23,7 @@ from tolsim.study.sampling import n_blocks
 #: Prefix of the sample rows in a block's records (beside its spot-check rows) and of their
 #: variables.
 PREFIX = "sample_"
+#: Codes of ``sample_regime``: :data:`tolsim.physics.velocity.models.BALL_REGIMES`.
 #: Codes of ``sample_model`` (:data:`tolsim.physics.velocity.models.MODEL_UNRESOLVED`,
 #: ``MODEL_FAST``, ``MODEL_FULL``) and their CF flag meanings.
 MODEL_FLAGS = {-1: "unresolved", 0: "fast_model", 1: "full_model"}
@@ -74,6 +76,7 @@ def sample_rows(config, save_samples, start, values, initial_gap, state, contact
     out[f"{PREFIX}normal_force"] = np.array(state.normal_force[first])
     out[f"{PREFIX}velocity_deviation"] = np.array(state.velocity_deviation[first])
     out[f"{PREFIX}model"] = np.array(state.model[first], dtype=np.int8)
+    out[f"{PREFIX}regime"] = np.array(state.regime[first], dtype=np.int8)
     out[f"{PREFIX}contact_time"] = np.array(contact_time[first], dtype=np.float64)
     out[f"{PREFIX}contact_pair"] = np.array(contact_pair[first], dtype=np.int64)
     if circuit is not None:  # (keep, tracks) [m]

@@ -239,8 +239,11 @@ class CircuitFrame(CarriageFrame):
     ``diameter``, ``ring_loaded``, ``ring_closed``, ``ring_speed``, ``length`` (C,),
     ``ring_ok`` (resolved at every evaluation so far); ``ring_id`` the study id of each ring
     ball (:func:`circuit_ball_ids`); ``slot_ring`` (size, tracks, slots) the ring ball in each
-    slot.
+    slot. An unloaded ball in the zone is still unresolved here (``pushes_unloaded``: the
+    circuit's step has no pushed ball in the zone yet).
     """
+
+    pushes_unloaded = False
 
     def __init__(self, config, block):
         super().__init__(config, block)

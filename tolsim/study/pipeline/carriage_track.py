@@ -37,7 +37,14 @@ from tolsim.study.pipeline.evaluate import (
     groove_error_fields,
     serial_if_small,
 )
-from tolsim.study.pipeline.propagation import AlongTrackFrame, Step, StepObserver, integrate
+from tolsim.study.pipeline.propagation import (
+    AlongTrackFrame,
+    Step,
+    StepObserver,
+    force_gaps,
+    integrate,
+    pushed_along,
+)
 from tolsim.study.sampling import entering_capacity, fixed_ball_values, moving_ball_values
 
 
@@ -200,9 +207,10 @@ def carry_pairs_kernel(old_id, old_flag, new_id, out_flag):
 class _Evaluation:
     """The loaded balls of a block's assemblies at given positions: carriage, then epsilon."""
 
-    def __init__(self, config, block):
+    def __init__(self, config, block, pushes_unloaded=True):
         carriage = config.carriage
         self.config, self.block = config, block
+        self.pushes_unloaded = pushes_unloaded
         self.tracks, self.balls = config.n_tracks, config.train.balls
         self.slots = slot_capacity(config)
         self.half_zone = 0.5 * config.train.loaded_zone_length
@@ -223,8 +231,9 @@ class _Evaluation:
         """Evaluate the balls in slots (m_k, T, S) of assemblies ``rows`` at time t [s].
 
         Returns (eps, ok, loaded, batch, state): epsilon (NaN unless loaded and resolved),
-        resolved (True where not loaded), loaded, the carriage batch and the BallState of the
-        loaded balls (flattened).
+        resolved (True where not loaded; an unloaded ball in the zone is accounted for, pushed
+        along, unless ``pushes_unloaded`` is False), loaded, the carriage batch and the
+        BallState of the loaded balls (flattened).
         """
         config, carriage = self.config, self.config.carriage
         shape = ball_z.shape
@@ -256,7 +265,7 @@ class _Evaluation:
         eps = np.full(shape, np.nan)
         eps[loaded] = state.velocity_deviation
         ok = np.ones(shape, dtype=bool)
-        ok[loaded] = state.valid
+        ok[loaded] = state.accounted if self.pushes_unloaded else state.valid
         return eps, ok, loaded, batch, state
 
 
@@ -306,6 +315,13 @@ class CarriageBalls:
     batch: object
     balls: BallState
 
+    @property
+    def unloaded(self) -> np.ndarray:
+        """Balls in the zone without a loaded contact (pushed along), in slots."""
+        out = np.zeros(self.loaded.shape, dtype=bool)
+        out[self.loaded] = self.balls.unloaded
+        return out
+
 
 @dataclass
 class CarriageStep(Step):
@@ -329,12 +345,17 @@ class CarriageFrame(AlongTrackFrame):
     step (:func:`advance_kernel`).
 
     ``initial_state``, ``initial_carriage``: the balls and the carriages at t = 0;
-    ``resolve_seconds``: full-model re-solves after the start of the stroke [s].
+    ``resolve_seconds``: full-model re-solves after the start of the stroke [s]. An unloaded
+    ball in the zone is pushed along (:func:`tolsim.study.pipeline.propagation.pushed_along`)
+    and its pairs close as one (:func:`tolsim.study.pipeline.propagation.force_gaps`), unless
+    ``pushes_unloaded`` is False: then it is unresolved.
     """
+
+    pushes_unloaded = True
 
     def __init__(self, config, block):
         self.config = config
-        self.evaluation = _Evaluation(config, block)
+        self.evaluation = _Evaluation(config, block, self.pushes_unloaded)
         self.tracks, self.balls, self.slots = (self.evaluation.tracks, self.evaluation.balls,
                                                self.evaluation.slots)
         self.half_zone = self.evaluation.half_zone
@@ -378,21 +399,51 @@ class CarriageFrame(AlongTrackFrame):
         return balls
 
     def predictor(self, state):
-        return np.nan_to_num(state.velocity_deviation)
+        unloaded = self.unloaded(state)
+        if unloaded is None:
+            return np.nan_to_num(state.velocity_deviation)
+        return np.nan_to_num(self.pushed(state.velocity_deviation, unloaded, ~state.loaded))
 
     def move(self, position, w, h):
         return position - h * (1.0 - np.nan_to_num(w)) * 0.5 * self.v
 
     def velocity(self, state1, state2):
         # a ball outside the zone at the midpoint keeps epsilon_1
-        return np.where(state2.loaded, np.nan_to_num(state2.velocity_deviation),
-                        np.nan_to_num(state1.velocity_deviation))
+        unloaded = self.unloaded(state1, state2)
+        if unloaded is None:
+            return np.where(state2.loaded, np.nan_to_num(state2.velocity_deviation),
+                            np.nan_to_num(state1.velocity_deviation))
+        eps = np.where(state2.loaded, state2.velocity_deviation, state1.velocity_deviation)
+        return np.nan_to_num(self.pushed(eps, unloaded, ~(state1.loaded | state2.loaded)))
+
+    def unloaded(self, state1, state2=None):
+        """The unloaded balls in the zone of the step (at the midpoint, or at its start for a
+        ball outside the zone there), None if there are none or they are not pushed."""
+        if not self.pushes_unloaded:
+            return None
+        unloaded = state1.unloaded
+        if state2 is not None:
+            unloaded = np.where(state2.loaded, state2.unloaded, unloaded)
+        return unloaded if unloaded.any() else None
+
+    def pushed(self, eps, unloaded, edge):
+        """epsilon in slots with the unloaded balls pushed along between their loaded
+        neighbours at the start of the step (``edge``: outside the zone or empty)."""
+        position = self.position[self.rows]
+        with np.errstate(invalid="ignore"):
+            gap = position[..., 1:] - position[..., :-1] - self.diameter
+        return pushed_along(gap, eps, unloaded, edge)
 
     def step(self, k, t, dt, position, new, state1, state2):
         ok = self.ball_ok[self.rows] & state1.valid & state2.valid
         with np.errstate(invalid="ignore"):
             gap_old = position[..., 1:] - position[..., :-1] - self.diameter
             gap_new = new[..., 1:] - new[..., :-1] - self.diameter
+        unloaded = self.unloaded(state1, state2)
+        if unloaded is not None:  # pairs with an unloaded ball close as one
+            edge = ~(state1.loaded | state2.loaded)
+            gap_old = force_gaps(gap_old, unloaded, edge, ok)
+            gap_new = force_gaps(gap_new, unloaded, edge, ok)
         return CarriageStep(k, t, dt, position, new, gap_old, gap_new, ok, state1, state2,
                             rows=self.rows, ball_id=self.ids)
 
@@ -467,7 +518,7 @@ class CarriageTrains(StepObserver):
     over the whole stroke."""
 
     def __init__(self, frame, friction):
-        self.friction = friction
+        self.friction, self.frame = friction, frame
         self.tracks, self.slots, self.balls = frame.tracks, frame.slots, frame.balls
         self.half_zone, self.v = frame.half_zone, frame.v
 
@@ -482,8 +533,12 @@ class CarriageTrains(StepObserver):
         friction, trains = self.friction, (-1, self.slots)
         loaded = state.loaded.reshape(trains)
         load = friction.coefficients(state.balls, loaded, friction.touching())
-        return np.nan_to_num(friction.predict(state.velocity_deviation.reshape(trains), load,
-                                              loaded, loaded)).reshape(w.shape)
+        eps = state.velocity_deviation
+        unloaded = self.frame.unloaded(state)  # pushed along as without the trains (``w``)
+        if unloaded is not None:
+            eps = np.where(unloaded, w, eps)
+        return np.nan_to_num(friction.predict(eps.reshape(trains), load, loaded, loaded)
+                             ).reshape(w.shape)
 
     def advance(self, step, new):
         # the step of the trains: cluster rule, then projection; the trains: balls loaded
@@ -496,7 +551,11 @@ class CarriageTrains(StepObserver):
             member = (state1.loaded & state2.loaded
                       & (np.abs(step.free) <= self.half_zone)).reshape(trains)
         free = np.where(state2.loaded, state2.velocity_deviation,
-                        np.nan_to_num(state1.velocity_deviation)).reshape(trains)  # NaN: unresolved
+                        np.nan_to_num(state1.velocity_deviation))  # NaN: unresolved
+        unloaded = self.frame.unloaded(state1, state2)
+        if unloaded is not None:  # pushed along, as in the free motion
+            free = np.where(unloaded, self.frame.velocity(state1, state2), free)
+        free = free.reshape(trains)
         w2 = np.nan_to_num(friction.velocity(free, friction.coefficients(state2.balls, loaded2),
                                              loaded2, member))
         return friction.advance(z0.reshape(trains),
@@ -625,10 +684,12 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     single-train propagation: such a ball moves at the nominal -v/2 (epsilon = 0), closes no gap,
     and its assembly is invalid (``train_valid`` False) if a loaded ball was unresolved at any
     evaluation before the assembly's first contact. A ball in the loaded zone whose four contacts
-    have opened (under an end relief deeper than the ball's approach, for one) is unresolved in
-    this sense, as a ball that lost contact in the constant propagation: keep the relief depth
-    below the preload oversize (Notes of :func:`tolsim.physics.carriage.end_relief`) to unload
-    the end balls gradually while they stay in four-point contact. An assembly is invalid, too,
+    have opened (under an end relief deeper than the ball's approach, or with clearance) is
+    unloaded (issue 25): it has no epsilon of its own and is pushed along between its loaded
+    neighbours (:func:`tolsim.study.pipeline.propagation.pushed_along`; with one loaded
+    neighbour in the zone it moves with it), and its pairs count as one contact, when the gaps
+    from one loaded neighbour to the other have all closed: the first contact that carries
+    force (:func:`tolsim.study.pipeline.propagation.force_gaps`). An assembly is invalid, too,
     if it needs more entering balls than were drawn (:func:`tolsim.study.sampling.
     entering_capacity`) or more balls in its zone than it has slots (:func:`slot_capacity`).
 

@@ -275,6 +275,55 @@ def _full(dbeta, force, bearing, out_eps, out_valid):
 VELOCITY_KERNELS = {"eq24": _eq24, "analytic": _analytic, "full": _full}
 
 
+#: Loaded contacts of a ball whose approaches are all below this [m] carry round-off, not
+#: load: 1 pm, a millionth of the smallest tolerance of the packaged configs (0.1 um) and far
+#: above the round-off of the carriage's positions (about 1e-18 m).
+ROUND_OFF_APPROACH = 1e-12
+
+
+def settle_round_off_contacts(force, count, bearing):
+    """Forces and loaded-contact counts with the contacts of balls that carry only round-off
+    opened.
+
+    Parameters
+    ----------
+    force : ndarray (n, 4)
+        Contact forces [N].
+    count : ndarray of int8 (n,)
+        :func:`loaded_contacts` of ``force``.
+    bearing : Bearing
+
+    Returns
+    -------
+    force, count
+        The inputs themselves when no loaded ball has all its contact forces at or below
+        K ROUND_OFF_APPROACH^1.5 (K the Hertz constant, 2.35e10 N/m^1.5 for the paper's balls:
+        2.4e-8 N); else copies in which those balls are unloaded (F = 0, count 0).
+
+    Notes
+    -----
+    A loose ball (clearance, or an end relief deeper than its approach) has its balance at
+    delta = 0 of the flanks it touches, a root of order 1.5 of F = K delta^1.5, and the
+    carriage solver leaves round-off there: one flank (measured 3e-21 to 6e-21 N) or the two
+    carriage flanks (2e-14 N), forces no other contact balances, below the solver's ball
+    tolerance of 1e-12 of the reference ball force (Notes of
+    :func:`tolsim.physics.carriage.solve_carriage`, "Ball tolerance"). Such a ball is
+    unloaded (issue 25), not a ball that lost contact or a two-point ball the full model
+    cannot solve.
+    """
+    if not np.any(count > 0):
+        return force, count
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    limit = hc.load_deflection_constant * ROUND_OFF_APPROACH**1.5
+    small = (count > 0) & (force[:, 0] <= limit) & (force[:, 1] <= limit) & (
+        force[:, 2] <= limit) & (force[:, 3] <= limit)
+    if not small.any():
+        return force, count
+    force = np.where(small[:, None], 0.0, force)
+    return force, np.where(small, np.int8(0), count)
+
+
 def loaded_contacts(force):
     """Loaded contacts (F > 0) per ball, (n,) int8, from (n, 4) forces [N]; a negative force
     (a contact in tension: the static model out of its range) counts as -1 for the ball."""
@@ -458,7 +507,8 @@ def ball_velocities(config, static: StaticResult, shape) -> BallState:
     with serial_if_small(n):
         force = static.normal_force
         dbeta = static.contact_angle_deviation
-        count = loaded_contacts(force)
+        force, count = settle_round_off_contacts(force, loaded_contacts(force),
+                                                 config.bearing)
         solvable = static.converged & static.four_point
         eps = np.empty(n)
         valid = np.zeros(n, dtype=np.bool_)

@@ -27,11 +27,12 @@ known, or whether it touches at all when no resolved pair does, is for the stati
 bound (:mod:`tolsim.study.statistics.accumulator`).
 
 Unloaded balls (no loaded contact, issue 25) have no epsilon of their own: they are pushed
-along by their neighbours and carry no force until a gap on each side has closed. Mode (a)
-gives them the epsilon that closes all the gaps between their loaded neighbours at once
-(:func:`pushed_velocity_deviation`), so the first contact it reports is the first contact that
-carries force. Mode (b) does not yet: there an unloaded ball leaves its train unresolved
-(counted and bounded).
+along by their neighbours and carry no force until a gap on each side has closed. Both modes
+give them the epsilon that closes all the gaps between their loaded neighbours at once
+(:func:`pushed_velocity_deviation`; mode (b) at every evaluation, :func:`pushed_along`), and
+mode (b) locates a contact on the gap that carries force, the sum of the gaps between the
+loaded neighbours (:func:`force_gaps`), so the first contact either reports is the first that
+carries force, and mode (b) reproduces mode (a) when epsilon is constant.
 
 Travel to contact is the carriage travel v t [m].
 
@@ -48,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import prange
 
-from tolsim._jit import pjit
+from tolsim._jit import jit, pjit
 from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
 from tolsim.study.sampling import error_values
 
@@ -158,8 +159,9 @@ def first_contact_constant(initial_gap, velocity_deviation, groove_velocity, hor
 
 
 @pjit
-def pushed_kernel(gap, eps, unloaded, out):
-    """Kernel of :func:`pushed_velocity_deviation` on (trains, balls) rows."""
+def pushed_kernel(gap, eps, unloaded, edge, out):
+    """Kernel of :func:`pushed_velocity_deviation` on (trains, balls) rows; a ball flagged in
+    ``edge`` (outside the loaded zone, an empty slot) ends a run as the end of the train."""
     m, n = eps.shape
     for t in prange(m):
         for i in range(n):
@@ -174,6 +176,10 @@ def pushed_kernel(gap, eps, unloaded, out):
                 last += 1
             before = i - 1
             after = last + 1
+            if before >= 0 and edge[t, before]:
+                before = -1
+            if after < n and edge[t, after]:
+                after = n
             if before < 0 and after >= n:
                 for k in range(i, last + 1):
                     out[t, k] = 0.0
@@ -230,8 +236,126 @@ def pushed_velocity_deviation(initial_gap, velocity_deviation, unloaded, tracks=
         m * tracks, max(balls - 1, 0)))
     flags = np.ascontiguousarray(np.asarray(unloaded, dtype=np.bool_).reshape(m * tracks, balls))
     out = np.empty((m * tracks, balls))
-    pushed_kernel(gap, eps.reshape(m * tracks, balls), flags, out)
+    pushed_kernel(gap, eps.reshape(m * tracks, balls), flags, np.zeros_like(flags), out)
     return out.reshape(eps.shape)
+
+
+def pushed_along(gap, eps, unloaded, edge=None):
+    """epsilon with the unloaded balls' filled in, at one evaluation of mode (b).
+
+    Parameters
+    ----------
+    gap : ndarray, shape (..., balls - 1)
+        The gaps at the start of the step [m] (NaN next to an empty slot).
+    eps : ndarray, shape (..., balls)
+        epsilon per ball [-] (anything at the unloaded balls).
+    unloaded : ndarray of bool, shape (..., balls)
+    edge : ndarray of bool, shape (..., balls), optional
+        Balls that end a run like the end of the train: outside the loaded zone or an empty
+        slot (a carriage's slots).
+
+    Returns
+    -------
+    ndarray, shape (..., balls)
+        ``eps`` itself when no ball is unloaded, else a copy with each unloaded ball's epsilon
+        as :func:`pushed_velocity_deviation`.
+
+    Notes
+    -----
+    An unloaded ball has no contact force, so nothing fixes its speed: every speed is in
+    equilibrium, and the model leaves its free motion open. Its loaded neighbours a and b do not
+    feel it (it carries no force), so the first contact that carries force, when the gaps from a
+    to b have all closed, does not depend on that choice (:func:`force_gaps`); only where the
+    unloaded ball is, which decides when it is loaded again, does. The choice here is the
+    constant propagation's: ball i of a run between a and b moves at
+    eps_a + (eps_b - eps_a) G_i / G with the gaps of the start of the step. Every gap of the
+    run then closes at a rate in proportion to its size, so the shares G_i / G stay as they
+    are (the midpoint's gaps give the same epsilon): the unloaded balls keep their places
+    between their loaded neighbours, touch neither before the run closes, and a ball already
+    touching a neighbour (G_i = 0 or G) moves with it, pushed. A run with one loaded
+    neighbour moves with it; one with none at 0. In the limit of constant epsilon this is
+    the motion of the constant propagation, step by step.
+    """
+    if not np.any(unloaded):
+        return eps
+    shape = np.shape(eps)
+    n = shape[-1]
+    flags = np.ascontiguousarray(np.reshape(unloaded, (-1, n)), dtype=np.bool_)
+    ends = (np.zeros_like(flags) if edge is None
+            else np.ascontiguousarray(np.reshape(edge, (-1, n)), dtype=np.bool_))
+    out = np.empty(flags.shape)
+    pushed_kernel(np.ascontiguousarray(np.reshape(gap, (-1, max(n - 1, 0))), dtype=np.float64),
+                  np.ascontiguousarray(np.reshape(eps, (-1, n)), dtype=np.float64), flags,
+                  ends, out)
+    return out.reshape(shape)
+
+
+@jit
+def force_gap_kernel(gap, unloaded, edge, ok, out):
+    """Kernel of :func:`force_gaps` on (trains, balls) rows."""
+    m, n = unloaded.shape
+    for t in range(m):
+        for j in range(n - 1):
+            out[t, j] = gap[t, j]
+        i = 0
+        while i < n:
+            if not unloaded[t, i]:
+                i += 1
+                continue
+            last = i  # the run of unloaded balls i..last
+            while last + 1 < n and unloaded[t, last + 1]:
+                last += 1
+            before = i - 1
+            after = last + 1
+            value = np.inf  # a run at an end of the train never carries force
+            if before >= 0 and after < n and not edge[t, before] and not edge[t, after]:
+                value = 0.0
+                for j in range(before, after):
+                    value += gap[t, j]
+                for k in range(before, after + 1):
+                    if not ok[t, k]:
+                        value = np.nan
+            for j in range(max(before, 0), min(after, n - 1)):
+                out[t, j] = value
+            i = last + 1
+
+
+def force_gaps(gap, unloaded, edge=None, ok=None):
+    """The gaps whose closing carries force: those of the pairs with an unloaded ball replaced
+    by the sum of the gaps between its loaded neighbours.
+
+    Parameters
+    ----------
+    gap : ndarray, shape (..., balls - 1)
+        Gaps [m].
+    unloaded : ndarray of bool, shape (..., balls)
+    edge : ndarray of bool, shape (..., balls), optional
+        As :func:`pushed_along`.
+    ok : ndarray of bool, shape (..., balls), optional
+        Resolved so far; a run with a ball that is not gets NaN (never closes).
+
+    Returns
+    -------
+    ndarray, shape (..., balls - 1)
+        ``gap`` itself when no ball is unloaded; else a copy in which every pair of a run of
+        unloaded balls between loaded balls a and b holds g_a + ... + g_{b-1} (they close
+        together, when a and b would touch with the run in between: the first contact that
+        carries force), and every pair of a run at an end of the train (one loaded neighbour
+        or none, or an ``edge`` ball) inf (never carries force).
+    """
+    if not np.any(unloaded):
+        return gap
+    shape = np.shape(gap)
+    n = np.shape(unloaded)[-1]
+    flags = np.ascontiguousarray(np.reshape(unloaded, (-1, n)), dtype=np.bool_)
+    ends = (np.zeros_like(flags) if edge is None
+            else np.ascontiguousarray(np.reshape(edge, (-1, n)), dtype=np.bool_))
+    good = (np.ones_like(flags) if ok is None
+            else np.ascontiguousarray(np.reshape(ok, (-1, n)), dtype=np.bool_))
+    out = np.empty((flags.shape[0], max(n - 1, 0)))
+    force_gap_kernel(np.ascontiguousarray(np.reshape(gap, out.shape), dtype=np.float64), flags,
+                     ends, good, out)
+    return out.reshape(shape)
 
 
 def first_contact_tracks(initial_gap, velocity_deviation, groove_velocity, horizon, tracks=1):
@@ -281,7 +405,8 @@ class Step:
     ``position`` and ``free``: the positions at the start of the step and at its end on the
     free motion (each ball at its own epsilon) [m], in the frame's shape ((m, balls) rail
     positions for free balls); ``gap_old``, ``gap_new``: the pairs' gaps there [m] (along
-    the last axis); ``ball_ok``: resolved at every evaluation so far; ``state1``, ``state2``:
+    the last axis), those of pairs with an unloaded ball the gaps that carry force
+    (:func:`force_gaps`); ``ball_ok``: resolved at every evaluation so far; ``state1``, ``state2``:
     the balls at the start and at the midpoint.
     """
 
@@ -460,13 +585,30 @@ class FreeBalls(AlongTrackFrame):
             return self.initial_state
         return self.evaluate(position, t)
 
+    def predictor(self, state):
+        return self.pushed(state)
+
+    def velocity(self, state1, state2):
+        return self.pushed(state2)
+
+    def pushed(self, state):
+        """The balls' epsilon with the unloaded ones pushed along (:func:`pushed_along`)."""
+        unloaded = state.unloaded
+        if not unloaded.any():
+            return state.velocity_deviation
+        return pushed_along(np.diff(self.position, axis=1) - self.diameter,
+                            state.velocity_deviation, unloaded)
+
     def move(self, position, w, h):
         return position + h * (1.0 + np.nan_to_num(w)) * 0.5 * self.v
 
     def step(self, k, t, dt, position, new, state1, state2):
-        self.ball_ok &= state1.valid & state2.valid
-        gap_old = np.diff(position, axis=1) - self.diameter
-        gap_new = np.diff(new, axis=1) - self.diameter
+        # an unloaded ball is accounted for (pushed along); its pairs close as one
+        self.ball_ok &= state1.accounted & state2.accounted
+        unloaded = state2.unloaded
+        gap_old = force_gaps(np.diff(position, axis=1) - self.diameter, unloaded,
+                             ok=self.ball_ok)
+        gap_new = force_gaps(np.diff(new, axis=1) - self.diameter, unloaded, ok=self.ball_ok)
         return Step(k, t, dt, position, new, gap_old, gap_new, self.ball_ok, state1, state2)
 
     def advance(self, step, new):
@@ -546,13 +688,20 @@ class TrainMotion(StepObserver):
     def predict(self, state, w):
         friction, everyone = self.friction, self.everyone
         load = friction.coefficients(state, everyone, friction.touching())
-        return friction.predict(state.velocity_deviation, load, everyone, everyone)
+        eps = state.velocity_deviation
+        unloaded = state.unloaded  # pushed along as without the trains (``w``)
+        if unloaded.any():
+            eps = np.where(unloaded, w, eps)
+        return friction.predict(eps, load, everyone, everyone)
 
     def advance(self, step, new):
         # the step of the trains: cluster rule, then projection
         friction, everyone = self.friction, self.everyone
         position, dt, v = step.position, step.dt, self.v
         eps2 = step.state2.velocity_deviation
+        unloaded = step.state2.unloaded
+        if unloaded.any():  # pushed along, as in the free motion
+            eps2 = pushed_along(np.diff(position, axis=1) - friction.diameter, eps2, unloaded)
         w2 = friction.velocity(eps2, friction.coefficients(step.state2, everyone), everyone,
                                everyone)
         return friction.advance(position, position + dt * (1.0 + np.nan_to_num(w2)) * 0.5 * v)

@@ -376,9 +376,10 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
       (:func:`tolsim.study.pipeline.propagation.pushed_velocity_deviation`), K = 0 and no
       friction, and transmits the force. A pair with a ball in regime B or two-point pays the
       ball-ball friction of the two balls' actual rotations, one with a pushed ball none
-      (:func:`tolsim.physics.trains.regimes.pair_braking`). Only ``constant`` propagation
-      fills in the pushed balls: with ``along_track`` an unloaded ball still leaves its train
-      unresolved.
+      (:func:`tolsim.physics.trains.regimes.pair_braking`). Along the track the first
+      contact takes unloaded balls as pushed along
+      (:func:`tolsim.study.pipeline.propagation.pushed_along`); so does the step rule after
+      contact (their free epsilon, K = 0 in the cluster rule).
     * **Sliding.** The linear creep law holds while each ball rolls. It stops when the push on a
       ball reaches its traction capacity, |P_i| >= P_cap,i, or the neighbour forces stall its
       rotation, S_i >= braking capacity (:mod:`tolsim.physics.velocity.ball_loads`). Every segment
