@@ -73,6 +73,8 @@ STUDY = ("bench_study.py",)
 DASK = ("bench_dask.py", "--repeats", "3")
 CARRIAGE = ("bench_carriage.py",)
 ALONG = ("bench_carriage.py", "--skip-batch", "--along-track", "2000")
+ALONG_STUDY = ("bench_study.py", "--along-track")
+_ALONG = r"^\s+{} \({}\):.*?"
 COLD = ("bench_cold_start.py",)
 RARE = ("bench_rare_events.py",)
 SWEEP = ("bench_sweep.py",)
@@ -133,6 +135,21 @@ ROWS = (
         r"sweep / separate = ([\d.]+)", "×", 2),
     Row("sweep_free", "the sweep against ten separate runs without sampling (target: < 2)",
         SWEEP, r"sweep / sampling-free separate = ([\d.]+)", "×", 1),
+    Row("along_free", "free balls along the track (`whatif_along_track.toml`, 100 steps)",
+        ALONG_STUDY, _ALONG.format(r"whatif_along_track\.toml", "free balls")
+        + r"along_track\s+\S+ s\s+(\d+) balls/s", "balls/s", -2),
+    Row("along_free_ratio", "free balls: cost per ball along the track / constant (target: ≤ 5)",
+        ALONG_STUDY, _ALONG.format(r"whatif_along_track\.toml", "free balls")
+        + r"cost per ball\s+([\d.]+)x", "×", 0),
+    Row("along_carriage", "`carriage_preload.toml` along the track (200 steps)", ALONG_STUDY,
+        _ALONG.format(r"carriage_preload\.toml", "carriage")
+        + r"along_track\s+\S+ s\s+(\d+) balls/s", "balls/s", -2),
+    Row("along_carriage_ratio", "carriage: cost per ball along the track / constant (target: ≤ 5)",
+        ALONG_STUDY, _ALONG.format(r"carriage_preload\.toml", "carriage")
+        + r"cost per ball\s+([\d.]+)x", "×", 0),
+    Row("along_circuit_ratio", "the same with a default `[carriage.circuit]`", ALONG_STUDY,
+        _ALONG.format(r"carriage_preload\.toml", r"carriage with \[carriage\.circuit\]")
+        + r"cost per ball\s+([\d.]+)x", "×", 0),
     Row("cold", "default study on a cold kernel cache against a warm one (CPU)", COLD,
         r"cold / warm: \S+ \(wall\), ([\d.]+) \(CPU\)", "×", 1),
     Row("warmed", "the same after `tolsim warmup` (wall)", COLD,
