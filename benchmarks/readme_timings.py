@@ -118,7 +118,7 @@ ROWS = (
     Row("known_answer", "known-answer study at σ = 2° (91 % of its balls re-solved)", STUDY,
         r"^\s+known_answer: \S+ balls\s+\S+ s\s+([\d.]+) M balls/s", "balls/s", -3, 1e6),
     Row("dask_process", "dask: 10^7 balls in this process (best of 3)", DASK,
-        r"^\s+in-process:\s+([\d.]+) s", "s", 2),
+        r"^\s*in-process:\s+([\d.]+) s", "s", 2),
     Row("dask_1", "dask: a LocalCluster of 1 worker, against this process", DASK,
         r"^\s+local:1:.*?([\d.]+)x the", "×", 2),
     Row("dask_2", "dask: a LocalCluster of 2 workers, against this process", DASK,
@@ -191,13 +191,24 @@ def render(values: dict, stamp: str) -> str:
     return "\n".join([*lines, "", END])
 
 
-def run(command: tuple) -> str:
-    """The output of one benchmark run (its own process, from the repository's root)."""
+def run(command: tuple, keep: Path | None) -> str:
+    """The output of one benchmark run (its own process, from the repository's root); with
+    ``keep``, read from / saved to a file there (``--outputs``)."""
+    saved = keep / ("_".join(command).replace("-", "").replace(".py", "") + ".txt") \
+        if keep else None
+    if saved is not None and saved.is_file():
+        print(f"reading {saved}", flush=True)
+        return saved.read_text(encoding="utf-8")
     print(f"running python benchmarks/{' '.join(command)} ...", flush=True)
+    # the repository's tolsim, not another one installed in the interpreter's site-packages
+    path = os.pathsep.join(filter(None, (str(ROOT), os.environ.get("PYTHONPATH"))))
     out = subprocess.run([sys.executable, str(ROOT / "benchmarks" / command[0]), *command[1:]],
-                         capture_output=True, text=True, cwd=ROOT, check=False)
+                         capture_output=True, text=True, cwd=ROOT, check=False,
+                         env=dict(os.environ, PYTHONPATH=path))
     if out.returncode:
         raise SystemExit(f"benchmarks/{' '.join(command)} failed:\n{out.stderr[-2000:]}")
+    if saved is not None:
+        saved.write_text(out.stdout, encoding="utf-8")
     return out.stdout
 
 
@@ -208,6 +219,9 @@ def main(argv=None):
                       help="re-run the benchmarks and compare each README row with its interval")
     what.add_argument("--write", action="store_true",
                       help="re-run the benchmarks and rewrite the README's table")
+    p.add_argument("--outputs", type=Path, default=None, metavar="DIR",
+                   help="keep each benchmark's output in DIR, and read it from there when it "
+                        "is already there (a second --check or --write runs nothing)")
     p.add_argument("--only", nargs="+", metavar="SCRIPT", default=None,
                    help="only the rows of these benchmark scripts (e.g. bench_full.py)")
     args = p.parse_args(argv)
@@ -216,11 +230,21 @@ def main(argv=None):
         p.error(f"--only: no row is measured by {' '.join(args.only)}")
     load = os.getloadavg()[0]
     print(f"load average at the start: {load:.2f} ({os.cpu_count()} cores)")
+    if args.outputs is not None:
+        args.outputs.mkdir(parents=True, exist_ok=True)
     outputs = {}
     for row in rows:
         if row.command not in outputs:
-            outputs[row.command] = run(row.command)
-    values = {row.key: row.measured(outputs[row.command]) for row in rows}
+            outputs[row.command] = run(row.command, args.outputs)
+    values, unread = {}, []
+    for row in rows:
+        try:
+            values[row.key] = row.measured(outputs[row.command])
+        except ValueError as exc:
+            unread.append(str(exc))
+    if unread:  # a benchmark's output changed: the rows must follow it
+        print("\n".join(unread))
+        return 1
     text = README.read_text(encoding="utf-8")
     table = readme_table(text)
     failed = 0
