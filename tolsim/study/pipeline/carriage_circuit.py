@@ -121,7 +121,7 @@ def initial_circuits(config, block):
     return position, diameter, circuit_length(diameter, gaps.sum(axis=1))
 
 
-def entering_velocity(eps, stiffness, loaded):
+def entering_velocity(eps, stiffness, loaded, pushed=None):
     """Give the unloaded balls of circuits the epsilon and creep stiffness of the zone's entry
     ball (in place), for a ball that enters the zone within the step.
 
@@ -131,7 +131,10 @@ def entering_velocity(eps, stiffness, loaded):
         Each ring ball's epsilon [-] and K [N] of the step (those of the unloaded balls are
         replaced).
     loaded : ndarray of bool (C, N)
-        Loaded at the start of the step (one run of ring balls per circuit).
+        In the zone at the start of the step (one run of ring balls per circuit).
+    pushed : ndarray of bool (C, N), optional
+        The balls in the zone without a groove contact (pushed along); the balls outside the
+        zone take the entry ball's flag as its epsilon.
 
     Notes
     -----
@@ -153,7 +156,7 @@ def entering_velocity(eps, stiffness, loaded):
     rows = np.flatnonzero(entry.any(axis=1))
     first = np.argmax(entry[rows], axis=1)
     fill = ~loaded[rows]
-    for values in (eps, stiffness):
+    for values in (eps, stiffness) if pushed is None else (eps, stiffness, pushed):
         sub = values[rows]
         sub[fill] = np.broadcast_to(sub[np.arange(len(rows)), first][:, None], sub.shape)[fill]
         values[rows] = sub
@@ -239,11 +242,12 @@ class CircuitFrame(CarriageFrame):
     ``diameter``, ``ring_loaded``, ``ring_closed``, ``ring_speed``, ``length`` (C,),
     ``ring_ok`` (resolved at every evaluation so far); ``ring_id`` the study id of each ring
     ball (:func:`circuit_ball_ids`); ``slot_ring`` (size, tracks, slots) the ring ball in each
-    slot. An unloaded ball in the zone is still unresolved here (``pushes_unloaded``: the
-    circuit's step has no pushed ball in the zone yet).
+    slot. An unloaded ball in the zone (no groove contact) is resolved: it is pushed along
+    by the circuit's step (:func:`tolsim.physics.circuit.step`, "Pushed balls"), and its
+    pairs carry force once the gaps between its neighbours have closed.
     """
 
-    pushes_unloaded = False
+    pushes_unloaded = True
 
     def __init__(self, config, block):
         super().__init__(config, block)
@@ -326,15 +330,19 @@ class CircuitFrame(CarriageFrame):
         ring = self.slot_ring[rows].reshape(c, -1)
         ring_eps = np.zeros((c, n))
         ring_k = np.full((c, n), fallback)
+        ring_pushed = np.zeros((c, n), dtype=bool)
         line, slot = np.nonzero(ring >= 0)
         target = ring[line, slot]
         ring_eps[line, target] = eps.reshape(c, -1)[line, slot]
         ring_k[line, target] = np.where(finite, stiff, fallback).reshape(c, -1)[line, slot]
+        pushed = self.unloaded(state1, state2)  # no groove contact: pushed by the step
+        if pushed is not None:
+            ring_pushed[line, target] = pushed.reshape(c, -1)[line, slot]
         ok = self.ring_ok[circuits]
         ok[line, target] &= ~unresolved.reshape(c, -1)[line, slot]
         self.ring_ok[circuits] = ok
         sigma, loaded = self.sigma[circuits], self.ring_loaded[circuits]
-        entering_velocity(ring_eps, ring_k, loaded)  # a ball that enters within the step
+        entering_velocity(ring_eps, ring_k, loaded, ring_pushed)  # entering within the step
         closed, speed = self.ring_closed[circuits], self.ring_speed[circuits]
         velocity, force, mean_force = (np.empty((c, n)) for _ in range(3))
         column = np.empty((c, 4))
@@ -346,7 +354,7 @@ class CircuitFrame(CarriageFrame):
         status = np.empty(c, dtype=np.int64)
         travel = self.v * step.dt
         step_circuit_kernel(sigma, np.ascontiguousarray(self.diameter_ring[circuits]),
-                            ring_eps, ring_k, loaded, closed,
+                            ring_eps, ring_k, ring_pushed, loaded, closed,
                             np.ascontiguousarray(self.length[circuits]), float(self.zone),
                             float(self.drag), float(travel), float(self.v * step.t), speed,
                             velocity, force, mean_force, column, count, pair, where, when,
@@ -366,7 +374,7 @@ class CircuitFrame(CarriageFrame):
         step.circuit = {"ok": ok, "loaded": loaded, "closed": closed, "force": force,
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
-                        "circuits": circuits}
+                        "circuits": circuits, "pushed": ring_pushed}
 
 
 #: Status bit of an assembly whose loaded balls outnumbered the carriage's slots.
