@@ -149,18 +149,15 @@ def test_config_is_read_in_si_with_its_defaults():
     ("return_drag_N = -0.1", r"carriage\.circuit\.return_drag_N = -0\.1 must be >= 0"),
     ("return_drag_mm = 0.1", r"carriage\.circuit\.return_drag_mm has an unknown unit"),
     ("colour = 1", r"carriage\.circuit\.colour is not a known key"),
-    ("contact", r"carriage\.circuit with \[contact\]"),
 ])
 def test_config_errors_are_one_line(change, message):
     circuit = "[carriage.circuit]\n"
-    if change not in ("constant", "contact"):
+    if change != "constant":
         circuit += change + "\n"
     text = BASE.format(stroke=100.0, vertical=300.0, gap=FIXED_GAP, tolerances="", samples=8,
                        steps=10, propagation="along_track", circuit=circuit)
     if change == "constant":
         text = text.replace('"along_track"', '"constant"')
-    elif change == "contact":
-        text += "[contact]\n"
     with pytest.raises(ConfigError, match=message) as err:
         parse_config(text, "circuit.toml")
     assert "\n" not in str(err.value)

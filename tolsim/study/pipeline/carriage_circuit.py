@@ -24,6 +24,7 @@ from tolsim.physics.circuit import (
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.study.pipeline.carriage_track import CarriageFrame
+from tolsim.study.pipeline.circuit_friction import CircuitTrains
 from tolsim.study.pipeline.propagation import StepObserver, integrate
 from tolsim.study.pipeline.track_friction import CREEP_MODELS
 from tolsim.study.sampling import entering_capacity, moving_ball_values
@@ -374,7 +375,8 @@ class CircuitFrame(CarriageFrame):
         step.circuit = {"ok": ok, "loaded": loaded, "closed": closed, "force": force,
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
-                        "circuits": circuits, "pushed": ring_pushed}
+                        "circuits": circuits, "pushed": ring_pushed, "slot_ring": ring,
+                        "status": status}
 
 
 #: Status bit of an assembly whose loaded balls outnumbered the carriage's slots.
@@ -490,7 +492,7 @@ class CircuitContact(StepObserver):
                 "slack_error": self.slack_error}
 
 
-def first_contact_carriage_circuit(config, block, observers=()):
+def first_contact_carriage_circuit(config, block, observers=(), *, friction=None):
     r"""First contact of a block's carriage assemblies whose balls run in circuits.
 
     Parameters
@@ -502,6 +504,11 @@ def first_contact_carriage_circuit(config, block, observers=()):
         (:func:`tolsim.study.sampling.entering_capacity`).
     observers : sequence of StepObserver
         More observers (a :class:`tolsim.study.pipeline.carriage_track.TrackTrace`).
+    friction : tolsim.study.pipeline.track_friction.TrackFriction, optional
+        With it (a study with ``[contact]``) the friction figures of the trains after contact
+        are accumulated in ``friction`` (:class:`tolsim.study.pipeline.circuit_friction.
+        CircuitTrains`); the motion, first contact and circuit figures are the same as
+        without it.
 
     Returns
     -------
@@ -569,7 +576,8 @@ def first_contact_carriage_circuit(config, block, observers=()):
                          "config with [carriage.circuit]")
     frame = CircuitFrame(config, block)
     contact = CircuitContact(frame)
-    integrate(config, frame, [contact, *observers])
+    trains = [] if friction is None else [CircuitTrains(frame, friction)]
+    integrate(config, frame, [contact, *trains, *observers])
     return (contact.time, contact.pair, contact.valid, frame.resolve_seconds,
             frame.initial_state, frame.initial_carriage, contact)
 
