@@ -448,3 +448,15 @@ def test_unloaded_balls_in_the_zone_are_pushed_not_unresolved():
         assert gaps.min() > -1e-12
     assert any(p.any() for p in pushed_steps)
 
+
+
+def test_an_entering_ball_takes_the_entry_ball_s_pushed_flag():
+    # As test_an_entering_ball_moves_with_the_ball_ahead: the balls outside the zone take the
+    # pushed flag (no groove contact) of the zone's entry ball with its epsilon and K, so a
+    # ball that enters under an end relief within a step is pushed along, as the ball ahead.
+    eps = np.zeros((2, 6))
+    k = np.ones((2, 6))
+    loaded = np.array([[0, 0, 1, 1, 1, 0], [1, 0, 0, 0, 1, 1]], dtype=bool)
+    pushed = np.array([[0, 0, 1, 0, 0, 0], [0, 0, 0, 0, 0, 1]], dtype=bool)
+    entering_velocity(eps, k, loaded, pushed)
+    assert_array_equal(pushed, [[1, 1, 1, 0, 0, 1], [0, 0, 0, 0, 0, 1]])

@@ -392,11 +392,15 @@ class CircuitContact(StepObserver):
     entry, exit, the largest over the tracks at the ends of the steps and the mean over the
     stroke of the larger track's), each circuit's total gap at the start and end of the
     stroke (``total_gap_start``, ``total_gap_end`` (size, tracks)) and the largest departure
-    of the total gap from the slack at any step (``slack_error`` (size,)) [m]."""
+    of the total gap from the slack at any step (``slack_error`` (size,)) [m]; with
+    ``[contact]`` the friction of the column's forces at the zone's ends (``column_friction``
+    (size,) [N], :meth:`tolsim.study.pipeline.circuit_friction.CircuitTrains.
+    column_friction`)."""
 
     def __init__(self, frame):
         self.frame = frame
         self.half_zone, self.slots, self.balls = frame.half_zone, frame.slots, frame.balls
+        self.column_friction = None  # (size,) [N] with [contact] (CircuitTrains)
 
     def begin(self, block, position):
         m, tracks = block.size, self.frame.tracks
@@ -486,10 +490,13 @@ class CircuitContact(StepObserver):
         """The circuit figures of the block (:meth:`tolsim.study.statistics.accumulator.
         Accumulator.add_circuit`)."""
         travel = self.travel if self.travel > 0 else 1.0
-        return {"where_count": self.where_count, "column_max": self.column_max,
-                "column_mean": self.column_mean / travel,
-                "total_gap_start": self.total_gap_start, "total_gap_end": self.total_gap_end,
-                "slack_error": self.slack_error}
+        out = {"where_count": self.where_count, "column_max": self.column_max,
+               "column_mean": self.column_mean / travel,
+               "total_gap_start": self.total_gap_start, "total_gap_end": self.total_gap_end,
+               "slack_error": self.slack_error}
+        if self.column_friction is not None:  # with [contact]
+            out["column_friction"] = self.column_friction
+        return out
 
 
 def first_contact_carriage_circuit(config, block, observers=(), *, friction=None):
@@ -552,7 +559,13 @@ def first_contact_carriage_circuit(config, block, observers=(), *, friction=None
     a step was not evaluated in it: it moves for the rest of the step with the epsilon and K
     of the ball ahead of it (:func:`entering_velocity`), a position error of at most
     |epsilon_k - epsilon_ahead| v dt / 2. An unresolved ball moves at epsilon = 0 (as without
-    the circuit) and makes its assembly invalid if it happens before the first contact.
+    the circuit) and makes its assembly invalid if it happens before the first contact. A ball
+    in the zone without a groove contact (unloaded, issue 25: under an end relief, an
+    undersized ball) is resolved: it has no epsilon or K of its own and the circuit's step
+    pushes it along between its neighbours (:func:`tolsim.physics.circuit.step`, "Pushed
+    balls"; the rule of :func:`tolsim.study.pipeline.propagation.pushed_along` on the ring),
+    so its pairs carry force, and count as a contact, only when the gaps from one neighbour
+    to the other have all closed.
 
     **Contact.** P(contact) and the time to first contact keep their meaning: the first contact
     between two loaded balls that are resolved so far, either a gap between them closing inside
@@ -560,9 +573,16 @@ def first_contact_carriage_circuit(config, block, observers=(), *, friction=None
     balls that carries force at the end of a step (balls pushed into the zone in contact by the
     column; its time the end of the step, at most dt late). Contacts of unloaded balls (at the
     entry, the exit or in the return channel) carry no friction of loaded balls and are counted
-    apart, by where they form (``where_count``). The pair index is that of the open model,
+    apart, by where they form (``where_count``); a run of pushed balls closes as one event,
+    labelled by the balls at its ends. The pair index is that of the open model,
     track * (balls - 1) + j, j the position of the pair's trailing ball from the trailing end at
     the end of the step (at most balls - 2). Every assembly is followed over the whole stroke.
+
+    **After contact.** The circuit's step moves the loaded balls as trains (the cluster rule
+    on the ring) with or without ``[contact]``; with it (``friction``) the friction figures of
+    the open carriage's trains are accumulated from the step's forces, with the column's force
+    at the zone's ends on the end balls (:class:`tolsim.study.pipeline.circuit_friction.
+    CircuitTrains`).
 
     Cost: the evaluation of the open model plus one circuit step per assembly and step
     (O(N) per event, a few events per step), and every assembly is followed to the end.
@@ -578,6 +598,8 @@ def first_contact_carriage_circuit(config, block, observers=(), *, friction=None
     contact = CircuitContact(frame)
     trains = [] if friction is None else [CircuitTrains(frame, friction)]
     integrate(config, frame, [contact, *trains, *observers])
+    if trains:
+        contact.column_friction = trains[0].column_friction()
     return (contact.time, contact.pair, contact.valid, frame.resolve_seconds,
             frame.initial_state, frame.initial_carriage, contact)
 

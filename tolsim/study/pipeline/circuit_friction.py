@@ -22,6 +22,7 @@ _USED = np.array([_COL[name] for name in ("free_rolling_carriage_force",
                                            "carriage_force_per_push",
                                            "carriage_force_per_neighbour_force")])
 _F0, _K = _COL["free_rolling_carriage_force"], _COL["creep_stiffness"]
+_A = _COL["carriage_force_per_push"]
 
 
 def column_coefficients() -> np.ndarray:
@@ -192,6 +193,7 @@ class CircuitTrains(StepObserver):
         self.friction.begin(block.size, np.zeros((rows, self.width - 1), dtype=bool),
                             carriage_frame=True)
         self.pressed = self.frame.ring_closed.copy()  # touching at t = 0
+        self.column_sum = np.zeros(rows)
 
     def following(self):
         return True  # every assembly over the whole stroke
@@ -240,6 +242,19 @@ class CircuitTrains(StepObserver):
         contact = np.where(start, 1.0, np.where(np.isfinite(first), part, 0.0))
         self.friction.account(loaded, member, load, force, ok, contact, formed)
         self.pressed = pressed
+        # the column's share: (a_trail + 1) Qbar_x - (1 + a_lead) Qbar_e
+        lead = np.maximum(member.sum(axis=1) - 2, 1)
+        line = np.arange(c)
+        share = ((load[:, 1, _A] + 1.0) * force[:, 0]
+                 - (1.0 + load[line, lead, _A]) * force[line, lead])
+        self.column_sum += np.where(ok & (lead > 0), np.nan_to_num(share), 0.0) * \
+            self.friction.weight
+
+    def column_friction(self) -> np.ndarray:
+        """The friction the column's forces at the zone's ends cost the carriage, (size,) [N]:
+        (a_trail + 1) Qbar_x - (1 + a_lead) Qbar_e averaged over the stroke (Notes), the
+        larger of the tracks'."""
+        return self.column_sum.reshape(-1, self.frame.tracks).max(axis=1)
 
 
 __all__ = ["CircuitTrains", "circuit_trains_kernel", "column_coefficients"]
