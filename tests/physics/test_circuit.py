@@ -177,6 +177,13 @@ def mirror(state):
         zone_length=state.zone_length)
 
 
+def events(record):
+    """The contact events of a :func:`circuit.run`, sorted: circuit, pair, where, travel."""
+    e = record.events
+    order = np.lexsort((e["travel"], e["pair"], e["circuit"]))
+    return [e[k][order] for k in ("circuit", "pair", "where", "travel")]
+
+
 # -------------------------------------------------------------------------------- tests
 @pytest.mark.parametrize("travel", [2.5e-3, -2.5e-3, 0.02])
 @pytest.mark.parametrize("drag", [0.0, 0.01])
@@ -240,11 +247,6 @@ def test_step_size_independent(drag):
     assert_allclose(coarse.state.position, fine.state.position, rtol=0, atol=1e-12)
     assert_array_equal(coarse.state.closed, fine.state.closed)
     assert_array_equal(coarse.state.loaded, fine.state.loaded)
-
-    def events(record):
-        e = record.events
-        order = np.lexsort((e["travel"], e["pair"], e["circuit"]))
-        return [e[k][order] for k in ("circuit", "pair", "where", "travel")]
 
     for a, b in zip(events(coarse)[:3], events(fine)[:3], strict=True):
         assert_array_equal(a, b)
@@ -477,11 +479,6 @@ def test_pushed_balls_keep_the_slack_and_the_step_size_does_not_matter():
                          pushed=pushed)
     fine = circuit.run(state, eps, stiffness, 0.14, 350, 0.01, pushed=pushed)
     assert_allclose(coarse.state.position, fine.state.position, rtol=0, atol=1e-12)
-
-    def events(record):
-        e = record.events
-        order = np.lexsort((e["travel"], e["pair"], e["circuit"]))
-        return [e[k][order] for k in ("circuit", "pair", "where", "travel")]
 
     for a, b in zip(events(coarse)[:3], events(fine)[:3], strict=True):
         assert_array_equal(a, b)
