@@ -21,7 +21,7 @@ _COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
 _USED = np.array([_COL[name] for name in ("free_rolling_carriage_force",
                                            "carriage_force_per_push",
                                            "carriage_force_per_neighbour_force")])
-_F0, _K = _COL["free_rolling_carriage_force"], _COL["creep_stiffness"]
+_K = _COL["creep_stiffness"]
 _A = _COL["carriage_force_per_push"]
 
 
@@ -140,7 +140,7 @@ class CircuitTrains(StepObserver):
     ``[contact]``, bit for bit. What ``[contact]`` adds is the carriage friction of each step,
     from the step-mean pair forces Qbar of the circuit and each ball's creep coefficients
     (:func:`tolsim.study.pipeline.track_friction.ball_creep_coefficients`, from its state at
-    the step's midpoint, else at its start; by regime, a pushed ball F_0 = a = b = 0), through
+    the step's midpoint; by regime, a pushed ball F_0 = a = b = 0), through
     :meth:`tolsim.study.pipeline.track_friction.TrackFriction.account`, the open carriage's
     eq. (1) per step: F_track = sum_i F_0,i + sum_j k_j Qbar_j, k_j = (a_{j+1} - a_j) + B_j.
 
@@ -199,14 +199,13 @@ class CircuitTrains(StepObserver):
         return True  # every assembly over the whole stroke
 
     def _ring_coefficients(self, step, circ):
-        """(C, N, len(TRAIN_COLUMNS)) coefficients of the ring balls evaluated in the step:
-        at the midpoint, else at the start (NaN for the others)."""
+        """(C, N, len(TRAIN_COLUMNS)) coefficients of the ring balls at the step's midpoint
+        (NaN for the others: a ball in the zone at the end of the step was in it at the
+        midpoint, or entered after it)."""
         friction, slots = self.friction, self.frame.slots
-        state1, state2 = step.state1, step.state2
+        state2 = step.state2
         trains = (-1, slots)
         load = friction.coefficients(state2.balls, state2.loaded.reshape(trains))
-        start = friction.coefficients(state1.balls, state1.loaded.reshape(trains))
-        load = np.where(np.isnan(load[..., _F0:_F0 + 1]), start, load)
         ring = circ["slot_ring"]
         c, n = ring.shape[0], self.frame.sigma.shape[1]
         out = np.full((c, n, len(TRAIN_COLUMNS)), np.nan)
