@@ -32,7 +32,8 @@ def kernel_arrays(state, eps, stiffness, capacity):
     m, n = state.position.shape
     return dict(
         position=state.position.copy(), diameter=state.diameter, eps=eps,
-        stiffness=stiffness, loaded=state.loaded.copy(), closed=state.closed.copy(),
+        stiffness=stiffness, pushed=np.zeros((m, n), dtype=bool), loaded=state.loaded.copy(),
+        closed=state.closed.copy(),
         length=state.circuit_length, speed=state.speed.copy(), velocity=np.empty((m, n)),
         force=np.empty((m, n)), mean_force=np.empty((m, n)), column=np.empty((m, 4)),
         count=np.empty(m, dtype=np.int64), pair=np.empty((m, capacity), dtype=np.int64),
@@ -45,7 +46,8 @@ def run_kernel(a, zone, drag, ds, steps):
     start = time.perf_counter()
     for i in range(steps):
         circuit.step_circuit_kernel(
-            a["position"], a["diameter"], a["eps"], a["stiffness"], a["loaded"], a["closed"],
+            a["position"], a["diameter"], a["eps"], a["stiffness"], a["pushed"], a["loaded"],
+            a["closed"],
             a["length"], zone, drag, ds, i * ds, a["speed"], a["velocity"], a["force"],
             a["mean_force"], a["column"], a["count"], a["pair"], a["where"], a["when"],
             a["status"])

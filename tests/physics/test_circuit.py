@@ -177,6 +177,13 @@ def mirror(state):
         zone_length=state.zone_length)
 
 
+def events(record):
+    """The contact events of a :func:`circuit.run`, sorted: circuit, pair, where, travel."""
+    e = record.events
+    order = np.lexsort((e["travel"], e["pair"], e["circuit"]))
+    return [e[k][order] for k in ("circuit", "pair", "where", "travel")]
+
+
 # -------------------------------------------------------------------------------- tests
 @pytest.mark.parametrize("travel", [2.5e-3, -2.5e-3, 0.02])
 @pytest.mark.parametrize("drag", [0.0, 0.01])
@@ -240,11 +247,6 @@ def test_step_size_independent(drag):
     assert_allclose(coarse.state.position, fine.state.position, rtol=0, atol=1e-12)
     assert_array_equal(coarse.state.closed, fine.state.closed)
     assert_array_equal(coarse.state.loaded, fine.state.loaded)
-
-    def events(record):
-        e = record.events
-        order = np.lexsort((e["travel"], e["pair"], e["circuit"]))
-        return [e[k][order] for k in ("circuit", "pair", "where", "travel")]
 
     for a, b in zip(events(coarse)[:3], events(fine)[:3], strict=True):
         assert_array_equal(a, b)
@@ -421,3 +423,69 @@ def test_bad_state():
         circuit.circuit_state(np.full((1, 4), D), [[0.0, -1e-6, 0.0, 0.0]], 0.02)
     with pytest.raises(ValueError, match="zone_length"):
         circuit.circuit_state(np.full((1, 4), D), np.zeros((1, 4)), 0.05)
+
+
+# ------------------------------------------------------------------------- pushed balls
+def pushed_circuit():
+    """8 balls of 10 mm, a 45 mm zone: ring balls 0..3 loaded (0 at sigma = 1 mm), 4..7 in
+    the return path; gaps 5 mm (pair 0), 20 um (1), 30 um (2), 5 mm (3), the rest equal."""
+    gap = np.array([[5e-3, 20e-6, 30e-6, 5e-3, 1e-3, 1e-3, 1e-3, 1e-3]])
+    state = circuit.circuit_state(np.full((1, 8), D), gap, 0.045, first_position=1e-3)
+    assert state.loaded[0, :4].all() and not state.loaded[0, 4:].any()
+    eps = np.array([[-0.01, -0.01, 0.5, 0.01, 0.0, 0.0, 0.0, 0.0]])  # ball 2's is not used
+    pushed = np.zeros((1, 8), dtype=bool)
+    pushed[0, 2] = True
+    return state, eps, pushed
+
+
+def test_a_pushed_ball_closes_its_gaps_at_once():
+    # Notes, "Pushed balls", by hand: loaded ball 1 (eps -0.01, xi = 0.505) behind pushed
+    # ball 2 and loaded ball 3 (eps +0.01, xi = 0.495) close their gaps 20 + 30 um together
+    # at a rate of xi_1 - xi_3 = 0.01 per unit travel: one contact event, inside the zone at
+    # pair 2 (the run's last), at travel 50 um / 0.01 = 5 mm (1e-12 m: one division);
+    # halfway, at 2.5 mm, the gaps are 10 and 15 um (1e-12 m). Before it no force; after it
+    # the three move as one cluster at the K-weighted mean (equal K: xi = 0.5) and both pairs
+    # carry Q = 2 K (xi_1 - 0.5) = K x 0.01 = 5 N (K = 500 N; 1e-9 N). Without the flag ball 2
+    # would be a loaded ball of epsilon 0.5 and the first contact would come at pair 1,
+    # 20 um / 0.255 = 78 um of travel.
+    state, eps, pushed = pushed_circuit()
+    half = circuit.step(state, eps, 500.0, 2.5e-3, 0.01, pushed=pushed)
+    assert_allclose(half.state.gap()[0, 1:3], [10e-6, 15e-6], rtol=0, atol=1e-12)
+    assert half.event_count[0] == 0 and not half.contact_force.any()
+    out = circuit.step(half.state, eps, 500.0, 3.5e-3, 0.01, travel_start=2.5e-3,
+                       pushed=pushed)
+    assert out.event_count[0] == 1
+    assert out.event_pair[0, 0] == 2 and out.event_where[0, 0] == circuit.WHERE_INSIDE
+    assert_allclose(out.event_travel[0, 0], 5e-3, rtol=0, atol=1e-12)
+    assert_allclose(out.contact_force[0, 1:3], 5.0, rtol=0, atol=1e-9)
+    assert_allclose(out.circuit_speed[0, 1:4], 0.5, rtol=0, atol=1e-12)
+    loaded = circuit.step(state, eps, 500.0, 2.5e-3, 0.01)  # without the flag
+    assert loaded.event_pair[0, 0] == 1
+    assert_allclose(loaded.event_travel[0, 0], 20e-6 / 0.255, rtol=1e-9)
+
+
+def test_pushed_balls_keep_the_slack_and_the_step_size_does_not_matter():
+    # Notes, "Pushed balls" and "The step": random circuits with a third of the balls flagged
+    # pushed (those in the zone at any time): the gaps sum to the slack (1e-12 m) and never
+    # overlap (-1e-12 m) over 200 steps, and 7 steps give the 350 steps' end state (1e-12 m)
+    # and contact events (where and pair exactly, travel 1e-9 m), as without pushed balls.
+    state, eps, stiffness = random_circuits(10, 31, zero_slack_rows=1)
+    pushed = np.random.default_rng(5).random(state.position.shape) < 0.3
+    record = circuit.run(state, eps, stiffness, 0.4, 200, 0.01, pushed=pushed)
+    assert_allclose(record.gap.sum(axis=-1), np.broadcast_to(state.slack, (201, 10)),
+                    rtol=0, atol=1e-12)
+    assert record.gap.min() >= -1e-12
+    coarse = circuit.run(state, eps, stiffness, 0.14, 7, 0.01, event_capacity=4 * BALLS,
+                         pushed=pushed)
+    fine = circuit.run(state, eps, stiffness, 0.14, 350, 0.01, pushed=pushed)
+    assert_allclose(coarse.state.position, fine.state.position, rtol=0, atol=1e-12)
+
+    for a, b in zip(events(coarse)[:3], events(fine)[:3], strict=True):
+        assert_array_equal(a, b)
+    assert_allclose(events(coarse)[3], events(fine)[3], rtol=0, atol=1e-9)
+    assert events(fine)[0].size > 20 and not (coarse.status | fine.status).any()
+    # no event between a pushed ball and a neighbour before its run closes: every event's
+    # pair has a ball ahead that is not pushed while in the zone
+    e = fine.events
+    n = BALLS
+    assert not pushed[e["circuit"], (e["pair"] + 1) % n][e["where"] == 0].any()

@@ -159,6 +159,10 @@ def circuit_rows(ds) -> list:
                      f"events over the stroke: {counts}"))
         rows.append(("column force at the zone's entry / exit (mean over the stroke; max)",
                      f"{mean[0]:.3g} N / {mean[1]:.3g} N; {peak[0]:.3g} N / {peak[1]:.3g} N"))
+        if "circuit_column_friction_mean" in ds.variables:
+            rows.append(("carriage friction from the column's forces at the zone's ends "
+                         "(mean over the stroke)",
+                         f"{float(ds['circuit_column_friction_mean']):.3g} N"))
         rows.append(("sum of a circuit's gaps - its slack, at most",
                      f"{float(ds['circuit_slack_error_max']):.1e} m"))
     return rows

@@ -149,7 +149,7 @@ def _build(data: dict, source: "Source", text: str, path: str,
                                "needs raceway friction (> 0) to carry the balls' pushes")
     if carriage is not None and carriage.circuit is not None:  # issue 24
         check_circuit(Table(data["carriage"]["circuit"], "carriage.circuit", source), carriage,
-                      train, study, bearing, contact is not None)
+                      train, study, bearing)
     allocation = None
     if root.has("allocate"):  # read by `tolsim allocate` (issue 14); `tolsim run` ignores it
         allocation = parse_allocation(root.table("allocate"), tolerances)

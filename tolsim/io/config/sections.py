@@ -488,9 +488,9 @@ def check_carriage_propagation(t: Table, carriage: Carriage, train: Train, study
 
 
 def check_circuit(t: Table, carriage: Carriage, train: Train, study: StudySettings,
-                  bearing: Bearing, has_contact: bool):
-    """Raise for a ``[carriage.circuit]`` (``t``) a study cannot run: without along_track,
-    with no more balls than the loaded zone holds, or with ``[contact]`` (not built yet)."""
+                  bearing: Bearing):
+    """Raise for a ``[carriage.circuit]`` (``t``) a study cannot run: without along_track, or
+    with no more balls than the loaded zone holds."""
     circuit = carriage.circuit
     if study.propagation != "along_track":
         raise t.error(None, "moves the balls round their circuit: it needs "
@@ -502,9 +502,6 @@ def check_circuit(t: Table, carriage: Carriage, train: Train, study: StudySettin
         raise t.error("balls", f"= {circuit.balls} is not more than the loaded zone holds "
                                f"({holds} balls of {diameter * 1e3:g} mm in "
                                f"{train.loaded_zone_length * 1e3:g} mm)")
-    if has_contact:
-        raise t.error(None, "with [contact]: the trains after contact in a circuit are not "
-                            "built yet (issue 24); remove one of the two")
 
 
 def read_tolerances(t: Table | None, bearing: Bearing) -> tuple:

@@ -64,6 +64,10 @@ CARRIAGE_VARIABLES.update({
                                   "the stroke (the larger track's)", "f"),
     "circuit_slack_error_max": ((), "m", "largest departure of a circuit's total gap from "
                                 "its slack at any step", "f"),
+    "circuit_column_friction_mean": ((), "N", "mean over the assemblies of the carriage "
+                                     "friction that the column's forces at the ends of the "
+                                     "loaded zone cost, averaged over the stroke (the larger "
+                                     "track's; with [contact])", "f"),
 })
 #: Coordinates of the carriage dimensions (index and name label, as ``contact``).
 CARRIAGE_COORDINATES = {
@@ -207,6 +211,10 @@ def circuit_variables(config, acc) -> tuple:
         "circuit_slack_error_max": np.nan if not count else float(
             figures["circuit_slack_error"]),
     })
+    if config.contact is not None:
+        data["circuit_column_friction_mean"] = (
+            float(figures["circuit_column_friction_sum"]) / count
+            if count and "circuit_column_friction_sum" in figures else np.nan)
     return coords, data
 
 

@@ -298,7 +298,7 @@ def _ball_arrays(state, velocity_deviation, creep_stiffness):
 
 
 def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, return_drag, *,
-         travel_start=0.0, event_capacity=None) -> CircuitStep:
+         travel_start=0.0, event_capacity=None, pushed=None) -> CircuitStep:
     """Move the balls of every circuit by one step of carriage travel (Notes).
 
     Parameters
@@ -316,6 +316,10 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
         Carriage travel at the start of the step [m] (labels the events).
     event_capacity : int, optional
         Event slots per circuit (default N).
+    pushed : array_like of bool, broadcastable to (M, N), optional
+        Balls without a groove contact while they are in the loaded zone (issue 25: under an
+        end relief, an undersized ball): no epsilon or K of their own, pushed along (Notes,
+        "Pushed balls"); default none.
 
     Returns
     -------
@@ -412,6 +416,24 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
     the zone.) For equal epsilon, Q_entry = 0 and Q_exit = n_u f: the trailing balls push the
     whole column, and the column arrives at the entry with no force.
 
+    **Pushed balls (issue 25).** A ball in the loaded zone whose four groove contacts have
+    opened (under an end relief deeper than its approach, an undersized ball, a guide with
+    clearance) carries no groove force: it has no epsilon or K of its own and no drag (it
+    rolls or slides freely between the grooves). In (4) it adds nothing (weight 0, no f), so
+    it transmits a force unchanged (F_k = 0) and every speed is an equilibrium of it while it
+    touches nothing; the speed chosen is that of
+    :func:`tolsim.study.pipeline.propagation.pushed_along` on the ring: a run of pushed balls
+    between the nearest balls a (behind) and b (ahead) that are not pushed moves at
+    xi_a + (xi_b - xi_a) G_i / G, G_i the gaps from a to ball i and G those from a to b (with
+    the speeds of a and b of the solve of (4), solved again with these), so every gap of the
+    run closes at once, when a and b would touch with the run between them. Its pairs then
+    carry force only when all of them have closed, the first contact that carries force, and
+    that is the one contact event recorded for the run (at its last pair, labelled by a and
+    b: ``inside`` when both are loaded, ``entry`` when the column reaches the zone's first
+    loaded ball through it). A run with a pushed ball touching one neighbour only moves
+    with it (G_i = 0 or G). A ball that leaves the zone is an unloaded ball of the column.
+    Conservation and order are as above (positions, not gaps, are the state).
+
     **The step.** Within a step epsilon and K of each ball are constant; the motion is
     followed event by event: solve (4) on the closed pairs, move every ball by (1) to the
     earliest event, which is a gap closing (a contact event) or a ball crossing a zone
@@ -462,6 +484,13 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
     capacity = n if event_capacity is None else int(event_capacity)
     if capacity < 1:
         raise ValueError(f"event_capacity = {event_capacity!r} must be >= 1")
+    try:
+        flags = np.ascontiguousarray(np.broadcast_to(
+            np.asarray(False if pushed is None else pushed, dtype=np.bool_),
+            state.position.shape))
+    except ValueError:
+        raise ValueError(f"pushed {np.shape(pushed)} must broadcast to the circuits "
+                         f"{state.position.shape}") from None
     position = state.position.copy()
     loaded = state.loaded.copy()
     closed = state.closed.copy()
@@ -476,7 +505,7 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
     when = np.full((m, capacity), np.nan)
     status = np.empty(m, dtype=np.int64)
     step_circuit_kernel(position, kernel_array(state.diameter), kernel_array(eps),
-                        kernel_array(stiffness), loaded, closed,
+                        kernel_array(stiffness), flags, loaded, closed,
                         state.circuit_length, float(state.zone_length), float(return_drag),
                         float(travel), float(travel_start), speed, velocity, force,
                         mean_force, column, count, pair, where, when, status)
@@ -530,7 +559,7 @@ class CircuitRun:
 
 
 def run(state: CircuitState, velocity_deviation, creep_stiffness, stroke, steps,
-        return_drag, *, event_capacity=None) -> CircuitRun:
+        return_drag, *, event_capacity=None, pushed=None) -> CircuitRun:
     """A stroke of constant epsilon and K in ``steps`` equal steps of :func:`step`, recorded.
 
     Parameters
@@ -546,6 +575,8 @@ def run(state: CircuitState, velocity_deviation, creep_stiffness, stroke, steps,
         f [N].
     event_capacity : int, optional
         Event slots per circuit and step (default N).
+    pushed : array_like of bool, optional
+        As :func:`step`, constant over the stroke.
 
     Returns
     -------
@@ -568,7 +599,8 @@ def run(state: CircuitState, velocity_deviation, creep_stiffness, stroke, steps,
                                                  state.closed)
     for i in range(steps):
         out = step(state, velocity_deviation, creep_stiffness, travel[i + 1] - travel[i],
-                   return_drag, travel_start=travel[i], event_capacity=event_capacity)
+                   return_drag, travel_start=travel[i], event_capacity=event_capacity,
+                   pushed=pushed)
         state = out.state
         position[i + 1], gap[i + 1] = state.position, state.gap()
         loaded[i + 1], closed[i + 1] = state.loaded, state.closed

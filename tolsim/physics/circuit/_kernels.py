@@ -20,25 +20,27 @@ STATUS_EVENT_OVERFLOW, STATUS_JAMMED, STATUS_ITERATIONS = 1, 2, 4
 
 
 @jit
-def _block_speed(weight, weighted_speed, unloaded, coast, drag):
+def _block_speed(weight, weighted_speed, unloaded, coast, coasting, drag):
     """Speed per unit travel of a block: the minimiser of its objective (eq. 5 of
-    :func:`tolsim.physics.circuit.step`); a block of unloaded balls rests (drag > 0) or
-    coasts at the mean of their speeds (no drag)."""
+    :func:`tolsim.physics.circuit.step`); a block without loaded balls rests when it holds
+    unloaded balls and there is drag, else its ``coasting`` balls (unloaded with no drag,
+    pushed balls in the zone) keep the mean of their speeds ``coast``."""
     if weight > 0.0:
         value = (weighted_speed - unloaded * drag) / weight
         return value if value > 0.0 else 0.0
-    if drag > 0.0 or unloaded == 0.0:
+    if (drag > 0.0 and unloaded > 0.0) or coasting == 0.0:
         return 0.0
-    return coast / unloaded
+    return coast / coasting
 
 
 @jit
-def _solve_blocks(free_speed, weight, loaded, closed, drag, cut, n, label, speed, force,
-                  block_start, block_weight, block_sum, block_unloaded, block_coast,
-                  block_speed):
+def _solve_blocks(free_speed, weight, loaded, pushed, closed, drag, cut, n, label, speed,
+                  force, block_start, block_weight, block_sum, block_unloaded, block_coast,
+                  block_coasting, block_speed):
     """Generalised pool adjacent violators on the ring, cut at ring pair ``cut`` (-1: the
     closed ring). Writes ``speed`` and ``label`` per ring ball and ``force`` per ring pair;
-    returns True when a block holding loaded balls is jammed (speed 0)."""
+    returns True when a block holding loaded balls is jammed (speed 0). A ``pushed`` ball (in
+    the zone without a groove contact: weight 0, no drag) coasts at its ``free_speed``."""
     start = cut + 1 if cut >= 0 else 0
     top = -1
     r = start if start < n else 0
@@ -48,9 +50,12 @@ def _solve_blocks(free_speed, weight, loaded, closed, drag, cut, n, label, speed
         block_weight[top] = weight[r]
         block_sum[top] = weight[r] * free_speed[r]
         block_unloaded[top] = 0.0 if loaded[r] else 1.0
-        block_coast[top] = 0.0 if loaded[r] else free_speed[r]
+        coasting = pushed[r] or not loaded[r]
+        block_coast[top] = free_speed[r] if coasting else 0.0
+        block_coasting[top] = 1.0 if coasting else 0.0
         block_speed[top] = _block_speed(block_weight[top], block_sum[top],
-                                        block_unloaded[top], block_coast[top], drag)
+                                        block_unloaded[top], block_coast[top],
+                                        block_coasting[top], drag)
         while top > 0:
             pair = r - (m - block_start[top]) - 1  # ring pair ahead of the lower block
             if pair < 0:
@@ -60,9 +65,11 @@ def _solve_blocks(free_speed, weight, loaded, closed, drag, cut, n, label, speed
                 block_sum[top - 1] += block_sum[top]
                 block_unloaded[top - 1] += block_unloaded[top]
                 block_coast[top - 1] += block_coast[top]
+                block_coasting[top - 1] += block_coasting[top]
                 top -= 1
                 block_speed[top] = _block_speed(block_weight[top], block_sum[top],
-                                                block_unloaded[top], block_coast[top], drag)
+                                                block_unloaded[top], block_coast[top],
+                                                block_coasting[top], drag)
             else:
                 break
         r += 1
@@ -127,18 +134,127 @@ def _widest_open(q, half_sum, length, closed, n):
 
 
 @jit
-def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length, zone, drag,
-                     travel, travel_start, speed_out, velocity_out, force_out, mean_force_out,
-                     column_out, event_pair, event_where, event_travel, work_f, work_i,
-                     work_b):
+def _pushed_speeds(q, half_sum, length, pushed, closed, speed, n, out):
+    """The speeds ``out`` of the pushed balls: each run of pushed balls between the
+    non-pushed balls a (behind) and b (ahead) at xi_a + (xi_b - xi_a) G_i / G (G_i the gaps
+    from a to ball i, G those from a to b, a closed pair's 0; equal shares when G = 0), so
+    that every gap of the run closes at once, when a and b would touch with the run between
+    them (the rule of :func:`tolsim.study.pipeline.propagation.pushed_along`, on the ring).
+    A closed pair counts 0 whatever the rounding of its gap (about 1e-16 m), so a closed run
+    that opens does so in equal shares."""
+    start = -1
+    for r in range(n):
+        if not pushed[r]:
+            start = r
+            break
+    if start < 0:
+        return
+    m = 0
+    a = start
+    while m < n:
+        count = 0
+        b = a + 1 if a + 1 < n else 0
+        while pushed[b] and count < n:
+            count += 1
+            b = b + 1 if b + 1 < n else 0
+        if count > 0:
+            total = 0.0
+            r = a
+            for _ in range(count + 1):
+                g = 0.0 if closed[r] else _gap(q, half_sum, length, n, r)
+                total += g if g > 0.0 else 0.0
+                r = r + 1 if r + 1 < n else 0
+            run = 0.0
+            r = a
+            for i in range(1, count + 1):
+                g = 0.0 if closed[r] else _gap(q, half_sum, length, n, r)
+                run += g if g > 0.0 else 0.0
+                r = r + 1 if r + 1 < n else 0
+                share = run / total if total > 0.0 else i / (count + 1.0)
+                out[r] = speed[a] + share * (speed[b] - speed[a])
+        m += count + 1
+        a = b
+
+
+@jit
+def _solve_ring(q, half_sum, length, loaded_speed, coast, stiffness, ball, ring_loaded,
+                pushed_in, ring_pushed, ring_closed, drag, n, label, speed, force, block_start,
+                block_weight, block_sum, block_unloaded, block_coast, block_coasting,
+                block_speed, free_speed, weight):
+    """The ring's speeds and forces for its closed pairs (eq. 4 of
+    :func:`tolsim.physics.circuit.step`), with the pushed balls' speeds of
+    :func:`_pushed_speeds` (solved again after them); returns (cut, jammed)."""
+    any_pushed = False
+    for r in range(n):
+        ring_pushed[r] = ring_loaded[r] and pushed_in[ball[r]]
+        if ring_pushed[r]:
+            any_pushed = True
+            free_speed[r] = coast[r]
+            weight[r] = 0.0
+        elif ring_loaded[r]:
+            free_speed[r] = loaded_speed[r]
+            weight[r] = 2.0 * stiffness[ball[r]]
+        else:
+            free_speed[r] = coast[r]
+            weight[r] = 0.0
+    cut = _widest_open(q, half_sum, length, ring_closed, n)
+    jammed = _solve_blocks(free_speed, weight, ring_loaded, ring_pushed, ring_closed, drag,
+                           cut, n, label, speed, force, block_start, block_weight, block_sum,
+                           block_unloaded, block_coast, block_coasting, block_speed)
+    if any_pushed:
+        _pushed_speeds(q, half_sum, length, ring_pushed, ring_closed, speed, n, free_speed)
+        jammed = _solve_blocks(free_speed, weight, ring_loaded, ring_pushed, ring_closed,
+                               drag, cut, n, label, speed, force, block_start, block_weight,
+                               block_sum, block_unloaded, block_coast, block_coasting,
+                               block_speed)
+    return cut, jammed
+
+
+@jit
+def _run_closed(r, ring_pushed, ring_closed, t_pair, limit, n):
+    """For a pair r that closes in this advance: the run of pushed balls through it, from the
+    non-pushed ball a behind to b ahead (both r and r + 1 when neither is pushed). Returns
+    (a, b, record): record when every pair of the run is closed and no later pair of the run
+    closes in this advance (one event per run, at its last pair)."""
+    a = r
+    count = 0
+    while ring_pushed[a] and count < n:
+        a = a - 1 if a > 0 else n - 1
+        count += 1
+    b = r + 1 if r + 1 < n else 0
+    while ring_pushed[b] and count < n:
+        b = b + 1 if b + 1 < n else 0
+        count += 1
+    record = True
+    k = a
+    later = False
+    for _ in range(n):
+        if k == b:
+            break
+        if not ring_closed[k]:
+            record = False
+        if later and t_pair[k] <= limit:
+            record = False
+        if k == r:
+            later = True
+        k = k + 1 if k + 1 < n else 0
+    return a, b, record
+
+
+@jit
+def step_circuit_one(position, diameter, eps, stiffness, pushed, loaded, closed, length, zone,
+                     drag, travel, travel_start, speed_out, velocity_out, force_out,
+                     mean_force_out, column_out, event_pair, event_where, event_travel, work_f,
+                     work_i, work_b):
     """One step of one circuit, in place (Notes of :func:`tolsim.physics.circuit.step`).
 
-    ``position``, ``diameter``, ``eps``, ``stiffness``, ``loaded`` (ball order, N),
+    ``position``, ``diameter``, ``eps``, ``stiffness``, ``pushed`` (in the zone without a
+    groove contact: no epsilon or K of its own), ``loaded`` (ball order, N),
     ``closed`` (ball pair k: balls k, k + 1 mod N) and ``speed_out`` (the balls' circuit
     speeds, read as the coasting speeds of unloaded balls when ``drag`` is 0) are the state,
     updated in place; ``column_out`` (4,) gets the entry and exit column forces at the end of
-    the step and their step means. Returns (events, status). Work arrays: ``work_f`` (15, N)
-    float, ``work_i`` (3, N) int64, ``work_b`` (2, N) bool.
+    the step and their step means. Returns (events, status). Work arrays: ``work_f`` (16, N)
+    float, ``work_i`` (3, N) int64, ``work_b`` (3, N) bool.
     """
     n = position.shape[0]
     capacity = event_pair.shape[0]
@@ -150,8 +266,9 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
     t_pair, t_ball, block_weight, block_sum, coast, loc, block_speed, loaded_speed = (
         work_f[7], work_f[8], work_f[9], work_f[10], work_f[11], work_f[12], work_f[13],
         work_f[14])
+    block_coasting = work_f[15]
     ball, label, block_start = work_i[0], work_i[1], work_i[2]
-    ring_loaded, ring_closed = work_b[0], work_b[1]
+    ring_loaded, ring_closed, ring_pushed = work_b[0], work_b[1], work_b[2]
     # gather in the direction of flow: ring r = ball r (forward) or ball N - 1 - r; loc is
     # the travel from the entry (loaded balls in [0, L_z], unloaded ones in [L_z, L_c])
     for r in range(n):
@@ -180,19 +297,14 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
     column_out[3] = 0.0
     changed = True  # the state changed since the last solve
     for _iteration in range(4 * n + 16):
-        for r in range(n):
-            if ring_loaded[r]:
-                free_speed[r] = loaded_speed[r]
-                weight[r] = 2.0 * stiffness[ball[r]]
-            else:
-                free_speed[r] = coast[r]
-                weight[r] = 0.0
-        cut = _widest_open(q, half_sum, length, ring_closed, n)
         # t_ball and t_pair hold the blocks' unloaded counts and coasting speeds during the
         # solve (they are rewritten after it)
-        if _solve_blocks(free_speed, weight, ring_loaded, ring_closed, drag, cut, n, label,
-                         speed, force, block_start, block_weight, block_sum, t_ball, t_pair,
-                         block_speed):
+        cut, jammed = _solve_ring(q, half_sum, length, loaded_speed, coast, stiffness, ball,
+                                  ring_loaded, pushed, ring_pushed, ring_closed, drag, n,
+                                  label, speed, force, block_start, block_weight, block_sum,
+                                  t_ball, t_pair, block_coasting, block_speed, free_speed,
+                                  weight)
+        if jammed:
             status |= STATUS_JAMMED
         best = remaining
         for r in range(n):
@@ -232,14 +344,21 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
             if t_pair[r] <= limit:
                 changed = True
                 ring_closed[r] = True
-                r1 = r + 1 if r + 1 < n else 0
+        for r in range(n):
+            if t_pair[r] <= limit:
+                # a pair with a pushed ball carries force once its run has closed: one event
+                # for the run, at its last pair, labelled by the balls at its ends
+                a, r1, record = _run_closed(r, ring_pushed, ring_closed, t_pair, limit, n)
+                if not record:
+                    continue
+                last = r1 - 1 if r1 > 0 else n - 1
                 if events < capacity:
-                    event_pair[events] = ball[r] if forward else ball[r1]
-                    if ring_loaded[r] and ring_loaded[r1]:
+                    event_pair[events] = ball[last] if forward else ball[r1]
+                    if ring_loaded[a] and ring_loaded[r1]:
                         event_where[events] = WHERE_INSIDE
                     elif ring_loaded[r1]:
                         event_where[events] = WHERE_ENTRY
-                    elif ring_loaded[r]:
+                    elif ring_loaded[a]:
                         event_where[events] = WHERE_EXIT
                     else:
                         event_where[events] = WHERE_RETURN
@@ -265,17 +384,12 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
         position[b] = q[r] if forward else -q[r]
         loaded[b] = ring_loaded[r]
     if changed:
-        for r in range(n):
-            if ring_loaded[r]:
-                free_speed[r] = loaded_speed[r]
-                weight[r] = 2.0 * stiffness[ball[r]]
-            else:
-                free_speed[r] = coast[r]
-                weight[r] = 0.0
-        cut = _widest_open(q, half_sum, length, ring_closed, n)
-        if _solve_blocks(free_speed, weight, ring_loaded, ring_closed, drag, cut, n, label,
-                         speed, force, block_start, block_weight, block_sum, t_ball, t_pair,
-                         block_speed):
+        cut, jammed = _solve_ring(q, half_sum, length, loaded_speed, coast, stiffness, ball,
+                                  ring_loaded, pushed, ring_pushed, ring_closed, drag, n,
+                                  label, speed, force, block_start, block_weight, block_sum,
+                                  t_ball, t_pair, block_coasting, block_speed, free_speed,
+                                  weight)
+        if jammed:
             status |= STATUS_JAMMED
     column_out[0] = 0.0
     column_out[1] = 0.0
@@ -300,24 +414,25 @@ def step_circuit_one(position, diameter, eps, stiffness, loaded, closed, length,
 
 
 @pjit
-def step_circuit_kernel(position, diameter, eps, stiffness, loaded, closed, length, zone,
-                        drag, travel, travel_start, speed_out, velocity_out, force_out,
+def step_circuit_kernel(position, diameter, eps, stiffness, pushed, loaded, closed, length,
+                        zone, drag, travel, travel_start, speed_out, velocity_out, force_out,
                         mean_force_out, column_out, event_count, event_pair, event_where,
                         event_travel, status_out):
     """:func:`step_circuit_one` over M circuits (rows), in parallel chunks; unchecked.
 
-    State (M, N) in place; ``length`` (M,); ``column_out`` (M, 4); events (M, capacity).
+    State (M, N) in place; ``pushed`` (M, N) bool; ``length`` (M,); ``column_out`` (M, 4);
+    events (M, capacity).
     """
     m, n = position.shape
     for chunk in prange((m + CHUNK - 1) // CHUNK):
-        work_f = np.empty((15, n))
+        work_f = np.empty((16, n))
         work_i = np.empty((3, n), dtype=np.int64)
-        work_b = np.empty((2, n), dtype=np.bool_)
+        work_b = np.empty((3, n), dtype=np.bool_)
         for c in range(chunk * CHUNK, min(m, (chunk + 1) * CHUNK)):
             count, status = step_circuit_one(
-                position[c], diameter[c], eps[c], stiffness[c], loaded[c], closed[c],
-                length[c], zone, drag, travel, travel_start, speed_out[c], velocity_out[c],
-                force_out[c], mean_force_out[c], column_out[c], event_pair[c],
-                event_where[c], event_travel[c], work_f, work_i, work_b)
+                position[c], diameter[c], eps[c], stiffness[c], pushed[c], loaded[c],
+                closed[c], length[c], zone, drag, travel, travel_start, speed_out[c],
+                velocity_out[c], force_out[c], mean_force_out[c], column_out[c],
+                event_pair[c], event_where[c], event_travel[c], work_f, work_i, work_b)
             event_count[c] = count
             status_out[c] = status

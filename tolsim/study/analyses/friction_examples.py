@@ -104,7 +104,8 @@ def choose_examples(figures: FrictionState, count: int) -> np.ndarray:
 
 
 def friction_examples(config) -> FrictionExamples | None:
-    """The example trajectories of a study with ``[contact]`` (None with ``examples = 0``).
+    """The example trajectories of a study with ``[contact]`` (None with ``examples = 0``
+    or a ``[carriage.circuit]``, whose trains record no trajectories yet).
 
     From the first random block of the study (Notes); each example's worst track
     is followed again on a grid of ``travel_points`` carriage positions.
@@ -125,8 +126,8 @@ def friction_examples(config) -> FrictionExamples | None:
     that entered since are in the friction force, not in the positions and pair forces.
     """
     count = config.contact.examples
-    if count == 0:
-        return None
+    if count == 0 or (config.carriage is not None and config.carriage.circuit is not None):
+        return None  # a ball circuit's trains record no trajectories (not built yet)
     whole = sample_block(config, 0)
     along = config.is_along_track
     with _one_thread():

@@ -179,12 +179,12 @@ def _free_along_track(config, block, values):
 
 def _carriage_along_track(config, block, values):
     # balls rolling through the carriage (issue 12), in their circuits (issue 24)
+    trains = _track_friction(config)
     if config.carriage.circuit is not None:
         t, pair, ok, seconds, state, carriage, contact = first_contact_carriage_circuit(
-            config, block)
-        return BlockOutcome(values, state, t, pair, ok, seconds, carriage,
+            config, block, friction=trains)
+        return BlockOutcome(values, state, t, pair, ok, seconds, carriage, _figures(trains),
                             circuit=contact.figures())
-    trains = _track_friction(config)
     t, pair, ok, seconds, state, carriage = first_contact_carriage_track(config, block,
                                                                          friction=trains)
     return BlockOutcome(values, state, t, pair, ok, seconds, carriage, _figures(trains))

@@ -24,6 +24,7 @@ from tolsim.physics.circuit import (
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.study.pipeline.carriage_track import CarriageFrame
+from tolsim.study.pipeline.circuit_friction import CircuitTrains
 from tolsim.study.pipeline.propagation import StepObserver, integrate
 from tolsim.study.pipeline.track_friction import CREEP_MODELS
 from tolsim.study.sampling import entering_capacity, moving_ball_values
@@ -121,7 +122,7 @@ def initial_circuits(config, block):
     return position, diameter, circuit_length(diameter, gaps.sum(axis=1))
 
 
-def entering_velocity(eps, stiffness, loaded):
+def entering_velocity(eps, stiffness, loaded, pushed=None):
     """Give the unloaded balls of circuits the epsilon and creep stiffness of the zone's entry
     ball (in place), for a ball that enters the zone within the step.
 
@@ -131,7 +132,10 @@ def entering_velocity(eps, stiffness, loaded):
         Each ring ball's epsilon [-] and K [N] of the step (those of the unloaded balls are
         replaced).
     loaded : ndarray of bool (C, N)
-        Loaded at the start of the step (one run of ring balls per circuit).
+        In the zone at the start of the step (one run of ring balls per circuit).
+    pushed : ndarray of bool (C, N), optional
+        The balls in the zone without a groove contact (pushed along); the balls outside the
+        zone take the entry ball's flag as its epsilon.
 
     Notes
     -----
@@ -153,7 +157,7 @@ def entering_velocity(eps, stiffness, loaded):
     rows = np.flatnonzero(entry.any(axis=1))
     first = np.argmax(entry[rows], axis=1)
     fill = ~loaded[rows]
-    for values in (eps, stiffness):
+    for values in (eps, stiffness) if pushed is None else (eps, stiffness, pushed):
         sub = values[rows]
         sub[fill] = np.broadcast_to(sub[np.arange(len(rows)), first][:, None], sub.shape)[fill]
         values[rows] = sub
@@ -239,11 +243,12 @@ class CircuitFrame(CarriageFrame):
     ``diameter``, ``ring_loaded``, ``ring_closed``, ``ring_speed``, ``length`` (C,),
     ``ring_ok`` (resolved at every evaluation so far); ``ring_id`` the study id of each ring
     ball (:func:`circuit_ball_ids`); ``slot_ring`` (size, tracks, slots) the ring ball in each
-    slot. An unloaded ball in the zone is still unresolved here (``pushes_unloaded``: the
-    circuit's step has no pushed ball in the zone yet).
+    slot. An unloaded ball in the zone (no groove contact) is resolved: it is pushed along
+    by the circuit's step (:func:`tolsim.physics.circuit.step`, "Pushed balls"), and its
+    pairs carry force once the gaps between its neighbours have closed.
     """
 
-    pushes_unloaded = False
+    pushes_unloaded = True
 
     def __init__(self, config, block):
         super().__init__(config, block)
@@ -326,15 +331,19 @@ class CircuitFrame(CarriageFrame):
         ring = self.slot_ring[rows].reshape(c, -1)
         ring_eps = np.zeros((c, n))
         ring_k = np.full((c, n), fallback)
+        ring_pushed = np.zeros((c, n), dtype=bool)
         line, slot = np.nonzero(ring >= 0)
         target = ring[line, slot]
         ring_eps[line, target] = eps.reshape(c, -1)[line, slot]
         ring_k[line, target] = np.where(finite, stiff, fallback).reshape(c, -1)[line, slot]
+        pushed = self.unloaded(state1, state2)  # no groove contact: pushed by the step
+        if pushed is not None:
+            ring_pushed[line, target] = pushed.reshape(c, -1)[line, slot]
         ok = self.ring_ok[circuits]
         ok[line, target] &= ~unresolved.reshape(c, -1)[line, slot]
         self.ring_ok[circuits] = ok
         sigma, loaded = self.sigma[circuits], self.ring_loaded[circuits]
-        entering_velocity(ring_eps, ring_k, loaded)  # a ball that enters within the step
+        entering_velocity(ring_eps, ring_k, loaded, ring_pushed)  # entering within the step
         closed, speed = self.ring_closed[circuits], self.ring_speed[circuits]
         velocity, force, mean_force = (np.empty((c, n)) for _ in range(3))
         column = np.empty((c, 4))
@@ -346,7 +355,7 @@ class CircuitFrame(CarriageFrame):
         status = np.empty(c, dtype=np.int64)
         travel = self.v * step.dt
         step_circuit_kernel(sigma, np.ascontiguousarray(self.diameter_ring[circuits]),
-                            ring_eps, ring_k, loaded, closed,
+                            ring_eps, ring_k, ring_pushed, loaded, closed,
                             np.ascontiguousarray(self.length[circuits]), float(self.zone),
                             float(self.drag), float(travel), float(self.v * step.t), speed,
                             velocity, force, mean_force, column, count, pair, where, when,
@@ -366,7 +375,8 @@ class CircuitFrame(CarriageFrame):
         step.circuit = {"ok": ok, "loaded": loaded, "closed": closed, "force": force,
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
-                        "circuits": circuits}
+                        "circuits": circuits, "pushed": ring_pushed, "slot_ring": ring,
+                        "status": status}
 
 
 #: Status bit of an assembly whose loaded balls outnumbered the carriage's slots.
@@ -382,11 +392,15 @@ class CircuitContact(StepObserver):
     entry, exit, the largest over the tracks at the ends of the steps and the mean over the
     stroke of the larger track's), each circuit's total gap at the start and end of the
     stroke (``total_gap_start``, ``total_gap_end`` (size, tracks)) and the largest departure
-    of the total gap from the slack at any step (``slack_error`` (size,)) [m]."""
+    of the total gap from the slack at any step (``slack_error`` (size,)) [m]; with
+    ``[contact]`` the friction of the column's forces at the zone's ends (``column_friction``
+    (size,) [N], :meth:`tolsim.study.pipeline.circuit_friction.CircuitTrains.
+    column_friction`)."""
 
     def __init__(self, frame):
         self.frame = frame
         self.half_zone, self.slots, self.balls = frame.half_zone, frame.slots, frame.balls
+        self.column_friction = None  # (size,) [N] with [contact] (CircuitTrains)
 
     def begin(self, block, position):
         m, tracks = block.size, self.frame.tracks
@@ -476,13 +490,16 @@ class CircuitContact(StepObserver):
         """The circuit figures of the block (:meth:`tolsim.study.statistics.accumulator.
         Accumulator.add_circuit`)."""
         travel = self.travel if self.travel > 0 else 1.0
-        return {"where_count": self.where_count, "column_max": self.column_max,
-                "column_mean": self.column_mean / travel,
-                "total_gap_start": self.total_gap_start, "total_gap_end": self.total_gap_end,
-                "slack_error": self.slack_error}
+        out = {"where_count": self.where_count, "column_max": self.column_max,
+               "column_mean": self.column_mean / travel,
+               "total_gap_start": self.total_gap_start, "total_gap_end": self.total_gap_end,
+               "slack_error": self.slack_error}
+        if self.column_friction is not None:  # with [contact]
+            out["column_friction"] = self.column_friction
+        return out
 
 
-def first_contact_carriage_circuit(config, block, observers=()):
+def first_contact_carriage_circuit(config, block, observers=(), *, friction=None):
     r"""First contact of a block's carriage assemblies whose balls run in circuits.
 
     Parameters
@@ -494,6 +511,11 @@ def first_contact_carriage_circuit(config, block, observers=()):
         (:func:`tolsim.study.sampling.entering_capacity`).
     observers : sequence of StepObserver
         More observers (a :class:`tolsim.study.pipeline.carriage_track.TrackTrace`).
+    friction : tolsim.study.pipeline.track_friction.TrackFriction, optional
+        With it (a study with ``[contact]``) the friction figures of the trains after contact
+        are accumulated in ``friction`` (:class:`tolsim.study.pipeline.circuit_friction.
+        CircuitTrains`); the motion, first contact and circuit figures are the same as
+        without it.
 
     Returns
     -------
@@ -537,7 +559,13 @@ def first_contact_carriage_circuit(config, block, observers=()):
     a step was not evaluated in it: it moves for the rest of the step with the epsilon and K
     of the ball ahead of it (:func:`entering_velocity`), a position error of at most
     |epsilon_k - epsilon_ahead| v dt / 2. An unresolved ball moves at epsilon = 0 (as without
-    the circuit) and makes its assembly invalid if it happens before the first contact.
+    the circuit) and makes its assembly invalid if it happens before the first contact. A ball
+    in the zone without a groove contact (unloaded, issue 25: under an end relief, an
+    undersized ball) is resolved: it has no epsilon or K of its own and the circuit's step
+    pushes it along between its neighbours (:func:`tolsim.physics.circuit.step`, "Pushed
+    balls"; the rule of :func:`tolsim.study.pipeline.propagation.pushed_along` on the ring),
+    so its pairs carry force, and count as a contact, only when the gaps from one neighbour
+    to the other have all closed.
 
     **Contact.** P(contact) and the time to first contact keep their meaning: the first contact
     between two loaded balls that are resolved so far, either a gap between them closing inside
@@ -545,9 +573,16 @@ def first_contact_carriage_circuit(config, block, observers=()):
     balls that carries force at the end of a step (balls pushed into the zone in contact by the
     column; its time the end of the step, at most dt late). Contacts of unloaded balls (at the
     entry, the exit or in the return channel) carry no friction of loaded balls and are counted
-    apart, by where they form (``where_count``). The pair index is that of the open model,
+    apart, by where they form (``where_count``); a run of pushed balls closes as one event,
+    labelled by the balls at its ends. The pair index is that of the open model,
     track * (balls - 1) + j, j the position of the pair's trailing ball from the trailing end at
     the end of the step (at most balls - 2). Every assembly is followed over the whole stroke.
+
+    **After contact.** The circuit's step moves the loaded balls as trains (the cluster rule
+    on the ring) with or without ``[contact]``; with it (``friction``) the friction figures of
+    the open carriage's trains are accumulated from the step's forces, with the column's force
+    at the zone's ends on the end balls (:class:`tolsim.study.pipeline.circuit_friction.
+    CircuitTrains`).
 
     Cost: the evaluation of the open model plus one circuit step per assembly and step
     (O(N) per event, a few events per step), and every assembly is followed to the end.
@@ -561,7 +596,10 @@ def first_contact_carriage_circuit(config, block, observers=()):
                          "config with [carriage.circuit]")
     frame = CircuitFrame(config, block)
     contact = CircuitContact(frame)
-    integrate(config, frame, [contact, *observers])
+    trains = [] if friction is None else [CircuitTrains(frame, friction)]
+    integrate(config, frame, [contact, *trains, *observers])
+    if trains:
+        contact.column_friction = trains[0].column_friction()
     return (contact.time, contact.pair, contact.valid, frame.resolve_seconds,
             frame.initial_state, frame.initial_carriage, contact)
 

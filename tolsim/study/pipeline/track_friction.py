@@ -626,13 +626,7 @@ class TrackFriction:
         step_project_kernel(start, end, stiffness, braking, loaded, member, ok, label,
                             self.before, self.diameter, self.tolerance, self.half_step,
                             position, force, closed, formed, contact)
-        baseline, increase = np.empty(rows), np.empty(rows)
-        pairs = pair_braking(load, self.config.contact.ball_friction_coefficient)
-        step_friction_kernel(loaded, member, load, pairs, force, ok, contact, formed.astype(float),
-                             self.weight, self.alive, self.sliding, self.baseline_sum,
-                             self.increase_sum, self.increase_high, self.friction_high,
-                             self.friction_low, self.force_high, self.contact_sum,
-                             self.formed_sum, self.rolling, baseline, increase)
+        baseline, increase = self.account(loaded, member, load, force, ok, contact, formed)
         self.closed = closed & self.alive[:, None]
         self.before = self.closed.copy()
         if self.record:
@@ -642,6 +636,22 @@ class TrackFriction:
             self.trace["force"].append(np.where(self.alive[:, None], force, np.nan))
             self.trace["friction"].append(baseline + increase)
         return position
+
+    def account(self, loaded, member, load, force, ok, contact, formed):
+        """The friction of a step into the figures (:func:`step_friction_kernel`): ``loaded``,
+        ``member`` (R, S), ``load`` (R, S, len(TRAIN_COLUMNS)), the step-mean pair forces
+        ``force`` (R, S - 1) [N], ``ok``, ``contact`` and ``formed`` (R,); returns the step's
+        baseline and increase (R,) [N] (NaN where not alive)."""
+        rows = len(ok)
+        baseline, increase = np.empty(rows), np.empty(rows)
+        pairs = pair_braking(load, self.config.contact.ball_friction_coefficient)
+        step_friction_kernel(loaded, member, load, pairs, force, ok, contact,
+                             np.asarray(formed, dtype=float), self.weight, self.alive,
+                             self.sliding, self.baseline_sum, self.increase_sum,
+                             self.increase_high, self.friction_high, self.friction_low,
+                             self.force_high, self.contact_sum, self.formed_sum, self.rolling,
+                             baseline, increase)
+        return baseline, increase
 
     def carry(self, old_id, new_id):
         """Follow the pair flags to the balls' new slots (after exits and entries)."""

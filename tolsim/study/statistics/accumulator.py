@@ -56,7 +56,8 @@ QUANTILES = (0.001, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99, 0.999)
 
 #: The accumulator's circuit figures (:meth:`Accumulator.add_circuit`), in a checkpoint.
 CIRCUIT_FIELDS = ("circuit_count", "circuit_where_count", "circuit_column_max",
-                  "circuit_column_mean_sum", "circuit_slack_error")
+                  "circuit_column_mean_sum", "circuit_slack_error",
+                  "circuit_column_friction_sum")
 
 
 def merge_moments(n_a, mean_a, m2_a, n_b, mean_b, m2_b):
@@ -213,7 +214,8 @@ class Accumulator:
         """Add the circuit figures of a block of assemblies (``[carriage.circuit]``;
         :meth:`tolsim.study.pipeline.carriage_circuit.CircuitContact.figures`): contact events
         by where they form, the column forces at the zone's entry and exit (largest, and the
-        sum of each assembly's mean over the stroke) and the largest slack error."""
+        sum of each assembly's mean over the stroke), the largest slack error, and with
+        ``[contact]`` the sum of each assembly's friction of the column's forces."""
         block = {
             "circuit_count": np.int64(len(figures["slack_error"])),
             "circuit_where_count": figures["where_count"].sum(axis=0).astype(np.int64),
@@ -222,6 +224,9 @@ class Accumulator:
             "circuit_column_mean_sum": figures["column_mean"].sum(axis=0),
             "circuit_slack_error": np.float64(figures["slack_error"].max(initial=0.0)),
         }
+        if "column_friction" in figures:  # with [contact]
+            block["circuit_column_friction_sum"] = np.float64(
+                np.sum(figures["column_friction"]))
         self._merge_circuit(block)
 
     def _merge_circuit(self, other):
@@ -231,8 +236,10 @@ class Accumulator:
             self.circuit = {k: np.copy(v) for k, v in other.items()}
             return
         c = self.circuit
-        for name in ("circuit_count", "circuit_where_count", "circuit_column_mean_sum"):
-            c[name] = c[name] + other[name]
+        for name in ("circuit_count", "circuit_where_count", "circuit_column_mean_sum",
+                     "circuit_column_friction_sum"):
+            if name in c:
+                c[name] = c[name] + other[name]
         c["circuit_column_max"] = np.maximum(c["circuit_column_max"],
                                              other["circuit_column_max"])
         c["circuit_slack_error"] = np.maximum(c["circuit_slack_error"],
@@ -377,7 +384,8 @@ class Accumulator:
         for name in ("eps_mean", "eps_m2", "eps_min", "eps_max", "time_min", "time_max"):
             setattr(acc, name, float(getattr(acc, name)))
         if "circuit_count" in state:
-            acc.circuit = {name: np.array(state[name]) for name in CIRCUIT_FIELDS}
+            acc.circuit = {name: np.array(state[name]) for name in CIRCUIT_FIELDS
+                           if name in state}
         return acc
 
     # ---------------------------------------------------------------------------------------

@@ -1,0 +1,177 @@
+"""The trains after contact in a ball circuit (``[contact]`` with ``[carriage.circuit]``,
+issue 24 item 3): :mod:`tolsim.study.pipeline.circuit_friction` over the circuit's step.
+
+Each test names its reference and tolerance.
+"""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from test_carriage_circuit import Record, config
+
+from tolsim.io.config import ConfigWarning, parse_config
+from tolsim.io.netcdf import result_to_dataset
+from tolsim.reports.result_view import circuit_rows
+from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.carriage_circuit import (
+    CircuitContact,
+    CircuitFrame,
+    first_contact_carriage_circuit,
+)
+from tolsim.study.pipeline.circuit_friction import CircuitTrains
+from tolsim.study.pipeline.propagation import integrate
+from tolsim.study.pipeline.track_friction import TrackFriction, follow_along_track
+from tolsim.study.sampling import sample_block
+
+
+def with_contact(c, contact="[contact]\n"):
+    return parse_config(c.text + contact, "contact.toml")
+
+
+class Increase:
+    """The step's friction increase of :class:`CircuitTrains` (its last ``account``)."""
+
+    def __init__(self, friction):
+        self.friction, self.steps = friction, []
+        account = friction.account
+
+        def recording(*args):
+            out = account(*args)
+            self.steps.append(out[1].copy())
+            return out
+
+        friction.account = recording
+
+
+def run_with_trains(c):
+    block = sample_block(c, 0)
+    frame = CircuitFrame(c, block)
+    friction = TrackFriction(c)
+    increase = Increase(friction)
+    contact = CircuitContact(frame)
+    record = Record(frame)
+    trains = CircuitTrains(frame, friction)
+    integrate(c, frame, [contact, trains, record])
+    return frame, contact, record, friction, increase, trains
+
+
+def test_the_config_takes_contact_with_a_circuit():
+    # The refusal of [contact] with [carriage.circuit] (issue 24 item 3, "not built yet") is
+    # gone: the config reads, with the contact settings.
+    c = with_contact(config())
+    assert c.carriage.circuit is not None and c.contact is not None
+
+
+def test_contact_leaves_the_motion_and_the_first_contact_alone():
+    # Notes of CircuitTrains: the circuit's step already moves the trains, so with [contact]
+    # the first contact, its pair and validity, the contact events by where and the column
+    # forces are those without it, bit for bit; the gaps still sum to the slack at every step
+    # (1e-12 m, issue 24 "Conservation") and every assembly has friction figures.
+    c = config(samples=8, steps=30)
+    cc = with_contact(c)
+    a = first_contact_carriage_circuit(c, sample_block(c, 0))
+    friction = TrackFriction(cc)
+    b = first_contact_carriage_circuit(cc, sample_block(cc, 0), friction=friction)
+    for x, y in zip(a[:3], b[:3], strict=True):
+        assert_array_equal(x, y)
+    assert_array_equal(a[-1].where_count, b[-1].where_count)
+    assert_array_equal(a[-1].column_max, b[-1].column_max)
+    assert b[-1].slack_error.max() < 1e-12
+    figures = friction.figures()
+    assert figures.resolved.all() and np.isfinite(figures.increase_max).all()
+    assert (figures.contact_force_max > 0).all()  # the column pushes at the exit (drag)
+
+
+@pytest.mark.parametrize("drag", [0.02, 0.05])
+def test_no_slack_the_column_costs_half_its_drag(drag):
+    # Notes of CircuitTrains, "The column at the ends", by hand: perfect balls (no
+    # tolerances) under a vertical load all have epsilon 0 and, by symmetry, a = -1/2; with
+    # mu_bb = 0 (b = 0, B = 0) the pairs inside the zone cost nothing (k = a_{j+1} - a_j =
+    # 0) and the column's pairs (a + 1) Q_x - (1 + a) Q_e = (Q_x - Q_e) / 2. With slack = 0
+    # the circuit is closed and Q_x - Q_e = n_u f (eq. 7 of tolsim.physics.circuit.step,
+    # test_no_slack_closed_form), so each step's increase is half the column's drag: the
+    # power n_u f v / 2 of the drag over the carriage's v. Per step, with the step means,
+    # increase = (Qbar_x - Qbar_e) / 2 (1e-12 N), and Qbar_x - Qbar_e lies between 9 f and
+    # 10 f (16 balls, 6 or 7 in the 60.3 mm zone of 10 mm balls).
+    c = with_contact(config(slack=0.0, drag=drag, tolerances="", samples=2, steps=20),
+                     "[contact]\nball_friction_coefficient = 0.0\n")
+    frame, contact, record, friction, increase, trains = run_with_trains(c)
+    for step, circuit in zip(increase.steps, record.circuit, strict=True):
+        column = circuit["column"]
+        half = 0.5 * (column[:, 3] - column[:, 2])
+        assert_allclose(step, half, rtol=0, atol=1e-12)
+        assert (column[:, 3] - column[:, 2] >= 9 * drag - 1e-12).all()
+        assert (column[:, 3] - column[:, 2] <= 10 * drag + 1e-12).all()
+    figures = friction.figures()
+    assert figures.resolved.all()
+    assert 4.5 * drag - 1e-12 <= figures.increase_mean.min()
+    assert figures.increase_max.max() <= 5 * drag + 1e-12
+    # all of it is the column's share (the file's circuit_column_friction_mean); the two
+    # tracks are mirror images, so the worst track's mean is the larger track's (to 1e-9 of
+    # it, the carriage solver's tolerance between the mirrored tracks; measured 4e-11)
+    assert_allclose(trains.column_friction(), figures.increase_mean, rtol=1e-9, atol=0)
+
+
+def test_no_slack_friction_closed_form_with_ball_friction():
+    # The same closed circuit with mu_bb = 0.1: each step's increase is the open carriage's
+    # eq. (1) with the column's two pairs, sum_j k_j Qbar_j + (a_t + 1) Qbar_x
+    # - (1 + a_l) Qbar_e, recomputed here from the balls' own coefficients (TrackFriction.
+    # coefficients at the midpoint, as CircuitTrains) and the circuit's step-mean forces
+    # (1e-12 N): the mapping of the ring's pairs onto the train's (trailing first) and of the
+    # column onto its ends. With b = mu_bb / (2 cos beta_0) > 0 the pairs inside the zone
+    # now cost B Q and the increase exceeds half the drag.
+    c = with_contact(config(slack=0.0, drag=0.02, tolerances="", samples=1, steps=10))
+    frame, contact, record, friction, increase, trains = run_with_trains(c)
+    for step, circuit in zip(increase.steps, record.circuit, strict=True):
+        assert (step > 0.5 * (circuit["column"][:, 3] - circuit["column"][:, 2])).all()
+    assert friction.figures().resolved.all()
+
+
+def test_a_long_return_without_drag_approaches_the_open_trains_with_contact():
+    # Issue 24, "Limit of today's model", with [contact]: no drag and a return channel of
+    # nearly a ball per gap (slack 9.9 mm; test_a_long_return_without_drag_approaches_the_
+    # open_trains). Over a 20 mm stroke (about 1 ball leaves and enters per track, so the
+    # trains are the initial ones) the friction figures of the circuit and of the open
+    # carriage with [contact] agree: over 24 assemblies the mean largest increase 0.01591
+    # against 0.01588 N (0.2 %), the mean increase 0.00530 against 0.00520 N (2 %), the
+    # largest contact force 0.1044 against 0.1041 N (measured, 40 steps). The difference is
+    # the circuit's motion without the ball-ball braking c and its event-exact step against
+    # the open trains' projection. Tolerance: 5 % on the means over the assemblies. (Over
+    # 100 mm the circuit's entering balls arrive with ~0.9 mm gaps, the open model's with
+    # U(0, 100 um): 0.036 against 0.045 N of largest increase, measured.)
+    with pytest.warns(ConfigWarning, match="slack_mm = 9.9 mm is unusual"):
+        c = with_contact(config(slack=9.9, drag=0.0, samples=24, stroke=20.0))
+    open_ = with_contact(config(circuit=False, samples=24, stroke=20.0))
+    friction = TrackFriction(c)
+    first_contact_carriage_circuit(c, sample_block(c, 0), friction=friction)
+    a = friction.figures()
+    b = follow_along_track(open_, sample_block(open_, 0))[-1].figures()
+    assert a.resolved.all() and b.resolved.all()
+    for name in ("increase_max", "increase_mean", "contact_force_max", "baseline"):
+        assert np.mean(getattr(a, name)) == pytest.approx(np.mean(getattr(b, name)), rel=0.05)
+    assert np.mean(a.increase_max) > 0.005  # there is contact to compare
+
+
+def test_a_study_with_a_circuit_and_contact_writes_both():
+    # The result file of a [contact] + [carriage.circuit] study holds the friction figures
+    # (the friction section of [contact]) and the circuit's (column forces at the zone's
+    # ends, contact events by where, the fraction of first contacts at the zone's ends), and
+    # the summary rows show the column forces; no friction examples (not built for a
+    # circuit).
+    c = with_contact(config(samples=8, steps=20))
+    ds = result_to_dataset(run_study(c))
+    for name in ("circuit_column_force_max", "circuit_column_force_mean",
+                 "circuit_contact_count", "contact_zone_end_fraction",
+                 "circuit_column_friction_mean"):
+        assert name in ds, name
+        assert "units" in ds[name].attrs and ds[name].attrs["long_name"], name
+    # the column pushed at the exit costs friction: between 0 and the column's drag
+    # (10 x 0.02 N) over 2 (the closed column's n_u f / 2 is its most, for nominal balls)
+    assert 0.0 < float(ds.circuit_column_friction_mean) < 0.11
+    friction = [k for k in ds.variables if "friction" in k and "increase" in k]
+    assert friction, sorted(ds.variables)
+    labels = [label for label, _ in circuit_rows(ds)]
+    assert any("column force" in label for label in labels)
+    assert any("friction from the column" in label for label in labels)
+    no_contact = result_to_dataset(run_study(config(samples=4, steps=10)))
+    assert "circuit_column_friction_mean" not in no_contact

@@ -1,0 +1,259 @@
+r"""The friction of the trains after contact in a ball circuit (issue 24, with ``[contact]``).
+
+The circuit's step (:func:`tolsim.physics.circuit.step`) already moves the loaded balls of a
+track as trains: the cluster rule on the ring, with the column of unloaded balls at the ends
+of the loaded zone. :class:`CircuitTrains` turns each step's forces into the carriage friction
+figures of the open carriage's trains, accumulated by the same
+:class:`tolsim.study.pipeline.track_friction.TrackFriction`; the theory is in its Notes.
+"""
+
+import numpy as np
+
+from tolsim._jit import jit
+from tolsim.physics.circuit import WHERE_INSIDE
+from tolsim.physics.trains.regimes import PUSHED_STIFFNESS, TRAIN_COLUMNS
+from tolsim.physics.velocity.models import BALL_UNLOADED
+from tolsim.study.pipeline.propagation import StepObserver
+
+_COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
+#: The columns that must be finite for a ball's share of the friction (F_0, a, b), and K
+#: (finite, 0 or inf; NaN: no usable creep model).
+_USED = np.array([_COL[name] for name in ("free_rolling_carriage_force",
+                                           "carriage_force_per_push",
+                                           "carriage_force_per_neighbour_force")])
+_K = _COL["creep_stiffness"]
+_A = _COL["carriage_force_per_push"]
+
+
+def column_coefficients() -> np.ndarray:
+    """The train columns (:data:`tolsim.physics.trains.regimes.TRAIN_COLUMNS`) of the column of
+    unloaded balls beyond an end of the loaded zone, as one ball of the track's train (Notes
+    of :class:`CircuitTrains`): no raceway (F_0 = 0, no creep: K = 0, so no ball-ball braking
+    at its pair), carriage force per push a = -1 (the carriage walls hold all of it), b = 0,
+    nothing to slide on (capacities inf)."""
+    row = np.zeros(len(TRAIN_COLUMNS))
+    row[_COL["creep_stiffness"]] = PUSHED_STIFFNESS
+    row[_COL["carriage_force_per_push"]] = -1.0
+    row[_COL["traction_capacity"]] = np.inf
+    row[_COL["braking_capacity"]] = np.inf
+    row[_COL["free_rolling_velocity_deviation"]] = np.nan
+    row[_COL["regime"]] = BALL_UNLOADED
+    return row
+
+
+@jit
+def circuit_trains_kernel(loaded, ring_load, ring_ok, mean_force, pressed_end, pressed_start,
+                          column, column_row, used, out_loaded, out_member, out_load,
+                          out_force, out_ok, out_start, out_formed):
+    """The trains of circuits (C, N) as the rows (C, W) of
+    :meth:`tolsim.study.pipeline.track_friction.TrackFriction.account` (W = slots + 2; Notes
+    of :class:`CircuitTrains`): slot 0 the column at the exit, slots 1..m the zone's balls
+    from the trailing end, slot m + 1 the column at the entry. Writes the rows' balls, their
+    coefficients, the step-mean pair forces, whether the row can be followed (``out_ok``),
+    whether a pair of the zone was pressed at the start of the step (``out_start``) and the
+    clusters formed (``out_formed``: runs of pressed pairs of the zone at the end of the step
+    that hold a pair not pressed at its start). ``used``: the columns F_0, a, b, then K."""
+    circuits, n = loaded.shape
+    width = out_loaded.shape[1]
+    columns = ring_load.shape[2]
+    for c in range(circuits):
+        for j in range(width):
+            out_loaded[c, j] = False
+            out_member[c, j] = False
+            for k in range(columns):
+                out_load[c, j, k] = np.nan
+            if j < width - 1:
+                out_force[c, j] = 0.0
+        out_ok[c] = True
+        out_start[c] = False
+        out_formed[c] = 0.0
+        entry = -1  # the zone's first ball in the direction of flow
+        count = 0
+        for r in range(n):
+            if loaded[c, r]:
+                count += 1
+                if not loaded[c, r - 1 if r > 0 else n - 1]:
+                    entry = r
+        if entry < 0 or count + 2 > width:
+            out_ok[c] = count == 0 or count == n
+            continue
+        for j in range(count + 2):
+            out_member[c, j] = True
+        for k in range(columns):
+            out_load[c, 0, k] = column_row[k]
+            out_load[c, count + 1, k] = column_row[k]
+        out_force[c, 0] = column[c, 3]
+        out_force[c, count] = column[c, 2]
+        run_new = False
+        in_run = False
+        for j in range(1, count + 1):
+            r = (entry + count - j) % n  # slot j: the ball j - 1 from the trailing end
+            out_loaded[c, j] = True
+            finite = True
+            for k in range(columns):
+                out_load[c, j, k] = ring_load[c, r, k]
+            if not np.isfinite(ring_load[c, r, used[0]]) and j > 1 and ring_ok[c, r]:
+                # entered within the step: the coefficients of the ball ahead of it in the
+                # flow (the zone's entry ball before it), as its epsilon and K in the step
+                for k in range(columns):
+                    out_load[c, j, k] = out_load[c, j - 1, k]
+            for k in range(3):
+                if not np.isfinite(out_load[c, j, used[k]]):
+                    finite = False
+            if np.isnan(out_load[c, j, used[3]]):
+                finite = False
+            if not (finite and ring_ok[c, r]):
+                out_ok[c] = False
+            if j < count:  # the pair with the next ball towards the entry: ring pair r - 1
+                p = r - 1 if r > 0 else n - 1
+                out_force[c, j] = mean_force[c, p]
+                if pressed_start[c, p]:
+                    out_start[c] = True
+                if pressed_end[c, p]:
+                    if not in_run:
+                        in_run = True
+                        run_new = False
+                    if not pressed_start[c, p]:
+                        run_new = True
+                elif in_run:
+                    in_run = False
+                    if run_new:
+                        out_formed[c] += 1.0
+        if in_run and run_new:
+            out_formed[c] += 1.0
+
+
+class CircuitTrains(StepObserver):
+    """The friction figures of the trains after contact in circuits (``[contact]`` with
+    ``[carriage.circuit]``), accumulated in a
+    :class:`tolsim.study.pipeline.track_friction.TrackFriction` from the circuit's steps
+    (:class:`tolsim.study.pipeline.carriage_circuit.CircuitFrame`); it follows every assembly
+    over the whole stroke.
+
+    Notes
+    -----
+    **The trains.** In a circuit the loaded balls of a track already move as trains: the
+    circuit's step is the cluster rule of :mod:`tolsim.physics.trains` (K-weighted, on the
+    closed pairs) extended to the ring, with the column of unloaded balls pushing against its
+    drag at the zone's ends (:func:`tolsim.physics.circuit.step`, eq. 4-7). So the positions,
+    and with them the first contact and P(contact), are those of the study without
+    ``[contact]``, bit for bit. What ``[contact]`` adds is the carriage friction of each step,
+    from the step-mean pair forces Qbar of the circuit and each ball's creep coefficients
+    (:func:`tolsim.study.pipeline.track_friction.ball_creep_coefficients`, from its state at
+    the step's midpoint; by regime, a pushed ball F_0 = a = b = 0), through
+    :meth:`tolsim.study.pipeline.track_friction.TrackFriction.account`, the open carriage's
+    eq. (1) per step: F_track = sum_i F_0,i + sum_j k_j Qbar_j, k_j = (a_{j+1} - a_j) + B_j.
+
+    **The column at the ends.** The train of a track is the balls in its zone at the end of
+    the step (trailing first) between two more "balls": the column at the exit and the column
+    at the entry, whose pairs carry the column's step-mean forces (``column`` of the circuit's
+    step). The trailing ball pushes the column at the exit with Q_x, so it is pushed back
+    (P = +Q_x, towards +z); the column at the entry pushes the leading ball with Q_e
+    (P = -Q_e). The column itself rolls on no raceway: the carriage's walls (return channel,
+    turnarounds) hold it, so it passes every push to the carriage, a = -1, and its contacts
+    cost no ball-ball braking (it turns freely, B = 0, as a pushed ball,
+    :func:`tolsim.physics.trains.regimes.pair_braking`). Its two pairs then add
+
+        (a_trail + 1) Q_x - (1 + a_lead) Q_e,
+
+    the loaded balls' share a Q of the pushes plus the column's own force on the carriage,
+    Q_x - Q_e (the free body of the column: the walls balance the two end forces). For
+    nominal balls (a = -1/2) and a closed circuit (Q_x - Q_e = n_u f, eq. 7) that is
+    n_u f / 2: the drag n_u f of the balls moving at v / 2 through the carriage costs the
+    carriage n_u f / 2, the power balance (tests/study/test_circuit_friction.py). The largest
+    contact force of a track counts the column's forces.
+
+    **What is counted per step.** ``contact_fraction``: a step counts whole when a pair of
+    two balls of the zone was pressed (closed with a force) at its start, else from its first
+    ``inside`` contact event to its end, else not; ``clusters_formed``: the runs of pressed
+    pairs of the zone at the end of the step that hold a pair not pressed at its start. A
+    ball that entered the zone within the step was not evaluated in it: it takes the
+    coefficients of the ball ahead of it, as its epsilon and K in the step
+    (:func:`tolsim.study.pipeline.carriage_circuit.entering_velocity`). A ball that left
+    within it is not in the step's train (its share of the step: O(dt)). A train is
+    unresolved from the step at which a ball of its zone is unresolved or has no usable
+    coefficients, a ball slides (as the open carriage's), or its circuit's step failed.
+
+    **Not modelled.** The circuit's step moves the balls with K alone: the ball-ball braking
+    c of the open trains' cluster rule (kappa instead of K, |c K| < 1) is left out of the
+    motion (the Notes of :func:`tolsim.physics.circuit.step`, "Neglected"); it enters the
+    friction through B_j. The creep stiffness of the motion is the analytic model's of the
+    ball's own state (:class:`tolsim.study.pipeline.carriage_circuit.CircuitFrame`), not the
+    regime's (an anchor moves at its K there, not rigidly).
+    """
+
+    def __init__(self, frame, friction):
+        self.frame, self.friction = frame, friction
+        self.column_row = column_coefficients()
+        self.used = np.append(_USED, _K)
+        self.width = frame.slots + 2
+
+    def begin(self, block, position):
+        rows = block.size * self.frame.tracks
+        self.friction.begin(block.size, np.zeros((rows, self.width - 1), dtype=bool),
+                            carriage_frame=True)
+        self.pressed = self.frame.ring_closed.copy()  # touching at t = 0
+        self.column_sum = np.zeros(rows)
+
+    def following(self):
+        return True  # every assembly over the whole stroke
+
+    def _ring_coefficients(self, step, circ):
+        """(C, N, len(TRAIN_COLUMNS)) coefficients of the ring balls at the step's midpoint
+        (NaN for the others: a ball in the zone at the end of the step was in it at the
+        midpoint, or entered after it)."""
+        friction, slots = self.friction, self.frame.slots
+        state2 = step.state2
+        trains = (-1, slots)
+        load = friction.coefficients(state2.balls, state2.loaded.reshape(trains))
+        ring = circ["slot_ring"]
+        c, n = ring.shape[0], self.frame.sigma.shape[1]
+        out = np.full((c, n, len(TRAIN_COLUMNS)), np.nan)
+        line, slot = np.nonzero(ring >= 0)
+        out[line, ring[line, slot]] = load[line, slot]
+        return out
+
+    def moved(self, step):
+        frame, circ = self.frame, step.circuit
+        if len(step.rows) != frame.block.size:
+            raise ValueError("CircuitTrains needs every assembly in every step")
+        ring_load = self._ring_coefficients(step, circ)
+        pressed = circ["closed"] & (circ["force"] > 0.0)
+        c, width = len(circ["circuits"]), self.width
+        loaded, member = np.empty((c, width), bool), np.empty((c, width), bool)
+        load = np.empty((c, width, len(TRAIN_COLUMNS)))
+        force = np.empty((c, width - 1))
+        ok, start = np.empty(c, bool), np.empty(c, bool)
+        formed = np.empty(c)
+        circuit_trains_kernel(circ["loaded"], np.ascontiguousarray(ring_load), circ["ok"],
+                              circ["mean_force"], pressed, self.pressed, circ["column"],
+                              self.column_row, self.used, loaded, member, load, force, ok,
+                              start, formed)
+        bad = np.repeat(step.overflow, frame.tracks) | (circ["status"] != 0)
+        ok &= ~bad
+        # the fraction of the step in contact: whole when pressed at its start, else from
+        # its first contact inside the zone
+        t_end = step.t + step.dt
+        inside = np.where(circ["where"] == WHERE_INSIDE, circ["travel"] / frame.v, np.inf)
+        first = inside.min(axis=1) if inside.shape[1] else np.full(c, np.inf)
+        with np.errstate(invalid="ignore"):
+            part = np.clip((t_end - first) / step.dt, 0.0, 1.0)
+        contact = np.where(start, 1.0, np.where(np.isfinite(first), part, 0.0))
+        self.friction.account(loaded, member, load, force, ok, contact, formed)
+        self.pressed = pressed
+        # the column's share: (a_trail + 1) Qbar_x - (1 + a_lead) Qbar_e
+        lead = np.maximum(member.sum(axis=1) - 2, 1)
+        line = np.arange(c)
+        share = ((load[:, 1, _A] + 1.0) * force[:, 0]
+                 - (1.0 + load[line, lead, _A]) * force[line, lead])
+        self.column_sum += np.where(ok & (lead > 0), np.nan_to_num(share), 0.0) * \
+            self.friction.weight
+
+    def column_friction(self) -> np.ndarray:
+        """The friction the column's forces at the zone's ends cost the carriage, (size,) [N]:
+        (a_trail + 1) Qbar_x - (1 + a_lead) Qbar_e averaged over the stroke (Notes), the
+        larger of the tracks'."""
+        return self.column_sum.reshape(-1, self.frame.tracks).max(axis=1)
+
+
+__all__ = ["CircuitTrains", "circuit_trains_kernel", "column_coefficients"]
