@@ -115,8 +115,15 @@ def test_carriage_config_oversize_deviation_per_track_and_flat():
                             "ball_oversize_deviation_um = [0.1, 0.2, 0.3, 0.4, -0.1, -0.2, "
                             "-0.3, -0.4]")
     expected = 3e-6 + 1e-6 * np.array([[0.1, 0.2, 0.3, 0.4], [-0.1, -0.2, -0.3, -0.4]])
+    # fixed sizes at the slots: constant propagation only (a carriage's default is along_track)
+    head = HEAD.replace("[study]\n", '[study]\npropagation = "constant"\n')
     for text in (per_track, flat):
-        assert_allclose(parse_config(HEAD + text).carriage.oversize, expected, rtol=1e-14)
+        assert_allclose(parse_config(head + text).carriage.oversize, expected, rtol=1e-14)
+    with pytest.raises(ConfigError) as info:  # without the key: says how to choose constant
+        parse_config(HEAD + flat, "c.toml")
+    message = str(info.value)
+    assert "\n" not in message and "carriage.ball_oversize_deviation_um" in message
+    assert "along_track is a [carriage] study's default" in message
 
 
 BAD = [

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from tolsim.cli.run import summary
 from tolsim.io.config import ConfigError, load_config, parse_config
 from tolsim.io.netcdf import result_to_dataset
 from tolsim.physics.carriage import solve_carriage
@@ -292,3 +293,31 @@ def test_tolsim_carriage_seed_solves_the_first_assembly_of_that_run(capsys):
     assert main(["carriage", str(CONFIG), "--seed", "-1"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--seed" in err
+
+
+def test_a_carriage_study_runs_along_the_track_unless_its_config_says_constant():
+    # Issue 24, item 2: a [carriage] study uses along_track unless [study] names the
+    # propagation; single-module studies (the paper's) keep constant; a config read without
+    # [study] (`tolsim carriage`) is no study and keeps constant too.
+    text = CONFIG.read_text()
+    assert "\npropagation" not in text
+    assert load_config(CONFIG).study.propagation == "along_track"
+    constant = parse_config(text.replace("[study]\n", '[study]\npropagation = "constant"\n'),
+                            "constant.toml")
+    assert constant.study.propagation == "constant"
+    assert load_config().study.propagation == "constant"  # the packaged default study
+    without = text[: text.index("[study]")]
+    assert parse_config(without, "c.toml", study=False).study.propagation == "constant"
+    # A constant carriage study says, in the file and the summary, that it follows balls
+    # beyond the loaded zone: in the 100 mm stroke they drift 50 mm through the carriage,
+    # 50 / 10.05 = 4.975 ball pitches (configs/carriage_preload.toml; issue 24: "4.98").
+    result = run_study(constant.with_overrides(samples=8))
+    ds = result_to_dataset(result)
+    caveat = ds.attrs["propagation_caveat"]
+    assert "about 4.98 of the 12 balls per track" in caveat
+    assert "beyond it" in caveat and "along_track" in caveat
+    assert caveat in summary(ds, Path("c.nc"), 1.0)
+    # along the track there is no such sentence (the open trains' own caveat instead)
+    along = result_to_dataset(run_study(load_config(CONFIG).with_overrides(samples=4)))
+    assert "beyond it" not in along.attrs["propagation_caveat"]
+    assert "ignores the ball circuit" in along.attrs["propagation_caveat"]

@@ -654,7 +654,7 @@ def test_carriage_reports_the_worst_track():
     c = load_config(CONFIGS / "carriage_preload.toml")
     text = c.text + "\n[contact]\n"
     c = parse_config(text, "carriage_contact.toml").with_overrides(samples=24)
-    c = replace(c, study=replace(c.study, block_size=24))
+    c = replace(c, study=replace(c.study, block_size=24, propagation="constant"))
     block = sample_block(c, 0)
     state = fx._evaluate_assemblies(c, block)
     out = fr.evaluate_friction(c, block.initial_gap, state)

@@ -93,6 +93,10 @@ def parse_config(text: str, path: str = "<string>", *, study: bool = True) -> St
     return replace(config, sweep=sweep)
 
 
+#: The propagation of a ``[carriage]`` study whose ``[study]`` does not name one (issue 24):
+#: constant epsilon would follow balls beyond the loaded zone.
+CARRIAGE_PROPAGATION = "along_track"
+
 #: ``[study]`` of a config read without one (``parse_config(..., study=False)``).
 NO_STUDY = {"samples": 1, "seed": 0}
 
@@ -132,6 +136,10 @@ def _build(data: dict, source: "Source", text: str, path: str,
     else:
         study_table = Table(dict(NO_STUDY), "study", source)
     study = read_study(study_table)
+    if carriage is not None and "propagation" not in study_table.data and root.has("study"):
+        # a carriage's balls roll through its loaded zone: followed along the track unless
+        # the config says constant (issue 24); a config read without [study] keeps constant
+        study = replace(study, propagation=CARRIAGE_PROPAGATION)
     if carriage is not None:  # the carriage solve is the static model of its balls
         given = study_table.data.get("static_model")
         if given not in (None, "solved"):

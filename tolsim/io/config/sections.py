@@ -463,7 +463,8 @@ def check_carriage_propagation(t: Table, carriage: Carriage, train: Train, study
                           study: StudySettings):
     """Raise for what a [carriage] study cannot combine with its propagation: end relief
     without along_track or longer than half the loaded zone; one ball per track, fixed
-    per-ball oversizes with along_track."""
+    per-ball oversizes with along_track (the default of a [carriage] study, so the message
+    says how to choose constant when ``study_table`` does not name the propagation)."""
     if carriage.end_relief_depth > 0:
         half = 0.5 * train.loaded_zone_length
         key = t.key_for("end_relief_length", "length")
@@ -476,15 +477,19 @@ def check_carriage_propagation(t: Table, carriage: Carriage, train: Train, study
                           "study.propagation = 'along_track'")
     if study.propagation != "along_track":
         return
+    # along_track by default (issue 24): say how to keep the constant propagation
+    hint = ("" if "propagation" in study_table.data else
+            " (along_track is a [carriage] study's default; study.propagation = 'constant' "
+            "keeps each ball's starting epsilon)")
     if carriage.layout.balls_per_track < 2:
         raise t.error("balls_per_track", "= 1: with propagation = 'along_track' a track needs "
                                          "at least 2 balls (one ball cannot hold the "
-                                         "carriage's pitch and yaw as it rolls)")
+                                         "carriage's pitch and yaw as it rolls)" + hint)
     if carriage.ball_oversize_deviation:
         raise t.error(t.key_for("ball_oversize_deviation", "length"),
                       "fixes the size of the balls at their slots, but with propagation = "
                       "'along_track' the balls roll through the carriage: give the size "
-                      "scatter as [tolerances.ball_oversize] instead")
+                      "scatter as [tolerances.ball_oversize] instead" + hint)
 
 
 def check_circuit(t: Table, carriage: Carriage, train: Train, study: StudySettings,

@@ -72,7 +72,8 @@ def propagation_assumption(propagation: str) -> str:
 def propagation_caveat(config) -> str:
     """A sentence for studies whose epsilon changes along the track but which use
     ``constant``: rail random fields (a rail-scope source with a correlation length) or loads
-    that vary between the balls; for an ``along_track`` carriage without
+    that vary between the balls, and for a carriage the balls it follows beyond the loaded
+    zone (always: its default is ``along_track``); for an ``along_track`` carriage without
     ``[carriage.circuit]``, that it ignores the circuit (issue 24). Empty otherwise."""
     if config.study.propagation != "constant":
         if config.carriage is not None and config.carriage.circuit is None:
@@ -83,13 +84,11 @@ def propagation_caveat(config) -> str:
         return ""
     fields = [t.source for t in config.tolerances
               if t.scope == "rail" and t.correlation_length > 0 and t.distribution.is_random]
-    if config.carriage is not None:  # balls enter and leave the carriage's load zone
-        loads = config.train.balls > 1
-        what = "a carriage whose balls pass through its load distribution"
-    else:
-        loads = (len(set(np.atleast_1d(config.loads.side_load))) > 1
-                 or len(set(np.atleast_1d(config.loads.normal_load))) > 1)
-        what = "loads that vary along the train"
+    if config.carriage is not None:
+        return _constant_carriage_caveat(config, fields)
+    loads = (len(set(np.atleast_1d(config.loads.side_load))) > 1
+             or len(set(np.atleast_1d(config.loads.normal_load))) > 1)
+    what = "loads that vary along the train"
     causes = ([f"rail random fields ({', '.join(fields)})"] if fields else []) + (
         [what] if loads else [])
     if not causes:
@@ -97,6 +96,24 @@ def propagation_caveat(config) -> str:
     return (f"This study has {' and '.join(causes)}, so a ball's epsilon changes as it moves "
             "along the track; the constant propagation keeps each ball's starting value. "
             "propagation = \"along_track\" answers with the change included.")
+
+
+def _constant_carriage_caveat(config, fields) -> str:
+    """:func:`propagation_caveat` of a ``constant`` carriage study: the balls it follows
+    beyond the loaded zone (issue 24)."""
+    layout, n = config.carriage.layout, config.train.balls
+    drift = 0.5 * config.motion.stroke  # a ball's travel through the carriage, at about v/2
+    pitch = layout.ball_pitch if layout.ball_pitch > 0 else 2.0 * config.bearing.ball_radius
+    leaving = min(drift / pitch, float(n))
+    also = f", and it reads the rail random fields ({', '.join(fields)}) there" if fields else ""
+    return (f"This carriage study uses constant propagation: it follows each ball over the "
+            f"whole stroke at its starting epsilon, as if it stayed in the loaded zone. In the "
+            f"{config.motion.stroke * 1e3:g} mm stroke the balls drift "
+            f"{drift * 1e3:g} mm through the carriage, so about {leaving:.2f} of the {n} balls "
+            f"per track (stroke / 2 / ball pitch) leave the loaded zone and are followed "
+            f"beyond it, new balls enter unseen, and the load distribution a ball rolls "
+            f"through is not re-read{also}. propagation = \"along_track\", the default of a "
+            f"[carriage] study, follows the balls through the zone.")
 
 
 @pjit
