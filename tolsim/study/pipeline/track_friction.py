@@ -32,7 +32,11 @@ from tolsim.study.pipeline.friction_kernels import (
     stroke_friction_kernel,
     train_inputs_kernel,
 )
-from tolsim.study.pipeline.propagation import first_contact_along_track, pushed_velocity_deviation
+from tolsim.study.pipeline.propagation import (
+    first_contact_along_track,
+    pushed_velocity_deviation,
+    time_steps,
+)
 from tolsim.study.sampling import error_values
 from tolsim.study.statistics.friction import COLUMNS
 
@@ -528,7 +532,7 @@ class TrackFriction:
         motion = config.motion
         self.config = config
         self.record = record
-        self.steps = config.study.time_steps
+        self.steps = time_steps(config)
         self.half_step = 0.5 * motion.duration / self.steps * motion.groove_velocity
         self.diameter = 2.0 * config.bearing.ball_radius
         self.tolerance = STEP_TOLERANCE * self.diameter
