@@ -306,12 +306,11 @@ def along_track(sizes, constant_factor=20.0):
                             along_track="constant")
             rate_a = along["balls"] / along["seconds"]
             rate_c = const["balls"] / const["seconds"]
-            print(f"  {config.name} ({label}, {_steps(config, kind)} steps): "
-                  f"{along['balls'] // balls:.0f} assemblies "
+            print(f"  {config.name} ({label}): {along['balls'] // balls:.0f} assemblies "
                   f"{along['balls']:.2e} balls along_track {along['seconds']:7.2f} s "
                   f"{rate_a:9.0f} balls/s; constant {rate_c:9.0f} balls/s "
                   f"({const['balls']:.2e} balls); cost per ball {rate_c / rate_a:6.1f}x "
-                  f"constant (target <= 5x)")
+                  f"constant (target <= 5x); {_steps(config, kind)} steps")
     print(f"tolsim along_track study after contact, with and without [contact]; one worker, "
           f"{os.cpu_count()} cores")
     for config in (FRICTION_CONFIG, carriage):
