@@ -45,9 +45,10 @@ balls/s of the along_track study, of the constant one, and their ratio (the cost
 along_track over that of constant). The along_track studies follow an assembly until its
 first contact (the circuit: over the whole stroke). Then ``configs/friction_yaw.toml`` and
 ``configs/carriage_preload.toml`` along the track with ``[contact]`` against the same without
-it (the automatic step count is finer with ``[contact]``: the steps are printed). Sizes are assemblies (default 2000: a few 10^4 balls; the constant studies run
-``--constant-factor`` times more assemblies, so that they last long enough to be timed);
-one worker. Report the load average with the numbers (the machine is shared).
+it (the automatic step count is finer with ``[contact]``: the steps are printed). Sizes are
+assemblies (default 2000: a few 10^4 balls; the constant studies run ``--constant-factor``
+times more assemblies, so that they last long enough to be timed); one worker. Report the
+load average with the numbers (the machine is shared).
 
 Run: ``python benchmarks/bench_study.py [--sizes 1e6 1e7] [--workers 1 2]
 [--static solved paired] [--friction] [--along-track [--sizes 2000] [--constant-factor 20]]``

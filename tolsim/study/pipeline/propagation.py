@@ -121,21 +121,22 @@ def time_steps(config) -> int:
     paired against a fine-step reference on the same assemblies). c = 4 gives 20 steps on
     ``configs/whatif_along_track.toml`` (the 10.05 mm ball spacing of its yaw-moment loads;
     its rail field: 20 mm) and ``configs/carriage_preload.toml`` (10.05 mm ball pitch), 42 on
-    ``configs/carriage_circuit.toml`` (4.8 mm pitch). There P(contact) lay inside its own 95
-    % interval, and it was inside already at c = 1 (5 steps); the paired change against the
-    reference (assemblies that touch only at n / only in the reference) was +4/-5 of 1 000
-    (free balls, reference 400 steps), +9/-5 of 600 (carriage, 800 steps), +3/-5 of 600
-    (circuit, 800 steps), and the mean change of the time to first contact 7, 10 and 5 ms of
-    a 500 ms stroke. The error falls at first order for the carriage (balls enter and leave
-    at step ends) and the circuit, at up to second order for free balls. With ``[contact]``
-    the largest increase and the ripple are extremes of step-mean friction forces, which
-    converge at first order from below: on the free balls the ripple was inside its own
-    (narrow) interval only from 200 steps (0.1711 N at 40 steps against 0.1737 N, its
-    interval +-0.0007 N), hence c = 40 (200 steps there, the former fixed default). On the
-    carriage (600 assemblies, reference 800 steps) the ripple does not converge
-    monotonically: 0.1275, 0.1294, 0.1298 and 0.1141 N at 20, 40, 80 and 200 steps against
-    0.1274 N (balls entering and leaving the zone make the friction jump within a step); the
-    largest and mean increase are inside their intervals from 10 steps.
+    ``configs/carriage_circuit.toml`` (4.8 mm pitch). There (600 assemblies, reference 800
+    steps) P(contact) lay inside its own 95 % interval, as it did from 5 steps on (c = 1);
+    the paired change against the reference (assemblies that touch only at n / only in the
+    reference) was +2/-5 (free balls), +9/-5 (carriage) and +3/-5 (circuit), and the mean
+    change of the time to first contact 8.1, 10 and 4.8 ms of a 500 ms stroke (27, 18 and
+    9.4 ms at 10 steps; 0.43, 4.4 and 3.5 ms at 40). The error falls at first order for the
+    carriage (balls enter and leave at step ends) and the circuit, at up to second order for
+    free balls. With ``[contact]`` the largest increase and the ripple are extremes of
+    step-mean friction forces, which converge at first order from below: on the free balls
+    (1 000 assemblies) the ripple was 0.1711 N at 40 steps against 0.1737 N at 400, outside
+    its own (narrow, +-0.0007 N) interval, and 0.1734 N at 200 steps against 0.1739 N at
+    800, inside; hence c = 40 (200 steps there, the former fixed default). On the carriage
+    (600 assemblies, reference 800 steps) the ripple does not converge monotonically:
+    0.1275, 0.1294, 0.1298 and 0.1141 N at 20, 40, 80 and 200 steps against 0.1274 N (balls
+    entering and leaving the zone make the friction jump within a step); the largest and
+    the mean increase are inside their intervals from 10 steps.
     """
     if config.study.time_steps is not None:
         return int(config.study.time_steps)
