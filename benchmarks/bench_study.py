@@ -36,17 +36,19 @@ cores, peak memory flat from 1e6 to 1e7 balls).
 With ``--along-track`` it times the along-track studies against the constant study of the
 same config in the same run (issue 24, "Speed": along_track at most 5x the cost per ball of
 constant; targets >= 500 k balls/s free balls, >= 200 k balls/s carriage, on 2 cores):
-``configs/whatif_along_track.toml`` (free balls, 6 per train, its 100 steps),
+``configs/whatif_along_track.toml`` (free balls, 6 per train),
 ``configs/carriage_preload.toml`` (a carriage, 2 x 12 balls entering and leaving its loaded
-zone, 200 steps) and the same with a default ``[carriage.circuit]`` (the constant study of a
+zone) and the same with a default ``[carriage.circuit]``, each at its automatic step count
+(``study.time_steps = "auto"``; each line says it) (the constant study of a
 circuit is that of the config without it: a circuit needs along_track). Each line gives
 balls/s of the along_track study, of the constant one, and their ratio (the cost per ball of
 along_track over that of constant). The along_track studies follow an assembly until its
 first contact (the circuit: over the whole stroke). Then ``configs/friction_yaw.toml`` and
 ``configs/carriage_preload.toml`` along the track with ``[contact]`` against the same without
-it. Sizes are assemblies (default 2000: a few 10^4 balls; the constant studies run
-``--constant-factor`` times more assemblies, so that they last long enough to be timed);
-one worker. Report the load average with the numbers (the machine is shared).
+it (the automatic step count is finer with ``[contact]``: the steps are printed). Sizes are
+assemblies (default 2000: a few 10^4 balls; the constant studies run ``--constant-factor``
+times more assemblies, so that they last long enough to be timed); one worker. Report the
+load average with the numbers (the machine is shared).
 
 Run: ``python benchmarks/bench_study.py [--sizes 1e6 1e7] [--workers 1 2]
 [--static solved paired] [--friction] [--along-track [--sizes 2000] [--constant-factor 20]]``
@@ -280,6 +282,13 @@ def friction(sizes):
               "(target: >= 1.5 M balls/s)")
 
 
+def _steps(config, kind) -> int:
+    """The integration steps of the benchmark's along-track study ``kind`` of ``config``."""
+    from tolsim.study.pipeline.propagation import time_steps
+
+    return time_steps(study(1, "solved", config, kind))
+
+
 def along_track(sizes, constant_factor=20.0):
     """Print along_track studies against constant ones, and with [contact] against without
     it; ``sizes`` in assemblies."""
@@ -302,7 +311,7 @@ def along_track(sizes, constant_factor=20.0):
                   f"{along['balls']:.2e} balls along_track {along['seconds']:7.2f} s "
                   f"{rate_a:9.0f} balls/s; constant {rate_c:9.0f} balls/s "
                   f"({const['balls']:.2e} balls); cost per ball {rate_c / rate_a:6.1f}x "
-                  f"constant (target <= 5x)")
+                  f"constant (target <= 5x); {_steps(config, kind)} steps")
     print(f"tolsim along_track study after contact, with and without [contact]; one worker, "
           f"{os.cpu_count()} cores")
     for config in (FRICTION_CONFIG, carriage):
@@ -310,8 +319,10 @@ def along_track(sizes, constant_factor=20.0):
         for size in sizes:
             free = measure(size * balls, config=config, along_track="free")
             contact = measure(size * balls, config=config, along_track="contact")
-            for label, r in (("without [contact]", free), ("with [contact]   ", contact)):
-                print(f"  {config.name}: {r['balls']:.2e} balls {label}: {r['seconds']:7.2f} s "
+            for label, r, kind in (("without [contact]", free, "free"),
+                                   ("with [contact]   ", contact, "contact")):
+                print(f"  {config.name}: {r['balls']:.2e} balls {label} "
+                      f"({_steps(config, kind):>3} steps): {r['seconds']:7.2f} s "
                       f" {r['balls'] / r['seconds']:9.0f} balls/s  peak RSS "
                       f"{max(r['peak_mib'], r['child_peak_mib']):.0f} MiB")
             print(f"  throughput with [contact]: {free['seconds'] / contact['seconds']:.2f}x "

@@ -10,8 +10,8 @@ script prints, per step count:
 * the paired change against the reference: assemblies that touch at this step and not at the
   reference (+) and the other way (-), and the mean |change| of the time to first contact
   over the assemblies that touch in both [s] (the step-size error of the integration, free
-  of sampling noise), with its observed order between successive step counts,
-  log2(err(h) / err(h/2)) (2 for the midpoint rule on smooth epsilon);
+  of sampling noise), with its observed order between successive step counts n,
+  log(err_1 / err_2) / log(n_2 / n_1) (2 for the midpoint rule on smooth epsilon);
 * with ``[contact]`` (``--contact`` adds one where the config has none) the friction figures'
   means with their 95 % intervals (mean +- 1.96 s / sqrt(n)) and the same check;
 * for an along-track carriage the fraction of first contacts at the zone's ends, and with
@@ -23,8 +23,11 @@ then validates (``study.time_steps``, and ``study.propagation = "along_track"`` 
 configs/carriage_preload.toml, which is ``constant`` as packaged), and through the public
 :func:`tolsim.run_study`, so it follows whatever step rule the integrator has.
 
+``--steps auto`` runs the automatic step count (``study.time_steps = "auto"``,
+:func:`tolsim.study.pipeline.propagation.time_steps`), marked "a" in the table.
+
 Run: ``python benchmarks/convergence_along_track.py [--configs whatif_along_track
-carriage_preload carriage_circuit] [--steps 25 50 100 200 400] [--reference 1600]
+carriage_preload carriage_circuit] [--steps auto 25 50 100 200 400] [--reference 1600]
 [--samples N] [--seed S] [--contact]``. The defaults (800 assemblies) run in a few minutes on
 two idle cores; ``--samples`` sets the size.
 """
@@ -41,6 +44,7 @@ import numpy as np
 
 from tolsim import parse_config, run_study
 from tolsim.io.schema.carriage import zone_end_fraction
+from tolsim.study.pipeline.propagation import time_steps as resolved_steps
 from tolsim.study.spec import set_study_value
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -75,12 +79,13 @@ def with_study_keys(text: str, **keys) -> str:
     return text
 
 
-def study_config(path, time_steps: int, *, samples=None, seed=None, contact=False):
-    """The study of ``path`` along the track at ``time_steps`` (and ``samples``, ``seed`` if
-    given), spot checks and sensitivity off, ``[contact]`` added if ``contact`` and the config
-    has none."""
+def study_config(path, time_steps, *, samples=None, seed=None, contact=False):
+    """The study of ``path`` along the track at ``time_steps`` (an int, or ``"auto"``: the
+    automatic count) (and ``samples``, ``seed`` if given), spot checks and sensitivity off,
+    ``[contact]`` added if ``contact`` and the config has none."""
     text = Path(path).read_text(encoding="utf-8")
-    keys = {"propagation": "along_track", "time_steps": int(time_steps), "spot_checks": 0,
+    steps = "auto" if time_steps == "auto" else int(time_steps)
+    keys = {"propagation": "along_track", "time_steps": steps, "spot_checks": 0,
             "sensitivity_samples": 0}
     if samples is not None:
         keys["samples"] = int(samples)
@@ -90,6 +95,11 @@ def study_config(path, time_steps: int, *, samples=None, seed=None, contact=Fals
     if contact and not re.search(r"^\s*\[contact\]", text, flags=re.MULTILINE):
         text = text.rstrip("\n") + "\n\n[contact]\n"
     return parse_config(text, str(path))
+
+
+def steps_argument(text: str):
+    """A ``--steps`` entry: ``"auto"`` or an integer."""
+    return "auto" if text == "auto" else int(text)
 
 
 def has_circuit(path) -> bool:
@@ -106,7 +116,8 @@ def measure(config) -> dict:
     seconds = time.perf_counter() - start
     acc = result.statistics
     p, low, high = acc.contact_probability()
-    out = {"time_steps": config.study.time_steps, "p": p, "low": low, "high": high,
+    out = {"time_steps": resolved_steps(config), "auto": config.study.time_steps is None,
+           "p": p, "low": low, "high": high,
            "n_contact": int(acc.n_contact), "n_unresolved": int(acc.n_unresolved),
            "n": int(acc.n_assemblies), "seconds": seconds,
            "contact_time": np.asarray(result.samples["sample_contact_time"], dtype=float)}
@@ -147,13 +158,15 @@ def within(value: float, low: float, high: float) -> bool:
     return bool(low <= value <= high)
 
 
-def observed_order(errors) -> list:
-    """log2(err_i / err_{i+1}) between successive step counts that double (NaN where an error
-    is 0 or NaN); the first entry is NaN."""
+def observed_order(errors, steps=None) -> list:
+    """log(err_i / err_{i+1}) / log(n_{i+1} / n_i) between successive step counts n (log2 of
+    the error ratio when ``steps`` is not given: counts that double; NaN where an error is 0
+    or NaN, or the counts are equal); the first entry is NaN."""
+    steps = [2.0**k for k in range(len(errors))] if steps is None else steps
     out = [float("nan")]
-    for a, b in zip(errors[:-1], errors[1:], strict=True):
-        ok = np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0
-        out.append(float(np.log2(a / b)) if ok else float("nan"))
+    for a, b, na, nb in zip(errors[:-1], errors[1:], steps[:-1], steps[1:], strict=True):
+        ok = np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0 and nb != na
+        out.append(float(np.log(a / b) / np.log(nb / na)) if ok else float("nan"))
     return out
 
 
@@ -170,7 +183,8 @@ def compare(rows: list, reference: dict) -> list:
                 name: within(reference["friction"][name][0], mean - half, mean + half)
                 for name, (mean, half) in row["friction"].items()}
         table.append(entry)
-    orders = observed_order([e["time_change"] for e in table])
+    orders = observed_order([e["time_change"] for e in table],
+                            [e["time_steps"] for e in table])
     for entry, order in zip(table, orders, strict=True):
         entry["order"] = order
     return table
@@ -191,7 +205,8 @@ def _text(name, rows, reference, table) -> str:
         ends = f"{row['zone_end_fraction']:.3f}" if "zone_end_fraction" in row else ""
         column = (f"{row['column']['entry']:.4f}/{row['column']['exit']:.4f}"
                   if "column" in row else "")
-        return (f"  {row['time_steps']:>5}  {row['p']:.4f} [{row['low']:.4f}, "
+        steps = f"{row['time_steps']}{'a' if row.get('auto') else ''}"
+        return (f"  {steps:>5}  {row['p']:.4f} [{row['low']:.4f}, "
                 f"{row['high']:.4f}]  {ok:>9}  {pm:>10}  {dt:>13}  {order:>5}  {ends:>5}  "
                 f"{column:>21}  {row['seconds']:.0f}")
 
@@ -212,7 +227,8 @@ def _text(name, rows, reference, table) -> str:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--configs", nargs="+", default=list(CONFIGS), choices=list(CONFIGS))
-    parser.add_argument("--steps", nargs="+", type=int, default=list(STEPS))
+    parser.add_argument("--steps", nargs="+", type=steps_argument, default=list(STEPS),
+                        help='step counts, or "auto" (the automatic count, marked "a")')
     parser.add_argument("--reference", type=int, default=REFERENCE,
                         help="time_steps of the fine-step reference")
     parser.add_argument("--samples", type=int, default=800)
@@ -221,7 +237,8 @@ def main(argv=None):
                         help="add [contact] (friction figures) where the config has none and "
                              "allows it")
     args = parser.parse_args(argv)
-    if min(args.steps) < 1 or args.reference <= max(args.steps):
+    numbers = [h for h in args.steps if h != "auto"]
+    if (numbers and min(numbers) < 1) or any(h >= args.reference for h in numbers):
         parser.error("--steps must be >= 1 and below --reference")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"load average {load:.2f} at the start")
@@ -235,9 +252,10 @@ def main(argv=None):
                                          seed=args.seed, contact=contact))
         print(f"{name}: reference {args.reference} steps, P = {reference['p']:.4f} "
               f"({reference['seconds']:.0f} s)", flush=True)
-        for h in sorted(args.steps):  # the table so far after each (a partial run says it)
-            rows.append(measure(study_config(path, h, samples=args.samples, seed=args.seed,
-                                             contact=contact)))
+        configs = [study_config(path, h, samples=args.samples, seed=args.seed, contact=contact)
+                   for h in args.steps]
+        for config in sorted(configs, key=resolved_steps):  # the table so far after each
+            rows.append(measure(config))
             print(_text(name, rows, reference, compare(rows, reference)), flush=True)
     return 0
 

@@ -190,6 +190,9 @@ BAD = [
     ("quoted_key", ("std_deg = 0.5", '"std_deg" = -0.5'), "tolerances.bottom_rotation.std_deg",
      19),
     ("syntax_line", ("balls = 2", "balls = = 2"), "invalid TOML", 10),
+    # issue 24: study.time_steps is "auto" or an integer >= 1
+    ("time_steps_word", ("seed = 1", 'seed = 1\ntime_steps = "fine"'), "study.time_steps", 24),
+    ("time_steps_zero", ("seed = 1", "seed = 1\ntime_steps = 0"), "study.time_steps", 24),
 ]
 
 

@@ -111,11 +111,30 @@ class RailField:
             pos = np.asarray(position)
             rows = RailField(self.origin, self.spacing, self.values)
             return rows.at(pos.reshape(self.values.shape[0], -1)).reshape(pos.shape)
-        x = (np.asarray(position) - self.origin) / self.spacing
-        k = np.clip(np.floor(x).astype(np.int64), 0, self.values.shape[1] - 2)
-        w = np.clip(x - k, 0.0, 1.0)
-        rows = np.arange(self.values.shape[0]).reshape((-1,) + (1,) * (x.ndim - 1))
-        return (1.0 - w) * self.values[rows, k] + w * self.values[rows, k + 1]
+        pos = np.asarray(position, dtype=np.float64)
+        out = np.empty(pos.shape)
+        values = np.ascontiguousarray(self.values, dtype=np.float64)
+        _field_at_kernel(values, float(self.origin), float(self.spacing),
+                         np.ascontiguousarray(pos).reshape(values.shape[0], -1),
+                         out.reshape(values.shape[0], -1))
+        return out
+
+
+@jit
+def _field_at_kernel(values, origin, spacing, position, out):
+    """Kernel of :meth:`RailField.at`: row r of ``position`` (rows, k) read on row r of the
+    grid ``values``, linear between its points, the end values beyond them (NaN at a NaN
+    position)."""
+    last = values.shape[1] - 2
+    for r in range(position.shape[0]):
+        for j in range(position.shape[1]):
+            x = (position[r, j] - origin) / spacing
+            if not np.isfinite(x):
+                out[r, j] = np.nan
+                continue
+            k = 0 if x < 0.0 else (last if x > last else min(int(np.floor(x)), last))
+            w = min(max(x - k, 0.0), 1.0)
+            out[r, j] = (1.0 - w) * values[r, k] + w * values[r, k + 1]
 
 
 @dataclass

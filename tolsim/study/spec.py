@@ -508,8 +508,10 @@ class StudySettings:
         :data:`SAMPLINGS`.
     spot_checks : int
         Balls re-solved with the full model.
-    time_steps : int
-        Integration steps over the horizon for ``along_track`` propagation.
+    time_steps : int or None
+        Integration steps over the horizon for ``along_track`` propagation; None (config
+        ``"auto"``, the default): sized from the lengths over which epsilon changes
+        (:func:`tolsim.study.pipeline.propagation.time_steps`).
     velocity_deviation_range : tuple of float
         Histogram range of epsilon [-] (a fraction; config key
         ``velocity_deviation_range_percent``).
@@ -554,7 +556,7 @@ class StudySettings:
     propagation: str = "constant"
     sampling: str = "random"
     spot_checks: int = 0
-    time_steps: int = 200
+    time_steps: int | None = None
     velocity_deviation_range: tuple = (-0.02, 0.02)
     velocity_deviation_bins: int = 400
     time_bins: int = 200

@@ -563,6 +563,18 @@ def read_contact(t: Table) -> ContactSettings:
     return s
 
 
+def _time_steps(t):
+    """``study.time_steps``: an integer >= 1, or ``"auto"`` (the default): None, the count
+    then chosen by :func:`tolsim.study.pipeline.propagation.time_steps`."""
+    if t.data.get("time_steps", "auto") == "auto":
+        t.used.add("time_steps")
+        return None
+    if isinstance(t.data["time_steps"], str):
+        raise t.error("time_steps", f'= {t.data["time_steps"]!r} must be "auto" or an integer '
+                                    ">= 1")
+    return t.integer("time_steps", minimum=1)
+
+
 def read_study(t: Table) -> StudySettings:
     for name in FRACTION_KEYS:
         if t.has(name):  # a bare 0.5 was read as 50 % where 0.5 % was meant
@@ -593,7 +605,7 @@ def read_study(t: Table) -> StudySettings:
         propagation=t.string("propagation", PROPAGATIONS, default="constant"),
         sampling=t.string("sampling", SAMPLINGS, default="random"),
         spot_checks=t.integer("spot_checks", default=0, minimum=0),
-        time_steps=t.integer("time_steps", default=200, minimum=1),
+        time_steps=_time_steps(t),
         velocity_deviation_range=tuple(lo_hi),
         velocity_deviation_bins=t.integer("velocity_deviation_bins", default=400, minimum=1),
         time_bins=t.integer("time_bins", default=200, minimum=1),

@@ -15,7 +15,11 @@ from tolsim.io.schema.declaration import Section, V
 from tolsim.physics.geometry import CONTACTS
 from tolsim.physics.velocity.models import BALL_REGIMES
 from tolsim.study.analyses.limit_state import EVENT_PROBABILITY
-from tolsim.study.pipeline.propagation import propagation_assumption, propagation_caveat
+from tolsim.study.pipeline.propagation import (
+    propagation_assumption,
+    propagation_caveat,
+    time_steps,
+)
 from tolsim.study.sampling import SPOT_CHECK_STRATA
 from tolsim.study.statistics.accumulator import QUANTILES
 
@@ -376,7 +380,8 @@ def collect(result, history=None) -> tuple:
             "[k/N, (k+u)/N] over all N trains with u unresolved, and the interval covering "
             "them"),
         "full_model_resolve_seconds": float(acc.resolve_seconds),
-        "propagation_assumption": propagation_assumption(st.propagation),
+        "propagation_assumption": propagation_assumption(
+            st.propagation, time_steps(cfg) if cfg.is_along_track else None),
         "propagation_caveat": propagation_caveat(cfg),
         "elapsed_seconds": float(result.elapsed),
         # Numba compilation (a cold kernel cache) and kernel-cache loading in the run, not part

@@ -224,6 +224,9 @@ class _Evaluation:
         except ValueError:
             q0 = np.zeros(5)
         self.start = np.tile(q0, (block.size, 1))
+        # the two latest solutions of each assembly and their times (extrapolated start)
+        self.solution = np.full((2, block.size, 5), np.nan)
+        self.solved_at = np.full((2, block.size), np.nan)
         self.fixed = fixed_ball_values(config, block)  # transformed once, read every step
         self.resolve_seconds = 0.0
 
@@ -253,9 +256,9 @@ class _Evaluation:
             batch = solve_carriage_batch(self.layout, carriage.load, config.bearing,
                                          oversize=carriage.preload_oversize,
                                          groove_errors=errors, ball_z=z, loaded=loaded,
-                                         start=self.start[rows])
+                                         start=self.newton_start(rows, t))
         solved = batch.status == STATUS_CONVERGED
-        self.start[rows[solved]] = batch.displacement[solved]
+        self.remember(rows, t, batch, solved)
         force = batch.normal_force[loaded]
         static = StaticResult(
             np.ascontiguousarray(batch.contact_angle_deviation[loaded]),
@@ -267,6 +270,42 @@ class _Evaluation:
         ok = np.ones(shape, dtype=bool)
         ok[loaded] = state.accounted if self.pushes_unloaded else state.valid
         return eps, ok, loaded, batch, state
+
+
+    def newton_start(self, rows, t):
+        """Where the carriage Newton of assemblies ``rows`` starts at time t [s]: the
+        assembly's own solution extrapolated linearly in time from its two latest ones, or
+        its latest alone (the nominal solution before its first).
+
+        Notes
+        -----
+        The carriage moves smoothly between two evaluations (dt / 2 apart) except when a ball
+        enters or leaves the zone, so the line through the two latest solutions starts the
+        Newton O(dt^2) from the solution instead of O(dt): with the automatic step
+        (:func:`tolsim.study.pipeline.propagation.time_steps`) of
+        ``configs/carriage_preload.toml`` (20 steps) it takes 2.5 joint Newton steps on
+        average instead of 3.0 (500 assemblies, seed 12; 1.65 instead of 2.0 at 200 steps).
+        The Newton's convergence test is the same, so the solution changes only within its
+        tolerance, and an assembly's start depends only on its own history (not on the
+        batch, chunking or threads).
+        """
+        (q0, q1), (t0, t1) = self.solution[:, rows], self.solved_at[:, rows]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = (t - t1) / (t1 - t0)
+        line = np.isfinite(w) & (w > 0.0) & np.isfinite(q0).all(axis=1)
+        start = self.start[rows]
+        start[line] = q1[line] + w[line, None] * (q1[line] - q0[line])
+        return start
+
+    def remember(self, rows, t, batch, solved):
+        """Keep the converged (``solved``) solutions of assemblies ``rows`` at time t [s]; an
+        assembly that did not converge starts its next Newton from its latest solution."""
+        done, failed = rows[solved], rows[~solved]
+        self.start[done] = batch.displacement[solved]
+        self.solution[0, done], self.solved_at[0, done] = (self.solution[1, done],
+                                                           self.solved_at[1, done])
+        self.solution[1, done], self.solved_at[1, done] = batch.displacement[solved], t
+        self.solution[:, failed], self.solved_at[:, failed] = np.nan, np.nan
 
 
 def _initial_state(config, ball_z, loaded, batch, state):

@@ -32,7 +32,11 @@ from tolsim.study.pipeline.friction_kernels import (
     stroke_friction_kernel,
     train_inputs_kernel,
 )
-from tolsim.study.pipeline.propagation import first_contact_along_track, pushed_velocity_deviation
+from tolsim.study.pipeline.propagation import (
+    first_contact_along_track,
+    pushed_velocity_deviation,
+    time_steps,
+)
 from tolsim.study.sampling import error_values
 from tolsim.study.statistics.friction import COLUMNS
 
@@ -503,7 +507,9 @@ class TrackFriction:
 
     *First contact.* It is located on the free motion of each step, as without ``[contact]``:
     up to the first contact the balls are free and the trajectories are the same to the last
-    bit, so P(contact) and the time to contact do not change when ``[contact]`` is added. (With
+    bit, so P(contact) and the time to contact do not change when ``[contact]`` is added at the
+    same ``study.time_steps`` (the automatic count is finer with ``[contact]``,
+    :func:`tolsim.study.pipeline.propagation.time_steps`). (With
     free balls the train's validity also counts the evaluations after its first contact,
     which are now those of the trajectory with trains: an assembly whose ball is unresolved
     only on one of the two after contact is valid in one run and not in the other. Its contact
@@ -528,7 +534,7 @@ class TrackFriction:
         motion = config.motion
         self.config = config
         self.record = record
-        self.steps = config.study.time_steps
+        self.steps = time_steps(config)
         self.half_step = 0.5 * motion.duration / self.steps * motion.groove_velocity
         self.diameter = 2.0 * config.bearing.ball_radius
         self.tolerance = STEP_TOLERANCE * self.diameter

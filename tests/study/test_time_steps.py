@@ -1,0 +1,98 @@
+"""The along-track step count (study.time_steps, "auto" by default; issue 24, "Speed") and the
+carriage Newton's extrapolated start."""
+
+import re
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from tolsim.io.config import parse_config
+from tolsim.study.pipeline.carriage_track import CarriageFrame
+from tolsim.study.pipeline.propagation import (
+    MIN_TIME_STEPS,
+    epsilon_lengths,
+    time_steps,
+)
+from tolsim.study.sampling import sample_block
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def packaged(name, steps=None, contact=False):
+    """A packaged config along the track, its ``time_steps`` line removed (or set)."""
+    text = re.sub(r"(?m)^time_steps = .*\n", "", (CONFIGS / f"{name}.toml").read_text())
+    if not re.search(r"(?m)^propagation = ", text):
+        text = text.replace("[study]\n", '[study]\npropagation = "along_track"\n', 1)
+    if steps is not None:
+        text = text.replace("[study]\n", f"[study]\ntime_steps = {steps}\n", 1)
+    return parse_config(text + ("\n[contact]\n" if contact else ""), f"{name}.toml")
+
+
+def test_time_steps_is_auto_by_default_or_a_number():
+    assert packaged("whatif_along_track").study.time_steps is None
+    assert packaged("whatif_along_track", '"auto"').study.time_steps is None
+    c = packaged("whatif_along_track", 37)
+    assert c.study.time_steps == 37 and time_steps(c) == 37
+
+
+def test_automatic_steps_of_the_packaged_configs():
+    # n = max(8, ceil(c (s / 2) / l_min)), s = 100 mm, c = 4 (40 with [contact]); by hand:
+    # whatif_along_track: l_min = 10.05 mm, the spacing of its yaw-moment loads (D + the mean
+    # gap 50 um; its rail field is 20 mm): 4 x 50 / 10.05 = 19.9 -> 20, with [contact] 199.0
+    # -> 200; carriage_preload: the ball pitch 10.05 mm -> 20; carriage_circuit: the pitch
+    # 4.8 mm, 4 x 50 / 4.8 = 41.7 -> 42.
+    whatif = packaged("whatif_along_track")
+    assert epsilon_lengths(whatif) == pytest.approx(
+        {"rail field bottom_rotation": 0.02, "ball spacing": 0.01005}, rel=1e-12)
+    assert time_steps(whatif) == 20
+    assert time_steps(packaged("whatif_along_track", contact=True)) == 200
+    preload = packaged("carriage_preload")
+    assert epsilon_lengths(preload) == pytest.approx(
+        {"rail field bottom_rotation": 0.1, "ball pitch": 0.01005}, rel=1e-12)
+    assert time_steps(preload) == 20
+    assert time_steps(packaged("carriage_circuit")) == 42
+
+
+def test_steps_follow_the_shortest_length_and_the_stroke():
+    # An end relief of 2 mm is the shortest length: 4 x 50 / 2 = 100 steps; a stroke of
+    # 400 mm with it 400; with nothing that changes epsilon along the track, the minimum.
+    c = packaged("carriage_preload")
+    text = c.text.replace("# end_relief_depth_um = 1.0", "end_relief_depth_um = 1.0").replace(
+        "# end_relief_length_mm = 15.0", "end_relief_length_mm = 2.0")
+    relief = parse_config(text, "relief.toml")
+    assert epsilon_lengths(relief)["end relief"] == pytest.approx(0.002, rel=1e-12)
+    assert time_steps(relief) == 100
+    longer = parse_config(text.replace("stroke_mm = 100.0", "stroke_mm = 400.0"), "long.toml")
+    assert time_steps(longer) == 400
+    whatif = packaged("whatif_along_track")
+    text = re.sub(r"(?ms)^\[tolerances\.bottom_rotation\].*?correlation_length_mm = 20\.0\n",
+                  "", whatif.text).replace("yaw_moment_N_m = 6.0", "yaw_moment_N_m = 0.0")
+    plain = parse_config(text, "plain.toml")
+    assert epsilon_lengths(plain) == {}
+    assert time_steps(plain) == MIN_TIME_STEPS
+
+
+def test_the_carriage_newton_starts_on_the_line_through_its_two_latest_solutions():
+    # By hand: solutions q(0) = a, q(dt/2) = b give the start 2b - a at t = dt (the line);
+    # an assembly with one solution starts from it, one without any from the nominal q0; an
+    # assembly whose solve failed forgets its line.
+    c = packaged("carriage_preload").with_overrides(samples=4)
+    evaluation = CarriageFrame(c, sample_block(c, 0)).evaluation
+    nominal = evaluation.start[0].copy()
+    a, b = np.arange(5.0) * 1e-6, np.arange(5.0) * 2e-6 + 1e-7
+    rows = np.arange(4)
+
+    def batch(q, n):
+        return SimpleNamespace(displacement=np.tile(q, (n, 1)))
+
+    evaluation.remember(rows[:3], 0.0, batch(a, 3), np.ones(3, dtype=bool))
+    evaluation.remember(rows[:2], 0.005, batch(b, 2), np.ones(2, dtype=bool))
+    start = evaluation.newton_start(rows, 0.01)
+    assert_allclose(start[:2], np.tile(2 * b - a, (2, 1)), rtol=1e-12, atol=0)
+    assert_array_equal(start[2], a)
+    assert_array_equal(start[3], nominal)
+    evaluation.remember(rows[:1], 0.01, batch(a, 1), np.zeros(1, dtype=bool))
+    assert_array_equal(evaluation.newton_start(rows[:1], 0.015)[0], b)
