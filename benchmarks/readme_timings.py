@@ -135,13 +135,15 @@ ROWS = (
         r"sweep / separate = ([\d.]+)", "×", 2),
     Row("sweep_free", "the sweep against ten separate runs without sampling (target: < 2)",
         SWEEP, r"sweep / sampling-free separate = ([\d.]+)", "×", 1),
-    Row("along_free", "free balls along the track (`whatif_along_track.toml`, 100 steps)",
+    Row("along_free",
+        "free balls along the track (`whatif_along_track.toml`, automatic step: 20 steps)",
         ALONG_STUDY, _ALONG.format(r"whatif_along_track\.toml", "free balls")
         + r"along_track\s+\S+ s\s+(\d+) balls/s", "balls/s", -2),
     Row("along_free_ratio", "free balls: cost per ball along the track / constant (target: ≤ 5)",
         ALONG_STUDY, _ALONG.format(r"whatif_along_track\.toml", "free balls")
         + r"cost per ball\s+([\d.]+)x", "×", 0),
-    Row("along_carriage", "`carriage_preload.toml` along the track (200 steps)", ALONG_STUDY,
+    Row("along_carriage", "`carriage_preload.toml` along the track (automatic step: 20 steps)",
+        ALONG_STUDY,
         _ALONG.format(r"carriage_preload\.toml", "carriage")
         + r"along_track\s+\S+ s\s+(\d+) balls/s", "balls/s", -2),
     Row("along_carriage_ratio", "carriage: cost per ball along the track / constant (target: ≤ 5)",

@@ -142,8 +142,8 @@ def test_carriage_preload_sizes_and_light_class():
     assert f"{config.study.samples:,}".replace(",", " ") + " assemblies as configured" in p
     m = re.search(r"--samples (\d+)", p)
     assert m, "the table's sample count is named as the option that produced it"
-    # light class (the config as given), constant propagation, at the table's size: the
-    # README's P(contact) and 95 % interval to the printed digits
+    # light class (the config as given), along the track (a carriage's default), at the
+    # table's size: the README's P(contact) and 95 % interval to the printed digits
     acc = run_study(quick(config, int(m.group(1)))).statistics
     prob, low, high = acc.contact_probability()
     assert f"| light | 2 µm | 23 N | 419 N/µm | 0.47 | {prob:.3f} [{low:.3f}, {high:.3f}] |" \
