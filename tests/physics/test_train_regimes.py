@@ -11,6 +11,7 @@ large and small finite K). Tolerances are stated at each assertion.
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
+from scipy.optimize import minimize
 
 from tolsim.physics.geometry import TABLE1, paired_forces
 from tolsim.physics.trains import (
@@ -26,6 +27,7 @@ from tolsim.physics.trains.regimes import (
     regime_creep_coefficients,
     rigid_rolling_rate,
     stick_line_stiffness,
+    three_point_coefficients,
     three_point_stiffness,
     two_point_rolling_rate,
 )
@@ -34,10 +36,15 @@ from tolsim.physics.velocity.full import full
 from tolsim.physics.velocity.models import (
     BALL_REGIME_A,
     BALL_REGIME_B,
+    BALL_THREE_POINT,
     BALL_TWO_POINT,
     BALL_UNLOADED,
 )
-from tolsim.physics.velocity.regimes import minimise_dissipation, two_point_loaded
+from tolsim.physics.velocity.regimes import (
+    dissipated_power,
+    minimise_dissipation,
+    two_point_loaded,
+)
 
 INF = np.inf
 COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
@@ -380,3 +387,101 @@ def test_three_point_stiffness_against_the_numpy_minimiser(open_contact):
     eps = [minimise_dissipation(dbeta, force, TABLE1, push=p).velocity_deviation
            for p in (-2.0, 2.0)]
     assert_allclose(k[0], 4.0 / (eps[1] - eps[0]), rtol=0.01)
+
+
+def _loaded_minimum(dbeta, force, push, braking_sum, start, nodes=(48, 192)):
+    """min over x = (v_B, Omega_x R, Omega_y R) / v of D + mu_bb S R |Omega_perp| - P v_B
+    (T1 of three_point_coefficients) by SciPy's BFGS on the independent NumPy quadrature of
+    D (dissipated_power with ``nodes``, exact gradient; D is smooth where all three contacts
+    slip), from ``start``; returns (epsilon, the minimum [W])."""
+    v, radius = 0.01, TABLE1.ball_radius
+
+    def phi(x):
+        d, g = dissipated_power(x[0] * v, np.array([x[1], x[2], 0.0]) * v / radius, dbeta,
+                                force, TABLE1, groove_velocity=v, gradient=True, nodes=nodes)
+        spin = np.hypot(x[1], x[2])
+        val = d + 0.1 * braking_sum * v * spin - push * x[0] * v
+        grad = np.array([(g[0] - push) * v, g[1] * v / radius + 0.1 * braking_sum * v
+                         * x[1] / spin, g[2] * v / radius + 0.1 * braking_sum * v * x[2] / spin])
+        return val, grad
+
+    res = minimize(phi, start, jac=True, method="BFGS", options={"gtol": 1e-12, "maxiter": 500})
+    return 2.0 * res.x[0] - 1.0, res.fun
+
+
+@pytest.mark.parametrize("open_contact", [1, 3])
+def test_three_point_coefficients_against_the_numpy_minimiser(open_contact):
+    # The three-point ball of the test above (case (a), rho = -0.8, BR or TL open; all three
+    # contacts slip). Its coefficients (T2, T3 in the Notes of three_point_coefficients)
+    # against the independent minimiser of D + mu_bb S R |Omega| - P v_B (_loaded_minimum,
+    # NumPy quadrature, SciPy BFGS):
+    # * c = d(eps)/dS: secant over S = -0.5 .. +0.5 N (S < 0 is the same smooth minimum with
+    #   the braking reversed) on a fine quadrature (192 x 768 nodes: the S-response is small,
+    #   5e-5 per N, and curves beyond ~1 N, where a contact starts to stick: eps 2.03 % at
+    #   S = 0, 0.22 % at S = 20 N); measured 4.604e-5 against 4.622e-5 /N (BR open),
+    #   -1.822e-4 against -1.840e-4 (TL open); 2 %;
+    # * b = dF_c/dS with v F_c = min (power balance): the same secant of the minimum
+    #   (0.067650 against 0.067649); 1e-3;
+    # * a = dF_c/dP: secant of the minimum over P = -2 .. +2 N (-0.510129 against -0.510128);
+    #   1e-3;
+    # * P_cap: min over Omega of D sliding at 1 m/s between grooves at rest (v_B / v = 1e8,
+    #   Nelder-Mead): the point-contact value is a lower bound (Jensen) within 1 % of it
+    #   (51.785 against 51.803 N, 50.008 against 50.027 N);
+    # * S_cap: |dD/dOmega| of a non-rotating ball sliding at v / 2 (the grooves' moment; the
+    #   planar uniform slip makes it exact) over mu_bb R; 1e-6.
+    theta = np.radians(2.0)
+    dbeta = np.array([-theta, theta, 0.0, 0.0])
+    force = np.array(paired_forces(-0.8 * 200.0, 200.0))
+    force[open_contact] = 0.0
+    cols, rate = three_point_coefficients(dbeta[None], force[None], TABLE1, ball_friction=0.1)
+    cols = {name: value[0] for name, value in cols.items()}
+    v, radius = 0.01, TABLE1.ball_radius
+    start = np.array([0.5 * (1.0 + cols["free_rolling_velocity_deviation"]), *rate[0]])
+    eps_s = [_loaded_minimum(dbeta, force, 0.0, s, start, (192, 768)) for s in (-0.5, 0.5)]
+    assert_allclose(cols["braking_sensitivity"], eps_s[1][0] - eps_s[0][0], rtol=0.02)
+    assert_allclose(cols["carriage_force_per_neighbour_force"],
+                    (eps_s[1][1] - eps_s[0][1]) / v, rtol=1e-3)
+    phi_p = [_loaded_minimum(dbeta, force, p, 0.0, start)[1] for p in (-2.0, 2.0)]
+    assert_allclose(cols["carriage_force_per_push"], (phi_p[1] - phi_p[0]) / (4.0 * v),
+                    rtol=1e-3)
+    free = _loaded_minimum(dbeta, force, 0.0, 0.0, start)
+    assert_allclose(cols["free_rolling_velocity_deviation"], free[0], atol=2e-5)
+    assert_allclose(cols["free_rolling_carriage_force"], free[1] / v, rtol=1e-3)
+
+    def sliding(w):
+        return dissipated_power(1.0, np.array([w[0], w[1], 0.0]) / radius, dbeta, force,
+                                TABLE1, groove_velocity=1e-8)
+
+    best = min((minimize(sliding, w0, method="Nelder-Mead",
+                         options={"xatol": 1e-10, "fatol": 1e-12, "maxiter": 4000})
+                for w0 in ([0.0, 0.0], [1.0, 0.0], [0.5, 0.5], [0.5, -0.5])),
+               key=lambda r: r.fun)
+    assert cols["traction_capacity"] <= best.fun * (1.0 + 1e-9)
+    assert_allclose(cols["traction_capacity"], best.fun, rtol=0.01)
+    _, grad = dissipated_power(0.5 * v, np.zeros(3), dbeta, force, TABLE1, groove_velocity=v,
+                               gradient=True)
+    assert_allclose(cols["braking_capacity"], np.hypot(grad[1], grad[2]) / (0.1 * radius),
+                    rtol=1e-6)
+
+
+def test_three_point_ball_in_the_train_columns():
+    # regime_creep_coefficients gives a three-point ball the columns of
+    # three_point_coefficients (bit for bit) and its actual rotation, where before it left them
+    # NaN (the creep model has none with an open contact), and pair_braking takes its pairs'
+    # braking from the rotations, mu_bb |Omega + Omega'| R / v (exact formula, 1e-15).
+    theta = np.radians(2.0)
+    dbeta = np.array([[-theta, theta, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+    force = np.array([paired_forces(-0.8 * 200.0, 200.0), [141.4] * 4])
+    force[0, 1] = 0.0
+    load = np.full((2, len(LOAD_COLUMNS)), np.nan)
+    load[1] = np.arange(len(LOAD_COLUMNS))
+    out = regime_creep_coefficients(load, [BALL_THREE_POINT, BALL_REGIME_A], dbeta, force,
+                                    TABLE1, ball_friction=0.1)
+    cols, rate = three_point_coefficients(dbeta[:1], force[:1], TABLE1, ball_friction=0.1)
+    for name, value in cols.items():
+        assert out[0, COL[name]] == value[0]
+    assert np.isfinite(out[0]).all()
+    assert_array_equal(out[0, COL["rolling_rate_x"]:COL["regime"]], rate[0])
+    assert_array_equal(out[1, :len(LOAD_COLUMNS)], load[1])
+    spin = out[:, COL["rolling_rate_x"]:COL["regime"]]
+    assert_allclose(pair_braking(out, 0.1), [0.1 * np.hypot(*spin.sum(axis=0))], rtol=1e-15)

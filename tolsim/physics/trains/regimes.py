@@ -4,10 +4,10 @@ A ball in regime A creeps (finite K); a ball in regime B is stiff (K from its st
 3e4 N and more); an exactly two-point ball is an *anchor* (K = inf: it keeps its speed under
 a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilon of its
 own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
-adds each ball's rolling angular velocity; :func:`pair_braking` gives the ball-ball friction
-of a pair from the two balls' actual rotations. The cluster rule with anchors is in the Notes of
-:func:`tolsim.physics.trains.cluster_velocities`. :func:`three_point_stiffness` gives a
-three-point ball's K from its own minimum of D (not yet used by the trains).
+adds each ball's rolling angular velocity; a three-point ball creeps with the coefficients of
+its own minimum of D (:func:`three_point_coefficients`); :func:`pair_braking` gives the
+ball-ball friction of a pair from the two balls' actual rotations. The cluster rule with
+anchors is in the Notes of :func:`tolsim.physics.trains.cluster_velocities`.
 """
 
 import numpy as np
@@ -18,14 +18,23 @@ from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, Bearing
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.velocity._full_kernels import ball_loads_kernel
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
-from tolsim.physics.velocity.ball_loads import ball_contact_slip
+from tolsim.physics.velocity.ball_loads import (
+    ball_contact_slip,
+    point_traction_capacity,
+    stall_moment,
+)
 from tolsim.physics.velocity.full import (
     DEFAULT_ANGULAR_NODES,
     DEFAULT_RADIAL_NODES,
     full,
     quadrature_grid,
 )
-from tolsim.physics.velocity.models import BALL_REGIME_B, BALL_TWO_POINT, BALL_UNLOADED
+from tolsim.physics.velocity.models import (
+    BALL_REGIME_B,
+    BALL_THREE_POINT,
+    BALL_TWO_POINT,
+    BALL_UNLOADED,
+)
 
 #: Columns of a train's per-ball coefficients: those of the creep model
 #: (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`), then the ball's rolling angular
@@ -182,13 +191,14 @@ def stick_line_stiffness(contact_angle_deviation, normal_force, bearing: Bearing
 
 
 @pjit
-def minimum_stiffness_kernel(beta, force, state, a, b, cin, sin_, win, xo, wo, tr, wr, step,
-                             out):
-    """K = (v / 2) / (H^-1)_vv [N / mu] at a smooth minimum of D; unchecked.
+def minimum_compliance_kernel(beta, force, state, a, b, cin, sin_, win, xo, wo, tr, wr, step,
+                              out):
+    """The v_B row of H^-1 [1 / N] at a smooth minimum of D; unchecked.
 
     ``state`` (n, 3): (v_B, Omega_x R, Omega_y R) / v at the minimum; H the Hessian of D over
     them by central differences of its gradient -(F_z, M_x, M_y) (R = v = mu = 1) over
-    +- ``step``, symmetrised.
+    +- ``step``, symmetrised; ``out`` (n, 3) its inverse's first row ((H^-1)_vv, (H^-1)_vx,
+    (H^-1)_vy), NaN where H is singular.
     """
     for n in prange(beta.shape[0]):
         px = np.empty(4)
@@ -220,11 +230,54 @@ def minimum_stiffness_kernel(beta, force, state, a, b, cin, sin_, win, xo, wo, t
                 m = 0.5 * (h[i, j] + h[j, i])
                 h[i, j] = m
                 h[j, i] = m
-        # (H^-1)_00 = det(H_11..22) / det(H)
-        minor = h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1]
-        det = (h[0, 0] * minor - h[0, 1] * (h[1, 0] * h[2, 2] - h[1, 2] * h[2, 0])
-               + h[0, 2] * (h[1, 0] * h[2, 1] - h[1, 1] * h[2, 0]))
-        out[n] = 0.5 * det / minor if minor != 0.0 else np.nan
+        # the first row of the adjugate over det(H)
+        c0 = h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1]
+        c1 = h[0, 2] * h[2, 1] - h[0, 1] * h[2, 2]
+        c2 = h[0, 1] * h[1, 2] - h[0, 2] * h[1, 1]
+        det = h[0, 0] * c0 + h[1, 0] * c1 + h[2, 0] * c2
+        for i in range(3):
+            out[n, i] = np.nan
+        if det != 0.0 and np.isfinite(det):
+            out[n, 0] = c0 / det
+            out[n, 1] = c1 / det
+            out[n, 2] = c2 / det
+
+
+@pjit
+def point_capacity_kernel(beta, force, out):
+    """(min Phi_0, M_stall / (mu R_B)) of point contacts per ball [N / mu]; unchecked.
+
+    :func:`tolsim.physics.velocity.ball_loads.point_traction_capacity` without braking and
+    :func:`tolsim.physics.velocity.ball_loads.stall_moment`, the creep model's capacities
+    (:func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`), for any number of
+    loaded contacts (an open contact has F = 0 and drops out of both).
+    """
+    for n in prange(beta.shape[0]):
+        out[n, 0] = point_traction_capacity(beta[n], force[n], 0.0, 1.0, 0.0)[0]
+        out[n, 1] = stall_moment(beta[n], force[n])
+
+
+def _three_point_solve(dbeta, force, bearing):
+    """The free solve of three-point balls and what their coefficients need.
+
+    Returns (K on the stick line, FullResult, the v_B row of H^-1 at a smooth minimum [1/N,
+    over mu], the state (v_B, Omega_x R, Omega_y R) / v); see :func:`three_point_stiffness`.
+    """
+    stick, res = stick_line_stiffness(dbeta, force, bearing)
+    v = 0.01
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    beta = bearing.nominal_contact_angle + dbeta
+    a = hc.semi_major_coefficient * np.cbrt(force) / bearing.ball_radius
+    b = hc.semi_minor_coefficient * np.cbrt(force) / bearing.ball_radius
+    state = np.empty((len(dbeta), 3))
+    state[:, 0] = 0.5 * (1.0 + np.asarray(res.velocity_deviation))
+    state[:, 1:] = np.asarray(res.angular_velocity)[:, :2] * bearing.ball_radius / v
+    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
+    row = np.empty((len(dbeta), 3))
+    minimum_compliance_kernel(beta, force, np.ascontiguousarray(state), a, b, *grid,
+                              STICK_STEP, row)
+    return stick, res, row, state
 
 
 def three_point_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
@@ -256,27 +309,113 @@ def three_point_stiffness(contact_angle_deviation, normal_force, bearing: Bearin
     regime) the minimum sits on the stick line and K is regime B's, (v / 2) D''_others on
     it (:func:`stick_line_stiffness`). (R2) is regime B's (R1) with the rotation free instead
     of held on the stick line; for a four-point ball in regime A it is the creep stiffness of
-    the exact model.
+    the exact model. The other coefficients of such a ball are those of
+    :func:`three_point_coefficients`.
     """
     dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
     force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    stick, res = stick_line_stiffness(dbeta, force, bearing)
-    v = 0.01
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / bearing.ball_radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / bearing.ball_radius
-    state = np.empty((len(dbeta), 3))
-    state[:, 0] = 0.5 * (1.0 + np.asarray(res.velocity_deviation))
-    state[:, 1:] = np.asarray(res.angular_velocity)[:, :2] * bearing.ball_radius / v
-    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
-    out = np.empty(len(dbeta))
-    minimum_stiffness_kernel(beta, force, np.ascontiguousarray(state), a, b, *grid,
-                             STICK_STEP, out)
-    smooth = bearing.friction_coefficient * out
+    stick, res, row, _ = _three_point_solve(dbeta, force, bearing)
+    smooth = bearing.friction_coefficient * 0.5 / row[:, 0]
     code = np.asarray(res.regime)
     return np.where(code == 2, stick, np.where(code == 1, smooth, np.nan)), res
+
+
+def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
+                             *, ball_friction=0.1):
+    """The creep coefficients of three-point balls from their own minimum of D (issue 25).
+
+    Parameters
+    ----------
+    contact_angle_deviation, normal_force : array_like, shape (n, 4)
+        dbeta_i [rad], F_i [N]; one force 0 (the open contact).
+    bearing : Bearing
+    ball_friction : float
+        mu_bb [-].
+
+    Returns
+    -------
+    columns : dict of str to ndarray (n,)
+        The :data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS` at zero load (K [N], c
+        [1/N], F_0 [N], a, b [-], P_cap, S_cap [N]); NaN where ``full`` does not certify
+        the ball.
+    rate : ndarray, shape (n, 2)
+        Omega_perp R_B / v of its minimum (its actual rotation).
+
+    Notes
+    -----
+    **The ball under loads.** With neighbour forces Q_back, Q_front (push P = Q_back - Q_front,
+    braking sum S = Q_back + Q_front) the state x = (v_B, Omega_x, Omega_y) minimises
+
+        Phi(x; P, S) = D(x) + mu_bb S R_B |Omega_perp| - P v_B,                       (T1)
+
+    D less the work of the push plus the ball-ball friction's dissipation, whose moment
+    -mu_bb S R_B Omega_perp / |Omega_perp| lies along the ball's own axis (Notes of
+    :class:`tolsim.physics.velocity.ball_loads.BallLoadFields`); D is that of the three loaded
+    contacts (the open one carries nothing). Every coefficient is a derivative of the minimiser
+    x*(P, S) or of the minimum Phi*(P, S) at P = S = 0:
+
+    * **epsilon, F_0**: those of the free minimum (:func:`tolsim.physics.velocity.full.full`,
+      certified: smooth, or on a stick line).
+    * **K and c.** At a smooth minimum (all three contacts slip) grad Phi = 0 gives
+      H dx = e_v dP - mu_bb R_B g dS with g = (0, Omega_perp / |Omega_perp|), so
+
+          K = (v / 2) / (H^-1)_vv,   c = d(epsilon)/dS = -(2 / v) mu_bb R_B (H^-1 g)_v   (T2)
+
+      (R2 of :func:`three_point_stiffness`; H by central differences, ``STICK_STEP``). On a
+      stick line (one contact stuck) K is the line's and c = -mu_bb / K, as regime B's (R1 in
+      :func:`regime_creep_coefficients`).
+    * **a and b, exactly.** The power balance v F_c + P v_B = D + mu_bb S R_B |Omega_perp|
+      (F_c the carriage force) says v F_c = Phi*(P, S). Phi* is a minimum over x of functions
+      affine in (P, S), so (envelope theorem, at a kink too) dPhi*/dP = -v_B and
+      dPhi*/dS = mu_bb R_B |Omega_perp| at the minimiser:
+
+          a = dF_c/dP = -v_B / v = -(1 + epsilon) / 2,   b = dF_c/dS = mu_bb R_B |Omega_perp| / v
+                                                                                        (T3)
+
+      (-1/2 and mu_bb / 2 for the two-point ball; the creep model of regime A gives (T3) for its
+      own state: a = -(1 + epsilon) / 2 to round-off).
+    * **The capacities.** Phi is bounded below only while P < lim D / v_B for v_B -> inf, the
+      ball sliding between grooves at rest: P_cap = min over Omega of D(v_B = 1, Omega; V = 0)
+      (BallLoadFields, "Gross sliding"); the rotation stalls once mu_bb S R_B exceeds the
+      moment M_stall of the grooves on a ball that does not rotate, S_cap = M_stall /
+      (mu_bb R_B). Both as the creep model takes them for regime A: P_cap from point contacts
+      (:func:`tolsim.physics.velocity.ball_loads.point_traction_capacity`, a lower bound by
+      Jensen's inequality), M_stall from :func:`tolsim.physics.velocity.ball_loads.stall_moment`,
+      over the three loaded contacts (:func:`point_capacity_kernel`).
+
+    Not modelled: a stuck contact letting go under a push before P_cap (the stick line's K
+    then gives way to the smooth one), as in regime B.
+    """
+    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
+    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
+    stick, res, row, state = _three_point_solve(dbeta, force, bearing)
+    mu = bearing.friction_coefficient
+    code = np.asarray(res.regime)
+    smooth, stuck = code == 1, code == 2
+    spin = np.hypot(state[:, 1], state[:, 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = state[:, 1:] / spin[:, None]
+        k = np.where(stuck, stick, np.where(smooth, 0.5 * mu / row[:, 0], np.nan))
+        c = np.where(stuck, -ball_friction / k,
+                     -2.0 * ball_friction / mu * np.sum(row[:, 1:] * g, axis=1))
+    capacity = np.empty((len(dbeta), 2))
+    point_capacity_kernel(bearing.nominal_contact_angle + dbeta, force, capacity)
+    with np.errstate(divide="ignore"):
+        braking_capacity = (mu * capacity[:, 1] / ball_friction if ball_friction > 0
+                            else np.full(len(dbeta), np.inf))
+    eps = np.asarray(res.velocity_deviation, dtype=np.float64)
+    drag = np.asarray(res.drag_force, dtype=np.float64)
+    columns = {"free_rolling_velocity_deviation": eps, "creep_stiffness": k,
+               "braking_sensitivity": c, "carriage_force": drag,
+               "free_rolling_carriage_force": drag,
+               "carriage_force_per_push": -0.5 * (1.0 + eps),
+               "carriage_force_per_neighbour_force": ball_friction * spin,
+               "traction_capacity": mu * capacity[:, 0],
+               "braking_capacity": braking_capacity}
+    solved = smooth | stuck
+    columns = {name: np.where(solved, value, np.nan) for name, value in columns.items()}
+    rate = np.where(solved[:, None], state[:, 1:], np.nan)
+    return columns, rate
 
 
 def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
@@ -331,6 +470,12 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     modelled: the push at which the stuck contact lets go before P_cap (the ball then
     creeps as in regime A).
 
+    **A three-point ball** (one contact open) creeps with the coefficients of its own minimum
+    of D (:func:`three_point_coefficients`): K and c from the Hessian there (smooth) or from
+    its stick line (one contact stuck), a = -(1 + epsilon) / 2 and b = mu_bb R_B
+    |Omega_perp| / v exactly (envelope theorem), the capacities of its three loaded contacts,
+    and its actual rotation.
+
     **An unloaded ball** has no raceway contact, so no raceway friction: F_c = 0 whatever the
     loads (F_0 = a = b = 0), no creep resistance (K = 0: it moves with whatever it touches,
     a null weight in the cluster rule) and nothing to slide on (capacities inf).
@@ -342,14 +487,15 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     out[:, :len(LOAD_COLUMNS)] = load
     two = regime == BALL_TWO_POINT
     stick = regime == BALL_REGIME_B
+    three = regime == BALL_THREE_POINT
     pushed = regime == BALL_UNLOADED
-    if not (two.any() or stick.any() or pushed.any()):
+    if not (two.any() or stick.any() or three.any() or pushed.any()):
         return out
     dbeta = np.asarray(contact_angle_deviation, dtype=np.float64).reshape(n, 4)
     force = np.asarray(normal_force, dtype=np.float64).reshape(n, 4)
     mu = bearing.friction_coefficient
     rate = np.full((n, 2), np.nan)
-    soft = ~(two | stick | pushed)
+    soft = ~(two | stick | three | pushed)
     if soft.any():
         rate[soft] = rigid_rolling_rate(dbeta[soft], force[soft], bearing)
     if two.any():
@@ -377,6 +523,11 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
         out[rows, _COL["free_rolling_carriage_force"]] = res.drag_force
         out[rows, _COL["carriage_force"]] = res.drag_force
         rate[stick] = res.angular_velocity[:, :2] * bearing.ball_radius / 0.01
+    if three.any():
+        columns, rate[three] = three_point_coefficients(dbeta[three], force[three], bearing,
+                                                        ball_friction=ball_friction)
+        for name, value in columns.items():
+            out[three, _COL[name]] = value
     if pushed.any():
         values = {"free_rolling_velocity_deviation": np.nan, "creep_stiffness": PUSHED_STIFFNESS,
                   "braking_sensitivity": 0.0, "carriage_force": 0.0,
@@ -404,8 +555,10 @@ def pair_braking(coefficients, ball_friction=0.1):
     -------
     ndarray, shape (..., n - 1)
         B_j, so that pair j adds k_j Q_j = ((a_{j+1} - a_j) + B_j) Q_j to the carriage
-        friction: b_j + b_{j+1} (bit for bit) where both balls are in regime A,
-        mu_bb |Omega_j + Omega_{j+1}|_perp R_B / v where one is not (regime B, two-point),
+        friction: b_j + b_{j+1} (bit for bit) where both balls are in regime A (four-point,
+        every contact slipping),
+        mu_bb |Omega_j + Omega_{j+1}|_perp R_B / v where one is not (regime B, three- or
+        two-point),
         0 where one is pushed along.
 
     Notes
@@ -439,7 +592,7 @@ def pair_braking(coefficients, ball_friction=0.1):
     b = coefficients[..., _COL["carriage_force_per_neighbour_force"]]
     base = b[..., :-1] + b[..., 1:]
     code = coefficients[..., _COL["regime"]]
-    other = (code == BALL_REGIME_B) | (code == BALL_TWO_POINT)
+    other = (code == BALL_REGIME_B) | (code == BALL_TWO_POINT) | (code == BALL_THREE_POINT)
     pushed = coefficients[..., _COL["creep_stiffness"]] == PUSHED_STIFFNESS
     mixed = other[..., :-1] | other[..., 1:]
     null = pushed[..., :-1] | pushed[..., 1:]
@@ -454,6 +607,6 @@ def pair_braking(coefficients, ball_friction=0.1):
 
 __all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "STICK_STEP", "TRAIN_COLUMNS",
            "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
-           "minimum_stiffness_kernel", "stick_line_stiffness", "stick_line_stiffness_kernel",
-           "three_point_stiffness",
+           "minimum_compliance_kernel", "point_capacity_kernel", "stick_line_stiffness",
+           "stick_line_stiffness_kernel", "three_point_coefficients", "three_point_stiffness",
            "two_point_rolling_rate"]
