@@ -23,6 +23,7 @@ from tolsim.physics.trains import (
 )
 from tolsim.physics.trains.regimes import (
     TRAIN_COLUMNS,
+    directional_braking,
     pair_braking,
     regime_creep_coefficients,
     rigid_rolling_rate,
@@ -485,3 +486,37 @@ def test_three_point_ball_in_the_train_columns():
     assert_array_equal(out[1, :len(LOAD_COLUMNS)], load[1])
     spin = out[:, COL["rolling_rate_x"]:COL["regime"]]
     assert_allclose(pair_braking(out, 0.1), [0.1 * np.hypot(*spin.sum(axis=0))], rtol=1e-15)
+
+
+def test_braking_along_the_actual_rotations_in_the_train_rule():
+    # Issue 25's example: a regime-A ball (nominal, 0.707 v / R_B about x) behind a two-point
+    # ball (0.5 v / R_B tilted by 45 deg). Their contact brakes both along W_hat = (1.0607,
+    # -0.3536) / 1.118, so the A ball's epsilon responds with c_front = c (Omega_hat .
+    # W_hat) = 0.9487 c (T4 in the Notes of directional_braking), not c: it pushes the anchor
+    # with Q = eps / (1 / K - 0.9487 c) (eq. 1 of cluster_velocities with the anchor at 0;
+    # exact up to rounding, 1e-12). A large c (2e-4 / N) makes the difference 9 %.
+    k, c, eps = 700.0, 2e-4, 2e-3
+    load = np.full((2, len(LOAD_COLUMNS)), np.nan)
+    load[0] = 0.0
+    load[0, COL["creep_stiffness"]], load[0, COL["braking_sensitivity"]] = k, c
+    dbeta = np.zeros((2, 4))
+    force = np.array([[141.4] * 4, [141.4, 0.0, 141.4, 0.0]])
+    out = regime_creep_coefficients(load, [BALL_REGIME_A, BALL_TWO_POINT], dbeta, force,
+                                    TABLE1, ball_friction=0.1)
+    assert_allclose(out[:, COL["rolling_rate_x"]:COL["regime"]],
+                    [[0.5 / np.cos(np.pi / 4), 0.0], [0.5 * np.sin(np.pi / 4), -0.5 * np.sin(
+                        np.pi / 4)]], rtol=1e-12)
+    stiffness, braking = directional_braking(out[None], [[k, INF]], [[c, 0.0]])
+    along = np.array([1.0607, -0.3536]) / 1.118  # W_hat, rounded as in the issue
+    w, q = cluster_velocities([[eps, 0.0]], stiffness, [[True]], braking)
+    assert_allclose(q, [[eps / (1.0 / k - c * along[0])]], rtol=1e-4)  # W_hat's rounding
+    cos = (0.5 / np.cos(np.pi / 4) + 0.5 * np.sin(np.pi / 4)) / np.hypot(
+        0.5 / np.cos(np.pi / 4) + 0.5 * np.sin(np.pi / 4), 0.5 * np.sin(np.pi / 4))
+    assert_allclose(q, [[eps / (1.0 / k - c * cos)]], rtol=1e-12)
+    assert_array_equal(w, [[0.0, 0.0]])
+    # the same ball between two regime-A balls keeps its own-axis c, bit for bit
+    same = regime_creep_coefficients(np.stack([load[0], load[0]]), [BALL_REGIME_A] * 2,
+                                     np.zeros((2, 4)), np.full((2, 4), 141.4), TABLE1)
+    kk, cc = np.array([[k, k]]), np.array([[c, c]])
+    got = directional_braking(same[None], kk, cc)
+    assert got[0] is kk and got[1] is cc

@@ -38,9 +38,13 @@ from tolsim.physics.velocity.models import (
 
 #: Columns of a train's per-ball coefficients: those of the creep model
 #: (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`), then the ball's rolling angular
-#: velocity Omega_perp R_B / v (x and y; NaN where no ball of the batch needs it) and its
-#: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only).
-TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime")
+#: velocity Omega_perp R_B / v (x and y; NaN where no ball of the batch needs it), its
+#: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only) and its
+#: braking vector gamma [1/N] (x and y, NaN as the rates): d(epsilon)/dQ of a neighbour force Q
+#: whose friction moment lies along the unit vector u is gamma . u (Notes of
+#: :func:`directional_braking`).
+TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime",
+                 "braking_vector_x", "braking_vector_y")
 #: Creep stiffness of an anchor and of a ball pushed along [N].
 ANCHOR_STIFFNESS, PUSHED_STIFFNESS = np.inf, 0.0
 #: Step along the stick line for its curvature, a fraction of v.
@@ -336,8 +340,9 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
     -------
     columns : dict of str to ndarray (n,)
         The :data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS` at zero load (K [N], c
-        [1/N], F_0 [N], a, b [-], P_cap, S_cap [N]); NaN where ``full`` does not certify
-        the ball.
+        [1/N], F_0 [N], a, b [-], P_cap, S_cap [N]) and the braking vector gamma
+        (``braking_vector_x``, ``_y`` [1/N], c = gamma . Omega_perp / |Omega_perp|); NaN
+        where ``full`` does not certify the ball.
     rate : ndarray, shape (n, 2)
         Omega_perp R_B / v of its minimum (its actual rotation).
 
@@ -361,9 +366,12 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
 
           K = (v / 2) / (H^-1)_vv,   c = d(epsilon)/dS = -(2 / v) mu_bb R_B (H^-1 g)_v   (T2)
 
-      (R2 of :func:`three_point_stiffness`; H by central differences, ``STICK_STEP``). On a
-      stick line (one contact stuck) K is the line's and c = -mu_bb / K, as regime B's (R1 in
-      :func:`regime_creep_coefficients`).
+      (R2 of :func:`three_point_stiffness`; H by central differences, ``STICK_STEP``), and
+      for a moment along any unit u the braking vector gamma = -(2 / v) mu_bb R_B
+      ((H^-1)_vx, (H^-1)_vy), c = gamma . g (:func:`directional_braking`). On a stick line
+      (one contact stuck) K is the line's and c = -mu_bb / K, as regime B's (R1 in
+      :func:`regime_creep_coefficients`), and gamma = c g (only the moment's component
+      along the line does work on it).
     * **a and b, exactly.** The power balance v F_c + P v_B = D + mu_bb S R_B |Omega_perp|
       (F_c the carriage force) says v F_c = Phi*(P, S). Phi* is a minimum over x of functions
       affine in (P, S), so (envelope theorem, at a kink too) dPhi*/dP = -v_B and
@@ -396,8 +404,9 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
     with np.errstate(divide="ignore", invalid="ignore"):
         g = state[:, 1:] / spin[:, None]
         k = np.where(stuck, stick, np.where(smooth, 0.5 * mu / row[:, 0], np.nan))
-        c = np.where(stuck, -ball_friction / k,
-                     -2.0 * ball_friction / mu * np.sum(row[:, 1:] * g, axis=1))
+        gamma = np.where(stuck[:, None], (-ball_friction / k)[:, None] * g,
+                         -2.0 * ball_friction / mu * row[:, 1:])
+        c = np.where(stuck, -ball_friction / k, np.sum(gamma * g, axis=1))
     capacity = np.empty((len(dbeta), 2))
     point_capacity_kernel(bearing.nominal_contact_angle + dbeta, force, capacity)
     with np.errstate(divide="ignore"):
@@ -411,7 +420,8 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
                "carriage_force_per_push": -0.5 * (1.0 + eps),
                "carriage_force_per_neighbour_force": ball_friction * spin,
                "traction_capacity": mu * capacity[:, 0],
-               "braking_capacity": braking_capacity}
+               "braking_capacity": braking_capacity,
+               "braking_vector_x": gamma[:, 0], "braking_vector_y": gamma[:, 1]}
     solved = smooth | stuck
     columns = {name: np.where(solved, value, np.nan) for name, value in columns.items()}
     rate = np.where(solved[:, None], state[:, 1:], np.nan)
@@ -476,6 +486,12 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     |Omega_perp| / v exactly (envelope theorem), the capacities of its three loaded contacts,
     and its actual rotation.
 
+    **The braking vector** gamma (:func:`directional_braking`): c Omega_perp / |Omega_perp|
+    in regime A (the creep model gives the response to a moment along the ball's own axis
+    only; the rest, the response to a tilt of the moment, is O(dbeta) and vanishes for a
+    mirror-symmetric ball, whose v_B is even in the tilt) and in regime B (exact on the stick
+    line), the full vector of (T2) for a three-point ball, 0 for an anchor or a pushed ball.
+
     **An unloaded ball** has no raceway contact, so no raceway friction: F_c = 0 whatever the
     loads (F_0 = a = b = 0), no creep resistance (K = 0: it moves with whatever it touches,
     a null weight in the cluster rule) and nothing to slide on (capacities inf).
@@ -495,6 +511,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     force = np.asarray(normal_force, dtype=np.float64).reshape(n, 4)
     mu = bearing.friction_coefficient
     rate = np.full((n, 2), np.nan)
+    gamma = np.zeros((n, 2))
     soft = ~(two | stick | three | pushed)
     if soft.any():
         rate[soft] = rigid_rolling_rate(dbeta[soft], force[soft], bearing)
@@ -528,6 +545,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
                                                         ball_friction=ball_friction)
         for name, value in columns.items():
             out[three, _COL[name]] = value
+        gamma[three] = out[three, _COL["braking_vector_x"]:]
     if pushed.any():
         values = {"free_rolling_velocity_deviation": np.nan, "creep_stiffness": PUSHED_STIFFNESS,
                   "braking_sensitivity": 0.0, "carriage_force": 0.0,
@@ -538,7 +556,92 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
             out[pushed, _COL[name]] = value
     out[:, _COL["rolling_rate_x"]:_COL["regime"]] = rate
     out[:, _COL["regime"]] = regime
+    # the own-axis response of the creep model (regime A) and of a stick line (regime B)
+    axial = soft | stick
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gamma[axial] = (out[axial, _COL["braking_sensitivity"], None] * rate[axial]
+                        / np.hypot(rate[axial, 0], rate[axial, 1])[:, None])
+    out[:, _COL["braking_vector_x"]:] = gamma
     return out
+
+
+def directional_braking(coefficients, stiffness, braking):
+    """The train rule's K and c of balls braked along their pairs' actual rotations.
+
+    Parameters
+    ----------
+    coefficients : ndarray, shape (..., n, len(TRAIN_COLUMNS))
+        The train columns of the balls of trains (or of a carriage track's slots).
+    stiffness, braking : ndarray, shape (..., n)
+        K [N] and c [1/N] of the train rule (NaN K: unusable).
+
+    Returns
+    -------
+    stiffness, braking : ndarray, shape (..., n)
+        The inputs themselves where no pair holds a ball in regime B, three- or two-point
+        (regime A unchanged, bit for bit); else K', c' of the Notes for the soft balls of
+        such pairs (NaN K', c' = 0 where a compliance is not positive: unusable).
+
+    Notes
+    -----
+    The friction moment of pair j on each of its balls is -mu_bb Q_j R_B W_hat_j, W_hat_j
+    the direction of W_j = Omega_j + Omega_{j+1} (Notes of :func:`pair_braking`), not of the
+    ball's own axis. A ball's epsilon responds to a moment along the unit u with gamma . u
+    per newton of Q (``braking_vector``; gamma . Omega_hat = c), so ball i rolls at
+
+        w_i = epsilon_i + Q_{i-1} (1 / K_i + c_back) - Q_i (1 / K_i - c_front),
+        c_back = gamma_i . W_hat_{i-1},   c_front = gamma_i . W_hat_i,                   (T4)
+
+    instead of eq. (1) of :func:`tolsim.physics.trains.cluster_velocities` with one c. (T4)
+    is eq. (1) with
+
+        1 / K' = 1 / K + (c_back - c_front) / 2,   c' = (c_back + c_front) / 2,
+
+    (the same compliances 1/K' + c' = 1/K + c_back to a push from behind and 1/K' - c' =
+    1/K - c_front from in front), so the cluster rule and the step projection take (K', c')
+    unchanged; they need both compliances positive, |c'| K' < 1. Between two balls in regime
+    A, or next to a ball pushed along (whose slip direction the model does not resolve,
+    Notes of :func:`pair_braking`), the own-axis c is kept. The issue's example: a
+    regime-A ball (0.707 v / R_B about x) in front of a two-point ball (0.5 v / R_B tilted
+    by 45 deg) is braked along W_hat = (0.949, -0.316), so c_back = 0.949 c for a
+    mirror-symmetric ball, not c.
+    """
+    stiffness = np.asarray(stiffness, dtype=np.float64)
+    braking = np.asarray(braking, dtype=np.float64)
+    coefficients = np.asarray(coefficients, dtype=np.float64)
+    code = coefficients[..., _COL["regime"]]
+    other = (code == BALL_REGIME_B) | (code == BALL_TWO_POINT) | (code == BALL_THREE_POINT)
+    pushed = coefficients[..., _COL["creep_stiffness"]] == PUSHED_STIFFNESS
+    mixed = (other[..., :-1] | other[..., 1:]) & ~(pushed[..., :-1] | pushed[..., 1:])
+    if not mixed.any():
+        return stiffness, braking
+    rate = coefficients[..., _COL["rolling_rate_x"]:_COL["regime"]]
+    w = rate[..., :-1, :] + rate[..., 1:, :]
+    norm = np.hypot(w[..., 0], w[..., 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit = w / norm[..., None]
+    gamma = coefficients[..., _COL["braking_vector_x"]:]
+    use = mixed & np.isfinite(norm) & (norm > 0.0)
+    c_front = braking.copy()
+    c_back = braking.copy()
+    with np.errstate(invalid="ignore"):
+        front = np.sum(gamma[..., :-1, :] * unit, axis=-1)
+        back = np.sum(gamma[..., 1:, :] * unit, axis=-1)
+    c_front[..., :-1] = np.where(use, front, braking[..., :-1])
+    c_back[..., 1:] = np.where(use, back, braking[..., 1:])
+    soft = np.isfinite(stiffness) & (stiffness > 0.0)
+    changed = soft & ((c_front != braking) | (c_back != braking))
+    if not changed.any():
+        return stiffness, braking
+    with np.errstate(divide="ignore", invalid="ignore"):
+        push_back = 1.0 / stiffness + c_back
+        push_front = 1.0 / stiffness - c_front
+        k_new = 1.0 / (0.5 * (push_back + push_front))
+        c_new = 0.5 * (c_back + c_front)
+    usable = (push_back > 0.0) & (push_front > 0.0)
+    stiffness = np.where(changed, np.where(usable, k_new, np.nan), stiffness)
+    braking = np.where(changed, np.where(usable, c_new, 0.0), braking)
+    return stiffness, braking
 
 
 def pair_braking(coefficients, ball_friction=0.1):
@@ -606,7 +709,7 @@ def pair_braking(coefficients, ball_friction=0.1):
 
 
 __all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "STICK_STEP", "TRAIN_COLUMNS",
-           "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
+           "directional_braking", "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
            "minimum_compliance_kernel", "point_capacity_kernel", "stick_line_stiffness",
            "stick_line_stiffness_kernel", "three_point_coefficients", "three_point_stiffness",
            "two_point_rolling_rate"]
