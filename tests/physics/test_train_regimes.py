@@ -371,6 +371,15 @@ def test_regime_b_stiffness_against_the_numpy_minimiser():
     assert_allclose(k[0], 4.0 / (eps[1] - eps[0]), rtol=0.01)
 
 
+def _case_a_three_point(open_contact):
+    """Case (a) (bottom groove turned 2 deg, paired forces at rho = -0.8, N_y = 200 N) with
+    the contact ``open_contact`` open: (dbeta, F), shape (4,) each."""
+    theta = np.radians(2.0)
+    force = np.array(paired_forces(-0.8 * 200.0, 200.0))
+    force[open_contact] = 0.0
+    return np.array([-theta, theta, 0.0, 0.0]), force
+
+
 @pytest.mark.parametrize("open_contact", [1, 3])
 def test_three_point_stiffness_against_the_numpy_minimiser(open_contact):
     # A three-point ball: case (a) (theta = 2 deg on the bottom groove, paired forces at
@@ -379,10 +388,7 @@ def test_three_point_stiffness_against_the_numpy_minimiser(open_contact):
     # of three_point_stiffness) against the secant of the independent minimiser of D - P v_B
     # (minimise_dissipation) over P = -2 .. +2 N. Measured 623.6 N against 623.3 N (BR open)
     # and 549.1 N against 548.3 N (TL open); tolerance 1 %, as regime B's test above.
-    theta = np.radians(2.0)
-    dbeta = np.array([-theta, theta, 0.0, 0.0])
-    force = np.array(paired_forces(-0.8 * 200.0, 200.0))
-    force[open_contact] = 0.0
+    dbeta, force = _case_a_three_point(open_contact)
     k, res = three_point_stiffness(dbeta[None], force[None], TABLE1)
     assert res.regime[0] == 1  # all three contacts slip (FullResult.regime)
     eps = [minimise_dissipation(dbeta, force, TABLE1, push=p).velocity_deviation
@@ -430,10 +436,7 @@ def test_three_point_coefficients_against_the_numpy_minimiser(open_contact):
     #   (51.785 against 51.803 N, 50.008 against 50.027 N);
     # * S_cap: |dD/dOmega| of a non-rotating ball sliding at v / 2 (the grooves' moment; the
     #   planar uniform slip makes it exact) over mu_bb R; 1e-6.
-    theta = np.radians(2.0)
-    dbeta = np.array([-theta, theta, 0.0, 0.0])
-    force = np.array(paired_forces(-0.8 * 200.0, 200.0))
-    force[open_contact] = 0.0
+    dbeta, force = _case_a_three_point(open_contact)
     cols, rate = three_point_coefficients(dbeta[None], force[None], TABLE1, ball_friction=0.1)
     cols = {name: value[0] for name, value in cols.items()}
     v, radius = 0.01, TABLE1.ball_radius
