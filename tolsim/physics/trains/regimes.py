@@ -477,8 +477,15 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     stuck, equal angles: rigid, K = inf, an anchor.) F_0 and Omega are those of its certified
     minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are
     the creep model's (the loads split between the grooves about as in regime A). Not
-    modelled: the push at which the stuck contact lets go before P_cap (the ball then
-    creeps as in regime A).
+    modelled: the push at which the stuck contact lets go before P_cap. It is not
+    symmetric and can be small: in case (a) at rho = -0.9 (K = 32 698 N, eps 0.030 %) the
+    independent minimiser of D - P v_B (:func:`tolsim.physics.velocity.regimes.
+    minimise_dissipation`) keeps the stick for P from -20 N (secant K 32 057 N) to +2 N
+    (eps 0.0366 %), and lets it go by +3 N (eps 1.92 %; the least directional slope of
+    Phi off the stick line, from its exact line minimum, falls from 0.070 N at P = 0 to
+    0.0004 N at 3 N); at rho = -0.95 it holds from -43 N to +30 N and has let go by +38 N
+    (eps 7.8 %). Beyond it the ball leaves the stick line for the other branch (regime A's
+    larger epsilon), which a linear K cannot follow; the trains keep K_B up to P_cap.
 
     **A three-point ball** (one contact open) creeps with the coefficients of its own minimum
     of D (:func:`three_point_coefficients`): K and c from the Hessian there (smooth) or from
