@@ -21,15 +21,18 @@ from tolsim.physics.trains import (
     step_project_kernel,
     train_contact_constant,
 )
+from tolsim.physics.trains.ball_minimum import (
+    stick_line_stiffness,
+    stick_release,
+    three_point_coefficients,
+    three_point_stiffness,
+)
 from tolsim.physics.trains.regimes import (
     TRAIN_COLUMNS,
     directional_braking,
     pair_braking,
     regime_creep_coefficients,
     rigid_rolling_rate,
-    stick_line_stiffness,
-    three_point_coefficients,
-    three_point_stiffness,
     two_point_rolling_rate,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
@@ -523,3 +526,27 @@ def test_braking_along_the_actual_rotations_in_the_train_rule():
     kk, cc = np.array([[k, k]]), np.array([[c, c]])
     got = directional_braking(same[None], kk, cc)
     assert got[0] is kk and got[1] is cc
+
+
+def test_stick_release_against_the_numpy_minimiser():
+    # Case (a) at rho = -0.9 (regime B, BL stuck, K = 32 698 N, eps 0.030 %): the stuck
+    # contact lets go at P = +2.94 N and -22.60 N (stick_release, Notes). The independent
+    # minimiser of D - P v_B (minimise_dissipation) at 0.9 of those pushes stays on the stick
+    # line (eps = eps_0 + P / K to 10 % of P / K; measured 0.03858 % against 0.03857 % at
+    # +2.65 N, -0.0331 % against -0.0317 % at -20.3 N) and at 1.1 of them has left it for the
+    # other branch (|eps - eps_0| > 10 |P / K|; measured 2.09 % at +3.24 N, -2.60 % at
+    # -24.9 N). The creep model's capacity, about mu sum F = 56.6 N, is far above both.
+    theta = np.radians(2.0)
+    dbeta = np.array([-theta, theta, 0.0, 0.0])
+    force = np.array(paired_forces(-0.9 * 200.0, 200.0))
+    release, res = stick_release(dbeta[None], force[None], TABLE1)
+    k, _ = stick_line_stiffness(dbeta[None], force[None], TABLE1)
+    assert 2.0 < release[0, 0] < 3.0 and -25.0 < release[0, 1] < -20.0
+    eps0 = res.velocity_deviation[0]
+    for p in release[0]:
+        stuck = minimise_dissipation(dbeta, force, TABLE1, push=0.9 * p).velocity_deviation
+        assert abs(stuck - (eps0 + 0.9 * p / k[0])) < 0.1 * abs(0.9 * p / k[0])
+        free = minimise_dissipation(dbeta, force, TABLE1, push=1.1 * p).velocity_deviation
+        assert abs(free - eps0) > 10.0 * abs(1.1 * p / k[0])
+    single = stick_release(np.zeros((1, 4)), np.full((1, 4), 141.4), TABLE1)[0]
+    assert_array_equal(single, [[np.inf, -np.inf]])  # regime A: nothing sticks

@@ -15,11 +15,8 @@ from numpy.testing import assert_allclose
 
 from tolsim.io.config import parse_config
 from tolsim.physics.geometry import TABLE1, paired_forces
-from tolsim.physics.trains.regimes import (
-    rigid_rolling_rate,
-    three_point_coefficients,
-    two_point_rolling_rate,
-)
+from tolsim.physics.trains.ball_minimum import three_point_coefficients
+from tolsim.physics.trains.regimes import rigid_rolling_rate, two_point_rolling_rate
 from tolsim.physics.velocity.analytic import analytic
 from tolsim.physics.velocity.models import BALL_THREE_POINT, BALL_TWO_POINT, BALL_UNLOADED
 from tolsim.study.pipeline import track_friction as fr

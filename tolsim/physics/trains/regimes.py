@@ -5,30 +5,22 @@ A ball in regime A creeps (finite K); a ball in regime B is stiff (K from its st
 a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilon of its
 own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
 adds each ball's rolling angular velocity; a three-point ball creeps with the coefficients of
-its own minimum of D (:func:`three_point_coefficients`); :func:`pair_braking` gives the
+its own minimum of D (:mod:`tolsim.physics.trains.ball_minimum`, which also gives the pushes
+at which a stuck contact lets go, not used by the trains yet); :func:`pair_braking` gives the
 ball-ball friction of a pair from the two balls' actual rotations. The cluster rule with
 anchors is in the Notes of :func:`tolsim.physics.trains.cluster_velocities`.
 """
 
 import numpy as np
-from numba import prange
 
-from tolsim._jit import pjit
-from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, Bearing
-from tolsim.physics.hertz import hertz_constants
-from tolsim.physics.velocity._full_kernels import ball_loads_kernel
+from tolsim.physics.geometry import TABLE1, Bearing
+from tolsim.physics.trains.ball_minimum import (
+    contact_directions,
+    stick_line_stiffness,
+    three_point_coefficients,
+)
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
-from tolsim.physics.velocity.ball_loads import (
-    ball_contact_slip,
-    point_traction_capacity,
-    stall_moment,
-)
-from tolsim.physics.velocity.full import (
-    DEFAULT_ANGULAR_NODES,
-    DEFAULT_RADIAL_NODES,
-    full,
-    quadrature_grid,
-)
+from tolsim.physics.velocity.ball_loads import ball_contact_slip
 from tolsim.physics.velocity.models import (
     BALL_REGIME_B,
     BALL_THREE_POINT,
@@ -47,16 +39,8 @@ TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime",
                  "braking_vector_x", "braking_vector_y")
 #: Creep stiffness of an anchor and of a ball pushed along [N].
 ANCHOR_STIFFNESS, PUSHED_STIFFNESS = np.inf, 0.0
-#: Step along the stick line for its curvature, a fraction of v.
-STICK_STEP = 1e-5
 
 _COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
-
-
-def _contact_directions(contact_angle_deviation, bearing):
-    """p_i = (sx sin beta_i, sy cos beta_i), shape (n, 4, 2)."""
-    beta = bearing.nominal_contact_angle + np.asarray(contact_angle_deviation, dtype=float)
-    return np.stack([SIDE_SIGN_X * np.sin(beta), SIDE_SIGN_Y * np.cos(beta)], axis=-1)
 
 
 def rigid_rolling_rate(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
@@ -75,7 +59,7 @@ def rigid_rolling_rate(contact_angle_deviation, normal_force, bearing: Bearing =
     -------
     ndarray, shape (n, 2)
     """
-    p = _contact_directions(contact_angle_deviation, bearing)
+    p = contact_directions(contact_angle_deviation, bearing)
     on = (np.asarray(normal_force, dtype=float) > 0.0)[..., None]
     rows = np.concatenate([np.ones(p.shape[:-1] + (1,)), p[..., 1:2], -p[..., 0:1]], axis=-1)
     rows = rows * on
@@ -100,332 +84,11 @@ def two_point_rolling_rate(contact_angle_deviation, normal_force, bearing: Beari
     -------
     ndarray, shape (n, 2)
     """
-    p = _contact_directions(contact_angle_deviation, bearing)
+    p = contact_directions(contact_angle_deviation, bearing)
     force = np.asarray(normal_force, dtype=float)
     top = np.where(force[:, 2] > 0.0, 2, 3)
     pt = p[np.arange(len(p)), top]
     return 0.5 * np.stack([pt[:, 1], -pt[:, 0]], axis=-1)
-
-
-@pjit
-def stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo, tr, wr,
-                                step, out):
-    """K = (v / 2) d^2 D_others / dw^2 [N / mu] on the stick line of each ball; unchecked.
-
-    ``beta``, ``force`` (n, 4), ``stuck`` (n,) the stuck contact k (else inf: both contacts of
-    a pair stick, rigid), ``rate`` (n,) w [v] at the minimum, ``a``, ``b`` (n, 4) the
-    semi-axes [R]. Central difference of the line slope dD/dw = -(F_z + M . x_k) (the loads
-    of the other contacts, R = v = mu = 1) over w +- ``step``.
-    """
-    for n in prange(beta.shape[0]):
-        k = stuck[n]
-        if k < 0 or k > 3:
-            out[n] = np.inf
-            continue
-        px = np.empty(4)
-        py = np.empty(4)
-        others = np.empty(4)
-        for i in range(4):
-            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
-            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
-            others[i] = force[n, i] if i != k else 0.0
-        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        xx, xy = -py[k], px[k]
-        state = np.empty(4)
-        loads = np.empty(5)
-        contact = np.empty((4, 5))
-        zero = np.zeros(4)
-        slope = np.empty(2)
-        for side in range(2):
-            w = rate[n] + (step if side else -step)
-            state[0] = vgroove[k] + w
-            state[1] = w * xx
-            state[2] = w * xy
-            state[3] = 0.0
-            ball_loads_kernel(state, px, py, vgroove, others, a[n], b[n], 1.5 / np.pi, False,
-                              1.0, zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
-            slope[side] = -(loads[0] + loads[1] * xx + loads[2] * xy)
-        out[n] = 0.25 * (slope[1] - slope[0]) / step
-
-
-def stick_line_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
-    """Creep stiffness K [N] of balls in regime B: the curvature of D on their stick line.
-
-    Parameters
-    ----------
-    contact_angle_deviation, normal_force : array_like, shape (n, 4)
-
-    Returns
-    -------
-    k : ndarray (n,)
-        K [N]; inf where both contacts of a pair stick (rigid), NaN where ``full`` does not
-        certify the ball in regime B.
-    result : tolsim.physics.velocity.full.FullResult
-        The free solve (epsilon, F_0, Omega).
-
-    Notes
-    -----
-    On the stick line of contact k the states are v_B = V_k + w, Omega = (w / R) x_k, and a
-    push P moves the minimum of D_others(w) - P v_B to dD_others/dw = P; with
-    epsilon = 2 v_B / v - 1, K = dP/d(epsilon) = (v / 2) d^2 D_others / dw^2, by central
-    differences of the line slope (``STICK_STEP`` v; D_others is smooth there: the other
-    contacts slip). 3-5e4 N against 110-750 N in regime A (issue 25).
-    """
-    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
-    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    v = 0.01
-    res = full(dbeta, force, bearing, groove_velocity=v)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    radius = bearing.ball_radius
-    beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
-    stuck = np.asarray(res.stuck_contact, dtype=np.int64)
-    p = _contact_directions(dbeta, bearing)
-    k = np.clip(stuck, 0, 3)
-    xk = np.stack([-p[np.arange(len(p)), k, 1], p[np.arange(len(p)), k, 0]], axis=-1)
-    rate = np.sum(res.angular_velocity[:, :2] * radius / v * xk, axis=1)
-    out = np.empty(len(dbeta))
-    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
-    stick_line_stiffness_kernel(beta, force, stuck, np.ascontiguousarray(rate), a, b, *grid,
-                                STICK_STEP, out)
-    out = bearing.friction_coefficient * out
-    return np.where(np.asarray(res.regime) == 2, out, np.nan), res
-
-
-@pjit
-def minimum_compliance_kernel(beta, force, state, a, b, cin, sin_, win, xo, wo, tr, wr, step,
-                              out):
-    """The v_B row of H^-1 [1 / N] at a smooth minimum of D; unchecked.
-
-    ``state`` (n, 3): (v_B, Omega_x R, Omega_y R) / v at the minimum; H the Hessian of D over
-    them by central differences of its gradient -(F_z, M_x, M_y) (R = v = mu = 1) over
-    +- ``step``, symmetrised; ``out`` (n, 3) its inverse's first row ((H^-1)_vv, (H^-1)_vx,
-    (H^-1)_vy), NaN where H is singular.
-    """
-    for n in prange(beta.shape[0]):
-        px = np.empty(4)
-        py = np.empty(4)
-        for i in range(4):
-            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
-            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
-        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        x = np.empty(4)
-        loads = np.empty(5)
-        contact = np.empty((4, 5))
-        zero = np.zeros(4)
-        h = np.empty((3, 3))
-        for j in range(3):
-            for side in range(2):
-                for i in range(3):
-                    x[i] = state[n, i]
-                x[3] = 0.0
-                x[j] += step if side else -step
-                ball_loads_kernel(x, px, py, vgroove, force[n], a[n], b[n], 1.5 / np.pi, False,
-                                  1.0, zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
-                sign = 1.0 if side else -1.0
-                for i in range(3):
-                    if side == 0:
-                        h[i, j] = 0.0
-                    h[i, j] -= sign * loads[i] / (2.0 * step)
-        for i in range(3):
-            for j in range(i + 1, 3):
-                m = 0.5 * (h[i, j] + h[j, i])
-                h[i, j] = m
-                h[j, i] = m
-        # the first row of the adjugate over det(H)
-        c0 = h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1]
-        c1 = h[0, 2] * h[2, 1] - h[0, 1] * h[2, 2]
-        c2 = h[0, 1] * h[1, 2] - h[0, 2] * h[1, 1]
-        det = h[0, 0] * c0 + h[1, 0] * c1 + h[2, 0] * c2
-        for i in range(3):
-            out[n, i] = np.nan
-        if det != 0.0 and np.isfinite(det):
-            out[n, 0] = c0 / det
-            out[n, 1] = c1 / det
-            out[n, 2] = c2 / det
-
-
-@pjit
-def point_capacity_kernel(beta, force, out):
-    """(min Phi_0, M_stall / (mu R_B)) of point contacts per ball [N / mu]; unchecked.
-
-    :func:`tolsim.physics.velocity.ball_loads.point_traction_capacity` without braking and
-    :func:`tolsim.physics.velocity.ball_loads.stall_moment`, the creep model's capacities
-    (:func:`tolsim.physics.velocity.analytic.creep_coefficients_kernel`), for any number of
-    loaded contacts (an open contact has F = 0 and drops out of both).
-    """
-    for n in prange(beta.shape[0]):
-        out[n, 0] = point_traction_capacity(beta[n], force[n], 0.0, 1.0, 0.0)[0]
-        out[n, 1] = stall_moment(beta[n], force[n])
-
-
-def _three_point_solve(dbeta, force, bearing):
-    """The free solve of three-point balls and what their coefficients need.
-
-    Returns (K on the stick line, FullResult, the v_B row of H^-1 at a smooth minimum [1/N,
-    over mu], the state (v_B, Omega_x R, Omega_y R) / v); see :func:`three_point_stiffness`.
-    """
-    stick, res = stick_line_stiffness(dbeta, force, bearing)
-    v = 0.01
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / bearing.ball_radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / bearing.ball_radius
-    state = np.empty((len(dbeta), 3))
-    state[:, 0] = 0.5 * (1.0 + np.asarray(res.velocity_deviation))
-    state[:, 1:] = np.asarray(res.angular_velocity)[:, :2] * bearing.ball_radius / v
-    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
-    row = np.empty((len(dbeta), 3))
-    minimum_compliance_kernel(beta, force, np.ascontiguousarray(state), a, b, *grid,
-                              STICK_STEP, row)
-    return stick, res, row, state
-
-
-def three_point_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
-    """Creep stiffness K [N] of three-point balls from their own minimum of D (issue 25).
-
-    Parameters
-    ----------
-    contact_angle_deviation, normal_force : array_like, shape (n, 4)
-        One force 0 (the open contact).
-
-    Returns
-    -------
-    k : ndarray (n,)
-        K [N]; NaN where ``full`` does not certify the ball.
-    result : tolsim.physics.velocity.full.FullResult
-        The free solve (epsilon, F_0, Omega).
-
-    Notes
-    -----
-    A push P moves the minimum of D(x) - P v_B, x = (v_B, Omega_x, Omega_y), to
-    grad D = P e_v. Where the three contacts slip the minimum is smooth, dx/dP = H^-1 e_v with
-    H the Hessian of D there, so dv_B / dP = (H^-1)_vv and, with epsilon = 2 v_B / v - 1,
-
-        K = dP/d(epsilon) = (v / 2) / (H^-1)_vv = (v / 2) (H_vv - H_vw H_ww^-1 H_wv)   (R2)
-
-    the curvature of D along v_B with the rotation at its best (the Schur complement); H by
-    central differences of the loads of :func:`tolsim.physics.velocity._full_kernels.
-    ball_loads_kernel` (``STICK_STEP`` v). Where a heavy contact sticks (``full``'s stick
-    regime) the minimum sits on the stick line and K is regime B's, (v / 2) D''_others on
-    it (:func:`stick_line_stiffness`). (R2) is regime B's (R1) with the rotation free instead
-    of held on the stick line; for a four-point ball in regime A it is the creep stiffness of
-    the exact model. The other coefficients of such a ball are those of
-    :func:`three_point_coefficients`.
-    """
-    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
-    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    stick, res, row, _ = _three_point_solve(dbeta, force, bearing)
-    smooth = bearing.friction_coefficient * 0.5 / row[:, 0]
-    code = np.asarray(res.regime)
-    return np.where(code == 2, stick, np.where(code == 1, smooth, np.nan)), res
-
-
-def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
-                             *, ball_friction=0.1):
-    """The creep coefficients of three-point balls from their own minimum of D (issue 25).
-
-    Parameters
-    ----------
-    contact_angle_deviation, normal_force : array_like, shape (n, 4)
-        dbeta_i [rad], F_i [N]; one force 0 (the open contact).
-    bearing : Bearing
-    ball_friction : float
-        mu_bb [-].
-
-    Returns
-    -------
-    columns : dict of str to ndarray (n,)
-        The :data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS` at zero load (K [N], c
-        [1/N], F_0 [N], a, b [-], P_cap, S_cap [N]) and the braking vector gamma
-        (``braking_vector_x``, ``_y`` [1/N], c = gamma . Omega_perp / |Omega_perp|); NaN
-        where ``full`` does not certify the ball.
-    rate : ndarray, shape (n, 2)
-        Omega_perp R_B / v of its minimum (its actual rotation).
-
-    Notes
-    -----
-    **The ball under loads.** With neighbour forces Q_back, Q_front (push P = Q_back - Q_front,
-    braking sum S = Q_back + Q_front) the state x = (v_B, Omega_x, Omega_y) minimises
-
-        Phi(x; P, S) = D(x) + mu_bb S R_B |Omega_perp| - P v_B,                       (T1)
-
-    D less the work of the push plus the ball-ball friction's dissipation, whose moment
-    -mu_bb S R_B Omega_perp / |Omega_perp| lies along the ball's own axis (Notes of
-    :class:`tolsim.physics.velocity.ball_loads.BallLoadFields`); D is that of the three loaded
-    contacts (the open one carries nothing). Every coefficient is a derivative of the minimiser
-    x*(P, S) or of the minimum Phi*(P, S) at P = S = 0:
-
-    * **epsilon, F_0**: those of the free minimum (:func:`tolsim.physics.velocity.full.full`,
-      certified: smooth, or on a stick line).
-    * **K and c.** At a smooth minimum (all three contacts slip) grad Phi = 0 gives
-      H dx = e_v dP - mu_bb R_B g dS with g = (0, Omega_perp / |Omega_perp|), so
-
-          K = (v / 2) / (H^-1)_vv,   c = d(epsilon)/dS = -(2 / v) mu_bb R_B (H^-1 g)_v   (T2)
-
-      (R2 of :func:`three_point_stiffness`; H by central differences, ``STICK_STEP``), and
-      for a moment along any unit u the braking vector gamma = -(2 / v) mu_bb R_B
-      ((H^-1)_vx, (H^-1)_vy), c = gamma . g (:func:`directional_braking`). On a stick line
-      (one contact stuck) K is the line's and c = -mu_bb / K, as regime B's (R1 in
-      :func:`regime_creep_coefficients`), and gamma = c g (only the moment's component
-      along the line does work on it).
-    * **a and b, exactly.** The power balance v F_c + P v_B = D + mu_bb S R_B |Omega_perp|
-      (F_c the carriage force) says v F_c = Phi*(P, S). Phi* is a minimum over x of functions
-      affine in (P, S), so (envelope theorem, at a kink too) dPhi*/dP = -v_B and
-      dPhi*/dS = mu_bb R_B |Omega_perp| at the minimiser:
-
-          a = dF_c/dP = -v_B / v = -(1 + epsilon) / 2,   b = dF_c/dS = mu_bb R_B |Omega_perp| / v
-                                                                                        (T3)
-
-      (-1/2 and mu_bb / 2 for the two-point ball; the creep model of regime A gives (T3) for its
-      own state: a = -(1 + epsilon) / 2 to round-off).
-    * **The capacities.** Phi is bounded below only while P < lim D / v_B for v_B -> inf, the
-      ball sliding between grooves at rest: P_cap = min over Omega of D(v_B = 1, Omega; V = 0)
-      (BallLoadFields, "Gross sliding"); the rotation stalls once mu_bb S R_B exceeds the
-      moment M_stall of the grooves on a ball that does not rotate, S_cap = M_stall /
-      (mu_bb R_B). Both as the creep model takes them for regime A: P_cap from point contacts
-      (:func:`tolsim.physics.velocity.ball_loads.point_traction_capacity`, a lower bound by
-      Jensen's inequality), M_stall from :func:`tolsim.physics.velocity.ball_loads.stall_moment`,
-      over the three loaded contacts (:func:`point_capacity_kernel`).
-
-    Not modelled: a stuck contact letting go under a push before P_cap (the stick line's K
-    then gives way to the smooth one), as in regime B.
-    """
-    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
-    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    stick, res, row, state = _three_point_solve(dbeta, force, bearing)
-    mu = bearing.friction_coefficient
-    code = np.asarray(res.regime)
-    smooth, stuck = code == 1, code == 2
-    spin = np.hypot(state[:, 1], state[:, 2])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        g = state[:, 1:] / spin[:, None]
-        k = np.where(stuck, stick, np.where(smooth, 0.5 * mu / row[:, 0], np.nan))
-        gamma = np.where(stuck[:, None], (-ball_friction / k)[:, None] * g,
-                         -2.0 * ball_friction / mu * row[:, 1:])
-        c = np.where(stuck, -ball_friction / k, np.sum(gamma * g, axis=1))
-    capacity = np.empty((len(dbeta), 2))
-    point_capacity_kernel(bearing.nominal_contact_angle + dbeta, force, capacity)
-    with np.errstate(divide="ignore"):
-        braking_capacity = (mu * capacity[:, 1] / ball_friction if ball_friction > 0
-                            else np.full(len(dbeta), np.inf))
-    eps = np.asarray(res.velocity_deviation, dtype=np.float64)
-    drag = np.asarray(res.drag_force, dtype=np.float64)
-    columns = {"free_rolling_velocity_deviation": eps, "creep_stiffness": k,
-               "braking_sensitivity": c, "carriage_force": drag,
-               "free_rolling_carriage_force": drag,
-               "carriage_force_per_push": -0.5 * (1.0 + eps),
-               "carriage_force_per_neighbour_force": ball_friction * spin,
-               "traction_capacity": mu * capacity[:, 0],
-               "braking_capacity": braking_capacity,
-               "braking_vector_x": gamma[:, 0], "braking_vector_y": gamma[:, 1]}
-    solved = smooth | stuck
-    columns = {name: np.where(solved, value, np.nan) for name, value in columns.items()}
-    rate = np.where(solved[:, None], state[:, 1:], np.nan)
-    return columns, rate
 
 
 def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
@@ -469,29 +132,27 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
 
         K = (v / 2) D''_others,   c = d(epsilon)/dS = -mu_bb / K                     (R1)
 
-    (:func:`stick_line_stiffness`): 3.3e4 N on case (a) at rho = -0.9 .. -0.98, against
-    110-750 N in regime A (issue 25), so it is a stiff ball rather than a rigid anchor: two
-    balls in regime B of different epsilon pushed together share a finite force (as rigid
-    anchors they could not roll together), and a soft neighbour's force is
-    K_s K_B / (K_s + K_B) d(epsilon), 1-2 % below K_s d(epsilon). (Both contacts of a pair
+    (:func:`~tolsim.physics.trains.ball_minimum.stick_line_stiffness`): 3.3e4 N on case (a) at
+    rho = -0.9 .. -0.98, against 110-750 N in regime A (issue 25), so it is a stiff ball rather
+    than a rigid anchor: two balls in regime B of different epsilon pushed together share a
+    finite force (as rigid anchors they could not roll together), and a soft neighbour's force
+    is K_s K_B / (K_s + K_B) d(epsilon), 1-2 % below K_s d(epsilon). (Both contacts of a pair
     stuck, equal angles: rigid, K = inf, an anchor.) F_0 and Omega are those of its certified
-    minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are
-    the creep model's (the loads split between the grooves about as in regime A). Not
-    modelled: the push at which the stuck contact lets go before P_cap. It is not
-    symmetric and can be small: in case (a) at rho = -0.9 (K = 32 698 N, eps 0.030 %) the
-    independent minimiser of D - P v_B (:func:`tolsim.physics.velocity.regimes.
-    minimise_dissipation`) keeps the stick for P from -20 N (secant K 32 057 N) to +2 N
-    (eps 0.0366 %), and lets it go by +3 N (eps 1.92 %; the least directional slope of
-    Phi off the stick line, from its exact line minimum, falls from 0.070 N at P = 0 to
-    0.0004 N at 3 N); at rho = -0.95 it holds from -43 N to +30 N and has let go by +38 N
-    (eps 7.8 %). Beyond it the ball leaves the stick line for the other branch (regime A's
-    larger epsilon), which a linear K cannot follow; the trains keep K_B up to P_cap.
+    minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are the
+    creep model's (the loads split between the grooves about as in regime A). Not modelled in
+    the trains: the push at which the stuck contact lets go before P_cap
+    (:func:`~tolsim.physics.trains.ball_minimum.stick_release`). It is not symmetric and can be
+    small: in case (a) at rho = -0.9 (K = 32 698 N, eps 0.030 %) +2.94 N and -22.6 N, at rho =
+    -0.95 +33.4 N and -51.2 N, against P_cap ~ mu sum F = 56.6 N (checked with the independent
+    minimiser of D - P v_B: eps 0.0386 % at +2.65 N, 2.09 % at +3.24 N). Beyond it the ball
+    leaves the stick line for the other branch (regime A's larger epsilon), which a linear K
+    cannot follow; the trains keep K_B up to P_cap.
 
     **A three-point ball** (one contact open) creeps with the coefficients of its own minimum
-    of D (:func:`three_point_coefficients`): K and c from the Hessian there (smooth) or from
-    its stick line (one contact stuck), a = -(1 + epsilon) / 2 and b = mu_bb R_B
-    |Omega_perp| / v exactly (envelope theorem), the capacities of its three loaded contacts,
-    and its actual rotation.
+    of D (:func:`~tolsim.physics.trains.ball_minimum.three_point_coefficients`): K and c from
+    the Hessian there (smooth) or from its stick line (one contact stuck), a =
+    -(1 + epsilon) / 2 and b = mu_bb R_B |Omega_perp| / v exactly (envelope theorem), the
+    capacities of its three loaded contacts, and its actual rotation.
 
     **The braking vector** gamma (:func:`directional_braking`): c Omega_perp / |Omega_perp|
     in regime A (the creep model gives the response to a moment along the ball's own axis
@@ -715,8 +376,6 @@ def pair_braking(coefficients, ball_friction=0.1):
     return np.ascontiguousarray(np.where(null, 0.0, out))
 
 
-__all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "STICK_STEP", "TRAIN_COLUMNS",
-           "directional_braking", "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
-           "minimum_compliance_kernel", "point_capacity_kernel", "stick_line_stiffness",
-           "stick_line_stiffness_kernel", "three_point_coefficients", "three_point_stiffness",
+__all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "TRAIN_COLUMNS", "directional_braking",
+           "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
            "two_point_rolling_rate"]
