@@ -72,6 +72,28 @@ def stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, 
         out[n] = 0.25 * (slope[1] - slope[0]) / step
 
 
+def _stick_line(contact_angle_deviation, normal_force, bearing):
+    """The free solve of balls and their stick lines' inputs for the kernels: (result,
+    beta, F, stuck contact, w at the minimum [v], a, b [R_B], quadrature grid)."""
+    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
+    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
+    v = 0.01
+    res = full(dbeta, force, bearing, groove_velocity=v)
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    radius = bearing.ball_radius
+    beta = bearing.nominal_contact_angle + dbeta
+    a = hc.semi_major_coefficient * np.cbrt(force) / radius
+    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
+    stuck = np.asarray(res.stuck_contact, dtype=np.int64)
+    p = contact_directions(dbeta, bearing)
+    k = np.clip(stuck, 0, 3)
+    xk = np.stack([-p[np.arange(len(p)), k, 1], p[np.arange(len(p)), k, 0]], axis=-1)
+    rate = np.ascontiguousarray(np.sum(res.angular_velocity[:, :2] * radius / v * xk, axis=1))
+    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
+    return res, beta, force, stuck, rate, a, b, grid
+
+
 def stick_line_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
     """Creep stiffness K [N] of balls in regime B: the curvature of D on their stick line.
 
@@ -95,25 +117,10 @@ def stick_line_stiffness(contact_angle_deviation, normal_force, bearing: Bearing
     differences of the line slope (``STICK_STEP`` v; D_others is smooth there: the other
     contacts slip). 3-5e4 N against 110-750 N in regime A (issue 25).
     """
-    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
-    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    v = 0.01
-    res = full(dbeta, force, bearing, groove_velocity=v)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    radius = bearing.ball_radius
-    beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
-    stuck = np.asarray(res.stuck_contact, dtype=np.int64)
-    p = contact_directions(dbeta, bearing)
-    k = np.clip(stuck, 0, 3)
-    xk = np.stack([-p[np.arange(len(p)), k, 1], p[np.arange(len(p)), k, 0]], axis=-1)
-    rate = np.sum(res.angular_velocity[:, :2] * radius / v * xk, axis=1)
-    out = np.empty(len(dbeta))
-    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
-    stick_line_stiffness_kernel(beta, force, stuck, np.ascontiguousarray(rate), a, b, *grid,
-                                STICK_STEP, out)
+    res, beta, force, stuck, rate, a, b, grid = _stick_line(contact_angle_deviation,
+                                                            normal_force, bearing)
+    out = np.empty(len(beta))
+    stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, *grid, STICK_STEP, out)
     out = bearing.friction_coefficient * out
     return np.where(np.asarray(res.regime) == 2, out, np.nan), res
 
@@ -273,27 +280,13 @@ def stick_release(contact_angle_deviation, normal_force, bearing: Bearing = TABL
     stuck contact's normal: there the stuck contact resists only with its spin moment, ~a/R_B
     of its sliding friction, and the least slope lies in a dip of that width which a uniform
     scan misses). The release push is where that minimum reaches zero (bisection). Beyond it
-    the ball leaves the stick line for its other branch (regime A's
-    larger epsilon), which the linear K of the trains does not follow.
+    the ball leaves the stick line for its other branch (regime A's larger epsilon), which
+    the linear K of the trains does not follow.
     """
-    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
-    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    v = 0.01
-    res = full(dbeta, force, bearing, groove_velocity=v)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    radius = bearing.ball_radius
-    a = hc.semi_major_coefficient * np.cbrt(force) / radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
-    stuck = np.asarray(res.stuck_contact, dtype=np.int64)
-    p = contact_directions(dbeta, bearing)
-    k = np.clip(stuck, 0, 3)
-    xk = np.stack([-p[np.arange(len(p)), k, 1], p[np.arange(len(p)), k, 0]], axis=-1)
-    rate = np.sum(res.angular_velocity[:, :2] * radius / v * xk, axis=1)
-    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
-    out = np.empty((len(dbeta), 2))
-    stick_release_kernel(bearing.nominal_contact_angle + dbeta, force, stuck,
-                         np.ascontiguousarray(rate), a, b, *grid, STICK_STEP, RELEASE_ANGLES,
+    res, beta, force, stuck, rate, a, b, grid = _stick_line(contact_angle_deviation,
+                                                            normal_force, bearing)
+    out = np.empty((len(beta), 2))
+    stick_release_kernel(beta, force, stuck, rate, a, b, *grid, STICK_STEP, RELEASE_ANGLES,
                          RELEASE_STEPS, out)
     return bearing.friction_coefficient * out, res
 
