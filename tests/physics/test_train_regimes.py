@@ -11,6 +11,7 @@ large and small finite K). Tolerances are stated at each assertion.
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
+from scipy.optimize import minimize
 
 from tolsim.physics.geometry import TABLE1, paired_forces
 from tolsim.physics.trains import (
@@ -20,13 +21,18 @@ from tolsim.physics.trains import (
     step_project_kernel,
     train_contact_constant,
 )
+from tolsim.physics.trains.ball_minimum import (
+    stick_line_stiffness,
+    stick_release,
+    three_point_coefficients,
+    three_point_stiffness,
+)
 from tolsim.physics.trains.regimes import (
     TRAIN_COLUMNS,
+    directional_braking,
     pair_braking,
     regime_creep_coefficients,
     rigid_rolling_rate,
-    stick_line_stiffness,
-    three_point_stiffness,
     two_point_rolling_rate,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
@@ -34,10 +40,15 @@ from tolsim.physics.velocity.full import full
 from tolsim.physics.velocity.models import (
     BALL_REGIME_A,
     BALL_REGIME_B,
+    BALL_THREE_POINT,
     BALL_TWO_POINT,
     BALL_UNLOADED,
 )
-from tolsim.physics.velocity.regimes import minimise_dissipation, two_point_loaded
+from tolsim.physics.velocity.regimes import (
+    dissipated_power,
+    minimise_dissipation,
+    two_point_loaded,
+)
 
 INF = np.inf
 COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
@@ -363,6 +374,15 @@ def test_regime_b_stiffness_against_the_numpy_minimiser():
     assert_allclose(k[0], 4.0 / (eps[1] - eps[0]), rtol=0.01)
 
 
+def _case_a_three_point(open_contact):
+    """Case (a) (bottom groove turned 2 deg, paired forces at rho = -0.8, N_y = 200 N) with
+    the contact ``open_contact`` open: (dbeta, F), shape (4,) each."""
+    theta = np.radians(2.0)
+    force = np.array(paired_forces(-0.8 * 200.0, 200.0))
+    force[open_contact] = 0.0
+    return np.array([-theta, theta, 0.0, 0.0]), force
+
+
 @pytest.mark.parametrize("open_contact", [1, 3])
 def test_three_point_stiffness_against_the_numpy_minimiser(open_contact):
     # A three-point ball: case (a) (theta = 2 deg on the bottom groove, paired forces at
@@ -371,12 +391,162 @@ def test_three_point_stiffness_against_the_numpy_minimiser(open_contact):
     # of three_point_stiffness) against the secant of the independent minimiser of D - P v_B
     # (minimise_dissipation) over P = -2 .. +2 N. Measured 623.6 N against 623.3 N (BR open)
     # and 549.1 N against 548.3 N (TL open); tolerance 1 %, as regime B's test above.
-    theta = np.radians(2.0)
-    dbeta = np.array([-theta, theta, 0.0, 0.0])
-    force = np.array(paired_forces(-0.8 * 200.0, 200.0))
-    force[open_contact] = 0.0
+    dbeta, force = _case_a_three_point(open_contact)
     k, res = three_point_stiffness(dbeta[None], force[None], TABLE1)
     assert res.regime[0] == 1  # all three contacts slip (FullResult.regime)
     eps = [minimise_dissipation(dbeta, force, TABLE1, push=p).velocity_deviation
            for p in (-2.0, 2.0)]
     assert_allclose(k[0], 4.0 / (eps[1] - eps[0]), rtol=0.01)
+
+
+def _loaded_minimum(dbeta, force, push, braking_sum, start, nodes=(48, 192)):
+    """min over x = (v_B, Omega_x R, Omega_y R) / v of D + mu_bb S R |Omega_perp| - P v_B
+    (T1 of three_point_coefficients) by SciPy's BFGS on the independent NumPy quadrature of
+    D (dissipated_power with ``nodes``, exact gradient; D is smooth where all three contacts
+    slip), from ``start``; returns (epsilon, the minimum [W])."""
+    v, radius = 0.01, TABLE1.ball_radius
+
+    def phi(x):
+        d, g = dissipated_power(x[0] * v, np.array([x[1], x[2], 0.0]) * v / radius, dbeta,
+                                force, TABLE1, groove_velocity=v, gradient=True, nodes=nodes)
+        spin = np.hypot(x[1], x[2])
+        val = d + 0.1 * braking_sum * v * spin - push * x[0] * v
+        grad = np.array([(g[0] - push) * v, g[1] * v / radius + 0.1 * braking_sum * v
+                         * x[1] / spin, g[2] * v / radius + 0.1 * braking_sum * v * x[2] / spin])
+        return val, grad
+
+    res = minimize(phi, start, jac=True, method="BFGS", options={"gtol": 1e-12, "maxiter": 500})
+    return 2.0 * res.x[0] - 1.0, res.fun
+
+
+@pytest.mark.parametrize("open_contact", [1, 3])
+def test_three_point_coefficients_against_the_numpy_minimiser(open_contact):
+    # The three-point ball of the test above (case (a), rho = -0.8, BR or TL open; all three
+    # contacts slip). Its coefficients (T2, T3 in the Notes of three_point_coefficients)
+    # against the independent minimiser of D + mu_bb S R |Omega| - P v_B (_loaded_minimum,
+    # NumPy quadrature, SciPy BFGS):
+    # * c = d(eps)/dS: secant over S = -0.5 .. +0.5 N (S < 0 is the same smooth minimum with
+    #   the braking reversed) on a fine quadrature (192 x 768 nodes: the S-response is small,
+    #   5e-5 per N, and curves beyond ~1 N, where a contact starts to stick: eps 2.03 % at
+    #   S = 0, 0.22 % at S = 20 N); measured 4.604e-5 against 4.622e-5 /N (BR open),
+    #   -1.822e-4 against -1.840e-4 (TL open); 2 %;
+    # * b = dF_c/dS with v F_c = min (power balance): the same secant of the minimum
+    #   (0.067650 against 0.067649); 1e-3;
+    # * a = dF_c/dP: secant of the minimum over P = -2 .. +2 N (-0.510129 against -0.510128);
+    #   1e-3;
+    # * P_cap: min over Omega of D sliding at 1 m/s between grooves at rest (v_B / v = 1e8,
+    #   Nelder-Mead): the point-contact value is a lower bound (Jensen) within 1 % of it
+    #   (51.785 against 51.803 N, 50.008 against 50.027 N);
+    # * S_cap: |dD/dOmega| of a non-rotating ball sliding at v / 2 (the grooves' moment; the
+    #   planar uniform slip makes it exact) over mu_bb R; 1e-6.
+    dbeta, force = _case_a_three_point(open_contact)
+    cols, rate = three_point_coefficients(dbeta[None], force[None], TABLE1, ball_friction=0.1)
+    cols = {name: value[0] for name, value in cols.items()}
+    v, radius = 0.01, TABLE1.ball_radius
+    start = np.array([0.5 * (1.0 + cols["free_rolling_velocity_deviation"]), *rate[0]])
+    eps_s = [_loaded_minimum(dbeta, force, 0.0, s, start, (192, 768)) for s in (-0.5, 0.5)]
+    assert_allclose(cols["braking_sensitivity"], eps_s[1][0] - eps_s[0][0], rtol=0.02)
+    assert_allclose(cols["carriage_force_per_neighbour_force"],
+                    (eps_s[1][1] - eps_s[0][1]) / v, rtol=1e-3)
+    phi_p = [_loaded_minimum(dbeta, force, p, 0.0, start)[1] for p in (-2.0, 2.0)]
+    assert_allclose(cols["carriage_force_per_push"], (phi_p[1] - phi_p[0]) / (4.0 * v),
+                    rtol=1e-3)
+    free = _loaded_minimum(dbeta, force, 0.0, 0.0, start)
+    assert_allclose(cols["free_rolling_velocity_deviation"], free[0], atol=2e-5)
+    assert_allclose(cols["free_rolling_carriage_force"], free[1] / v, rtol=1e-3)
+
+    def sliding(w):
+        return dissipated_power(1.0, np.array([w[0], w[1], 0.0]) / radius, dbeta, force,
+                                TABLE1, groove_velocity=1e-8)
+
+    best = min((minimize(sliding, w0, method="Nelder-Mead",
+                         options={"xatol": 1e-10, "fatol": 1e-12, "maxiter": 4000})
+                for w0 in ([0.0, 0.0], [1.0, 0.0], [0.5, 0.5], [0.5, -0.5])),
+               key=lambda r: r.fun)
+    assert cols["traction_capacity"] <= best.fun * (1.0 + 1e-9)
+    assert_allclose(cols["traction_capacity"], best.fun, rtol=0.01)
+    _, grad = dissipated_power(0.5 * v, np.zeros(3), dbeta, force, TABLE1, groove_velocity=v,
+                               gradient=True)
+    assert_allclose(cols["braking_capacity"], np.hypot(grad[1], grad[2]) / (0.1 * radius),
+                    rtol=1e-6)
+
+
+def test_three_point_ball_in_the_train_columns():
+    # regime_creep_coefficients gives a three-point ball the columns of
+    # three_point_coefficients (bit for bit) and its actual rotation, where before it left them
+    # NaN (the creep model has none with an open contact), and pair_braking takes its pairs'
+    # braking from the rotations, mu_bb |Omega + Omega'| R / v (exact formula, 1e-15).
+    theta = np.radians(2.0)
+    dbeta = np.array([[-theta, theta, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+    force = np.array([paired_forces(-0.8 * 200.0, 200.0), [141.4] * 4])
+    force[0, 1] = 0.0
+    load = np.full((2, len(LOAD_COLUMNS)), np.nan)
+    load[1] = np.arange(len(LOAD_COLUMNS))
+    out = regime_creep_coefficients(load, [BALL_THREE_POINT, BALL_REGIME_A], dbeta, force,
+                                    TABLE1, ball_friction=0.1)
+    cols, rate = three_point_coefficients(dbeta[:1], force[:1], TABLE1, ball_friction=0.1)
+    for name, value in cols.items():
+        assert out[0, COL[name]] == value[0]
+    assert np.isfinite(out[0]).all()
+    assert_array_equal(out[0, COL["rolling_rate_x"]:COL["regime"]], rate[0])
+    assert_array_equal(out[1, :len(LOAD_COLUMNS)], load[1])
+    spin = out[:, COL["rolling_rate_x"]:COL["regime"]]
+    assert_allclose(pair_braking(out, 0.1), [0.1 * np.hypot(*spin.sum(axis=0))], rtol=1e-15)
+
+
+def test_braking_along_the_actual_rotations_in_the_train_rule():
+    # Issue 25's example: a regime-A ball (nominal, 0.707 v / R_B about x) behind a two-point
+    # ball (0.5 v / R_B tilted by 45 deg). Their contact brakes both along W_hat = (1.0607,
+    # -0.3536) / 1.118, so the A ball's epsilon responds with c_front = c (Omega_hat .
+    # W_hat) = 0.9487 c (T4 in the Notes of directional_braking), not c: it pushes the anchor
+    # with Q = eps / (1 / K - 0.9487 c) (eq. 1 of cluster_velocities with the anchor at 0;
+    # exact up to rounding, 1e-12). A large c (2e-4 / N) makes the difference 9 %.
+    k, c, eps = 700.0, 2e-4, 2e-3
+    load = np.full((2, len(LOAD_COLUMNS)), np.nan)
+    load[0] = 0.0
+    load[0, COL["creep_stiffness"]], load[0, COL["braking_sensitivity"]] = k, c
+    dbeta = np.zeros((2, 4))
+    force = np.array([[141.4] * 4, [141.4, 0.0, 141.4, 0.0]])
+    out = regime_creep_coefficients(load, [BALL_REGIME_A, BALL_TWO_POINT], dbeta, force,
+                                    TABLE1, ball_friction=0.1)
+    assert_allclose(out[:, COL["rolling_rate_x"]:COL["regime"]],
+                    [[0.5 / np.cos(np.pi / 4), 0.0], [0.5 * np.sin(np.pi / 4), -0.5 * np.sin(
+                        np.pi / 4)]], rtol=1e-12)
+    stiffness, braking = directional_braking(out[None], [[k, INF]], [[c, 0.0]])
+    along = np.array([1.0607, -0.3536]) / 1.118  # W_hat, rounded as in the issue
+    w, q = cluster_velocities([[eps, 0.0]], stiffness, [[True]], braking)
+    assert_allclose(q, [[eps / (1.0 / k - c * along[0])]], rtol=1e-4)  # W_hat's rounding
+    cos = (0.5 / np.cos(np.pi / 4) + 0.5 * np.sin(np.pi / 4)) / np.hypot(
+        0.5 / np.cos(np.pi / 4) + 0.5 * np.sin(np.pi / 4), 0.5 * np.sin(np.pi / 4))
+    assert_allclose(q, [[eps / (1.0 / k - c * cos)]], rtol=1e-12)
+    assert_array_equal(w, [[0.0, 0.0]])
+    # the same ball between two regime-A balls keeps its own-axis c, bit for bit
+    same = regime_creep_coefficients(np.stack([load[0], load[0]]), [BALL_REGIME_A] * 2,
+                                     np.zeros((2, 4)), np.full((2, 4), 141.4), TABLE1)
+    kk, cc = np.array([[k, k]]), np.array([[c, c]])
+    got = directional_braking(same[None], kk, cc)
+    assert got[0] is kk and got[1] is cc
+
+
+def test_stick_release_against_the_numpy_minimiser():
+    # Case (a) at rho = -0.9 (regime B, BL stuck, K = 32 698 N, eps 0.030 %): the stuck
+    # contact lets go at P = +2.94 N and -22.60 N (stick_release, Notes). The independent
+    # minimiser of D - P v_B (minimise_dissipation) at 0.9 of those pushes stays on the stick
+    # line (eps = eps_0 + P / K to 10 % of P / K; measured 0.03858 % against 0.03857 % at
+    # +2.65 N, -0.0331 % against -0.0317 % at -20.3 N) and at 1.1 of them has left it for the
+    # other branch (|eps - eps_0| > 10 |P / K|; measured 2.09 % at +3.24 N, -2.60 % at
+    # -24.9 N). The creep model's capacity, about mu sum F = 56.6 N, is far above both.
+    theta = np.radians(2.0)
+    dbeta = np.array([-theta, theta, 0.0, 0.0])
+    force = np.array(paired_forces(-0.9 * 200.0, 200.0))
+    release, res = stick_release(dbeta[None], force[None], TABLE1)
+    k, _ = stick_line_stiffness(dbeta[None], force[None], TABLE1)
+    assert 2.0 < release[0, 0] < 3.0 and -25.0 < release[0, 1] < -20.0
+    eps0 = res.velocity_deviation[0]
+    for p in release[0]:
+        stuck = minimise_dissipation(dbeta, force, TABLE1, push=0.9 * p).velocity_deviation
+        assert abs(stuck - (eps0 + 0.9 * p / k[0])) < 0.1 * abs(0.9 * p / k[0])
+        free = minimise_dissipation(dbeta, force, TABLE1, push=1.1 * p).velocity_deviation
+        assert abs(free - eps0) > 10.0 * abs(1.1 * p / k[0])
+    single = stick_release(np.zeros((1, 4)), np.full((1, 4), 141.4), TABLE1)[0]
+    assert_array_equal(single, [[np.inf, -np.inf]])  # regime A: nothing sticks

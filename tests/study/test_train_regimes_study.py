@@ -15,9 +15,10 @@ from numpy.testing import assert_allclose
 
 from tolsim.io.config import parse_config
 from tolsim.physics.geometry import TABLE1, paired_forces
+from tolsim.physics.trains.ball_minimum import three_point_coefficients
 from tolsim.physics.trains.regimes import rigid_rolling_rate, two_point_rolling_rate
 from tolsim.physics.velocity.analytic import analytic
-from tolsim.physics.velocity.models import BALL_TWO_POINT, BALL_UNLOADED
+from tolsim.physics.velocity.models import BALL_THREE_POINT, BALL_TWO_POINT, BALL_UNLOADED
 from tolsim.study.pipeline import track_friction as fr
 from tolsim.study.pipeline.block import evaluate_block
 from tolsim.study.pipeline.propagation import FirstContact, FreeBalls, TrainMotion, integrate
@@ -150,3 +151,48 @@ def test_unloaded_middle_ball_along_the_track_gives_the_constant_trains():
     assert out.resolved.all()
     assert_allclose(out.contact_force_max, constant.contact_force_max, rtol=1e-9)
     assert_allclose(out.increase_max, constant.increase_max, rtol=1e-9)
+
+
+def test_three_point_ball_behind_an_anchor_resolves():
+    # Ball 0 made a three-point ball (case (a): bottom groove turned 2 deg, rho = -0.8 at
+    # N_y = 200 N, BR open; eps 2.03 %), ball 1 the two-point anchor of the test above. Before
+    # issue 25's three-point coefficients the train was unresolved (the creep model has none
+    # with an open contact). Now ball 0 pushes the anchor with Q_01 = eps_0 / (1/K_0 -
+    # c_front), c_front = gamma_0 . W_hat_01 its response to a moment along the pair's actual
+    # rotation (T4 of tolsim.physics.trains.regimes.directional_braking), K_0 and gamma_0 from
+    # three_point_coefficients; ball 2 (regime A) is pushed with Q_12 = -eps_2 / (1/K_2 +
+    # c_2 Omega_hat_2 . W_hat_12); the friction rises by k_01 Q_01 + k_12 Q_12 with
+    # k_01 = (-1/2 - a_0) + mu_bb |Omega_0 + Omega_1| R / v, a_0 = -(1 + eps_0) / 2 (T3).
+    # Tolerance 1e-12 relative, as above.
+    config, block, state, dbeta, force, ref = _setup()
+    theta = np.radians(2.0)
+    d0 = np.array([-theta, theta, 0.0, 0.0])
+    f0 = np.array(paired_forces(-0.8 * 200.0, 200.0))
+    f0[1] = 0.0
+    cols, rate0 = three_point_coefficients(d0[None], f0[None], TABLE1, ball_friction=MU_BB)
+    two = np.array([141.4, 0.0, 141.4, 0.0])
+    for ball, (eps, regime, f, d) in enumerate(
+            [(cols["free_rolling_velocity_deviation"][0], BALL_THREE_POINT, f0, d0),
+             (0.0, BALL_TWO_POINT, two, np.zeros(4))]):
+        state.velocity_deviation[:, ball] = eps
+        state.valid[:, ball] = True
+        state.regime[:, ball] = regime
+        state.normal_force[:, ball, :] = f
+        state.contact_angle_deviation[:, ball, :] = d
+    out = fr.evaluate_friction(config, block.initial_gap, state)
+    assert out.resolved.all() and not out.sliding.any()
+    middle = two_point_rolling_rate(np.zeros((1, 4)), two[None, :], TABLE1)[0]
+    spin2 = rigid_rolling_rate(dbeta[1:], force[1:], TABLE1)[0]
+    w01, w12 = rate0[0] + middle, spin2 + middle
+    u01, u12 = w01 / np.hypot(*w01), w12 / np.hypot(*w12)
+    gamma0 = np.array([cols["braking_vector_x"][0], cols["braking_vector_y"][0]])
+    eps0, k0 = cols["free_rolling_velocity_deviation"][0], cols["creep_stiffness"][0]
+    c2 = ref.braking_sensitivity[1] * (spin2 / np.hypot(*spin2)) @ u12
+    q01 = eps0 / (1 / k0 - gamma0 @ u01)
+    q12 = -ref.velocity_deviation[1] / (1 / ref.creep_stiffness[1] + c2)
+    first = ((-0.5 + 0.5 * (1 + eps0)) + MU_BB * np.hypot(*w01)) * q01
+    second = ((ref.carriage_force_per_push[1] + 0.5) + MU_BB * np.hypot(*w12)) * q12
+    assert_allclose(out.contact_force_max, max(q01, q12), rtol=1e-12)
+    assert_allclose(out.increase_max, max(0.0, first, first + second), rtol=1e-12)
+    assert_allclose(out.baseline, cols["free_rolling_carriage_force"][0]
+                    + ref.free_rolling_carriage_force[1], rtol=1e-12)

@@ -4,46 +4,43 @@ A ball in regime A creeps (finite K); a ball in regime B is stiff (K from its st
 3e4 N and more); an exactly two-point ball is an *anchor* (K = inf: it keeps its speed under
 a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilon of its
 own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
-adds each ball's rolling angular velocity; :func:`pair_braking` gives the ball-ball friction
-of a pair from the two balls' actual rotations. The cluster rule with anchors is in the Notes of
-:func:`tolsim.physics.trains.cluster_velocities`. :func:`three_point_stiffness` gives a
-three-point ball's K from its own minimum of D (not yet used by the trains).
+adds each ball's rolling angular velocity; a three-point ball creeps with the coefficients of
+its own minimum of D (:mod:`tolsim.physics.trains.ball_minimum`, which also gives the pushes
+at which a stuck contact lets go, not used by the trains yet); :func:`pair_braking` gives the
+ball-ball friction of a pair from the two balls' actual rotations. The cluster rule with
+anchors is in the Notes of :func:`tolsim.physics.trains.cluster_velocities`.
 """
 
 import numpy as np
-from numba import prange
 
-from tolsim._jit import pjit
-from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, Bearing
-from tolsim.physics.hertz import hertz_constants
-from tolsim.physics.velocity._full_kernels import ball_loads_kernel
+from tolsim.physics.geometry import TABLE1, Bearing
+from tolsim.physics.trains.ball_minimum import (
+    contact_directions,
+    stick_line_stiffness,
+    three_point_coefficients,
+)
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.physics.velocity.ball_loads import ball_contact_slip
-from tolsim.physics.velocity.full import (
-    DEFAULT_ANGULAR_NODES,
-    DEFAULT_RADIAL_NODES,
-    full,
-    quadrature_grid,
+from tolsim.physics.velocity.models import (
+    BALL_REGIME_B,
+    BALL_THREE_POINT,
+    BALL_TWO_POINT,
+    BALL_UNLOADED,
 )
-from tolsim.physics.velocity.models import BALL_REGIME_B, BALL_TWO_POINT, BALL_UNLOADED
 
 #: Columns of a train's per-ball coefficients: those of the creep model
 #: (:data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS`), then the ball's rolling angular
-#: velocity Omega_perp R_B / v (x and y; NaN where no ball of the batch needs it) and its
-#: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only).
-TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime")
+#: velocity Omega_perp R_B / v (x and y; NaN where no ball of the batch needs it), its
+#: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only) and its
+#: braking vector gamma [1/N] (x and y, NaN as the rates): d(epsilon)/dQ of a neighbour force Q
+#: whose friction moment lies along the unit vector u is gamma . u (Notes of
+#: :func:`directional_braking`).
+TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime",
+                 "braking_vector_x", "braking_vector_y")
 #: Creep stiffness of an anchor and of a ball pushed along [N].
 ANCHOR_STIFFNESS, PUSHED_STIFFNESS = np.inf, 0.0
-#: Step along the stick line for its curvature, a fraction of v.
-STICK_STEP = 1e-5
 
 _COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
-
-
-def _contact_directions(contact_angle_deviation, bearing):
-    """p_i = (sx sin beta_i, sy cos beta_i), shape (n, 4, 2)."""
-    beta = bearing.nominal_contact_angle + np.asarray(contact_angle_deviation, dtype=float)
-    return np.stack([SIDE_SIGN_X * np.sin(beta), SIDE_SIGN_Y * np.cos(beta)], axis=-1)
 
 
 def rigid_rolling_rate(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
@@ -62,7 +59,7 @@ def rigid_rolling_rate(contact_angle_deviation, normal_force, bearing: Bearing =
     -------
     ndarray, shape (n, 2)
     """
-    p = _contact_directions(contact_angle_deviation, bearing)
+    p = contact_directions(contact_angle_deviation, bearing)
     on = (np.asarray(normal_force, dtype=float) > 0.0)[..., None]
     rows = np.concatenate([np.ones(p.shape[:-1] + (1,)), p[..., 1:2], -p[..., 0:1]], axis=-1)
     rows = rows * on
@@ -87,196 +84,11 @@ def two_point_rolling_rate(contact_angle_deviation, normal_force, bearing: Beari
     -------
     ndarray, shape (n, 2)
     """
-    p = _contact_directions(contact_angle_deviation, bearing)
+    p = contact_directions(contact_angle_deviation, bearing)
     force = np.asarray(normal_force, dtype=float)
     top = np.where(force[:, 2] > 0.0, 2, 3)
     pt = p[np.arange(len(p)), top]
     return 0.5 * np.stack([pt[:, 1], -pt[:, 0]], axis=-1)
-
-
-@pjit
-def stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo, tr, wr,
-                                step, out):
-    """K = (v / 2) d^2 D_others / dw^2 [N / mu] on the stick line of each ball; unchecked.
-
-    ``beta``, ``force`` (n, 4), ``stuck`` (n,) the stuck contact k (else inf: both contacts of
-    a pair stick, rigid), ``rate`` (n,) w [v] at the minimum, ``a``, ``b`` (n, 4) the
-    semi-axes [R]. Central difference of the line slope dD/dw = -(F_z + M . x_k) (the loads
-    of the other contacts, R = v = mu = 1) over w +- ``step``.
-    """
-    for n in prange(beta.shape[0]):
-        k = stuck[n]
-        if k < 0 or k > 3:
-            out[n] = np.inf
-            continue
-        px = np.empty(4)
-        py = np.empty(4)
-        others = np.empty(4)
-        for i in range(4):
-            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
-            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
-            others[i] = force[n, i] if i != k else 0.0
-        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        xx, xy = -py[k], px[k]
-        state = np.empty(4)
-        loads = np.empty(5)
-        contact = np.empty((4, 5))
-        zero = np.zeros(4)
-        slope = np.empty(2)
-        for side in range(2):
-            w = rate[n] + (step if side else -step)
-            state[0] = vgroove[k] + w
-            state[1] = w * xx
-            state[2] = w * xy
-            state[3] = 0.0
-            ball_loads_kernel(state, px, py, vgroove, others, a[n], b[n], 1.5 / np.pi, False,
-                              1.0, zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
-            slope[side] = -(loads[0] + loads[1] * xx + loads[2] * xy)
-        out[n] = 0.25 * (slope[1] - slope[0]) / step
-
-
-def stick_line_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
-    """Creep stiffness K [N] of balls in regime B: the curvature of D on their stick line.
-
-    Parameters
-    ----------
-    contact_angle_deviation, normal_force : array_like, shape (n, 4)
-
-    Returns
-    -------
-    k : ndarray (n,)
-        K [N]; inf where both contacts of a pair stick (rigid), NaN where ``full`` does not
-        certify the ball in regime B.
-    result : tolsim.physics.velocity.full.FullResult
-        The free solve (epsilon, F_0, Omega).
-
-    Notes
-    -----
-    On the stick line of contact k the states are v_B = V_k + w, Omega = (w / R) x_k, and a
-    push P moves the minimum of D_others(w) - P v_B to dD_others/dw = P; with
-    epsilon = 2 v_B / v - 1, K = dP/d(epsilon) = (v / 2) d^2 D_others / dw^2, by central
-    differences of the line slope (``STICK_STEP`` v; D_others is smooth there: the other
-    contacts slip). 3-5e4 N against 110-750 N in regime A (issue 25).
-    """
-    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
-    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    v = 0.01
-    res = full(dbeta, force, bearing, groove_velocity=v)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    radius = bearing.ball_radius
-    beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
-    stuck = np.asarray(res.stuck_contact, dtype=np.int64)
-    p = _contact_directions(dbeta, bearing)
-    k = np.clip(stuck, 0, 3)
-    xk = np.stack([-p[np.arange(len(p)), k, 1], p[np.arange(len(p)), k, 0]], axis=-1)
-    rate = np.sum(res.angular_velocity[:, :2] * radius / v * xk, axis=1)
-    out = np.empty(len(dbeta))
-    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
-    stick_line_stiffness_kernel(beta, force, stuck, np.ascontiguousarray(rate), a, b, *grid,
-                                STICK_STEP, out)
-    out = bearing.friction_coefficient * out
-    return np.where(np.asarray(res.regime) == 2, out, np.nan), res
-
-
-@pjit
-def minimum_stiffness_kernel(beta, force, state, a, b, cin, sin_, win, xo, wo, tr, wr, step,
-                             out):
-    """K = (v / 2) / (H^-1)_vv [N / mu] at a smooth minimum of D; unchecked.
-
-    ``state`` (n, 3): (v_B, Omega_x R, Omega_y R) / v at the minimum; H the Hessian of D over
-    them by central differences of its gradient -(F_z, M_x, M_y) (R = v = mu = 1) over
-    +- ``step``, symmetrised.
-    """
-    for n in prange(beta.shape[0]):
-        px = np.empty(4)
-        py = np.empty(4)
-        for i in range(4):
-            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
-            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
-        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        x = np.empty(4)
-        loads = np.empty(5)
-        contact = np.empty((4, 5))
-        zero = np.zeros(4)
-        h = np.empty((3, 3))
-        for j in range(3):
-            for side in range(2):
-                for i in range(3):
-                    x[i] = state[n, i]
-                x[3] = 0.0
-                x[j] += step if side else -step
-                ball_loads_kernel(x, px, py, vgroove, force[n], a[n], b[n], 1.5 / np.pi, False,
-                                  1.0, zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
-                sign = 1.0 if side else -1.0
-                for i in range(3):
-                    if side == 0:
-                        h[i, j] = 0.0
-                    h[i, j] -= sign * loads[i] / (2.0 * step)
-        for i in range(3):
-            for j in range(i + 1, 3):
-                m = 0.5 * (h[i, j] + h[j, i])
-                h[i, j] = m
-                h[j, i] = m
-        # (H^-1)_00 = det(H_11..22) / det(H)
-        minor = h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1]
-        det = (h[0, 0] * minor - h[0, 1] * (h[1, 0] * h[2, 2] - h[1, 2] * h[2, 0])
-               + h[0, 2] * (h[1, 0] * h[2, 1] - h[1, 1] * h[2, 0]))
-        out[n] = 0.5 * det / minor if minor != 0.0 else np.nan
-
-
-def three_point_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
-    """Creep stiffness K [N] of three-point balls from their own minimum of D (issue 25).
-
-    Parameters
-    ----------
-    contact_angle_deviation, normal_force : array_like, shape (n, 4)
-        One force 0 (the open contact).
-
-    Returns
-    -------
-    k : ndarray (n,)
-        K [N]; NaN where ``full`` does not certify the ball.
-    result : tolsim.physics.velocity.full.FullResult
-        The free solve (epsilon, F_0, Omega).
-
-    Notes
-    -----
-    A push P moves the minimum of D(x) - P v_B, x = (v_B, Omega_x, Omega_y), to
-    grad D = P e_v. Where the three contacts slip the minimum is smooth, dx/dP = H^-1 e_v with
-    H the Hessian of D there, so dv_B / dP = (H^-1)_vv and, with epsilon = 2 v_B / v - 1,
-
-        K = dP/d(epsilon) = (v / 2) / (H^-1)_vv = (v / 2) (H_vv - H_vw H_ww^-1 H_wv)   (R2)
-
-    the curvature of D along v_B with the rotation at its best (the Schur complement); H by
-    central differences of the loads of :func:`tolsim.physics.velocity._full_kernels.
-    ball_loads_kernel` (``STICK_STEP`` v). Where a heavy contact sticks (``full``'s stick
-    regime) the minimum sits on the stick line and K is regime B's, (v / 2) D''_others on
-    it (:func:`stick_line_stiffness`). (R2) is regime B's (R1) with the rotation free instead
-    of held on the stick line; for a four-point ball in regime A it is the creep stiffness of
-    the exact model.
-    """
-    dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
-    force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    stick, res = stick_line_stiffness(dbeta, force, bearing)
-    v = 0.01
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / bearing.ball_radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / bearing.ball_radius
-    state = np.empty((len(dbeta), 3))
-    state[:, 0] = 0.5 * (1.0 + np.asarray(res.velocity_deviation))
-    state[:, 1:] = np.asarray(res.angular_velocity)[:, :2] * bearing.ball_radius / v
-    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
-    out = np.empty(len(dbeta))
-    minimum_stiffness_kernel(beta, force, np.ascontiguousarray(state), a, b, *grid,
-                             STICK_STEP, out)
-    smooth = bearing.friction_coefficient * out
-    code = np.asarray(res.regime)
-    return np.where(code == 2, stick, np.where(code == 1, smooth, np.nan)), res
 
 
 def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
@@ -320,16 +132,33 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
 
         K = (v / 2) D''_others,   c = d(epsilon)/dS = -mu_bb / K                     (R1)
 
-    (:func:`stick_line_stiffness`): 3.3e4 N on case (a) at rho = -0.9 .. -0.98, against
-    110-750 N in regime A (issue 25), so it is a stiff ball rather than a rigid anchor: two
-    balls in regime B of different epsilon pushed together share a finite force (as rigid
-    anchors they could not roll together), and a soft neighbour's force is
-    K_s K_B / (K_s + K_B) d(epsilon), 1-2 % below K_s d(epsilon). (Both contacts of a pair
+    (:func:`~tolsim.physics.trains.ball_minimum.stick_line_stiffness`): 3.3e4 N on case (a) at
+    rho = -0.9 .. -0.98, against 110-750 N in regime A (issue 25), so it is a stiff ball rather
+    than a rigid anchor: two balls in regime B of different epsilon pushed together share a
+    finite force (as rigid anchors they could not roll together), and a soft neighbour's force
+    is K_s K_B / (K_s + K_B) d(epsilon), 1-2 % below K_s d(epsilon). (Both contacts of a pair
     stuck, equal angles: rigid, K = inf, an anchor.) F_0 and Omega are those of its certified
-    minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are
-    the creep model's (the loads split between the grooves about as in regime A). Not
-    modelled: the push at which the stuck contact lets go before P_cap (the ball then
-    creeps as in regime A).
+    minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are the
+    creep model's (the loads split between the grooves about as in regime A). Not modelled in
+    the trains: the push at which the stuck contact lets go before P_cap
+    (:func:`~tolsim.physics.trains.ball_minimum.stick_release`). It is not symmetric and can be
+    small: in case (a) at rho = -0.9 (K = 32 698 N, eps 0.030 %) +2.94 N and -22.6 N, at rho =
+    -0.95 +33.4 N and -51.2 N, against P_cap ~ mu sum F = 56.6 N (checked with the independent
+    minimiser of D - P v_B: eps 0.0386 % at +2.65 N, 2.09 % at +3.24 N). Beyond it the ball
+    leaves the stick line for the other branch (regime A's larger epsilon), which a linear K
+    cannot follow; the trains keep K_B up to P_cap.
+
+    **A three-point ball** (one contact open) creeps with the coefficients of its own minimum
+    of D (:func:`~tolsim.physics.trains.ball_minimum.three_point_coefficients`): K and c from
+    the Hessian there (smooth) or from its stick line (one contact stuck), a =
+    -(1 + epsilon) / 2 and b = mu_bb R_B |Omega_perp| / v exactly (envelope theorem), the
+    capacities of its three loaded contacts, and its actual rotation.
+
+    **The braking vector** gamma (:func:`directional_braking`): c Omega_perp / |Omega_perp|
+    in regime A (the creep model gives the response to a moment along the ball's own axis
+    only; the rest, the response to a tilt of the moment, is O(dbeta) and vanishes for a
+    mirror-symmetric ball, whose v_B is even in the tilt) and in regime B (exact on the stick
+    line), the full vector of (T2) for a three-point ball, 0 for an anchor or a pushed ball.
 
     **An unloaded ball** has no raceway contact, so no raceway friction: F_c = 0 whatever the
     loads (F_0 = a = b = 0), no creep resistance (K = 0: it moves with whatever it touches,
@@ -342,14 +171,16 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     out[:, :len(LOAD_COLUMNS)] = load
     two = regime == BALL_TWO_POINT
     stick = regime == BALL_REGIME_B
+    three = regime == BALL_THREE_POINT
     pushed = regime == BALL_UNLOADED
-    if not (two.any() or stick.any() or pushed.any()):
+    if not (two.any() or stick.any() or three.any() or pushed.any()):
         return out
     dbeta = np.asarray(contact_angle_deviation, dtype=np.float64).reshape(n, 4)
     force = np.asarray(normal_force, dtype=np.float64).reshape(n, 4)
     mu = bearing.friction_coefficient
     rate = np.full((n, 2), np.nan)
-    soft = ~(two | stick | pushed)
+    gamma = np.zeros((n, 2))
+    soft = ~(two | stick | three | pushed)
     if soft.any():
         rate[soft] = rigid_rolling_rate(dbeta[soft], force[soft], bearing)
     if two.any():
@@ -377,6 +208,12 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
         out[rows, _COL["free_rolling_carriage_force"]] = res.drag_force
         out[rows, _COL["carriage_force"]] = res.drag_force
         rate[stick] = res.angular_velocity[:, :2] * bearing.ball_radius / 0.01
+    if three.any():
+        columns, rate[three] = three_point_coefficients(dbeta[three], force[three], bearing,
+                                                        ball_friction=ball_friction)
+        for name, value in columns.items():
+            out[three, _COL[name]] = value
+        gamma[three] = out[three, _COL["braking_vector_x"]:]
     if pushed.any():
         values = {"free_rolling_velocity_deviation": np.nan, "creep_stiffness": PUSHED_STIFFNESS,
                   "braking_sensitivity": 0.0, "carriage_force": 0.0,
@@ -387,7 +224,92 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
             out[pushed, _COL[name]] = value
     out[:, _COL["rolling_rate_x"]:_COL["regime"]] = rate
     out[:, _COL["regime"]] = regime
+    # the own-axis response of the creep model (regime A) and of a stick line (regime B)
+    axial = soft | stick
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gamma[axial] = (out[axial, _COL["braking_sensitivity"], None] * rate[axial]
+                        / np.hypot(rate[axial, 0], rate[axial, 1])[:, None])
+    out[:, _COL["braking_vector_x"]:] = gamma
     return out
+
+
+def directional_braking(coefficients, stiffness, braking):
+    """The train rule's K and c of balls braked along their pairs' actual rotations.
+
+    Parameters
+    ----------
+    coefficients : ndarray, shape (..., n, len(TRAIN_COLUMNS))
+        The train columns of the balls of trains (or of a carriage track's slots).
+    stiffness, braking : ndarray, shape (..., n)
+        K [N] and c [1/N] of the train rule (NaN K: unusable).
+
+    Returns
+    -------
+    stiffness, braking : ndarray, shape (..., n)
+        The inputs themselves where no pair holds a ball in regime B, three- or two-point
+        (regime A unchanged, bit for bit); else K', c' of the Notes for the soft balls of
+        such pairs (NaN K', c' = 0 where a compliance is not positive: unusable).
+
+    Notes
+    -----
+    The friction moment of pair j on each of its balls is -mu_bb Q_j R_B W_hat_j, W_hat_j
+    the direction of W_j = Omega_j + Omega_{j+1} (Notes of :func:`pair_braking`), not of the
+    ball's own axis. A ball's epsilon responds to a moment along the unit u with gamma . u
+    per newton of Q (``braking_vector``; gamma . Omega_hat = c), so ball i rolls at
+
+        w_i = epsilon_i + Q_{i-1} (1 / K_i + c_back) - Q_i (1 / K_i - c_front),
+        c_back = gamma_i . W_hat_{i-1},   c_front = gamma_i . W_hat_i,                   (T4)
+
+    instead of eq. (1) of :func:`tolsim.physics.trains.cluster_velocities` with one c. (T4)
+    is eq. (1) with
+
+        1 / K' = 1 / K + (c_back - c_front) / 2,   c' = (c_back + c_front) / 2,
+
+    (the same compliances 1/K' + c' = 1/K + c_back to a push from behind and 1/K' - c' =
+    1/K - c_front from in front), so the cluster rule and the step projection take (K', c')
+    unchanged; they need both compliances positive, |c'| K' < 1. Between two balls in regime
+    A, or next to a ball pushed along (whose slip direction the model does not resolve,
+    Notes of :func:`pair_braking`), the own-axis c is kept. The issue's example: a
+    regime-A ball (0.707 v / R_B about x) in front of a two-point ball (0.5 v / R_B tilted
+    by 45 deg) is braked along W_hat = (0.949, -0.316), so c_back = 0.949 c for a
+    mirror-symmetric ball, not c.
+    """
+    stiffness = np.asarray(stiffness, dtype=np.float64)
+    braking = np.asarray(braking, dtype=np.float64)
+    coefficients = np.asarray(coefficients, dtype=np.float64)
+    code = coefficients[..., _COL["regime"]]
+    other = (code == BALL_REGIME_B) | (code == BALL_TWO_POINT) | (code == BALL_THREE_POINT)
+    pushed = coefficients[..., _COL["creep_stiffness"]] == PUSHED_STIFFNESS
+    mixed = (other[..., :-1] | other[..., 1:]) & ~(pushed[..., :-1] | pushed[..., 1:])
+    if not mixed.any():
+        return stiffness, braking
+    rate = coefficients[..., _COL["rolling_rate_x"]:_COL["regime"]]
+    w = rate[..., :-1, :] + rate[..., 1:, :]
+    norm = np.hypot(w[..., 0], w[..., 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit = w / norm[..., None]
+    gamma = coefficients[..., _COL["braking_vector_x"]:]
+    use = mixed & np.isfinite(norm) & (norm > 0.0)
+    c_front = braking.copy()
+    c_back = braking.copy()
+    with np.errstate(invalid="ignore"):
+        front = np.sum(gamma[..., :-1, :] * unit, axis=-1)
+        back = np.sum(gamma[..., 1:, :] * unit, axis=-1)
+    c_front[..., :-1] = np.where(use, front, braking[..., :-1])
+    c_back[..., 1:] = np.where(use, back, braking[..., 1:])
+    soft = np.isfinite(stiffness) & (stiffness > 0.0)
+    changed = soft & ((c_front != braking) | (c_back != braking))
+    if not changed.any():
+        return stiffness, braking
+    with np.errstate(divide="ignore", invalid="ignore"):
+        push_back = 1.0 / stiffness + c_back
+        push_front = 1.0 / stiffness - c_front
+        k_new = 1.0 / (0.5 * (push_back + push_front))
+        c_new = 0.5 * (c_back + c_front)
+    usable = (push_back > 0.0) & (push_front > 0.0)
+    stiffness = np.where(changed, np.where(usable, k_new, np.nan), stiffness)
+    braking = np.where(changed, np.where(usable, c_new, 0.0), braking)
+    return stiffness, braking
 
 
 def pair_braking(coefficients, ball_friction=0.1):
@@ -404,8 +326,10 @@ def pair_braking(coefficients, ball_friction=0.1):
     -------
     ndarray, shape (..., n - 1)
         B_j, so that pair j adds k_j Q_j = ((a_{j+1} - a_j) + B_j) Q_j to the carriage
-        friction: b_j + b_{j+1} (bit for bit) where both balls are in regime A,
-        mu_bb |Omega_j + Omega_{j+1}|_perp R_B / v where one is not (regime B, two-point),
+        friction: b_j + b_{j+1} (bit for bit) where both balls are in regime A (four-point,
+        every contact slipping),
+        mu_bb |Omega_j + Omega_{j+1}|_perp R_B / v where one is not (regime B, three- or
+        two-point),
         0 where one is pushed along.
 
     Notes
@@ -439,7 +363,7 @@ def pair_braking(coefficients, ball_friction=0.1):
     b = coefficients[..., _COL["carriage_force_per_neighbour_force"]]
     base = b[..., :-1] + b[..., 1:]
     code = coefficients[..., _COL["regime"]]
-    other = (code == BALL_REGIME_B) | (code == BALL_TWO_POINT)
+    other = (code == BALL_REGIME_B) | (code == BALL_TWO_POINT) | (code == BALL_THREE_POINT)
     pushed = coefficients[..., _COL["creep_stiffness"]] == PUSHED_STIFFNESS
     mixed = other[..., :-1] | other[..., 1:]
     null = pushed[..., :-1] | pushed[..., 1:]
@@ -452,8 +376,6 @@ def pair_braking(coefficients, ball_friction=0.1):
     return np.ascontiguousarray(np.where(null, 0.0, out))
 
 
-__all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "STICK_STEP", "TRAIN_COLUMNS",
+__all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "TRAIN_COLUMNS", "directional_braking",
            "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
-           "minimum_stiffness_kernel", "stick_line_stiffness", "stick_line_stiffness_kernel",
-           "three_point_stiffness",
            "two_point_rolling_rate"]

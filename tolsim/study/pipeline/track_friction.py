@@ -20,7 +20,12 @@ from tolsim.physics.trains import (
     step_project_kernel,
     train_contact_constant,
 )
-from tolsim.physics.trains.regimes import TRAIN_COLUMNS, pair_braking, regime_creep_coefficients
+from tolsim.physics.trains.regimes import (
+    TRAIN_COLUMNS,
+    directional_braking,
+    pair_braking,
+    regime_creep_coefficients,
+)
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS, creep_coefficients_kernel
 from tolsim.study.pipeline.carriage_track import (
     carry_pairs_kernel,
@@ -137,8 +142,10 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
     **By regime** (issue 25): the creep model's columns hold for a ball in regime A. A ball in
     regime B creeps with the stiffness of its stick line, an exactly two-point ball is an
     anchor (K = inf), an unloaded ball is pushed along (K = 0), with the columns of
-    :func:`tolsim.physics.trains.regimes.regime_creep_coefficients` (a three-point ball has
-    no creep model yet: its train stays unresolved).
+    :func:`tolsim.physics.trains.regimes.regime_creep_coefficients` (a three-point ball with
+    those of its own minimum of D, :func:`tolsim.physics.trains.regimes.
+    three_point_coefficients`). Next to a ball that is not in regime A the braking acts along
+    the pair's actual rotation (:func:`tolsim.physics.trains.regimes.directional_braking`).
     """
     dbeta = np.ascontiguousarray(state.contact_angle_deviation.reshape(-1, 4))
     force = np.ascontiguousarray(state.normal_force.reshape(-1, 4))
@@ -268,6 +275,7 @@ def follow_trains(config, initial_gap, state):
     eps = np.ascontiguousarray(eps.reshape(trains, n))
     stiffness, braking = np.empty((trains, n)), np.empty((trains, n))
     train_inputs_kernel(eps, load, stiffness, braking)
+    stiffness, braking = directional_braking(load, stiffness, braking)
     horizon = config.motion.duration
     result = train_contact_constant(np.asarray(initial_gap).reshape(trains, max(n - 1, 0)),
                                     eps, stiffness, config.motion.groove_velocity, horizon,
@@ -592,6 +600,8 @@ class TrackFriction:
         rows, slots = eps.shape
         stiffness, braking = np.empty((rows, slots)), np.empty((rows, slots))
         train_inputs_kernel(eps, load, stiffness, braking)
+        stiffness, braking = (np.ascontiguousarray(x) for x in
+                              directional_braking(load, stiffness, braking))
         velocity = np.empty((rows, slots))
         force = np.empty((rows, max(slots - 1, 0)))
         label = np.empty((rows, slots), dtype=np.int64)
