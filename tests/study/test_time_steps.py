@@ -57,16 +57,22 @@ def test_automatic_steps_of_the_packaged_configs():
 
 
 def test_steps_follow_the_shortest_length_and_the_stroke():
-    # An end relief of 2 mm is the shortest length: 4 x 50 / 2 = 100 steps; a stroke of
-    # 400 mm with it 400; with nothing that changes epsilon along the track, the minimum.
+    # An end relief of 2 mm is the shortest length, with the fine factor 40 of a relief
+    # (time_steps' Notes: 1 um / 15 mm on carriage_preload needs ~200 steps): 40 x 50 / 2 =
+    # 1000 steps; a stroke of 400 mm with it 4000; a 15 mm relief leaves the 10.05 mm pitch
+    # the shortest, 40 x 50 / 10.05 = 199.0 -> 200; with nothing that changes epsilon along
+    # the track, the minimum.
     c = packaged("carriage_preload")
     text = c.text.replace("# end_relief_depth_um = 1.0", "end_relief_depth_um = 1.0").replace(
         "# end_relief_length_mm = 15.0", "end_relief_length_mm = 2.0")
     relief = parse_config(text, "relief.toml")
     assert epsilon_lengths(relief)["end relief"] == pytest.approx(0.002, rel=1e-12)
-    assert time_steps(relief) == 100
+    assert time_steps(relief) == 1000
     longer = parse_config(text.replace("stroke_mm = 100.0", "stroke_mm = 400.0"), "long.toml")
-    assert time_steps(longer) == 400
+    assert time_steps(longer) == 4000
+    fifteen = parse_config(text.replace("end_relief_length_mm = 2.0",
+                                        "end_relief_length_mm = 15.0"), "fifteen.toml")
+    assert time_steps(fifteen) == 200
     whatif = packaged("whatif_along_track")
     text = re.sub(r"(?ms)^\[tolerances\.bottom_rotation\].*?correlation_length_mm = 20\.0\n",
                   "", whatif.text).replace("yaw_moment_N_m = 6.0", "yaw_moment_N_m = 0.0")
