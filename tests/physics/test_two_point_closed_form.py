@@ -3,16 +3,14 @@
 Balls from the carriage solve of ``configs/carriage_preload.toml``'s guide (two wrapped tracks
 of 12 [Lin2018] Table 1 balls, 300 N and 2 N m) with sampled groove and ball errors, at 0 um
 oversize (no preload: two-, three- and four-point balls) and at -5 um (clearance: every loaded
-ball two-point).
+ball two-point), from the ``carriage_balls`` fixture (tests/conftest.py).
 """
 
 import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from tolsim.physics.carriage import CarriageLayout, CarriageLoad, solve_carriage_batch
 from tolsim.physics.geometry import TABLE1
-from tolsim.physics.static import GrooveErrors
 from tolsim.physics.velocity._regime_kernels import (
     REGIME_STICK,
     REGIME_TWO_POINT,
@@ -21,28 +19,15 @@ from tolsim.physics.velocity._regime_kernels import (
 from tolsim.physics.velocity.full import exactly_two_point, full
 
 
-def carriage_balls(oversize, seed=25, assemblies=20):
-    """(dbeta, F) of the balls with two or more loaded contacts, (n, 4) each."""
-    rng = np.random.default_rng(seed)
-    shape = (assemblies, 2, 12)
-    errors = GrooveErrors(
-        arc_centre_offset_normal=rng.normal(0.0, 1e-6, shape + (4,)),
-        arc_centre_offset_tangential=rng.normal(0.0, 1e-6, shape + (4,)),
-        bottom_rotation=rng.normal(0.0, 1.75e-3, shape),
-        top_rotation=rng.normal(0.0, 1.75e-3, shape),
-        ball_oversize=rng.normal(0.0, 0.1e-6, shape))
-    layout = CarriageLayout([-0.02, 0.02], [0.0, 0.0], np.deg2rad([90.0, -90.0]), 12, 0.01005)
-    batch = solve_carriage_batch(layout, CarriageLoad(vertical_force=300.0, pitch_moment=2.0),
-                                 oversize=oversize, groove_errors=errors)
-    force = batch.normal_force.reshape(-1, 4)
-    dbeta = batch.contact_angle_deviation.reshape(-1, 4)
-    keep = np.all(np.isfinite(force), axis=1) & (np.count_nonzero(force > 0.0, axis=1) >= 2)
+def loaded(dbeta, force):
+    """The balls with two or more loaded contacts (the ones ``full`` solves)."""
+    keep = np.count_nonzero(force > 0.0, axis=1) >= 2
     return dbeta[keep], force[keep]
 
 
 @pytest.fixture(scope="module", params=[0.0, -5e-6], ids=["no_preload", "clearance"])
-def balls(request):
-    dbeta, force = carriage_balls(request.param)
+def balls(request, carriage_balls):
+    dbeta, force = loaded(*carriage_balls(request.param, 25, 20))
     return dbeta, force, full(dbeta, force)
 
 
@@ -74,12 +59,12 @@ def test_closed_form_falls_back_outside_its_tolerance():
     assert_array_equal(full(dbeta, force).regime == REGIME_TWO_POINT, [False, True])
 
 
-def test_three_point_balls_stick_at_the_first_candidate():
+def test_three_point_balls_stick_at_the_first_candidate(carriage_balls):
     # The stick solve tries a three-point ball's pair contact on the other groove than its
     # single contact first (candidate_order); it is the contact that sticks on these carriage
     # balls, so one stick line is solved per ball instead of two where the heavier contact of
     # the pair does not stick (which happens here too: the order is not by force).
-    dbeta, force = carriage_balls(0.0)
+    dbeta, force = loaded(*carriage_balls(0.0, 25, 20))
     res = full(dbeta, force)
     three = (np.count_nonzero(force > 0.0, axis=1) == 3) & (res.regime == REGIME_STICK)
     assert three.sum() >= 50
