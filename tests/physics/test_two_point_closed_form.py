@@ -72,3 +72,16 @@ def test_three_point_balls_stick_at_the_first_candidate(carriage_balls):
     assert_array_equal(res.stuck_contact[three], first)
     heaviest = np.argmax(force[three], axis=1)
     assert (first != heaviest).any()
+
+
+@pytest.mark.parametrize("single, first", [(0, 3), (1, 2), (2, 1), (3, 0)])
+def test_candidate_order_of_three_point_balls(single, first):
+    # Contacts BL, BR (bottom), TR, TL (top); the pair opposite the single contact's diagonal
+    # holds one contact on each groove, and the one on the other groove than the single
+    # contact comes first, the rest by decreasing force (four-point balls: by force alone).
+    force = np.array([300.0, 200.0, 150.0, 100.0])
+    force[(single + 2) % 4] = 0.0
+    order = candidate_order(force)
+    rest = [k for k in np.argsort(-force) if k != first]
+    assert_array_equal(order, [first] + rest)
+    assert_array_equal(candidate_order(np.array([300.0, 200.0, 150.0, 100.0])), [0, 1, 2, 3])
