@@ -117,3 +117,34 @@ def other_thread_count():
             numba.set_num_threads(ambient)
 
     return run
+
+
+@pytest.fixture(scope="session")
+def carriage_balls():
+    """``balls(oversize, seed, assemblies)``: (dbeta, F), (n, 4) each, of every ball with
+    finite forces in sampled assemblies of ``configs/carriage_preload.toml``'s guide (two
+    wrapped tracks of 12 [Lin2018] Table 1 balls, 300 N and 2 N m; 1 um arc-centre offsets,
+    0.1 deg rotations, 0.1 um ball sizes), solved by
+    :func:`tolsim.physics.carriage.solve_carriage_batch` at ball oversize ``oversize`` [m]."""
+    from tolsim.physics.carriage import CarriageLayout, CarriageLoad, solve_carriage_batch
+    from tolsim.physics.static import GrooveErrors
+
+    def balls(oversize, seed, assemblies):
+        gen = np.random.default_rng(seed)
+        shape = (assemblies, 2, 12)
+        errors = GrooveErrors(
+            arc_centre_offset_normal=gen.normal(0.0, 1e-6, shape + (4,)),
+            arc_centre_offset_tangential=gen.normal(0.0, 1e-6, shape + (4,)),
+            bottom_rotation=gen.normal(0.0, 1.75e-3, shape),
+            top_rotation=gen.normal(0.0, 1.75e-3, shape),
+            ball_oversize=gen.normal(0.0, 0.1e-6, shape))
+        layout = CarriageLayout([-0.02, 0.02], [0.0, 0.0], np.deg2rad([90.0, -90.0]), 12,
+                                0.01005)
+        batch = solve_carriage_batch(layout, CarriageLoad(vertical_force=300.0,
+                                                          pitch_moment=2.0),
+                                     oversize=oversize, groove_errors=errors)
+        force = batch.normal_force.reshape(-1, 4)
+        keep = np.all(np.isfinite(force), axis=1)
+        return batch.contact_angle_deviation.reshape(-1, 4)[keep], force[keep]
+
+    return balls

@@ -401,6 +401,42 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, table, cin, s
 
 
 @jit
+def candidate_order(force):
+    """The order in which :func:`stick_solve` tries the stick lines of a ball's contacts.
+
+    By decreasing force; but a three-point ball (one diagonal loaded at both contacts, the
+    other at one, the "single" contact) first tries the contact of the loaded pair on the
+    other groove than the single one: that is the one that sticks, in every one of 73 905
+    three-point regime-B balls of ``configs/carriage_preload.toml`` at 0 um oversize along
+    the track (200 assemblies, seed 12), against 43 % for the heavier contact. Only the
+    order changes, so the same certified line is found with one line solve instead of two
+    where the heavier contact does not stick.
+    """
+    order = np.argsort(-force)
+    single = -1
+    loaded = 0
+    for i in range(4):
+        if force[i] > 0.0:
+            loaded += 1
+            if not force[(i + 2) % 4] > 0.0:
+                single = i
+    if loaded != 3 or single < 0:
+        return order
+    # the pair is (single + 1, single + 3) mod 4: one bottom (0, 1) and one top (2, 3) contact
+    first = (single + 1) % 4
+    if (first >= 2) == (single >= 2):
+        first = (single + 3) % 4
+    out = np.empty(4, dtype=order.dtype)
+    out[0] = first
+    m = 1
+    for j in range(4):
+        if order[j] != first:
+            out[m] = order[j]
+            m += 1
+    return out
+
+
+@jit
 def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_, win, xo, wo,
                 tr, wr, scan, state, contact, info, regime):
     """Regime B: the first certified stick line of a loaded contact (else the one of least D).
@@ -437,9 +473,10 @@ def stick_solve(beta, force, a, b, sigma_scale, rd, hoff, tol, table, cin, sin_,
                 info[1] = 1.0
                 info[2] = 1.0
                 return True
-    # candidates by decreasing force (the heavy diagonal first); a certified line minimum is
-    # the minimum of D, so the search stops there
-    order = np.argsort(-force)
+    # candidates by decreasing force (the heavy diagonal first), a three-point ball's likely
+    # stuck contact before them; a certified line minimum is the minimum of D, so the search
+    # stops there
+    order = candidate_order(force)
     best_d = np.inf
     best_k = -1
     best_cert = np.nan

@@ -34,7 +34,12 @@ from tolsim.physics.velocity._contact_tables import (
     sample_kernel,
 )
 from tolsim.physics.velocity._full_kernels import ball_loads_kernel, contact_friction_kernel
-from tolsim.physics.velocity._regime_kernels import REGIME_SMOOTH, REGIME_UNSOLVED, regime_kernel
+from tolsim.physics.velocity._regime_kernels import (
+    REGIME_SMOOTH,
+    REGIME_UNSOLVED,
+    TWO_POINT_ANGLE_TOLERANCE,
+    regime_kernel,
+)
 from tolsim.physics.velocity._smooth_kernels import (
     FULL_LOAD_COLUMNS,
     full_kernel,
@@ -592,6 +597,41 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
                            state, contact, info, load)
     return _loaded_full_result(state, contact, info, load, force, shape, bearing, hc,
                                groove_velocity, load_p, load_q, float(ball_friction), free)
+
+
+def exactly_two_point(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+    """Balls that :func:`full` answers in closed form: exactly two-point, rolling at v/2.
+
+    Parameters
+    ----------
+    contact_angle_deviation, normal_force : ndarray, shape (n, 4)
+        dbeta_i [rad], F_i [N].
+    bearing : Bearing
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        Exactly two loaded contacts (F > 0), opposite (BL-TR or BR-TL), whose loaded angles
+        differ by at most :data:`~tolsim.physics.velocity._regime_kernels.TWO_POINT_ANGLE_TOLERANCE`
+        (1e-9 rad): the test of :func:`full`'s regime kernel on the planar surface, to the
+        same floats (beta = beta_0 + dbeta). Such a ball has epsilon = 0, D = 0 and
+        Omega = (v / 2R_B)(cos b*, -+sin b*, 0), ``regime`` two-point, ``converged`` and
+        ``valid`` True, certificate 0 (issue 25); its other fields are those of :func:`full`.
+
+    Notes
+    -----
+    Static equilibrium of a ball on two contacts makes them opposite and equal; the carriage
+    solve leaves them equal to round-off (|dbeta_1 - dbeta_3| <= 1.1e-12 rad over 302 600
+    two-point balls of ``configs/carriage_preload.toml`` at 0 and -5 um oversize along the
+    track), far inside the tolerance; a ball outside it (a two-point ball out of balance) is
+    left to the full model.
+    """
+    beta = bearing.nominal_contact_angle + np.asarray(contact_angle_deviation, dtype=float)
+    loaded = np.asarray(normal_force) > 0.0
+    with np.errstate(invalid="ignore"):
+        equal = np.abs(beta[:, :2] - beta[:, 2:]) <= TWO_POINT_ANGLE_TOLERANCE
+    pair = loaded[:, :2] & loaded[:, 2:] & equal
+    return (np.count_nonzero(loaded, axis=1) == 2) & (pair[:, 0] | pair[:, 1])
 
 
 def _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocity, regime=None):

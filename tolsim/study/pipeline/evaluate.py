@@ -63,6 +63,7 @@ from tolsim.physics.velocity.analytic import (
 )
 from tolsim.physics.velocity.models import (
     BALL_REGIME_A,
+    BALL_TWO_POINT,
     BALL_UNLOADED,
     BALL_UNRESOLVED,
     MODEL_FAST,
@@ -337,7 +338,9 @@ def loaded_contacts(force):
 def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
     """epsilon and regime of balls from :func:`tolsim.physics.velocity.full.full`, never raising.
 
-    ``full`` takes four-, three- and two-point balls (issue 25). Balls that it cannot take
+    ``full`` takes four-, three- and two-point balls (issue 25); the exactly two-point ones
+    (:func:`tolsim.physics.velocity.full.exactly_two_point`) are answered here in its closed
+    form (epsilon = 0, two-point), without the kernel. Balls that it cannot take
     (fewer than two loaded contacts, a contact in tension, a loaded contact angle outside
     (0, 90) deg, a contact ellipse wider than R_B / 2) and balls it does not certify come back
     with ``ok`` False and epsilon NaN. epsilon does not depend on ``groove_velocity``.
@@ -377,6 +380,12 @@ def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
                  & np.all(hc.semi_major_coefficient * np.cbrt(force)
                           < 0.5 * bearing.ball_radius, axis=1))
     idx = np.flatnonzero(takes)
+    if len(idx):  # exactly two-point balls in closed form (epsilon = 0), the rest by ``full``
+        two = module.exactly_two_point(dbeta[idx], force[idx], bearing)
+        eps[idx[two]] = 0.0
+        ok[idx[two]] = True
+        regime[idx[two]] = BALL_TWO_POINT
+        idx = idx[~two]
     if len(idx):
         res = module.full(dbeta[idx], force[idx], bearing, groove_velocity=groove_velocity)
         good = np.asarray(res.valid, dtype=bool) & np.isfinite(res.velocity_deviation)
