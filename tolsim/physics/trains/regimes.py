@@ -16,7 +16,7 @@ import numpy as np
 from tolsim.physics.geometry import TABLE1, Bearing
 from tolsim.physics.trains.ball_minimum import (
     contact_directions,
-    stick_line_stiffness,
+    stick_line_release,
     three_point_coefficients,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
@@ -34,9 +34,11 @@ from tolsim.physics.velocity.models import (
 #: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only) and its
 #: braking vector gamma [1/N] (x and y, NaN as the rates): d(epsilon)/dQ of a neighbour force Q
 #: whose friction moment lies along the unit vector u is gamma . u (Notes of
-#: :func:`directional_braking`).
+#: :func:`directional_braking`), and the pushes P = Q_back - Q_front [N] at which a ball in
+#: regime B leaves its stick line (forward > 0, backward < 0; +-inf for every other ball).
 TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime",
-                 "braking_vector_x", "braking_vector_y")
+                 "braking_vector_x", "braking_vector_y", "release_push_forward",
+                 "release_push_backward")
 #: Creep stiffness of an anchor and of a ball pushed along [N].
 ANCHOR_STIFFNESS, PUSHED_STIFFNESS = np.inf, 0.0
 
@@ -169,6 +171,8 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     regime = np.asarray(regime).reshape(n)
     out = np.full((n, len(TRAIN_COLUMNS)), np.nan)
     out[:, :len(LOAD_COLUMNS)] = load
+    out[:, _COL["release_push_forward"]] = np.inf
+    out[:, _COL["release_push_backward"]] = -np.inf
     two = regime == BALL_TWO_POINT
     stick = regime == BALL_REGIME_B
     three = regime == BALL_THREE_POINT
@@ -198,8 +202,10 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
             out[two, _COL[name]] = value
         rate[two] = two_point_rolling_rate(dbeta[two], force[two], bearing)
     if stick.any():
-        stiffness, res = stick_line_stiffness(dbeta[stick], force[stick], bearing)
+        stiffness, release, res = stick_line_release(dbeta[stick], force[stick], bearing)
         rows = np.flatnonzero(stick)
+        out[rows, _COL["release_push_forward"]] = release[:, 0]
+        out[rows, _COL["release_push_backward"]] = release[:, 1]
         out[rows, _COL["creep_stiffness"]] = stiffness
         with np.errstate(divide="ignore", invalid="ignore"):
             out[rows, _COL["braking_sensitivity"]] = np.where(np.isfinite(stiffness),
@@ -213,7 +219,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
                                                         ball_friction=ball_friction)
         for name, value in columns.items():
             out[three, _COL[name]] = value
-        gamma[three] = out[three, _COL["braking_vector_x"]:]
+        gamma[three] = out[three, _COL["braking_vector_x"]:_COL["release_push_forward"]]
     if pushed.any():
         values = {"free_rolling_velocity_deviation": np.nan, "creep_stiffness": PUSHED_STIFFNESS,
                   "braking_sensitivity": 0.0, "carriage_force": 0.0,
@@ -229,7 +235,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     with np.errstate(divide="ignore", invalid="ignore"):
         gamma[axial] = (out[axial, _COL["braking_sensitivity"], None] * rate[axial]
                         / np.hypot(rate[axial, 0], rate[axial, 1])[:, None])
-    out[:, _COL["braking_vector_x"]:] = gamma
+    out[:, _COL["braking_vector_x"]:_COL["release_push_forward"]] = gamma
     return out
 
 
@@ -288,7 +294,7 @@ def directional_braking(coefficients, stiffness, braking):
     norm = np.hypot(w[..., 0], w[..., 1])
     with np.errstate(divide="ignore", invalid="ignore"):
         unit = w / norm[..., None]
-    gamma = coefficients[..., _COL["braking_vector_x"]:]
+    gamma = coefficients[..., _COL["braking_vector_x"]:_COL["release_push_forward"]]
     use = mixed & np.isfinite(norm) & (norm > 0.0)
     c_front = braking.copy()
     c_back = braking.copy()
