@@ -6,9 +6,10 @@ a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilo
 own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
 adds each ball's rolling angular velocity; a three-point ball creeps with the coefficients of
 its own minimum of D (:mod:`tolsim.physics.trains.ball_minimum`, which also gives the pushes
-at which a stuck contact lets go, not used by the trains yet); :func:`pair_braking` gives the
-ball-ball friction of a pair from the two balls' actual rotations. The cluster rule with
-anchors is in the Notes of :func:`tolsim.physics.trains.cluster_velocities`.
+at which a stuck contact lets go: train columns of a ball in regime B);
+:func:`pair_braking` gives the ball-ball friction of a pair from the two balls' actual
+rotations. The cluster rule with anchors is in the Notes of
+:func:`tolsim.physics.trains.cluster_velocities`.
 """
 
 import numpy as np
@@ -141,14 +142,19 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     is K_s K_B / (K_s + K_B) d(epsilon), 1-2 % below K_s d(epsilon). (Both contacts of a pair
     stuck, equal angles: rigid, K = inf, an anchor.) F_0 and Omega are those of its certified
     minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are the
-    creep model's (the loads split between the grooves about as in regime A). Not modelled in
-    the trains: the push at which the stuck contact lets go before P_cap
-    (:func:`~tolsim.physics.trains.ball_minimum.stick_release`). It is not symmetric and can be
-    small: in case (a) at rho = -0.9 (K = 32 698 N, eps 0.030 %) +2.94 N and -22.6 N, at rho =
-    -0.95 +33.4 N and -51.2 N, against P_cap ~ mu sum F = 56.6 N (checked with the independent
-    minimiser of D - P v_B: eps 0.0386 % at +2.65 N, 2.09 % at +3.24 N). Beyond it the ball
-    leaves the stick line for the other branch (regime A's larger epsilon), which a linear K
-    cannot follow; the trains keep K_B up to P_cap.
+    creep model's (the loads split between the grooves about as in regime A). The pushes at
+    which the stuck contact lets go before P_cap (columns ``release_push_forward``,
+    ``_backward``, :func:`~tolsim.physics.trains.ball_minimum.stick_line_release`, the fast
+    form of :func:`~tolsim.physics.trains.ball_minimum.stick_release`) are not symmetric and
+    can be small: in case (a) at rho = -0.9 (K = 32 698 N, eps 0.030 %) +2.94 N and -22.6 N,
+    at rho = -0.95 +33.4 N and -51.2 N, against P_cap ~ mu sum F = 56.6 N (checked with the
+    independent minimiser of D - P v_B: eps 0.0386 % at +2.65 N, 2.09 % at +3.24 N). Beyond
+    it the ball leaves the stick line for the other branch (regime A's larger epsilon),
+    which a linear K cannot follow: a train in which a ball in regime B is pushed past one
+    of them is unresolved from that step on, as one with a sliding ball (the sliding check
+    of :mod:`tolsim.study.pipeline.friction_kernels`). Not modelled: the released state's own
+    coefficients (regime A of the same contacts under that push), and the release of a
+    three-point ball on a stick line.
 
     **A three-point ball** (one contact open) creeps with the coefficients of its own minimum
     of D (:func:`~tolsim.physics.trains.ball_minimum.three_point_coefficients`): K and c from
