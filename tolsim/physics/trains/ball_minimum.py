@@ -170,6 +170,50 @@ def _stick_margin(push, w, t, px, py, vgroove, others, a, b, cin, sin_, win, xo,
     return least
 
 
+@jit
+def _stick_frame(beta, force, k, px, py, others, alone):
+    """Contact directions of one ball into ``px``, ``py``; the forces of the other contacts
+    and of the stuck contact ``k`` alone into ``others``, ``alone``. Returns (sum F, t, e1,
+    e2, pivot): the stick line (t[:3] its direction, t[3] its offset V_k: v_B = V_k + w,
+    Omega R = w x_k), the unit vectors e1, e2 normal to it, and the phase of the pivot."""
+    total = 0.0
+    for i in range(4):
+        px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[i])
+        py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[i])
+        others[i] = force[i] if i != k else 0.0
+        alone[i] = force[i] if i == k else 0.0
+        total += force[i]
+    t = np.array([1.0, -py[k], px[k], 1.0 if k >= 2 else 0.0])
+    norm = np.sqrt(1.0 + t[1] * t[1] + t[2] * t[2])
+    e1 = np.array([-t[1], 1.0, 0.0]) / np.hypot(1.0, t[1])
+    e2 = np.array([t[1] * e1[2] - t[2] * e1[1], t[2] * e1[0] - e1[2],
+                   e1[1] - t[1] * e1[0]]) / norm
+    # the pure spin about the stuck contact's normal, (0, y_k), at the phase pivot: there
+    # sigma_k is smallest (only the spin moment resists), a dip of width ~ a / R_B
+    pivot = np.arctan2(-px[k] * e2[1] - py[k] * e2[2], -px[k] * e1[1] - py[k] * e1[2])
+    return total, t, e1, e2, pivot
+
+
+@jit
+def _support_scan(phases, e1, e2, px, py, alone, a, b, cin, sin_, win, xo, wo, tr, wr):
+    """(dirs, sigma): the unit directions cos e1 + sin e2 at ``phases`` and the stuck
+    contact's support function sigma_k there (its dissipation, grooves at rest)."""
+    dirs = np.empty((len(phases), 3))
+    sigma = np.empty(len(phases))
+    loads = np.empty(5)
+    contact = np.empty((4, 5))
+    zero = np.zeros(4)
+    d = np.zeros(4)
+    for j in range(len(phases)):
+        for i in range(3):
+            dirs[j, i] = np.cos(phases[j]) * e1[i] + np.sin(phases[j]) * e2[i]
+            d[i] = dirs[j, i]
+        ball_loads_kernel(d, px, py, zero, alone, a, b, 1.5 / np.pi, False, 1.0, zero, cin,
+                          sin_, win, xo, wo, tr, wr, loads, contact)
+        sigma[j] = loads[4]
+    return dirs, sigma
+
+
 @pjit
 def stick_release_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo, tr, wr, step,
                          angles, steps, out):
@@ -189,46 +233,20 @@ def stick_release_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo,
         px = np.empty(4)
         py = np.empty(4)
         others = np.empty(4)
-        alone = np.zeros(4)
-        total = 0.0
-        for i in range(4):
-            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
-            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
-            others[i] = force[n, i] if i != k else 0.0
-            total += force[n, i]
-        alone[k] = force[n, k]
+        alone = np.empty(4)
+        total, t, e1, e2, pivot = _stick_frame(beta[n], force[n], k, px, py, others, alone)
         vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        # t[:3] the line's direction, t[3] its offset V_k: v_B = V_k + w, Omega R = w x_k
-        t = np.array([1.0, -py[k], px[k], vgroove[k]])
-        norm = np.sqrt(1.0 + t[1] * t[1] + t[2] * t[2])
-        e1 = np.array([-t[1], 1.0, 0.0]) / np.hypot(1.0, t[1])
-        e2 = np.array([t[1] * e1[2] - t[2] * e1[1], t[2] * e1[0] - e1[2],
-                       e1[1] - t[1] * e1[0]]) / norm
-        # the pure spin about the stuck contact's normal, (0, y_k), at the phase pivot: there
-        # sigma_k is smallest (only the spin moment resists), a dip of width ~ a / R_B
-        pivot = np.arctan2(-px[k] * e2[1] - py[k] * e2[2], -px[k] * e1[1] - py[k] * e1[2])
-        total_dirs = angles + 2 * (angles + 1)
-        dirs = np.empty((total_dirs, 3))
-        sigma = np.empty(total_dirs)
-        loads = np.empty(5)
-        contact = np.empty((4, 5))
-        zero = np.zeros(4)
-        rest = np.zeros(4)
-        d = np.zeros(4)
-        for j in range(total_dirs):
+        phases = np.empty(angles + 2 * (angles + 1))
+        for j in range(len(phases)):
             if j < angles:
-                phase = 2.0 * np.pi * j / angles
+                phases[j] = 2.0 * np.pi * j / angles
             else:
                 fine = j - angles
                 side_ = fine // (angles + 1)
-                phase = (pivot + np.pi * side_
-                         + RELEASE_WINDOW * (2.0 * (fine % (angles + 1)) / angles - 1.0))
-            for i in range(3):
-                dirs[j, i] = np.cos(phase) * e1[i] + np.sin(phase) * e2[i]
-                d[i] = dirs[j, i]
-            ball_loads_kernel(d, px, py, rest, alone, a[n], b[n], 1.5 / np.pi, False, 1.0,
-                              zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
-            sigma[j] = loads[4]
+                phases[j] = (pivot + np.pi * side_
+                             + RELEASE_WINDOW * (2.0 * (fine % (angles + 1)) / angles - 1.0))
+        dirs, sigma = _support_scan(phases, e1, e2, px, py, alone, a[n], b[n], cin, sin_, win,
+                                    xo, wo, tr, wr)
         w = np.empty(1)
         for side in range(2):
             sign = 1.0 if side == 0 else -1.0
@@ -360,43 +378,22 @@ def release_threshold_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo,
         px = np.empty(4)
         py = np.empty(4)
         others = np.empty(4)
-        alone = np.zeros(4)
-        total = 0.0
-        for i in range(4):
-            px[i] = (-1.0 if i == 0 or i == 3 else 1.0) * np.sin(beta[n, i])
-            py[i] = (-1.0 if i < 2 else 1.0) * np.cos(beta[n, i])
-            others[i] = force[n, i] if i != k else 0.0
-            total += force[n, i]
-        alone[k] = force[n, k]
+        alone = np.empty(4)
+        total, t, e1, e2, pivot = _stick_frame(beta[n], force[n], k, px, py, others, alone)
         vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        t = np.array([1.0, -py[k], px[k], vgroove[k]])
-        norm = np.sqrt(1.0 + t[1] * t[1] + t[2] * t[2])
-        e1 = np.array([-t[1], 1.0, 0.0]) / np.hypot(1.0, t[1])
-        e2 = np.array([t[1] * e1[2] - t[2] * e1[1], t[2] * e1[0] - e1[2],
-                       e1[1] - t[1] * e1[0]]) / norm
-        pivot = np.arctan2(-px[k] * e2[1] - py[k] * e2[2], -px[k] * e1[1] - py[k] * e1[2])
         half = width * a[n, k]
-        count = angles + 2 * nodes
-        dirs = np.empty((count, 3))
-        sigma = np.empty(count)
-        loads = np.empty(5)
-        contact = np.empty((4, 5))
-        zero = np.zeros(4)
-        rest = np.zeros(4)
-        d = np.zeros(4)
-        for j in range(count):
+        phases = np.empty(angles + 2 * nodes)
+        for j in range(len(phases)):
             if j < angles:
-                phase = 2.0 * np.pi * j / angles
+                phases[j] = 2.0 * np.pi * j / angles
             else:
                 fine = j - angles
-                phase = (pivot + np.pi * (fine // nodes)
-                         + half * (2.0 * (fine % nodes) / (nodes - 1) - 1.0))
-            for i in range(3):
-                dirs[j, i] = np.cos(phase) * e1[i] + np.sin(phase) * e2[i]
-                d[i] = dirs[j, i]
-            ball_loads_kernel(d, px, py, rest, alone, a[n], b[n], 1.5 / np.pi, False, 1.0,
-                              zero, cin, sin_, win, xo, wo, tr, wr, loads, contact)
-            sigma[j] = loads[4]
+                phases[j] = (pivot + np.pi * (fine // nodes)
+                             + half * (2.0 * (fine % nodes) / (nodes - 1) - 1.0))
+        dirs, sigma = _support_scan(phases, e1, e2, px, py, alone, a[n], b[n], cin, sin_, win,
+                                    xo, wo, tr, wr)
+        loads = np.empty(5)
+        contact = np.empty((4, 5))
         low_slope = _line_slope(rate[n] - step, t, px, py, vgroove, others, a[n], b[n], cin,
                                 sin_, win, xo, wo, tr, wr, loads, contact)
         high_slope = _line_slope(rate[n] + step, t, px, py, vgroove, others, a[n], b[n], cin,
