@@ -332,7 +332,8 @@ def _line_slope(w, t, px, py, vgroove, others, a, b, cin, sin_, win, xo, wo, tr,
 def _fast_margin(push, w, curvature, t, px, py, vgroove, others, a, b, cin, sin_, win, xo, wo,
                  tr, wr, dirs, sigma, out_w):
     """:func:`_stick_margin` by secant steps on the line slope from ``w`` (first step with
-    ``curvature``), the line minimum's w into ``out_w[0]``."""
+    ``curvature``), the line minimum's w into ``out_w[0]``; -inf where the steps find no
+    minimum on the line (the stick line does not hold the push)."""
     loads = np.empty(5)
     contact = np.empty((4, 5))
     w0 = w
@@ -346,9 +347,9 @@ def _fast_margin(push, w, curvature, t, px, py, vgroove, others, a, b, cin, sin_
             break
         w2 = w1 - r1 * (w1 - w0) / (r1 - r0)
         w0, r0, w1 = w1, r1, w2
-    else:
+    else:  # no minimum on the line (the push exceeds what the other contacts hold there)
         out_w[0] = np.nan
-        return np.nan
+        return -np.inf
     least = np.inf
     for j in range(dirs.shape[0]):
         m = sigma[j] - (loads[0] + push) * dirs[j, 0] - loads[1] * dirs[j, 1] \
@@ -412,7 +413,7 @@ def release_threshold_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo,
             m_high = _fast_margin(sign * total, w_low + sign * total / curvature, curvature, t,
                                   px, py, vgroove, others, a[n], b[n], cin, sin_, win, xo, wo,
                                   tr, wr, dirs, sigma, w)
-            if not (m_low >= 0.0 and np.isfinite(m_high)):
+            if not m_low >= 0.0 or np.isnan(m_high):
                 out[n, side] = np.nan
                 continue
             if m_high >= 0.0:
@@ -429,7 +430,7 @@ def release_threshold_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo,
                 m = _fast_margin(sign * mid, w_low + sign * (mid - low) / curvature, curvature,
                                  t, px, py, vgroove, others, a[n], b[n], cin, sin_, win, xo,
                                  wo, tr, wr, dirs, sigma, w)
-                if not np.isfinite(m):
+                if np.isnan(m):
                     low = np.nan
                     break
                 if m >= 0.0:
@@ -447,7 +448,7 @@ def release_threshold_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo,
                     m = _fast_margin(sign * mid, w_low + sign * (mid - low) / curvature,
                                      curvature, t, px, py, vgroove, others, a[n], b[n], cin,
                                      sin_, win, xo, wo, tr, wr, dirs, sigma, w)
-                    if not np.isfinite(m):
+                    if np.isnan(m):
                         low = np.nan
                         break
                     if m >= 0.0:
