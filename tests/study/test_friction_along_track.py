@@ -29,7 +29,7 @@ from tolsim.physics.trains import (
     step_project_kernel,
     train_contact_constant,
 )
-from tolsim.physics.velocity.analytic import LOAD_COLUMNS
+from tolsim.physics.trains.regimes import TRAIN_COLUMNS
 from tolsim.study.analyses import friction_examples as fx
 from tolsim.study.execution.runner import run_study
 from tolsim.study.pipeline import track_friction as fr
@@ -300,7 +300,9 @@ def test_step_friction_kernel_matches_numpy_twin(rng):
     for _ in range(steps):
         loaded = rng.random((rows, slots)) < 0.95
         member = loaded & (rng.random((rows, slots)) < 0.95)
-        load = np.full((rows, slots, len(LOAD_COLUMNS)), np.nan)
+        load = np.full((rows, slots, len(TRAIN_COLUMNS)), np.nan)
+        load[..., TRAIN_COLUMNS.index("release_push_forward")] = np.inf
+        load[..., TRAIN_COLUMNS.index("release_push_backward")] = -np.inf
         load[..., fr._F0] = rng.uniform(1.0, 1.4, (rows, slots))
         load[..., fr._A] = rng.normal(-0.5, 0.01, (rows, slots))
         load[..., fr._B] = rng.normal(0.07, 0.005, (rows, slots))

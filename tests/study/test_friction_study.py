@@ -25,6 +25,7 @@ from tolsim.io.schema.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, paired_forces
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.trains import train_contact_constant
+from tolsim.physics.trains.regimes import TRAIN_COLUMNS
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS, analytic
 from tolsim.study.analyses import friction_examples as fx
 from tolsim.study.execution.runner import StudyInterrupted, run_study
@@ -134,7 +135,9 @@ def test_stroke_kernel_matches_numpy_twin(rng):
     stiffness = rng.uniform(600.0, 800.0, (m, n))
     stiffness[-3:, 2] = np.nan  # unresolved trains
     res = train_contact_constant(gap, eps, stiffness, 0.2, horizon, segments=True)
-    load = np.full((m, n, len(LOAD_COLUMNS)), np.nan)
+    load = np.full((m, n, len(TRAIN_COLUMNS)), np.nan)
+    load[:, :, TRAIN_COLUMNS.index("release_push_forward")] = np.inf
+    load[:, :, TRAIN_COLUMNS.index("release_push_backward")] = -np.inf
     load[:, :, fr._F0] = rng.uniform(1.1, 1.3, (m, n))
     load[:, :, fr._A] = rng.normal(-0.5, 0.01, (m, n))
     load[:, :, fr._B] = rng.normal(0.07, 0.005, (m, n))

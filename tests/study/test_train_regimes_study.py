@@ -15,10 +15,15 @@ from numpy.testing import assert_allclose
 
 from tolsim.io.config import parse_config
 from tolsim.physics.geometry import TABLE1, paired_forces
-from tolsim.physics.trains.ball_minimum import three_point_coefficients
+from tolsim.physics.trains.ball_minimum import stick_line_release, three_point_coefficients
 from tolsim.physics.trains.regimes import rigid_rolling_rate, two_point_rolling_rate
 from tolsim.physics.velocity.analytic import analytic
-from tolsim.physics.velocity.models import BALL_THREE_POINT, BALL_TWO_POINT, BALL_UNLOADED
+from tolsim.physics.velocity.models import (
+    BALL_REGIME_B,
+    BALL_THREE_POINT,
+    BALL_TWO_POINT,
+    BALL_UNLOADED,
+)
 from tolsim.study.pipeline import track_friction as fr
 from tolsim.study.pipeline.block import evaluate_block
 from tolsim.study.pipeline.propagation import FirstContact, FreeBalls, TrainMotion, integrate
@@ -196,3 +201,30 @@ def test_three_point_ball_behind_an_anchor_resolves():
     assert_allclose(out.increase_max, max(0.0, first, first + second), rtol=1e-12)
     assert_allclose(out.baseline, cols["free_rolling_carriage_force"][0]
                     + ref.free_rolling_carriage_force[1], rtol=1e-12)
+
+
+def test_regime_b_ball_pushed_past_its_release_is_unresolved():
+    # The middle ball in regime B (case (a), theta = 2 deg, N_y = 200 N), ball 0 made faster
+    # (epsilon 1 %): the pair 0-1 closes and pushes the middle ball forward with Q = 6.66 N
+    # (the cluster rule, K_B = 3.3e4 N). At rho = -0.9 its stuck contact lets go at +2.95 N
+    # (stick_line_release; stick_release +2.94 N, issue 25), so its K no longer holds and the
+    # train is unresolved from that step on (counted with the sliding ones, bounded, never
+    # dropped); at rho = -0.95 the release is +33.5 N and the train stays resolved.
+    theta = np.radians(2.0)
+    dbeta = np.array([-theta, theta, 0.0, 0.0])
+    for rho, released in ((-0.9, True), (-0.95, False)):
+        config, block, state, _, _, _ = _setup()
+        force = np.array(paired_forces(rho * 200.0, 200.0))
+        _, release, res = stick_line_release(dbeta[None], force[None], TABLE1)
+        state.velocity_deviation[:, 0] = 0.01
+        state.velocity_deviation[:, 1] = res.velocity_deviation[0]
+        state.valid[:, 1] = True
+        state.regime[:, 1] = BALL_REGIME_B
+        state.normal_force[:, 1, :] = force
+        state.contact_angle_deviation[:, 1, :] = dbeta
+        out = fr.evaluate_friction(config, block.initial_gap, state)
+        assert out.sliding.all() == released and out.resolved.all() != released
+        if not released:
+            assert 3.0 < out.contact_force_max[0] < release[0, 0]
+        else:
+            assert release[0, 0] < 3.0

@@ -6,9 +6,10 @@ a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilo
 own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
 adds each ball's rolling angular velocity; a three-point ball creeps with the coefficients of
 its own minimum of D (:mod:`tolsim.physics.trains.ball_minimum`, which also gives the pushes
-at which a stuck contact lets go, not used by the trains yet); :func:`pair_braking` gives the
-ball-ball friction of a pair from the two balls' actual rotations. The cluster rule with
-anchors is in the Notes of :func:`tolsim.physics.trains.cluster_velocities`.
+at which a stuck contact lets go: train columns of a ball in regime B);
+:func:`pair_braking` gives the ball-ball friction of a pair from the two balls' actual
+rotations. The cluster rule with anchors is in the Notes of
+:func:`tolsim.physics.trains.cluster_velocities`.
 """
 
 import numpy as np
@@ -16,7 +17,7 @@ import numpy as np
 from tolsim.physics.geometry import TABLE1, Bearing
 from tolsim.physics.trains.ball_minimum import (
     contact_directions,
-    stick_line_stiffness,
+    stick_line_release,
     three_point_coefficients,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
@@ -34,9 +35,11 @@ from tolsim.physics.velocity.models import (
 #: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only) and its
 #: braking vector gamma [1/N] (x and y, NaN as the rates): d(epsilon)/dQ of a neighbour force Q
 #: whose friction moment lies along the unit vector u is gamma . u (Notes of
-#: :func:`directional_braking`).
+#: :func:`directional_braking`), and the pushes P = Q_back - Q_front [N] at which a ball in
+#: regime B leaves its stick line (forward > 0, backward < 0; +-inf for every other ball).
 TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime",
-                 "braking_vector_x", "braking_vector_y")
+                 "braking_vector_x", "braking_vector_y", "release_push_forward",
+                 "release_push_backward")
 #: Creep stiffness of an anchor and of a ball pushed along [N].
 ANCHOR_STIFFNESS, PUSHED_STIFFNESS = np.inf, 0.0
 
@@ -139,14 +142,19 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     is K_s K_B / (K_s + K_B) d(epsilon), 1-2 % below K_s d(epsilon). (Both contacts of a pair
     stuck, equal angles: rigid, K = inf, an anchor.) F_0 and Omega are those of its certified
     minimum of D (:func:`tolsim.physics.velocity.full.full`); a, b and the capacities are the
-    creep model's (the loads split between the grooves about as in regime A). Not modelled in
-    the trains: the push at which the stuck contact lets go before P_cap
-    (:func:`~tolsim.physics.trains.ball_minimum.stick_release`). It is not symmetric and can be
-    small: in case (a) at rho = -0.9 (K = 32 698 N, eps 0.030 %) +2.94 N and -22.6 N, at rho =
-    -0.95 +33.4 N and -51.2 N, against P_cap ~ mu sum F = 56.6 N (checked with the independent
-    minimiser of D - P v_B: eps 0.0386 % at +2.65 N, 2.09 % at +3.24 N). Beyond it the ball
-    leaves the stick line for the other branch (regime A's larger epsilon), which a linear K
-    cannot follow; the trains keep K_B up to P_cap.
+    creep model's (the loads split between the grooves about as in regime A). The pushes at
+    which the stuck contact lets go before P_cap (columns ``release_push_forward``,
+    ``_backward``, :func:`~tolsim.physics.trains.ball_minimum.stick_line_release`, the fast
+    form of :func:`~tolsim.physics.trains.ball_minimum.stick_release`) are not symmetric and
+    can be small: in case (a) at rho = -0.9 (K = 32 698 N, eps 0.030 %) +2.94 N and -22.6 N,
+    at rho = -0.95 +33.4 N and -51.2 N, against P_cap ~ mu sum F = 56.6 N (checked with the
+    independent minimiser of D - P v_B: eps 0.0386 % at +2.65 N, 2.09 % at +3.24 N). Beyond
+    it the ball leaves the stick line for the other branch (regime A's larger epsilon),
+    which a linear K cannot follow: a train in which a ball in regime B is pushed past one
+    of them is unresolved from that step on, as one with a sliding ball (the sliding check
+    of :mod:`tolsim.study.pipeline.friction_kernels`). Not modelled: the released state's own
+    coefficients (regime A of the same contacts under that push), and the release of a
+    three-point ball on a stick line.
 
     **A three-point ball** (one contact open) creeps with the coefficients of its own minimum
     of D (:func:`~tolsim.physics.trains.ball_minimum.three_point_coefficients`): K and c from
@@ -169,6 +177,8 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     regime = np.asarray(regime).reshape(n)
     out = np.full((n, len(TRAIN_COLUMNS)), np.nan)
     out[:, :len(LOAD_COLUMNS)] = load
+    out[:, _COL["release_push_forward"]] = np.inf
+    out[:, _COL["release_push_backward"]] = -np.inf
     two = regime == BALL_TWO_POINT
     stick = regime == BALL_REGIME_B
     three = regime == BALL_THREE_POINT
@@ -198,8 +208,10 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
             out[two, _COL[name]] = value
         rate[two] = two_point_rolling_rate(dbeta[two], force[two], bearing)
     if stick.any():
-        stiffness, res = stick_line_stiffness(dbeta[stick], force[stick], bearing)
+        stiffness, release, res = stick_line_release(dbeta[stick], force[stick], bearing)
         rows = np.flatnonzero(stick)
+        out[rows, _COL["release_push_forward"]] = release[:, 0]
+        out[rows, _COL["release_push_backward"]] = release[:, 1]
         out[rows, _COL["creep_stiffness"]] = stiffness
         with np.errstate(divide="ignore", invalid="ignore"):
             out[rows, _COL["braking_sensitivity"]] = np.where(np.isfinite(stiffness),
@@ -213,7 +225,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
                                                         ball_friction=ball_friction)
         for name, value in columns.items():
             out[three, _COL[name]] = value
-        gamma[three] = out[three, _COL["braking_vector_x"]:]
+        gamma[three] = out[three, _COL["braking_vector_x"]:_COL["release_push_forward"]]
     if pushed.any():
         values = {"free_rolling_velocity_deviation": np.nan, "creep_stiffness": PUSHED_STIFFNESS,
                   "braking_sensitivity": 0.0, "carriage_force": 0.0,
@@ -229,7 +241,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     with np.errstate(divide="ignore", invalid="ignore"):
         gamma[axial] = (out[axial, _COL["braking_sensitivity"], None] * rate[axial]
                         / np.hypot(rate[axial, 0], rate[axial, 1])[:, None])
-    out[:, _COL["braking_vector_x"]:] = gamma
+    out[:, _COL["braking_vector_x"]:_COL["release_push_forward"]] = gamma
     return out
 
 
@@ -288,7 +300,7 @@ def directional_braking(coefficients, stiffness, braking):
     norm = np.hypot(w[..., 0], w[..., 1])
     with np.errstate(divide="ignore", invalid="ignore"):
         unit = w / norm[..., None]
-    gamma = coefficients[..., _COL["braking_vector_x"]:]
+    gamma = coefficients[..., _COL["braking_vector_x"]:_COL["release_push_forward"]]
     use = mixed & np.isfinite(norm) & (norm > 0.0)
     c_front = braking.copy()
     c_back = braking.copy()

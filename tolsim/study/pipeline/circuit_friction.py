@@ -36,6 +36,8 @@ def column_coefficients() -> np.ndarray:
     row[_COL["carriage_force_per_push"]] = -1.0
     row[_COL["traction_capacity"]] = np.inf
     row[_COL["braking_capacity"]] = np.inf
+    row[_COL["release_push_forward"]] = np.inf
+    row[_COL["release_push_backward"]] = -np.inf
     row[_COL["free_rolling_velocity_deviation"]] = np.nan
     row[_COL["regime"]] = BALL_UNLOADED
     return row

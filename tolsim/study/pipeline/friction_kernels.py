@@ -14,6 +14,8 @@ _A = TRAIN_COLUMNS.index("carriage_force_per_push")
 _B = TRAIN_COLUMNS.index("carriage_force_per_neighbour_force")
 _PCAP = TRAIN_COLUMNS.index("traction_capacity")
 _BCAP = TRAIN_COLUMNS.index("braking_capacity")
+_RF = TRAIN_COLUMNS.index("release_push_forward")
+_RB = TRAIN_COLUMNS.index("release_push_backward")
 
 
 @jit(inline="always")
@@ -24,8 +26,14 @@ def slides(back, front, coefficients):
     force (Notes of :func:`tolsim.study.pipeline.track_friction.evaluate_friction`). An
     anchor (K = inf): |P| / P_cap + S / S_cap >= 1, or a force that is not finite (anchors
     that cannot roll together), the line of
-    :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`.
+    :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`. A ball in regime B also
+    leaves its stick line (its K no longer holds) once P = back - front reaches a release push,
+    P >= P_fwd or P <= P_bwd (:func:`tolsim.physics.trains.ball_minimum.stick_line_release`;
+    +-inf for every other ball, so nothing else changes): counted with the sliding balls.
     """
+    push = back - front
+    if push >= coefficients[_RF] or push <= coefficients[_RB]:
+        return True
     if coefficients[_K] == np.inf:
         use = (abs(back - front) / coefficients[_PCAP]
                + (back + front) / coefficients[_BCAP])
