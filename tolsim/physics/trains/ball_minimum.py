@@ -214,6 +214,21 @@ def _support_scan(phases, e1, e2, px, py, alone, a, b, cin, sin_, win, xo, wo, t
     return dirs, sigma
 
 
+@jit
+def _scan_phases(angles, nodes, pivot, half):
+    """The directions of a release scan: ``angles`` over the circle, then ``nodes`` within
+    +- ``half`` of the pivot's phase and as many within +- ``half`` of the opposite one."""
+    phases = np.empty(angles + 2 * nodes)
+    for j in range(len(phases)):
+        if j < angles:
+            phases[j] = 2.0 * np.pi * j / angles
+        else:
+            fine = j - angles
+            phases[j] = (pivot + np.pi * (fine // nodes)
+                         + half * (2.0 * (fine % nodes) / (nodes - 1) - 1.0))
+    return phases
+
+
 @pjit
 def stick_release_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo, tr, wr, step,
                          angles, steps, out):
@@ -236,15 +251,7 @@ def stick_release_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo,
         alone = np.empty(4)
         total, t, e1, e2, pivot = _stick_frame(beta[n], force[n], k, px, py, others, alone)
         vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        phases = np.empty(angles + 2 * (angles + 1))
-        for j in range(len(phases)):
-            if j < angles:
-                phases[j] = 2.0 * np.pi * j / angles
-            else:
-                fine = j - angles
-                side_ = fine // (angles + 1)
-                phases[j] = (pivot + np.pi * side_
-                             + RELEASE_WINDOW * (2.0 * (fine % (angles + 1)) / angles - 1.0))
+        phases = _scan_phases(angles, angles + 1, pivot, RELEASE_WINDOW)
         dirs, sigma = _support_scan(phases, e1, e2, px, py, alone, a[n], b[n], cin, sin_, win,
                                     xo, wo, tr, wr)
         w = np.empty(1)
@@ -382,15 +389,7 @@ def release_threshold_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo,
         alone = np.empty(4)
         total, t, e1, e2, pivot = _stick_frame(beta[n], force[n], k, px, py, others, alone)
         vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        half = width * a[n, k]
-        phases = np.empty(angles + 2 * nodes)
-        for j in range(len(phases)):
-            if j < angles:
-                phases[j] = 2.0 * np.pi * j / angles
-            else:
-                fine = j - angles
-                phases[j] = (pivot + np.pi * (fine // nodes)
-                             + half * (2.0 * (fine % nodes) / (nodes - 1) - 1.0))
+        phases = _scan_phases(angles, nodes, pivot, width * a[n, k])
         dirs, sigma = _support_scan(phases, e1, e2, px, py, alone, a[n], b[n], cin, sin_, win,
                                     xo, wo, tr, wr)
         loads = np.empty(5)
