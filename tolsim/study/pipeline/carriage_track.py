@@ -29,6 +29,7 @@ from tolsim.physics.carriage import (
 )
 from tolsim.physics.static import GrooveErrors
 from tolsim.physics.velocity.models import BALL_UNRESOLVED, MODEL_UNRESOLVED
+from tolsim.study.pipeline.ball_kernels import gather_loaded_kernel, scatter_loaded_kernel
 from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.evaluate import (
     BallState,
@@ -259,16 +260,17 @@ class _Evaluation:
                                          start=self.newton_start(rows, t))
         solved = batch.status == STATUS_CONVERGED
         self.remember(rows, t, batch, solved)
-        force = batch.normal_force[loaded]
-        static = StaticResult(
-            np.ascontiguousarray(batch.contact_angle_deviation[loaded]),
-            np.ascontiguousarray(np.where(np.isfinite(force), force, 0.0)),
-            batch.ball_converged[loaded] & np.broadcast_to(solved[:, None, None], shape)[loaded])
-        state = ball_velocities(config, static, (int(loaded.sum()),))
-        eps = np.full(shape, np.nan)
-        eps[loaded] = state.velocity_deviation
-        ok = np.ones(shape, dtype=bool)
-        ok[loaded] = state.accounted if self.pushes_unloaded else state.valid
+        n = int(np.count_nonzero(loaded))
+        static = StaticResult(np.empty((n, 4)), np.empty((n, 4)), np.empty(n, dtype=bool),
+                              np.empty(n, dtype=bool))
+        gather_loaded_kernel(loaded, batch.contact_angle_deviation, batch.normal_force,
+                             batch.ball_converged, solved, static.contact_angle_deviation,
+                             static.normal_force, static.converged, static.four_point)
+        state = ball_velocities(config, static, (n,))
+        eps, ok = np.empty(shape), np.empty(shape, dtype=bool)
+        scatter_loaded_kernel(loaded, state.velocity_deviation, np.nan, eps)
+        scatter_loaded_kernel(loaded, state.accounted if self.pushes_unloaded else state.valid,
+                              True, ok)
         return eps, ok, loaded, batch, state
 
 
