@@ -16,6 +16,7 @@ from tolsim.study.pipeline.ball_kernels import (
     ball_outcomes_kernel,
     contact_counts_kernel,
     gather_loaded_kernel,
+    nan_to_num,
     scatter_loaded_kernel,
 )
 from tolsim.study.pipeline.evaluate import (
@@ -110,3 +111,14 @@ def test_gather_and_scatter_are_boolean_indexing():
     want = np.full(shape, np.nan)
     want[loaded] = values
     assert_array_equal(_bits(got), _bits(want))
+
+
+def test_nan_to_num_is_numpy_nan_to_num():
+    # source: np.nan_to_num (NaN -> 0, +-inf -> +-the largest double); tolerance: the bits
+    rng = np.random.default_rng(14)
+    x = rng.normal(size=(50, 3, 7))
+    x.reshape(-1)[rng.integers(0, x.size, 60)] = np.nan
+    x.reshape(-1)[:4] = [np.inf, -np.inf, -0.0, 0.0]
+    assert_array_equal(_bits(nan_to_num(x)), _bits(np.nan_to_num(x)))
+    view = x[:, :, ::2]  # not contiguous: NumPy's own
+    assert_array_equal(_bits(nan_to_num(view)), _bits(np.nan_to_num(view)))

@@ -25,7 +25,9 @@ def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_amaps, out
     ``np.where`` on the unloaded balls.
     """
     m, tracks, n = z.shape
+    nball = tracks * n
     for a in range(m):
+        maps, amaps = out_maps[a], out_amaps[a]
         for t in range(tracks):
             c, s, ms, mc, gx, gy = (track[t, 0], track[t, 1], track[t, 2], track[t, 3],
                                     track[t, 4], track[t, 5])
@@ -33,18 +35,23 @@ def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_amaps, out
                 b = t * n + j
                 zz = z[a, t, j]
                 out_zetas[a, b] = zz / length
+                for k in range(10):
+                    maps[b, k // 5, k % 5] = 0.0
                 if loaded[a, t, j]:
-                    row0 = (c * scale[0], s * scale[1], (ms * zz) * scale[2],
-                            (c * zz) * scale[3], gx * scale[4])
-                    row1 = (ms * scale[0], c * scale[1], (mc * zz) * scale[2],
-                            (ms * zz) * scale[3], gy * scale[4])
-                else:
-                    row0 = row1 = (0.0, 0.0, 0.0, 0.0, 0.0)
-                for k in range(5):
-                    out_maps[a, b, 0, k] = row0[k]
-                    out_maps[a, b, 1, k] = row1[k]
-                    out_amaps[a, k, b] = row0[k]
-                    out_amaps[a, 5 + k, b] = row1[k]
+                    maps[b, 0, 0] = c * scale[0]
+                    maps[b, 0, 1] = s * scale[1]
+                    maps[b, 0, 2] = (ms * zz) * scale[2]
+                    maps[b, 0, 3] = (c * zz) * scale[3]
+                    maps[b, 0, 4] = gx * scale[4]
+                    maps[b, 1, 0] = ms * scale[0]
+                    maps[b, 1, 1] = c * scale[1]
+                    maps[b, 1, 2] = (mc * zz) * scale[2]
+                    maps[b, 1, 3] = (ms * zz) * scale[3]
+                    maps[b, 1, 4] = gy * scale[4]
+        for r in range(10):  # by rows: the transposed copy
+            i, k = r // 5, r % 5
+            for b in range(nball):
+                amaps[r, b] = maps[b, i, k]
 
 
 @jit(inline="always")

@@ -29,7 +29,11 @@ from tolsim.physics.carriage import (
 )
 from tolsim.physics.static import GrooveErrors
 from tolsim.physics.velocity.models import BALL_UNRESOLVED, MODEL_UNRESOLVED
-from tolsim.study.pipeline.ball_kernels import gather_loaded_kernel, scatter_loaded_kernel
+from tolsim.study.pipeline.ball_kernels import (
+    gather_loaded_kernel,
+    nan_to_num,
+    scatter_loaded_kernel,
+)
 from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.evaluate import (
     BallState,
@@ -442,20 +446,20 @@ class CarriageFrame(AlongTrackFrame):
     def predictor(self, state):
         unloaded = self.unloaded(state)
         if unloaded is None:
-            return np.nan_to_num(state.velocity_deviation)
-        return np.nan_to_num(self.pushed(state.velocity_deviation, unloaded, ~state.loaded))
+            return nan_to_num(state.velocity_deviation)
+        return nan_to_num(self.pushed(state.velocity_deviation, unloaded, ~state.loaded))
 
     def move(self, position, w, h):
-        return position - h * (1.0 - np.nan_to_num(w)) * 0.5 * self.v
+        return position - h * (1.0 - nan_to_num(w)) * 0.5 * self.v
 
     def velocity(self, state1, state2):
         # a ball outside the zone at the midpoint keeps epsilon_1
         unloaded = self.unloaded(state1, state2)
         if unloaded is None:
-            return np.where(state2.loaded, np.nan_to_num(state2.velocity_deviation),
-                            np.nan_to_num(state1.velocity_deviation))
+            return np.where(state2.loaded, nan_to_num(state2.velocity_deviation),
+                            nan_to_num(state1.velocity_deviation))
         eps = np.where(state2.loaded, state2.velocity_deviation, state1.velocity_deviation)
-        return np.nan_to_num(self.pushed(eps, unloaded, ~(state1.loaded | state2.loaded)))
+        return nan_to_num(self.pushed(eps, unloaded, ~(state1.loaded | state2.loaded)))
 
     def unloaded(self, state1, state2=None):
         """The unloaded balls in the zone of the step (at the midpoint, or at its start for a
