@@ -17,19 +17,6 @@ FLOOR_LENGTH = 1e-9
 # --------------------------------------------------------------------------------------------
 # Kernels
 # --------------------------------------------------------------------------------------------
-@jit
-def finite_extent(values):
-    """(True, max |v|) of a 1-D float64 array, or (False, NaN) if a value is not finite: the
-    check of ``as_float`` in one pass (max |v| is max(-min, max))."""
-    largest = 0.0
-    for i in range(values.size):
-        v = values[i]
-        if not np.isfinite(v):
-            return False, np.nan
-        largest = max(largest, abs(v))
-    return True, largest
-
-
 @jit(inline="always")
 def _idx(arr, n):
     """Row n of an input whose first axis is n_balls or 1 (broadcast without copying)."""

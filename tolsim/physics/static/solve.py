@@ -7,11 +7,7 @@ import numpy as np
 from tolsim._jit import kernel_array
 from tolsim.physics.geometry import TABLE1, Bearing
 from tolsim.physics.hertz import hertz_constants
-from tolsim.physics.static._kernels import (
-    finite_extent,
-    static_displacement_kernel,
-    static_load_kernel,
-)
+from tolsim.physics.static._kernels import static_displacement_kernel, static_load_kernel
 
 #: Default relative tolerance on the force imbalance (relative to the largest of |N|, F_i);
 #: Newton converges quadratically, so this costs at most one step over 1e-10 and leaves the
@@ -239,14 +235,10 @@ def as_float(name, value):
         raise ValueError(f"{name} must be numeric, got {value!r}") from None
     if arr.size == 0:
         return arr, 0.0
-    if arr.flags.c_contiguous:  # one compiled pass
-        finite, largest = finite_extent(arr.reshape(-1))
-    else:  # (a broadcast view: two reductions, no copy; NaN propagates)
-        lo, hi = arr.min(), arr.max()
-        finite, largest = bool(np.isfinite(lo) and np.isfinite(hi)), max(-lo, hi)
-    if not finite:
+    lo, hi = arr.min(), arr.max()  # two reductions, no temporaries; NaN propagates
+    if not (np.isfinite(lo) and np.isfinite(hi)):
         raise ValueError(f"{name} must be finite")
-    return arr, float(largest)
+    return arr, float(max(-lo, hi))
 
 
 def prepare_inputs(items, bearing):
