@@ -619,6 +619,12 @@ def test_sensitivity_matches_solver_and_linearised_error():
          "arc_centre_offset_normal"),
         (dict(side_load=0.0, normal_load=1.0, errors=GrooveErrors(bottom_rotation=1.0)),
          "bottom_rotation"),
+        (dict(side_load=np.array([0.0, np.inf, 1.0]), normal_load=1.0), "side_load"),
+        (dict(side_load=0.0, normal_load=1.0,  # below -pi/8, contiguous and a broadcast view
+              errors=GrooveErrors(top_rotation=np.array([0.1, -0.5]))), "top_rotation"),
+        (dict(side_load=0.0, normal_load=1.0, errors=GrooveErrors(
+            bottom_rotation=np.broadcast_to(np.array([0.0, -0.5]), (3, 2)))),
+         "bottom_rotation"),
         (dict(side_load=np.zeros(3), normal_load=np.ones(4)), "broadcast"),
         (dict(side_load=0.0, normal_load=1.0, tol=0.0), "tol"),
         (dict(side_load=0.0, normal_load=1.0, max_iter=0), "max_iter"),

@@ -114,19 +114,21 @@ class RailField:
         pos = np.asarray(position, dtype=np.float64)
         out = np.empty(pos.shape)
         values = np.ascontiguousarray(self.values, dtype=np.float64)
-        _field_at_kernel(values, float(self.origin), float(self.spacing),
+        _field_at_kernel(values, np.arange(values.shape[0]), float(self.origin),
+                         float(self.spacing),
                          np.ascontiguousarray(pos).reshape(values.shape[0], -1),
                          out.reshape(values.shape[0], -1))
         return out
 
 
 @jit
-def _field_at_kernel(values, origin, spacing, position, out):
-    """Kernel of :meth:`RailField.at`: row r of ``position`` (rows, k) read on row r of the
-    grid ``values``, linear between its points, the end values beyond them (NaN at a NaN
-    position)."""
+def _field_at_kernel(values, index, origin, spacing, position, out):
+    """Kernel of :meth:`RailField.at`: row r of ``position`` (rows, k) read on row
+    ``index[r]`` of the grid ``values``, linear between its points, the end values beyond them
+    (NaN at a NaN position)."""
     last = values.shape[1] - 2
     for r in range(position.shape[0]):
+        v = values[index[r]]
         for j in range(position.shape[1]):
             x = (position[r, j] - origin) / spacing
             if not np.isfinite(x):
@@ -134,7 +136,7 @@ def _field_at_kernel(values, origin, spacing, position, out):
                 continue
             k = 0 if x < 0.0 else (last if x > last else min(int(np.floor(x)), last))
             w = min(max(x - k, 0.0), 1.0)
-            out[r, j] = (1.0 - w) * values[r, k] + w * values[r, k + 1]
+            out[r, j] = (1.0 - w) * v[k] + w * v[k + 1]
 
 
 @dataclass
@@ -486,11 +488,23 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
     for t in config.tolerances:
         if t.source not in fixed:
             out[t.source] = t.distribution.from_normal(z[t.source])
-        elif t.scope == "ball":
-            out[t.source] = np.take_along_axis(fixed[t.source][rows], ids, axis=2)
-        else:
-            out[t.source] = np.broadcast_to(fixed[t.source][rows], shape).copy()
+        else:  # by ball id, or the track's one value
+            out[t.source] = np.empty(shape)
+            _take_balls_kernel(fixed[t.source], rows, ids, t.scope == "ball", out[t.source])
     return out
+
+
+@jit
+def _take_balls_kernel(values, rows, ids, by_ball, out):
+    """``out[a, t, j]`` = ``values[rows[a], t, ids[a, t, j]]`` (``by_ball``) or
+    ``values[rows[a], t, 0]`` (as ``np.take_along_axis`` of ``values[rows]``, or its
+    broadcast)."""
+    m, tracks, slots = out.shape
+    for a in range(m):
+        r = rows[a]
+        for t in range(tracks):
+            for j in range(slots):
+                out[a, t, j] = values[r, t, ids[a, t, j] if by_ball else 0]
 
 
 def fixed_ball_values(config, block: Block) -> dict:
@@ -517,10 +531,13 @@ def fixed_ball_values(config, block: Block) -> dict:
 def _field_at(rail_field: RailField, rows, position):
     """``rail_field`` of the block's assemblies ``rows`` at positions (m, T, S) [-]."""
     tracks = rail_field.tracks
-    values = rail_field.values.reshape(-1, tracks, rail_field.values.shape[1])[rows]
-    sub = RailField(rail_field.origin, rail_field.spacing,
-                    values.reshape(len(rows) * tracks, -1), tracks)
-    return sub.at(position)
+    index = (np.asarray(rows)[:, None] * tracks + np.arange(tracks)).reshape(-1)
+    pos = np.ascontiguousarray(position, dtype=np.float64)
+    out = np.empty(pos.shape)
+    _field_at_kernel(np.ascontiguousarray(rail_field.values, dtype=np.float64), index,
+                     float(rail_field.origin), float(rail_field.spacing),
+                     pos.reshape(len(index), -1), out.reshape(len(index), -1))
+    return out
 
 
 def _correlate(group, z):

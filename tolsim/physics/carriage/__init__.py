@@ -13,7 +13,8 @@ Every solve ends with a :class:`CarriageStatus` (CONVERGED, NOT_CONVERGED, LIFT_
 per assembly in :attr:`CarriageBatch.status`, in :attr:`CarriageSolution.status`, and as
 :attr:`CarriageError.status` where :func:`solve_carriage` raises. Layout: ``layout`` (the
 dataclasses and geometry), ``solve`` (the validated solves), ``_kernels`` and
-``_batch_kernels`` (the Numba loops).
+``_batch_kernels`` (the Numba loops), ``_map_kernels`` (the groove maps of balls at their
+own z, the singular-tangent test).
 
 References
 ----------

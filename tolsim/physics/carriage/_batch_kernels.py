@@ -17,6 +17,7 @@ from tolsim.physics.carriage._kernels import (
     scaled_error,
     schur_complement,
 )
+from tolsim.physics.carriage._map_kernels import singular_pivot, trace_bounds
 from tolsim.physics.static import (
     FLOOR_LENGTH,
     arc_centres,
@@ -377,8 +378,9 @@ def _track_assembly(w, frame, zeta, q_ext, residual, reduced, tangent, ball_tol)
 
 @jit
 def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, max_iter, ball_tol,
-                  ball_max_iter, ball_floor, force_floor, load_norm, singular, cap, limit,
-                  resolve, q_ext, residual, tangent, state, work, low, step, reduced):
+                  ball_max_iter, ball_floor, force_floor, load_norm, singular, geometric,
+                  k_ref, eig_work, cap, limit, resolve, q_ext, residual, tangent, state, work,
+                  low, step, reduced):
     """Newton on the balls and the carriage together (the fast path): its steps, or -1.
 
     Unknowns: every ball centre P_b and q. Linearising the ball balance r_b = sum_i F_i u_i
@@ -454,7 +456,8 @@ def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, max_iter,
         if it >= max_iter:
             return -1
         it += 1
-        if not cholesky(tangent[0], free, low) > singular:
+        if singular_pivot(cholesky(tangent[0], free, low), singular, geometric, free, k_ref,
+                          eig_work):
             return -1
         cholesky_solve(low, free, reduced, step)
         move = 0.0
@@ -518,7 +521,8 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
     holds cos phi, sin phi, x / L and y / L of each track and ``zetas`` (m or 1, n_balls)
     z_b / L (:func:`_track_assembly`); ``free`` the indices of the free DOFs, ``geometrics``
     (m or 1, 5, 5) sum_b A_b^T A_b and ``geometric_maxs`` (m or 1,) the largest eigenvalue of
-    its free block; ``loaded`` (m or 1, n_balls) marks the balls in the loaded zone. A ball
+    its free block, or NaN: then computed only if a pivot needs it (:func:`singular_pivot`);
+    ``loaded`` (m or 1, n_balls) marks the balls in the loaded zone. A ball
     that is not loaded has zero rows in A and a radius of R_B - d/2 in the kernel (no flank
     touches it, so it carries and transmits nothing); its outputs are overwritten: no force,
     NaN angles and loads, count 0, converged. Assembly a is solved by the same sequence of
@@ -558,6 +562,7 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
         trial = np.empty(5)
         reduced = np.empty(5)
         kreg = np.empty((5, 5))
+        singular = np.empty(3)
         low = np.empty((5, 5))
         work = np.empty((4, 6))
         unit = np.empty((4, 2))
@@ -608,13 +613,18 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
             delta_ref = max((f_ref / k) ** (2.0 / 3.0), FLOOR_LENGTH)
             k_ref = 1.5 * k * np.sqrt(delta_ref) * 0.5
             ball_floor = max(f_ref, floor)
-            singular = 1e-10 * k_ref * geometric_max
+            if np.isnan(geometric_max):  # not given: bounds, the value when needed
+                trace_bounds(geometric, free, k_ref, singular)
+            else:
+                for i in range(3):
+                    singular[i] = 1e-10 * k_ref * geometric_max
             it = -1
             if joint:
                 it = _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol,
                                    _JOINT_MAX_ITER, ball_tol, ball_max_iter, ball_floor, floor,
-                                   load_norm, singular, cap, limit, _RESOLVE, q_ext, residual,
-                                   tangent, state, work, low, step, reduced)
+                                   load_norm, singular, geometric, k_ref, kreg, cap, limit,
+                                   _RESOLVE, q_ext, residual, tangent, state, work, low, step,
+                                   reduced)
             out_fallback[a] = joint and it < 0
             if it >= 0:
                 status, cur, last = STATUS_CONVERGED, 0, 0

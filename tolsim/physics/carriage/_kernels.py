@@ -3,6 +3,7 @@
 import numpy as np
 
 from tolsim._jit import jit
+from tolsim.physics.carriage._map_kernels import singular_pivot
 from tolsim.physics.carriage.layout import CarriageStatus
 from tolsim.physics.static import displacement_one, flank, flank_newton, move_top_groove
 
@@ -303,7 +304,8 @@ def nested_newton(q, free, groove_map, geometric, base, half, s0, c0, dist, k, t
 
     A regularised step from a state with no carriage flank loaded that closes no contact
     settles the carriage along it (:func:`settle`; Notes of :func:`solve_carriage`,
-    "Settling"). Returns (status, iterations, buffer of the solution, buffer of the last
+    "Settling"). ``singular``: the threshold of :func:`singular_pivot` (3,).
+    Returns (status, iterations, buffer of the solution, buffer of the last
     evaluation); the status is STATUS_LIFT_OFF only from :func:`settle`, STATUS_FAILED where
     no step stays in the gothic arch or a ball solve fails.
     """
@@ -328,7 +330,8 @@ def nested_newton(q, free, groove_map, geometric, base, half, s0, c0, dist, k, t
             break
         it += 1
         loose = not state[cur, 2] > 0.0  # no carriage flank loaded
-        if not cholesky(tangent[cur], free, low) > singular:  # singular: regularise
+        if singular_pivot(cholesky(tangent[cur], free, low), singular, geometric, free,
+                          k_ref, kreg):  # singular: regularise (kreg: scratch until here)
             for i in range(5):
                 for j in range(5):
                     kreg[i, j] = tangent[cur, i, j] + k_ref * geometric[i, j]

@@ -11,6 +11,7 @@ from tolsim.physics.carriage._kernels import (
     carriage_balls_kernel,
     receding,
 )
+from tolsim.physics.carriage._map_kernels import moving_groove_maps
 from tolsim.physics.carriage.layout import (
     DOFS,
     CarriageBatch,
@@ -119,6 +120,16 @@ def _batch_inputs(layout, oversize, groove_errors, bearing):
     e_n, e_t, rot_b, rot_t, off_b, off_t, dd, extra = flat
     # (columns of (rows, 1) arrays are contiguous views; the kernel adds the two oversizes)
     return (e_n, e_t, rot_b[:, 0], rot_t[:, 0], off_b, off_t, dd[:, 0], extra[:, 0]), full[0]
+
+
+def _track_rows(layout):
+    """(n_tracks, 6) c, s, -s, -c, s x - c y, c x + s y of each track (c, s: cos and sin of
+    its orientation) for :func:`moving_groove_maps`, as :meth:`CarriageLayout.groove_map_at`
+    forms them."""
+    c, s = np.cos(layout.track_orientation), np.sin(layout.track_orientation)
+    x, y = layout.track_x, layout.track_y
+    return np.ascontiguousarray(np.stack([c, s, -s, -c, s * x - c * y, c * x + s * y],
+                                         axis=1))
 
 
 class _Balls:
@@ -667,8 +678,10 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
 
     The locked DOFs are those of the layout's nominal balls, whatever ``ball_z`` and
     ``loaded``. Without ``ball_z`` and ``loaded`` the solve is exactly the one of the fixed
-    nominal balls (bit-identical); with them, the groove map A, sum_b A_b^T A_b and its
-    largest eigenvalue are formed per assembly.
+    nominal balls (bit-identical); with them, the groove map A and sum_b A_b^T A_b are formed
+    per assembly (A compiled, :func:`tolsim.physics.carriage._map_kernels.moving_groove_maps`),
+    and the largest eigenvalue of the latter only where a tangent's pivot needs it (between
+    bounds from its trace: :func:`tolsim.physics.carriage._map_kernels.singular_pivot`).
     """
     check_solver_options(tol, max_iter)
     check_solver_options(ball_tol, ball_max_iter)
@@ -696,16 +709,15 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
             base = 0.0 if oversize is None else np.asarray(oversize, dtype=float)
             inputs, m = _batch_inputs(layout, np.broadcast_to(base, z.shape), groove_errors,
                                       bearing)
-        z, mask = np.broadcast_to(z, (m, t, n)), np.broadcast_to(mask, (m, t, n))
-        a_s = layout.groove_map_at(z).reshape(z.shape[0], nball, 2, 5) * scale
-        a_s = np.ascontiguousarray(np.where(mask.reshape(-1, nball, 1, 1), a_s, 0.0))
+        z = np.ascontiguousarray(np.broadcast_to(z, (m, t, n)))
+        mask = np.ascontiguousarray(np.broadcast_to(mask, (m, t, n)))
+        a_s, amap, zeta = np.empty((m, nball, 2, 5)), np.empty((m, 10, nball)), np.empty(
+            (m, nball))
+        moving_groove_maps(z, mask, _track_rows(layout), scale, length, a_s, amap, zeta)
         flat = a_s.reshape(-1, 2 * nball, 5)
         geometric = np.matmul(flat.transpose(0, 2, 1), flat)
-        geometric_max = np.ascontiguousarray(
-            np.linalg.eigvalsh(geometric[:, free][:, :, free])[:, -1])
-        amap = np.ascontiguousarray(a_s.transpose(0, 2, 3, 1).reshape(-1, 10, nball))
-        maps = (a_s, amap, np.ascontiguousarray(z.reshape(-1, nball) / length), geometric,
-                geometric_max, np.ascontiguousarray(mask.reshape(-1, nball)))
+        geometric_max = np.full(m, np.nan)  # bounds from the trace (singular_pivot)
+        maps = (a_s, amap, zeta, geometric, geometric_max, mask.reshape(-1, nball))
 
     if start is not None:
         start = np.asarray(start, dtype=float)

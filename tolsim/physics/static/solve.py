@@ -244,13 +244,14 @@ def as_float(name, value):
 def prepare_inputs(items, bearing):
     """Validate inputs and bring each to a 2-D C array with first axis 1 or n.
 
-    ``items`` is a list of (name, value, trailing) with trailing 0 (per ball), 2 or 4.
-    Returns (arrays, ball_shape).
+    ``items`` is a list of (name, value, trailing) with trailing 0 (per ball), 2 or 4, or of
+    (name, value, trailing, True) for a value already checked by :func:`as_float` (the items
+    of :func:`error_items`: not read again). Returns (arrays, ball_shape).
     """
     arrays = []
     shapes = []
-    for name, value, trailing in items:
-        arr = as_float(name, value)[0]
+    for name, value, trailing, *checked in items:
+        arr = value if checked and checked[0] else as_float(name, value)[0]
         if trailing:
             if arr.ndim == 0:
                 arr = np.broadcast_to(arr, (trailing,))
@@ -268,7 +269,7 @@ def prepare_inputs(items, bearing):
         raise ValueError(f"ball shapes do not broadcast: {desc}") from None
     size = int(np.prod(ball_shape))
     out = []
-    for (_name, _value, trailing), arr, shape in zip(items, arrays, shapes, strict=True):
+    for (_name, _value, trailing, *_), arr, shape in zip(items, arrays, shapes, strict=True):
         width = max(trailing, 1)
         if int(np.prod(shape)) == 1:
             flat = arr.reshape(1, width)
@@ -282,7 +283,8 @@ def prepare_inputs(items, bearing):
 
 
 def error_items(errors, bearing):
-    """``prepare_inputs`` items of a GrooveErrors, each field checked finite and in range.
+    """``prepare_inputs`` items of a GrooveErrors, each field checked finite and in range
+    (float64 arrays, marked checked).
 
     Rotations must stay within +/-pi/8 rad and lengths within +/-(R_G - R_B)/4.
     """
@@ -301,7 +303,7 @@ def error_items(errors, bearing):
         if largest > limit:
             raise ValueError(f"{name} must stay within +/-{limit:.3g} {unit} "
                              f"(|value| up to {largest:.3g} {unit})")
-        items.append((name, arr, GrooveErrors.TRAILING[f.name]))
+        items.append((name, arr, GrooveErrors.TRAILING[f.name], True))
     return items
 
 

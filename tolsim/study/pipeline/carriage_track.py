@@ -29,6 +29,11 @@ from tolsim.physics.carriage import (
 )
 from tolsim.physics.static import GrooveErrors
 from tolsim.physics.velocity.models import BALL_UNRESOLVED, MODEL_UNRESOLVED
+from tolsim.study.pipeline.ball_kernels import (
+    gather_loaded_kernel,
+    nan_to_num,
+    scatter_loaded_kernel,
+)
 from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.evaluate import (
     BallState,
@@ -259,16 +264,17 @@ class _Evaluation:
                                          start=self.newton_start(rows, t))
         solved = batch.status == STATUS_CONVERGED
         self.remember(rows, t, batch, solved)
-        force = batch.normal_force[loaded]
-        static = StaticResult(
-            np.ascontiguousarray(batch.contact_angle_deviation[loaded]),
-            np.ascontiguousarray(np.where(np.isfinite(force), force, 0.0)),
-            batch.ball_converged[loaded] & np.broadcast_to(solved[:, None, None], shape)[loaded])
-        state = ball_velocities(config, static, (int(loaded.sum()),))
-        eps = np.full(shape, np.nan)
-        eps[loaded] = state.velocity_deviation
-        ok = np.ones(shape, dtype=bool)
-        ok[loaded] = state.accounted if self.pushes_unloaded else state.valid
+        n = int(np.count_nonzero(loaded))
+        static = StaticResult(np.empty((n, 4)), np.empty((n, 4)), np.empty(n, dtype=bool),
+                              np.empty(n, dtype=bool))
+        gather_loaded_kernel(loaded, batch.contact_angle_deviation, batch.normal_force,
+                             batch.ball_converged, solved, static.contact_angle_deviation,
+                             static.normal_force, static.converged, static.four_point)
+        state = ball_velocities(config, static, (n,))
+        eps, ok = np.empty(shape), np.empty(shape, dtype=bool)
+        scatter_loaded_kernel(loaded, state.velocity_deviation, np.nan, eps)
+        scatter_loaded_kernel(loaded, state.accounted if self.pushes_unloaded else state.valid,
+                              True, ok)
         return eps, ok, loaded, batch, state
 
 
@@ -440,20 +446,20 @@ class CarriageFrame(AlongTrackFrame):
     def predictor(self, state):
         unloaded = self.unloaded(state)
         if unloaded is None:
-            return np.nan_to_num(state.velocity_deviation)
-        return np.nan_to_num(self.pushed(state.velocity_deviation, unloaded, ~state.loaded))
+            return nan_to_num(state.velocity_deviation)
+        return nan_to_num(self.pushed(state.velocity_deviation, unloaded, ~state.loaded))
 
     def move(self, position, w, h):
-        return position - h * (1.0 - np.nan_to_num(w)) * 0.5 * self.v
+        return position - h * (1.0 - nan_to_num(w)) * 0.5 * self.v
 
     def velocity(self, state1, state2):
         # a ball outside the zone at the midpoint keeps epsilon_1
         unloaded = self.unloaded(state1, state2)
         if unloaded is None:
-            return np.where(state2.loaded, np.nan_to_num(state2.velocity_deviation),
-                            np.nan_to_num(state1.velocity_deviation))
+            return np.where(state2.loaded, nan_to_num(state2.velocity_deviation),
+                            nan_to_num(state1.velocity_deviation))
         eps = np.where(state2.loaded, state2.velocity_deviation, state1.velocity_deviation)
-        return np.nan_to_num(self.pushed(eps, unloaded, ~(state1.loaded | state2.loaded)))
+        return nan_to_num(self.pushed(eps, unloaded, ~(state1.loaded | state2.loaded)))
 
     def unloaded(self, state1, state2=None):
         """The unloaded balls in the zone of the step (at the midpoint, or at its start for a

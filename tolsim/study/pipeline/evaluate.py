@@ -71,6 +71,7 @@ from tolsim.physics.velocity.models import (
     MODEL_UNRESOLVED,
     ball_regime,
 )
+from tolsim.study.pipeline.ball_kernels import ball_outcomes_kernel, contact_counts_kernel
 
 CONTACTS = ("BL", "BR", "TR", "TL")
 
@@ -282,6 +283,14 @@ VELOCITY_KERNELS = {"eq24": _eq24, "analytic": _analytic, "full": _full}
 ROUND_OFF_APPROACH = 1e-12
 
 
+def round_off_force(bearing):
+    """K ROUND_OFF_APPROACH^1.5 [N]: a loaded ball whose contact forces are all at or below it
+    carries round-off only (:func:`settle_round_off_contacts`)."""
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    return hc.load_deflection_constant * ROUND_OFF_APPROACH**1.5
+
+
 def settle_round_off_contacts(force, count, bearing):
     """Forces and loaded-contact counts with the contacts of balls that carry only round-off
     opened.
@@ -314,9 +323,7 @@ def settle_round_off_contacts(force, count, bearing):
     """
     if not np.any(count > 0):
         return force, count
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    limit = hc.load_deflection_constant * ROUND_OFF_APPROACH**1.5
+    limit = round_off_force(bearing)
     small = (count > 0) & (force[:, 0] <= limit) & (force[:, 1] <= limit) & (
         force[:, 2] <= limit) & (force[:, 3] <= limit)
     if not small.any():
@@ -516,36 +523,41 @@ def ball_velocities(config, static: StaticResult, shape) -> BallState:
     with serial_if_small(n):
         force = static.normal_force
         dbeta = static.contact_angle_deviation
-        force, count = settle_round_off_contacts(force, loaded_contacts(force),
-                                                 config.bearing)
-        solvable = static.converged & static.four_point
+        count = np.empty(n, dtype=np.int8)
+        clipped = np.empty((n, 4))  # max(F, 0) of the settled forces, for the fast model
+        if contact_counts_kernel(force, round_off_force(config.bearing), count, clipped):
+            force = settle_round_off_contacts(force, loaded_contacts(force),
+                                              config.bearing)[0]
         eps = np.empty(n)
         valid = np.zeros(n, dtype=np.bool_)
         if fast:
             with np.errstate(divide="ignore", invalid="ignore"):
-                VELOCITY_KERNELS[config.study.velocity_model](
-                    dbeta, np.maximum(force, 0.0), config.bearing, eps, valid)
-            valid &= solvable & np.isfinite(eps)
-        model = np.where(valid, np.int8(MODEL_FAST), np.int8(MODEL_UNRESOLVED))
-        regime = np.where(valid, np.int8(BALL_REGIME_A), np.int8(BALL_UNRESOLVED))
-        regime[static.converged & (count == 0)] = BALL_UNLOADED
-        # the full model: four-point balls outside the fast model's validity, and every ball
-        # with two or three loaded contacts
-        redo = np.flatnonzero(static.converged & ~valid & (count >= 2))
+                VELOCITY_KERNELS[config.study.velocity_model](dbeta, clipped, config.bearing,
+                                                              eps, valid)
+        model = np.empty(n, dtype=np.int8)
+        regime = np.empty(n, dtype=np.int8)
+        lost = np.empty(n, dtype=np.bool_)
+        redo = np.empty(n, dtype=np.int64)
+        # valid: the fast model's, solvable and finite; the full model: four-point balls
+        # outside the fast model's validity, and every ball with two or three loaded contacts
+        redo = redo[:ball_outcomes_kernel(
+            eps, valid, static.converged, static.four_point, count, fast, MODEL_FAST,
+            MODEL_UNRESOLVED, BALL_REGIME_A, BALL_UNRESOLVED, BALL_UNLOADED, model, regime,
+            lost, redo)]
         if len(redo):
             c0, t0 = compile_seconds(), time.perf_counter()
-            eps_full, ok, regime_full = full_velocity(dbeta[redo], force[redo], config.bearing,
-                                                      config.motion.groove_velocity)
+            with serial_if_small(len(redo)):  # (a few balls: no thread pool)
+                eps_full, ok, regime_full = full_velocity(dbeta[redo], force[redo],
+                                                          config.bearing,
+                                                          config.motion.groove_velocity)
             # model time only: a cold kernel cache compiles the full model here, once
             resolve_seconds = (time.perf_counter() - t0) - (compile_seconds() - c0)
-            eps[redo] = eps_full
+            eps[redo] = eps_full  # NaN where not ok
             valid[redo] = ok
             model[redo[ok]] = MODEL_FULL
             regime[redo] = regime_full
     if not fast:
         resolve_seconds = 0.0  # the study's own model, not a re-solve
-    eps[~valid] = np.nan
-    lost = static.converged & ((count == 1) | (count < 0))
     return BallState(
         eps.reshape(shape), valid.reshape(shape), static.converged.reshape(shape),
         lost.reshape(shape), dbeta.reshape(shape + (4,)), force.reshape(shape + (4,)),
