@@ -284,7 +284,7 @@ def friction(sizes):
 
 def _steps(config, kind) -> int:
     """The integration steps of the benchmark's along-track study ``kind`` of ``config``."""
-    from tolsim.study.pipeline.propagation import time_steps
+    from tolsim.study.pipeline.propagation_rules import time_steps
 
     return time_steps(study(1, "solved", config, kind))
 
