@@ -537,8 +537,9 @@ class TrackFriction:
     stroke (without ``[contact]``: up to its first contact).
 
     *Cost.* Per step the creep coefficients of every loaded ball at the midpoint and, for the
-    trains with a closed pair, at the start; two O(n) passes per train. The propagation's two
-    evaluations per step still dominate (benchmarks/bench_study.py ``--along-track``).
+    trains with a closed pair, at the start; two O(n) passes per train. The propagation's
+    evaluations (one per step for free balls, two for a carriage) still dominate
+    (benchmarks/bench_study.py ``--along-track``).
     """
 
     def __init__(self, config, record=False):
