@@ -90,10 +90,15 @@ def time_steps(config) -> int:
     (1 000 assemblies) the ripple was 0.1711 N at 40 steps against 0.1737 N at 400, outside
     its own (narrow, +-0.0007 N) interval, and 0.1734 N at 200 steps against 0.1739 N at
     800, inside; hence c = 40 (200 steps there, the former fixed default). On the carriage
-    (600 assemblies, reference 800 steps) the ripple does not converge monotonically:
-    0.1275, 0.1294, 0.1298 and 0.1141 N at 20, 40, 80 and 200 steps against 0.1274 N (balls
-    entering and leaving the zone make the friction jump within a step); the largest and
-    the mean increase are inside their intervals from 10 steps.
+    (600 assemblies, reference 800 steps) the largest and the mean increase are inside their
+    intervals from 10 steps, but the ripple does not converge: 0.1275, 0.1294, 0.1298,
+    0.1141 and 0.1181 N at 20, 40, 80, 200 and 400 steps against 0.1274 N. Its extremes
+    are set by the short windows in which the zone holds one ball fewer or one more (between
+    an exit and the next entry), about one ball's F_0 (0.07-0.1 N) for as long as the gaps
+    make the window last (2.1 ms in the first assembly of seed 12); a step sees a window
+    only when its midpoint falls in it, and an entering ball is evaluated from the next step
+    on. A convergent ripple needs the carriage solved in each window, at the exit and entry
+    events (not built; README, "Carriage and preload").
 
     An end relief converges slowly: its balls unload near the zone's ends and load again, and
     most first contacts form there. ``configs/carriage_preload.toml`` with 1 um / 15 mm of
