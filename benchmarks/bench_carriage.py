@@ -17,8 +17,8 @@ time per assembly less so.
 
 ``--along-track N`` (default 200; 0 skips it) times the study path with ``along_track``
 propagation (:mod:`tolsim.study.pipeline.carriage_track`: the balls rolling through the carriage,
-the
-carriage re-solved twice per time step) on N assemblies of the same config, as ``tolsim run``
+the carriage re-solved twice per time step; ``--time-steps``, default the automatic step
+count) on N assemblies of the same config, as ``tolsim run``
 runs them (sampling, integration, statistics; one block), and the same assemblies with
 ``constant`` propagation as the baseline of the same run. ``--skip-batch`` runs only that.
 
@@ -26,7 +26,7 @@ runs them (sampling, integration, statistics; one block), and the same assemblie
 carriages settle onto their contacts, issue 25).
 
 Run: ``python benchmarks/bench_carriage.py [--assemblies 10000 100000] [--baseline 200]
-[--along-track 200] [--time-steps 200] [--skip-batch] [--preload-um X]``
+[--along-track 200] [--time-steps auto] [--skip-batch] [--preload-um X]``
 """
 
 import argparse
@@ -46,6 +46,7 @@ from tolsim.physics.carriage import CarriageStatus, solve_carriage, solve_carria
 from tolsim.physics.static import GrooveErrors, solve_static_displacement
 from tolsim.study.execution.chunks import retain_freed_memory
 from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.propagation_rules import time_steps as resolved_steps
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "carriage_preload.toml"
 #: Standard deviations of the sampled errors (normal, independent per ball): arc-centre
@@ -126,11 +127,15 @@ def _probability(acc):
 def along_track_study(assemblies, time_steps):
     """assemblies/s of the study path with along_track propagation (and constant, the
     baseline), ``configs/carriage_preload.toml`` with ``assemblies`` samples in one block."""
+    steps = f'"{time_steps}"' if time_steps == "auto" else time_steps
     text = CONFIG.read_text().replace("seed = 12", "seed = 12\nblock_size = "
-                                      f"{assemblies}\ntime_steps = {time_steps}")
-    constant = parse_config(text, str(CONFIG)).with_overrides(samples=assemblies)
+                                      f"{assemblies}\ntime_steps = {steps}")
+    # each propagation named (a [carriage] study's default is along_track)
+    constant = parse_config(text.replace("[study]", '[study]\npropagation = "constant"'),
+                            str(CONFIG)).with_overrides(samples=assemblies)
     along = parse_config(text.replace("[study]", '[study]\npropagation = "along_track"'),
                          str(CONFIG)).with_overrides(samples=assemblies)
+    time_steps = resolved_steps(along)
     t0 = time.perf_counter()
     for warm in (along, constant):
         small = warm.with_overrides(samples=2)
@@ -155,6 +160,16 @@ def along_track_study(assemblies, time_steps):
     return rate
 
 
+def _steps_argument(text):
+    """``--time-steps``: "auto" or a positive integer."""
+    if text == "auto":
+        return text
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError("must be a positive integer or 'auto'")
+    return value
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--assemblies", type=int, nargs="+", default=[10_000, 100_000])
@@ -162,7 +177,9 @@ def main(argv=None):
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--seed", type=int, default=20240)
     parser.add_argument("--along-track", type=int, default=200)
-    parser.add_argument("--time-steps", type=int, default=200)
+    parser.add_argument("--time-steps", type=_steps_argument, default="auto",
+                        help='steps of the along_track study: a number, or "auto" (the '
+                             "automatic step count, the default)")
     parser.add_argument("--skip-batch", action="store_true")
     parser.add_argument("--preload-um", type=float, default=None,
                         help="ball oversize of the preload class instead of the config's "

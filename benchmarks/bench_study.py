@@ -38,7 +38,8 @@ same config in the same run (issue 24, "Speed": along_track at most 5x the cost 
 constant; targets >= 500 k balls/s free balls, >= 200 k balls/s carriage, on 2 cores):
 ``configs/whatif_along_track.toml`` (free balls, 6 per train),
 ``configs/carriage_preload.toml`` (a carriage, 2 x 12 balls entering and leaving its loaded
-zone) and the same with a default ``[carriage.circuit]``, each at its automatic step count
+zone) and the same with a default ``[carriage.circuit]``, each as shipped (its own static
+model: ``whatif_along_track`` the paired one) at its automatic step count
 (``study.time_steps = "auto"``; each line says it) (the constant study of a
 circuit is that of the config without it: a circuit needs along_track). Each line gives
 balls/s of the along_track study, of the constant one, and their ratio (the cost per ball of
@@ -74,7 +75,8 @@ RESOLVE_STUDIES = {"default": ROOT / "tolsim" / "data" / "default.toml",
 
 
 def study(balls_total, static_model="solved", config=CONFIG, along_track=None):
-    """The benchmark's study; ``along_track``: None (as the config), "contact" / "free" for
+    """The benchmark's study (``static_model`` "config": the config's own); ``along_track``:
+    None (as the config), "contact" / "free" for
     along_track propagation with or without [contact], "circuit" along_track with a default
     ``[carriage.circuit]``, "constant" constant propagation."""
     from tolsim.io.config import load_config, parse_config
@@ -86,7 +88,8 @@ def study(balls_total, static_model="solved", config=CONFIG, along_track=None):
         text = c.text.replace("[study]\n", '[study]\npropagation = "along_track"\n', 1)
         c = parse_config(text + "\n[carriage.circuit]\n", str(config))
     c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0,
-                                 static_model=static_model))
+                                 static_model=(c.study.static_model if static_model == "config"
+                                               else static_model)))
     if along_track is not None:
         propagation = "constant" if along_track == "constant" else "along_track"
         c = replace(c, study=replace(c.study, propagation=propagation),
@@ -284,9 +287,9 @@ def friction(sizes):
 
 def _steps(config, kind) -> int:
     """The integration steps of the benchmark's along-track study ``kind`` of ``config``."""
-    from tolsim.study.pipeline.propagation import time_steps
+    from tolsim.study.pipeline.propagation_rules import time_steps
 
-    return time_steps(study(1, "solved", config, kind))
+    return time_steps(study(1, "config", config, kind))
 
 
 def along_track(sizes, constant_factor=20.0):
@@ -302,23 +305,27 @@ def along_track(sizes, constant_factor=20.0):
     for config, kind, label in cases:
         balls = _balls_per_assembly(config)
         for size in sizes:
-            along = measure(size * balls, config=config, along_track=kind)
+            along = measure(size * balls, config=config, along_track=kind,
+                            static_model="config")
             const = measure(size * constant_factor * balls, config=config,
-                            along_track="constant")
+                            along_track="constant", static_model="config")
             rate_a = along["balls"] / along["seconds"]
             rate_c = const["balls"] / const["seconds"]
             print(f"  {config.name} ({label}): {along['balls'] // balls:.0f} assemblies "
                   f"{along['balls']:.2e} balls along_track {along['seconds']:7.2f} s "
                   f"{rate_a:9.0f} balls/s; constant {rate_c:9.0f} balls/s "
                   f"({const['balls']:.2e} balls); cost per ball {rate_c / rate_a:6.1f}x "
-                  f"constant (target <= 5x); {_steps(config, kind)} steps")
+                  f"constant (target <= 5x); {_steps(config, kind)} steps, "
+                  f"{_static_model(config)} static")
     print(f"tolsim along_track study after contact, with and without [contact]; one worker, "
           f"{os.cpu_count()} cores")
     for config in (FRICTION_CONFIG, carriage):
         balls = _balls_per_assembly(config)
         for size in sizes:
-            free = measure(size * balls, config=config, along_track="free")
-            contact = measure(size * balls, config=config, along_track="contact")
+            free = measure(size * balls, config=config, along_track="free",
+                           static_model="config")
+            contact = measure(size * balls, config=config, along_track="contact",
+                              static_model="config")
             for label, r, kind in (("without [contact]", free, "free"),
                                    ("with [contact]   ", contact, "contact")):
                 print(f"  {config.name}: {r['balls']:.2e} balls {label} "
@@ -335,6 +342,12 @@ def _balls_per_assembly(config):
     from tolsim.io.config import load_config
 
     return load_config(config).balls
+
+
+def _static_model(config):
+    from tolsim.io.config import load_config
+
+    return load_config(config).study.static_model
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ configs/carriage_preload.toml, which is ``constant`` as packaged), and through t
 :func:`tolsim.run_study`, so it follows whatever step rule the integrator has.
 
 ``--steps auto`` runs the automatic step count (``study.time_steps = "auto"``,
-:func:`tolsim.study.pipeline.propagation.time_steps`), marked "a" in the table.
+:func:`tolsim.study.pipeline.propagation_rules.time_steps`), marked "a" in the table.
 
 Run: ``python benchmarks/convergence_along_track.py [--configs whatif_along_track
 carriage_preload carriage_circuit] [--steps auto 25 50 100 200 400] [--reference 1600]
@@ -44,7 +44,7 @@ import numpy as np
 
 from tolsim import parse_config, run_study
 from tolsim.io.schema.carriage import zone_end_fraction
-from tolsim.study.pipeline.propagation import time_steps as resolved_steps
+from tolsim.study.pipeline.propagation_rules import time_steps as resolved_steps
 from tolsim.study.spec import set_study_value
 
 ROOT = Path(__file__).resolve().parent.parent

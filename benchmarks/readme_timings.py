@@ -136,7 +136,8 @@ ROWS = (
     Row("sweep_free", "the sweep against ten separate runs without sampling (target: < 2)",
         SWEEP, r"sweep / sampling-free separate = ([\d.]+)", "×", 1),
     Row("along_free",
-        "free balls along the track (`whatif_along_track.toml`, automatic step: 20 steps)",
+        "free balls along the track (`whatif_along_track.toml` as shipped: paired static model, "
+        "automatic step: 20 steps)",
         ALONG_STUDY, _ALONG.format(r"whatif_along_track\.toml", "free balls")
         + r"along_track\s+\S+ s\s+(\d+) balls/s", "balls/s", -2),
     Row("along_free_ratio", "free balls: cost per ball along the track / constant (target: ≤ 5)",

@@ -12,6 +12,7 @@ from test_carriage_circuit import Record, config
 from tolsim.io.config import ConfigWarning, parse_config
 from tolsim.io.netcdf import result_to_dataset
 from tolsim.reports.result_view import circuit_rows
+from tolsim.study.analyses.friction_examples import friction_examples
 from tolsim.study.execution.runner import run_study
 from tolsim.study.pipeline.carriage_circuit import (
     CircuitContact,
@@ -156,13 +157,14 @@ def test_a_study_with_a_circuit_and_contact_writes_both():
     # The result file of a [contact] + [carriage.circuit] study holds the friction figures
     # (the friction section of [contact]) and the circuit's (column forces at the zone's
     # ends, contact events by where, the fraction of first contacts at the zone's ends), and
-    # the summary rows show the column forces; no friction examples (not built for a
-    # circuit).
+    # the summary rows show the column forces, and the friction examples of the report
+    # (before session 11 none: the circuit's trains recorded no steps).
     c = with_contact(config(samples=8, steps=20))
     ds = result_to_dataset(run_study(c))
     for name in ("circuit_column_force_max", "circuit_column_force_mean",
                  "circuit_contact_count", "contact_zone_end_fraction",
-                 "circuit_column_friction_mean"):
+                 "circuit_column_friction_mean", "example_friction_force",
+                 "example_ball_position", "example_contact_force"):
         assert name in ds, name
         assert "units" in ds[name].attrs and ds[name].attrs["long_name"], name
     # the column pushed at the exit costs friction: between 0 and the column's drag
@@ -175,3 +177,38 @@ def test_a_study_with_a_circuit_and_contact_writes_both():
     assert any("friction from the column" in label for label in labels)
     no_contact = result_to_dataset(run_study(config(samples=4, steps=10)))
     assert "circuit_column_friction_mean" not in no_contact
+
+
+def test_circuit_examples_are_the_recorded_steps():
+    # The report's friction examples of a circuit (friction_examples): the circuit's trains
+    # record their steps as the open carriage's do (CircuitTrains.record). Recording changes
+    # no figure (bit for bit); the examples' first travel point is the start of the stroke,
+    # where each example track's balls sit at the block's initial positions (carriage frame
+    # z = L/2 - sigma, sigma built from them: 1e-12 m); at each travel point the friction
+    # force is that of the recorded step holding it (exactly, the same array). (The
+    # circuit's balls start at the block's gaps with their own sizes, so their centres are
+    # the frame's, not block.initial_position: 0.26 um apart here.)
+    c = with_contact(config(samples=8, steps=20), "[contact]\nexamples = 2\n")
+    block = sample_block(c, 0)
+    plain = TrackFriction(c)
+    first_contact_carriage_circuit(c, block, friction=plain)
+    recorded = TrackFriction(c, record=True)
+    first_contact_carriage_circuit(c, sample_block(c, 0), friction=recorded)
+    a, b = plain.figures(), recorded.figures()
+    for name in ("baseline", "increase_max", "increase_mean", "ripple", "contact_force_max"):
+        assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    ex = friction_examples(c)
+    assert ex is not None and len(ex.assembly) == 2
+    n = c.train.balls
+    frame = CircuitFrame(c, sample_block(c, 0))
+    z, ids = frame.position[ex.assembly, ex.track], frame.ball_id[ex.assembly, ex.track]
+    start = np.array([[z[e][ids[e] == j][0] for j in range(n)] for e in range(len(z))])
+    assert_allclose(ex.ball_position[:, 0, :], start, rtol=0, atol=1e-12)
+    steps = len(recorded.trace["friction"])
+    rows = ex.assembly * c.n_tracks + ex.track
+    dt = c.motion.duration / steps
+    k = np.minimum((ex.travel / c.motion.groove_velocity / dt).astype(int), steps - 1)
+    expected = np.array([[recorded.trace["friction"][j][r] for j in k] for r in rows])
+    assert_array_equal(ex.friction_force, expected)
+    assert np.isfinite(ex.friction_force).all()
+    assert (np.nan_to_num(ex.contact_force) >= 0).all()

@@ -11,7 +11,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import parse_config
 from tolsim.study.pipeline.carriage_track import CarriageFrame
-from tolsim.study.pipeline.propagation import (
+from tolsim.study.pipeline.propagation_rules import (
     MIN_TIME_STEPS,
     epsilon_lengths,
     time_steps,

@@ -605,7 +605,7 @@ def assumption_table(ds, config=None) -> list:
         + " (tolsim.study.pipeline.propagation)")
     if a.get("propagation_caveat"):
         add("models", "caveat of the propagation", a["propagation_caveat"],
-            "tolsim.study.pipeline.propagation.propagation_caveat")
+            "tolsim.study.pipeline.propagation_rules.propagation_caveat")
     if has_friction(ds):
         rows.extend(friction_assumptions(ds, config, data))
 

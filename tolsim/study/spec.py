@@ -511,7 +511,7 @@ class StudySettings:
     time_steps : int or None
         Integration steps over the horizon for ``along_track`` propagation; None (config
         ``"auto"``, the default): sized from the lengths over which epsilon changes
-        (:func:`tolsim.study.pipeline.propagation.time_steps`).
+        (:func:`tolsim.study.pipeline.propagation_rules.time_steps`).
     velocity_deviation_range : tuple of float
         Histogram range of epsilon [-] (a fraction; config key
         ``velocity_deviation_range_percent``).

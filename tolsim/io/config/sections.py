@@ -565,7 +565,7 @@ def read_contact(t: Table) -> ContactSettings:
 
 def _time_steps(t):
     """``study.time_steps``: an integer >= 1, or ``"auto"`` (the default): None, the count
-    then chosen by :func:`tolsim.study.pipeline.propagation.time_steps`."""
+    then chosen by :func:`tolsim.study.pipeline.propagation_rules.time_steps`."""
     if t.data.get("time_steps", "auto") == "auto":
         t.used.add("time_steps")
         return None

@@ -15,7 +15,7 @@ from tolsim.io.schema.declaration import Section, V
 from tolsim.physics.geometry import CONTACTS
 from tolsim.physics.velocity.models import BALL_REGIMES
 from tolsim.study.analyses.limit_state import EVENT_PROBABILITY
-from tolsim.study.pipeline.propagation import (
+from tolsim.study.pipeline.propagation_rules import (
     propagation_assumption,
     propagation_caveat,
     time_steps,

@@ -13,8 +13,10 @@ from tolsim.physics.trains import (
 from tolsim.physics.trains.regimes import pair_braking
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.study.pipeline.block import evaluate_block
+from tolsim.study.pipeline.carriage_circuit import first_contact_carriage_circuit
 from tolsim.study.pipeline.track_friction import (
     FrictionState,
+    TrackFriction,
     follow_along_track,
     follow_trains,
 )
@@ -104,8 +106,7 @@ def choose_examples(figures: FrictionState, count: int) -> np.ndarray:
 
 
 def friction_examples(config) -> FrictionExamples | None:
-    """The example trajectories of a study with ``[contact]`` (None with ``examples = 0``
-    or a ``[carriage.circuit]``, whose trains record no trajectories yet).
+    """The example trajectories of a study with ``[contact]`` (None with ``examples = 0``).
 
     From the first random block of the study (Notes); each example's worst track
     is followed again on a grid of ``travel_points`` carriage positions.
@@ -123,11 +124,14 @@ def friction_examples(config) -> FrictionExamples | None:
     steps: at a travel point the forces and the friction force of the step that holds it, the
     positions interpolated linearly within the step. With a carriage the ``ball`` columns are the
     track's initial balls while they are in the loaded zone (NaN once they have left it); the balls
-    that entered since are in the friction force, not in the positions and pair forces.
+    that entered since are in the friction force, not in the positions and pair forces. With
+    a ``[carriage.circuit]`` the trains are the circuit's
+    (:class:`tolsim.study.pipeline.circuit_friction.CircuitTrains`), whose friction force
+    counts the column's forces at the zone's ends.
     """
     count = config.contact.examples
-    if count == 0 or (config.carriage is not None and config.carriage.circuit is not None):
-        return None  # a ball circuit's trains record no trajectories (not built yet)
+    if count == 0:
+        return None
     whole = sample_block(config, 0)
     along = config.is_along_track
     with _one_thread():
@@ -136,7 +140,7 @@ def friction_examples(config) -> FrictionExamples | None:
         for size in sorted({min(EXAMPLE_WINDOW, whole.size), whole.size}):
             block = _first_assemblies(whole, size)
             if along:
-                trains = follow_along_track(config, block, record=True)[-1]
+                trains = _follow_recorded(config, block)
                 figures = trains.figures()
             else:
                 state = _evaluate_assemblies(config, block)
@@ -147,6 +151,16 @@ def friction_examples(config) -> FrictionExamples | None:
         if along:
             return _track_examples(config, block, figures, trains, chosen)
         return _example_trajectories(config, block, figures, trains, chosen)
+
+
+def _follow_recorded(config, block):
+    """The recording TrackFriction of a block's along-track integration, with or without a
+    ball circuit."""
+    if config.carriage is not None and config.carriage.circuit is not None:
+        friction = TrackFriction(config, record=True)
+        first_contact_carriage_circuit(config, block, friction=friction)
+        return friction
+    return follow_along_track(config, block, record=True)[-1]
 
 
 def _track_examples(config, block, figures, friction, chosen):

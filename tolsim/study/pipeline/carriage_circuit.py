@@ -302,16 +302,19 @@ class CircuitFrame(CarriageFrame):
         overflow = (count < 0).reshape(k, tracks).any(axis=1)
         self.status[np.asarray(rows)[overflow]] |= STATUS_OVERFLOW_SLOTS
 
-    def stiffness(self, balls, loaded):
+    def stiffness(self, balls, loaded, where=None):
         """Creep stiffness K [N] of the loaded slots (NaN elsewhere and where unresolved):
         the analytic model at each ball's own contact state (:data:`tolsim.study.pipeline.
-        track_friction.CREEP_MODELS`), as the trains after contact."""
+        track_friction.CREEP_MODELS`), as the trains after contact; only at the slots
+        ``where`` (a subset of ``loaded``) when given."""
         out = np.full(loaded.shape, np.nan)
-        if loaded.any():
-            dbeta = np.ascontiguousarray(balls.contact_angle_deviation.reshape(-1, 4))
-            force = np.ascontiguousarray(balls.normal_force.reshape(-1, 4))
+        take = loaded if where is None else where
+        if take.any():
+            pick = take[loaded]  # the loaded balls (flattened in ``loaded`` order) wanted
+            dbeta = np.ascontiguousarray(balls.contact_angle_deviation.reshape(-1, 4)[pick])
+            force = np.ascontiguousarray(balls.normal_force.reshape(-1, 4)[pick])
             k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
-            out[loaded] = np.where(np.asarray(balls.valid).reshape(-1), k, np.nan)
+            out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
 
     def advance(self, step, new):
@@ -322,8 +325,10 @@ class CircuitFrame(CarriageFrame):
         state1, state2 = step.state1, step.state2
         eps = self.velocity(state1, state2)
         stiff = self.stiffness(state2.balls, state2.loaded)
-        stiff = np.where(np.isfinite(stiff), stiff, self.stiffness(state1.balls,
-                                                                   state1.loaded))
+        missing = ~np.isfinite(stiff) & state1.loaded  # K of the start where none at midpoint
+        if missing.any():
+            stiff = np.where(missing, self.stiffness(state1.balls, state1.loaded, missing),
+                             stiff)
         finite = np.isfinite(stiff) & (stiff > 0)
         fallback = float(np.mean(stiff[finite])) if finite.any() else 1.0
         unresolved = ~(state1.valid & state2.valid)
@@ -376,7 +381,7 @@ class CircuitFrame(CarriageFrame):
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
                         "circuits": circuits, "pushed": ring_pushed, "slot_ring": ring,
-                        "status": status}
+                        "status": status, "sigma_start": before[0]}
 
 
 #: Status bit of an assembly whose loaded balls outnumbered the carriage's slots.

@@ -288,7 +288,7 @@ class _Evaluation:
         The carriage moves smoothly between two evaluations (dt / 2 apart) except when a ball
         enters or leaves the zone, so the line through the two latest solutions starts the
         Newton O(dt^2) from the solution instead of O(dt): with the automatic step
-        (:func:`tolsim.study.pipeline.propagation.time_steps`) of
+        (:func:`tolsim.study.pipeline.propagation_rules.time_steps`) of
         ``configs/carriage_preload.toml`` (20 steps) it takes 2.5 joint Newton steps on
         average instead of 3.0 (500 assemblies, seed 12; 1.65 instead of 2.0 at 200 steps).
         The Newton's convergence test is the same, so the solution changes only within its

@@ -46,7 +46,7 @@ def column_coefficients() -> np.ndarray:
 @jit
 def circuit_trains_kernel(loaded, ring_load, ring_ok, mean_force, pressed_end, pressed_start,
                           column, column_row, used, out_loaded, out_member, out_load,
-                          out_force, out_ok, out_start, out_formed):
+                          out_force, out_ok, out_start, out_formed, out_ring):
     """The trains of circuits (C, N) as the rows (C, W) of
     :meth:`tolsim.study.pipeline.track_friction.TrackFriction.account` (W = slots + 2; Notes
     of :class:`CircuitTrains`): slot 0 the column at the exit, slots 1..m the zone's balls
@@ -54,7 +54,9 @@ def circuit_trains_kernel(loaded, ring_load, ring_ok, mean_force, pressed_end, p
     coefficients, the step-mean pair forces, whether the row can be followed (``out_ok``),
     whether a pair of the zone was pressed at the start of the step (``out_start``) and the
     clusters formed (``out_formed``: runs of pressed pairs of the zone at the end of the step
-    that hold a pair not pressed at its start). ``used``: the columns F_0, a, b, then K."""
+    that hold a pair not pressed at its start), and the ring ball in each row slot
+    (``out_ring``, -1 for the columns and past them). ``used``: the columns F_0, a, b, then
+    K."""
     circuits, n = loaded.shape
     width = out_loaded.shape[1]
     columns = ring_load.shape[2]
@@ -62,6 +64,7 @@ def circuit_trains_kernel(loaded, ring_load, ring_ok, mean_force, pressed_end, p
         for j in range(width):
             out_loaded[c, j] = False
             out_member[c, j] = False
+            out_ring[c, j] = -1
             for k in range(columns):
                 out_load[c, j, k] = np.nan
             if j < width - 1:
@@ -90,6 +93,7 @@ def circuit_trains_kernel(loaded, ring_load, ring_ok, mean_force, pressed_end, p
         in_run = False
         for j in range(1, count + 1):
             r = (entry + count - j) % n  # slot j: the ball j - 1 from the trailing end
+            out_ring[c, j] = r
             out_loaded[c, j] = True
             finite = True
             for k in range(columns):
@@ -227,10 +231,11 @@ class CircuitTrains(StepObserver):
         force = np.empty((c, width - 1))
         ok, start = np.empty(c, bool), np.empty(c, bool)
         formed = np.empty(c)
+        ring = np.empty((c, width), dtype=np.int64)
         circuit_trains_kernel(circ["loaded"], np.ascontiguousarray(ring_load), circ["ok"],
                               circ["mean_force"], pressed, self.pressed, circ["column"],
                               self.column_row, self.used, loaded, member, load, force, ok,
-                              start, formed)
+                              start, formed, ring)
         bad = np.repeat(step.overflow, frame.tracks) | (circ["status"] != 0)
         ok &= ~bad
         # the fraction of the step in contact: whole when pressed at its start, else from
@@ -241,7 +246,10 @@ class CircuitTrains(StepObserver):
         with np.errstate(invalid="ignore"):
             part = np.clip((t_end - first) / step.dt, 0.0, 1.0)
         contact = np.where(start, 1.0, np.where(np.isfinite(first), part, 0.0))
-        self.friction.account(loaded, member, load, force, ok, contact, formed)
+        baseline, increase = self.friction.account(loaded, member, load, force, ok, contact,
+                                                   formed)
+        if self.friction.record:
+            self.record(circ, ring, force, baseline + increase)
         self.pressed = pressed
         # the column's share: (a_trail + 1) Qbar_x - (1 + a_lead) Qbar_e
         lead = np.maximum(member.sum(axis=1) - 2, 1)
@@ -250,6 +258,28 @@ class CircuitTrains(StepObserver):
                  - (1.0 + load[line, lead, _A]) * force[line, lead])
         self.column_sum += np.where(ok & (lead > 0), np.nan_to_num(share), 0.0) * \
             self.friction.weight
+
+    def record(self, circ, ring, force, friction):
+        """The step into the trace of a recording TrackFriction (its ``record``), as the open
+        carriage's trains record theirs (:func:`tolsim.study.analyses.friction_examples.
+        friction_examples`): per row slot (the train of :func:`circuit_trains_kernel`: the
+        zone's balls at the end of the step between the two columns) the study id (-1 for
+        the columns), the carriage-frame z at the start and at the end of the step [m] (NaN
+        for the columns; z = L/2 - (sigma mod L_c) at the end, and back by the ball's travel
+        sigma_end - sigma_start along the circuit: a ball that entered in the step starts
+        beyond L/2), the step-mean pair forces [N] and the step's friction force [N]."""
+        frame, trace = self.frame, self.friction.trace
+        circuits = circ["circuits"]
+        take = np.maximum(ring, 0)
+        sigma = np.take_along_axis(frame.sigma[circuits], take, axis=1)
+        moved = sigma - np.take_along_axis(circ["sigma_start"], take, axis=1)
+        end = frame.half_zone - np.mod(sigma, frame.length[circuits][:, None])
+        column = ring < 0
+        trace["ids"].append(np.where(column, -1, frame.ring_id[take]))
+        trace["start"].append(np.where(column, np.nan, end + moved))
+        trace["end"].append(np.where(column, np.nan, end))
+        trace["force"].append(np.where(self.friction.alive[:, None], force, np.nan))
+        trace["friction"].append(friction)
 
     def column_friction(self) -> np.ndarray:
         """The friction the column's forces at the zone's ends cost the carriage, (size,) [N]:

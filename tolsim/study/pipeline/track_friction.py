@@ -40,8 +40,8 @@ from tolsim.study.pipeline.friction_kernels import (
 from tolsim.study.pipeline.propagation import (
     first_contact_along_track,
     pushed_velocity_deviation,
-    time_steps,
 )
+from tolsim.study.pipeline.propagation_rules import time_steps
 from tolsim.study.sampling import error_values
 from tolsim.study.statistics.friction import COLUMNS
 
@@ -520,7 +520,7 @@ class TrackFriction:
     up to the first contact the balls are free and the trajectories are the same to the last
     bit, so P(contact) and the time to contact do not change when ``[contact]`` is added at the
     same ``study.time_steps`` (the automatic count is finer with ``[contact]``,
-    :func:`tolsim.study.pipeline.propagation.time_steps`). (With
+    :func:`tolsim.study.pipeline.propagation_rules.time_steps`). (With
     free balls the train's validity also counts the evaluations after its first contact,
     which are now those of the trajectory with trains: an assembly whose ball is unresolved
     only on one of the two after contact is valid in one run and not in the other. Its contact
@@ -537,8 +537,9 @@ class TrackFriction:
     stroke (without ``[contact]``: up to its first contact).
 
     *Cost.* Per step the creep coefficients of every loaded ball at the midpoint and, for the
-    trains with a closed pair, at the start; two O(n) passes per train. The propagation's two
-    evaluations per step still dominate (benchmarks/bench_study.py ``--along-track``).
+    trains with a closed pair, at the start; two O(n) passes per train. The propagation's
+    evaluations (one per step for free balls, two for a carriage) still dominate
+    (benchmarks/bench_study.py ``--along-track``).
     """
 
     def __init__(self, config, record=False):

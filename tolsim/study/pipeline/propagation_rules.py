@@ -1,0 +1,167 @@
+"""What each propagation model assumes, and how finely ``along_track`` steps.
+
+The one-sentence assumption of each model and the caveats of a study whose model misses
+what changes along the track (summary, report, the file's attributes), and the automatic
+step count of :func:`tolsim.study.pipeline.propagation.integrate` from the lengths over
+which a ball's epsilon changes.
+"""
+
+import numpy as np
+
+#: What each propagation model assumes, in one sentence (summary, report, netCDF attribute).
+PROPAGATION_ASSUMPTIONS = {
+    "constant": ("constant: each ball keeps the epsilon of its position at the start of the "
+                 "stroke (the paper's Fig. 9); rail errors along the track and the load "
+                 "distribution of the carriage do not change it"),
+    "along_track": ("along_track: epsilon is re-evaluated as each ball rolls past the rail "
+                    "errors and through the carriage's load distribution (midpoint rule, "
+                    "study.time_steps steps)"),
+}
+
+
+def propagation_assumption(propagation: str, steps: int | None = None) -> str:
+    """The one-sentence assumption of a propagation model (:data:`PROPAGATION_ASSUMPTIONS`),
+    with the number of steps of an ``along_track`` study when ``steps`` is given
+    (:func:`time_steps`)."""
+    text = PROPAGATION_ASSUMPTIONS[propagation]
+    if steps is not None and propagation == "along_track":
+        text = text.replace("study.time_steps steps", f"{int(steps)} steps (study.time_steps)")
+    return text
+
+
+#: Automatic ``study.time_steps``: steps per shortest length over which a ball's epsilon
+#: changes (:func:`time_steps`, which gives the measurements).
+STEPS_PER_LENGTH = 4.0
+#: The same with ``[contact]`` (the friction figures' extremes are taken over step means) or
+#: an end relief (balls unload and reload within it: first order, and slow).
+STEPS_PER_LENGTH_CONTACT = 40.0
+#: The fewest automatic steps over the stroke.
+MIN_TIME_STEPS = 8
+
+
+def epsilon_lengths(config) -> dict:
+    """The lengths over which a ball's epsilon changes as it rolls [m], by cause: the
+    correlation length of each rail random field (read at the ball's rail position), and the
+    load distribution read at its carriage position: a carriage's ball pitch (a ball enters
+    or leaves the loaded zone every pitch of travel, and the load distribution jumps) and its
+    end relief length, or the slot spacing of a train whose loads vary from ball to ball."""
+    out = {f"rail field {t.source}": t.correlation_length for t in config.tolerances
+           if t.scope == "rail" and t.correlation_length > 0 and t.distribution.is_random}
+    if config.carriage is not None:
+        out["ball pitch"] = config.carriage.layout.ball_pitch
+        if config.carriage.end_relief_length > 0:
+            out["end relief"] = config.carriage.end_relief_length
+    elif config.train.balls > 1 and (len(set(np.atleast_1d(config.loads.side_load))) > 1
+                                     or len(set(np.atleast_1d(config.loads.normal_load))) > 1):
+        slots = config.train.slot_positions(2.0 * config.bearing.ball_radius)
+        out["ball spacing"] = float(slots[1] - slots[0])
+    return out
+
+
+def time_steps(config) -> int:
+    """The integration steps of an ``along_track`` study over its horizon:
+    ``study.time_steps`` when the config gives a number, else (``"auto"``, the default) the
+    automatic count of the Notes.
+
+    Notes
+    -----
+    A ball moves along the rail and through the carriage at about v / 2, so over the stroke
+    s it travels s / 2 in either frame, and its epsilon changes over the lengths l of
+    :func:`epsilon_lengths`. The automatic step lets a ball travel 1 / c of the shortest of
+    them: n = max(:data:`MIN_TIME_STEPS`, ceil(c (s / 2) / l_min)), c =
+    :data:`STEPS_PER_LENGTH` (4), or :data:`STEPS_PER_LENGTH_CONTACT` (40) with
+    ``[contact]`` or an end relief; :data:`MIN_TIME_STEPS` without any length (epsilon then
+    changes only
+    through the unloaded balls, the trains after contact, or not at all).
+
+    The factors come from ``benchmarks/convergence_along_track.py`` (each config's seed,
+    paired against a fine-step reference on the same assemblies). c = 4 gives 20 steps on
+    ``configs/whatif_along_track.toml`` (the 10.05 mm ball spacing of its yaw-moment loads;
+    its rail field: 20 mm) and ``configs/carriage_preload.toml`` (10.05 mm ball pitch), 42 on
+    ``configs/carriage_circuit.toml`` (4.8 mm pitch). There (600 assemblies, reference 800
+    steps) P(contact) lay inside its own 95 % interval, as it did from 5 steps on (c = 1);
+    the paired change against the reference (assemblies that touch only at n / only in the
+    reference) was +2/-5 (free balls), +9/-5 (carriage) and +3/-5 (circuit), and the mean
+    change of the time to first contact 8.1, 10 and 4.8 ms of a 500 ms stroke (27, 18 and
+    9.4 ms at 10 steps; 0.43, 4.4 and 3.5 ms at 40). The error falls at first order for the
+    carriage (balls enter and leave at step ends) and the circuit, at up to second order for
+    free balls. With ``[contact]`` the largest increase and the ripple are extremes of
+    step-mean friction forces, which converge at first order from below: on the free balls
+    (1 000 assemblies) the ripple was 0.1711 N at 40 steps against 0.1737 N at 400, outside
+    its own (narrow, +-0.0007 N) interval, and 0.1734 N at 200 steps against 0.1739 N at
+    800, inside; hence c = 40 (200 steps there, the former fixed default). On the carriage
+    (600 assemblies, reference 800 steps) the largest and the mean increase are inside their
+    intervals from 10 steps, but the ripple does not converge: 0.1275, 0.1294, 0.1298,
+    0.1141 and 0.1181 N at 20, 40, 80, 200 and 400 steps against 0.1274 N. Its extremes
+    are set by the short windows in which the zone holds one ball fewer or one more (between
+    an exit and the next entry), about one ball's F_0 (0.07-0.1 N) for as long as the gaps
+    make the window last (2.1 ms in the first assembly of seed 12); a step sees a window
+    only when its midpoint falls in it, and an entering ball is evaluated from the next step
+    on. A convergent ripple needs the carriage solved in each window, at the exit and entry
+    events (not built; README, "Carriage and preload").
+
+    An end relief converges slowly: its balls unload near the zone's ends and load again, and
+    most first contacts form there. ``configs/carriage_preload.toml`` with 1 um / 15 mm of
+    relief (2 000 assemblies, seed 12): P(contact) 0.4845, 0.5275, 0.5430, 0.5545 and 0.5560
+    at 20, 40, 80, 200 and 400 steps, so c = 4 (20 steps) lies outside the 400-step
+    reference's interval [0.5339, 0.5779] and c = 40 (200 steps) inside it; hence the fine
+    factor with a relief.
+    """
+    if config.study.time_steps is not None:
+        return int(config.study.time_steps)
+    lengths = epsilon_lengths(config)
+    if not lengths:
+        return MIN_TIME_STEPS
+    fine = config.contact is not None or (config.carriage is not None
+                                          and config.carriage.end_relief_depth > 0)
+    per_length = STEPS_PER_LENGTH_CONTACT if fine else STEPS_PER_LENGTH
+    travel = 0.5 * config.motion.stroke
+    return max(MIN_TIME_STEPS,
+               int(np.ceil(per_length * travel / min(lengths.values()) * (1 - 1e-12))))
+
+
+def propagation_caveat(config) -> str:
+    """A sentence for studies whose epsilon changes along the track but which use
+    ``constant``: rail random fields (a rail-scope source with a correlation length) or loads
+    that vary between the balls, and for a carriage the balls it follows beyond the loaded
+    zone (always: its default is ``along_track``); for an ``along_track`` carriage without
+    ``[carriage.circuit]``, that it ignores the circuit (issue 24). Empty otherwise."""
+    if config.study.propagation != "constant":
+        if config.carriage is not None and config.carriage.circuit is None:
+            return ("This carriage study ignores the ball circuit: every ball that enters the "
+                    "loaded zone is a fresh, independent draw with a fresh gap, and nothing "
+                    "resists at the zone's ends (open trains). [carriage.circuit] follows "
+                    "the balls round their circuit.")
+        return ""
+    fields = [t.source for t in config.tolerances
+              if t.scope == "rail" and t.correlation_length > 0 and t.distribution.is_random]
+    if config.carriage is not None:
+        return _constant_carriage_caveat(config, fields)
+    loads = (len(set(np.atleast_1d(config.loads.side_load))) > 1
+             or len(set(np.atleast_1d(config.loads.normal_load))) > 1)
+    what = "loads that vary along the train"
+    causes = ([f"rail random fields ({', '.join(fields)})"] if fields else []) + (
+        [what] if loads else [])
+    if not causes:
+        return ""
+    return (f"This study has {' and '.join(causes)}, so a ball's epsilon changes as it moves "
+            "along the track; the constant propagation keeps each ball's starting value. "
+            "propagation = \"along_track\" answers with the change included.")
+
+
+def _constant_carriage_caveat(config, fields) -> str:
+    """:func:`propagation_caveat` of a ``constant`` carriage study: the balls it follows
+    beyond the loaded zone (issue 24)."""
+    layout, n = config.carriage.layout, config.train.balls
+    drift = 0.5 * config.motion.stroke  # a ball's travel through the carriage, at about v/2
+    pitch = layout.ball_pitch if layout.ball_pitch > 0 else 2.0 * config.bearing.ball_radius
+    leaving = min(drift / pitch, float(n))
+    also = f", and it reads the rail random fields ({', '.join(fields)}) there" if fields else ""
+    return (f"This carriage study uses constant propagation: it follows each ball over the "
+            f"whole stroke at its starting epsilon, as if it stayed in the loaded zone. In the "
+            f"{config.motion.stroke * 1e3:g} mm stroke the balls drift "
+            f"{drift * 1e3:g} mm through the carriage, so about {leaving:.2f} of the {n} balls "
+            f"per track (stroke / 2 / ball pitch) leave the loaded zone and are followed "
+            f"beyond it, new balls enter unseen, and the load distribution a ball rolls "
+            f"through is not re-read{also}. propagation = \"along_track\", the default of a "
+            f"[carriage] study, follows the balls through the zone.")
