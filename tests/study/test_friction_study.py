@@ -144,11 +144,12 @@ def test_stroke_kernel_matches_numpy_twin(rng):
     load[:, :, fr._PCAP] = rng.choice([1.0, 56.0], (m, n), p=[0.05, 0.95])
     load[:, :, fr._BCAP] = rng.choice([2.0, 400.0, np.inf], (m, n), p=[0.05, 0.5, 0.45])
     out = {k: np.empty(m) for k in ("baseline", "mean", "max", "min", "rolling")}
-    sliding = np.empty(m, dtype=bool)
+    onset = np.empty(m, dtype=np.int8)
     pairs = load[:, :-1, fr._B] + load[:, 1:, fr._B]
     fr.stroke_friction_kernel(res.segment_start, res.segment_contact_force, res.valid, load,
                               pairs, horizon, out["baseline"], out["mean"], out["max"], out["min"],
-                              sliding, out["rolling"])
+                              onset, out["rolling"])
+    sliding = onset != 0  # SLIDING: no release pushes here
     twin = stroke_friction_numpy(res.segment_start, res.segment_contact_force, res.valid,
                                  load, horizon)
     assert_array_equal(sliding, twin["sliding"])
@@ -356,7 +357,8 @@ def figures(resolved, exceeds, sliding=None, increase=None):
         clusters_formed=np.where(resolved, 1.0, np.nan),
         worst_track=np.where(resolved, 0, -1), resolved=np.asarray(resolved),
         exceeds=np.asarray(exceeds),
-        sliding=np.zeros(m, bool) if sliding is None else np.asarray(sliding))
+        sliding=np.zeros(m, bool) if sliding is None else np.asarray(sliding),
+        released=np.zeros(m, bool))
 
 
 def test_exceedance_with_unresolved_assemblies_is_bounded():
