@@ -11,6 +11,7 @@ bit-identical across chunking and resuming, no [contact] changes nothing, matche
 
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -770,3 +771,36 @@ def test_contact_needs_raceway_friction(old, new, key):
     with pytest.raises(ValueError, match=key) as info:
         parse_config(text, "f.toml")
     assert "\n" not in str(info.value)
+
+
+def test_released_trains_are_counted_apart_from_sliding_ones():
+    # Why a train stops (friction_kernels.slides): a ball beyond a capacity (SLIDING) or,
+    # none such, a ball pushed past a release push (RELEASED). Per assembly (three tracks):
+    # sliding when some track slid, released when none slid but some was released; so the
+    # two counts add up to the assemblies that were counted as sliding before they were told
+    # apart (exact counts; merged block by block, kept in a checkpoint, and written to the
+    # result file as n_assemblies_sliding and n_assemblies_released).
+    rolling, sliding, released = fr.ROLLING, fr.SLIDING, fr.RELEASED
+    onset = np.array([[rolling, rolling, rolling], [sliding, rolling, rolling],
+                      [released, rolling, rolling], [released, sliding, rolling],
+                      [released, released, rolling], [rolling, rolling, rolling]])
+    m = len(onset)
+    ok = (onset == rolling).reshape(-1)
+    config = SimpleNamespace(n_tracks=3, contact=SimpleNamespace(friction_increase_limit=0.0))
+    ones = np.ones(3 * m)
+    rows = fr._worst_tracks(config, m, track_ok=ok, baseline=ones, increase_max=ones,
+                            increase_mean=ones, ripple=ones, contact_force_max=ones,
+                            contact_fraction=ones, clusters_formed=ones, bounded=~ok,
+                            rolling=ones, onset=onset.reshape(-1))
+    assert_array_equal(rows.sliding, [False, True, False, True, False, False])
+    assert_array_equal(rows.released, [False, False, True, False, True, False])
+    assert_array_equal(rows.sliding | rows.released, (onset != rolling).any(axis=1))
+    stats = fs.FrictionStatistics()
+    stats.add(rows.rows(slice(0, 3)))
+    stats.add(rows.rows(slice(3, None)))
+    again = fs.FrictionStatistics.from_state(stats.state())
+    for s in (stats, again):
+        assert (s.n_sliding, s.n_released, s.n_resolved, s.n_unresolved) == (2, 2, 2, 4)
+    old = {k: v for k, v in stats.state().items() if k != "n_released"}
+    assert fs.FrictionStatistics.from_state(old).n_released == 0  # a checkpoint from before
+    assert FRICTION_VARIABLES["n_assemblies_released"][:2] == ((), "1")

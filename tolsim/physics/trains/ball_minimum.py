@@ -766,8 +766,11 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
       Jensen's inequality), M_stall from :func:`tolsim.physics.velocity.ball_loads.stall_moment`,
       over the three loaded contacts (:func:`point_capacity_kernel`).
 
-    Not modelled: a stuck contact letting go under a push before P_cap (the stick line's K
-    then gives way to the smooth one), as in regime B.
+    A stuck contact lets go under a push before P_cap, at the release pushes of its stick
+    line (:func:`stick_line_release`, the derivation of :func:`stick_release` with the open
+    contact's F = 0; ``release_inputs`` for the trains, which count a train in which it is
+    pushed past one as unresolved). Not modelled: the released state's own coefficients
+    (the smooth minimum's K under that push), as in regime B.
     """
     dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
     force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)

@@ -6,7 +6,8 @@ a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilo
 own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
 adds each ball's rolling angular velocity; a three-point ball creeps with the coefficients of
 its own minimum of D (:mod:`tolsim.physics.trains.ball_minimum`, which also gives the pushes
-at which a stuck contact lets go: train columns of a ball in regime B);
+at which a stuck contact lets go: train columns of a ball on a stick line, computed when a
+push reaches it, :func:`settle_release_pushes`);
 :func:`pair_braking` gives the ball-ball friction of a pair from the two balls' actual
 rotations. The cluster rule with anchors is in the Notes of
 :func:`tolsim.physics.trains.cluster_velocities`.
@@ -162,16 +163,25 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     independent minimiser of D - P v_B: eps 0.0386 % at +2.65 N, 2.09 % at +3.24 N). Beyond
     it the ball leaves the stick line for the other branch (regime A's larger epsilon),
     which a linear K cannot follow: a train in which a ball in regime B is pushed past one
-    of them is unresolved from that step on, as one with a sliding ball (the sliding check
-    of :mod:`tolsim.study.pipeline.friction_kernels`). Not modelled: the released state's own
-    coefficients (regime A of the same contacts under that push), and the release of a
-    three-point ball on a stick line.
+    of them is unresolved from that step on, counted apart from those with a sliding ball
+    (``RELEASED``, the sliding check of :mod:`tolsim.study.pipeline.friction_kernels`). The
+    pushes cost a scan each (0.5-1.5 ms per ball), so with ``lazy_release`` they are left
+    pending and computed only for the balls a push reaches (:func:`settle_release_pushes`,
+    after a train's forces are known; a ball without a push cannot let go). Not modelled: the
+    released state's own coefficients (regime A of the same contacts under that push).
 
     **A three-point ball** (one contact open) creeps with the coefficients of its own minimum
     of D (:func:`~tolsim.physics.trains.ball_minimum.three_point_coefficients`): K and c from
     the Hessian there (smooth) or from its stick line (one contact stuck), a =
     -(1 + epsilon) / 2 and b = mu_bb R_B |Omega_perp| / v exactly (envelope theorem), the
-    capacities of its three loaded contacts, and its actual rotation.
+    capacities of its three loaded contacts, and its actual rotation. On a stick line it has
+    release pushes as a ball in regime B: the line's minimum of D - P v_B stops being the
+    minimum overall where the stuck contact's support function no longer outweighs the
+    slope of the others off the line, the condition of
+    :func:`~tolsim.physics.trains.ball_minimum.stick_release`, in which the open contact
+    (F = 0) drops out of D and of sum F (case (a) at rho = -0.85 with BR open: K = 32 091 N,
+    +17.08 N and -39.82 N, confirmed by the independent minimiser of D - P v_B: eps jumps
+    off the line between 0.97 and 1.03 of each push).
 
     **The braking vector** gamma (:func:`directional_braking`): c Omega_perp / |Omega_perp|
     in regime A (the creep model gives the response to a moment along the ball's own axis

@@ -401,8 +401,11 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
       :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`): a ball in regime B
       creeps with the stiffness of its stick line (about 3e4 N) while the push on it,
       P = Q_back - Q_front, stays between the pushes at which its stuck contact lets go
-      (:func:`tolsim.physics.trains.ball_minimum.stick_line_release`, as little as +2.9 N);
-      beyond them it is counted as a sliding ball (below); an exactly two-point ball
+      (:func:`tolsim.physics.trains.ball_minimum.stick_line_release`, as little as +2.9 N;
+      so does a three-point ball with a stuck contact); beyond them the train is unresolved
+      as with a sliding ball (below) but counted apart (``released``); the pushes are
+      computed only for the balls that carry a push once the train's forces are known
+      (:func:`tolsim.physics.trains.regimes.settle_release_pushes`); an exactly two-point ball
       keeps its epsilon (K = inf) and slides when |P| / P_cap + S / S_cap >= 1 (exact:
       |P| + mu_bb S >= 2 mu F); an
       unloaded ball gets the epsilon that closes both its gaps at once
