@@ -72,6 +72,15 @@ def stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, 
         out[n] = 0.25 * (slope[1] - slope[0]) / step
 
 
+def _semi_axes(force, bearing):
+    """(Hertz constants, a, b [R_B]) of contacts under the forces ``force`` [N]."""
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    radius = bearing.ball_radius
+    return (hc, hc.semi_major_coefficient * np.cbrt(force) / radius,
+            hc.semi_minor_coefficient * np.cbrt(force) / radius)
+
+
 def _stick_line(contact_angle_deviation, normal_force, bearing):
     """The free solve of balls and their stick lines' inputs for the kernels: (result,
     beta, F, stuck contact, w at the minimum [v], a, b [R_B], quadrature grid)."""
@@ -79,12 +88,9 @@ def _stick_line(contact_angle_deviation, normal_force, bearing):
     force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
     v = 0.01
     res = full(dbeta, force, bearing, groove_velocity=v)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc, a, b = _semi_axes(force, bearing)
     radius = bearing.ball_radius
     beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
     stuck = np.asarray(res.stuck_contact, dtype=np.int64)
     p = contact_directions(dbeta, bearing)
     k = np.clip(stuck, 0, 3)
@@ -512,13 +518,10 @@ def release_pushes(inputs, bearing: Bearing = TABLE1):
     rows = np.flatnonzero(np.isfinite(inputs[:, 0]))
     if not len(rows):
         return out
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
     dbeta = np.ascontiguousarray(inputs[rows, 2:6])
     force = np.ascontiguousarray(inputs[rows, 6:10])
+    hc, a, b = _semi_axes(force, bearing)
     beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / bearing.ball_radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / bearing.ball_radius
     stuck = np.ascontiguousarray(inputs[rows, 0].astype(np.int64))
     rate = np.ascontiguousarray(inputs[rows, 1])
     grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
@@ -640,11 +643,8 @@ def _three_point_solve(dbeta, force, bearing):
     """
     stick, inputs, res = stick_line_inputs(dbeta, force, bearing)
     v = 0.01
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc, a, b = _semi_axes(force, bearing)
     beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / bearing.ball_radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / bearing.ball_radius
     state = np.empty((len(dbeta), 3))
     state[:, 0] = 0.5 * (1.0 + np.asarray(res.velocity_deviation))
     state[:, 1:] = np.asarray(res.angular_velocity)[:, :2] * bearing.ball_radius / v
