@@ -126,7 +126,10 @@ def test_section_shows_the_files_numbers(friction_result, friction_report):
         f"{_f(ds, 'clusters_formed_mean'):.3g}",
         f"{int(ds.n_assemblies_friction_resolved):,} / {u:,} / "
         f"{int(ds.n_assemblies_sliding):,} of {n:,}",
+        f"{int(ds.n_assemblies_released):,} of {n:,}",  # pushed off a stick line, apart
     ]
+    released = ds["n_assemblies_released"]
+    assert released.attrs["units"] == "1" and "stick line" in released.attrs["long_name"]
     for what in expected:
         assert what in text, what
     # the distribution table: mean, std and the quantiles of each force, as in the file

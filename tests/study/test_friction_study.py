@@ -11,6 +11,7 @@ bit-identical across chunking and resuming, no [contact] changes nothing, matche
 
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -144,11 +145,12 @@ def test_stroke_kernel_matches_numpy_twin(rng):
     load[:, :, fr._PCAP] = rng.choice([1.0, 56.0], (m, n), p=[0.05, 0.95])
     load[:, :, fr._BCAP] = rng.choice([2.0, 400.0, np.inf], (m, n), p=[0.05, 0.5, 0.45])
     out = {k: np.empty(m) for k in ("baseline", "mean", "max", "min", "rolling")}
-    sliding = np.empty(m, dtype=bool)
+    onset = np.empty(m, dtype=np.int8)
     pairs = load[:, :-1, fr._B] + load[:, 1:, fr._B]
     fr.stroke_friction_kernel(res.segment_start, res.segment_contact_force, res.valid, load,
                               pairs, horizon, out["baseline"], out["mean"], out["max"], out["min"],
-                              sliding, out["rolling"])
+                              onset, out["rolling"])
+    sliding = onset != 0  # SLIDING: no release pushes here
     twin = stroke_friction_numpy(res.segment_start, res.segment_contact_force, res.valid,
                                  load, horizon)
     assert_array_equal(sliding, twin["sliding"])
@@ -356,7 +358,8 @@ def figures(resolved, exceeds, sliding=None, increase=None):
         clusters_formed=np.where(resolved, 1.0, np.nan),
         worst_track=np.where(resolved, 0, -1), resolved=np.asarray(resolved),
         exceeds=np.asarray(exceeds),
-        sliding=np.zeros(m, bool) if sliding is None else np.asarray(sliding))
+        sliding=np.zeros(m, bool) if sliding is None else np.asarray(sliding),
+        released=np.zeros(m, bool))
 
 
 def test_exceedance_with_unresolved_assemblies_is_bounded():
@@ -768,3 +771,36 @@ def test_contact_needs_raceway_friction(old, new, key):
     with pytest.raises(ValueError, match=key) as info:
         parse_config(text, "f.toml")
     assert "\n" not in str(info.value)
+
+
+def test_released_trains_are_counted_apart_from_sliding_ones():
+    # Why a train stops (friction_kernels.slides): a ball beyond a capacity (SLIDING) or,
+    # none such, a ball pushed past a release push (RELEASED). Per assembly (three tracks):
+    # sliding when some track slid, released when none slid but some was released; so the
+    # two counts add up to the assemblies that were counted as sliding before they were told
+    # apart (exact counts; merged block by block, kept in a checkpoint, and written to the
+    # result file as n_assemblies_sliding and n_assemblies_released).
+    rolling, sliding, released = fr.ROLLING, fr.SLIDING, fr.RELEASED
+    onset = np.array([[rolling, rolling, rolling], [sliding, rolling, rolling],
+                      [released, rolling, rolling], [released, sliding, rolling],
+                      [released, released, rolling], [rolling, rolling, rolling]])
+    m = len(onset)
+    ok = (onset == rolling).reshape(-1)
+    config = SimpleNamespace(n_tracks=3, contact=SimpleNamespace(friction_increase_limit=0.0))
+    ones = np.ones(3 * m)
+    rows = fr._worst_tracks(config, m, track_ok=ok, baseline=ones, increase_max=ones,
+                            increase_mean=ones, ripple=ones, contact_force_max=ones,
+                            contact_fraction=ones, clusters_formed=ones, bounded=~ok,
+                            rolling=ones, onset=onset.reshape(-1))
+    assert_array_equal(rows.sliding, [False, True, False, True, False, False])
+    assert_array_equal(rows.released, [False, False, True, False, True, False])
+    assert_array_equal(rows.sliding | rows.released, (onset != rolling).any(axis=1))
+    stats = fs.FrictionStatistics()
+    stats.add(rows.rows(slice(0, 3)))
+    stats.add(rows.rows(slice(3, None)))
+    again = fs.FrictionStatistics.from_state(stats.state())
+    for s in (stats, again):
+        assert (s.n_sliding, s.n_released, s.n_resolved, s.n_unresolved) == (2, 2, 2, 4)
+    old = {k: v for k, v in stats.state().items() if k != "n_released"}
+    assert fs.FrictionStatistics.from_state(old).n_released == 0  # a checkpoint from before
+    assert FRICTION_VARIABLES["n_assemblies_released"][:2] == ((), "1")

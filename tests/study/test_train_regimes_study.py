@@ -11,7 +11,8 @@ relative (the study runs the same arithmetic in another order).
 """
 
 import numpy as np
-from numpy.testing import assert_allclose
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import parse_config
 from tolsim.physics.geometry import TABLE1, paired_forces
@@ -28,6 +29,7 @@ from tolsim.study.pipeline import track_friction as fr
 from tolsim.study.pipeline.block import evaluate_block
 from tolsim.study.pipeline.propagation import FirstContact, FreeBalls, TrainMotion, integrate
 from tolsim.study.sampling import sample_block
+from tolsim.study.statistics.friction import FrictionStatistics
 
 THREE_BALLS = """\
 [bearing]
@@ -208,8 +210,9 @@ def test_regime_b_ball_pushed_past_its_release_is_unresolved():
     # (epsilon 1 %): the pair 0-1 closes and pushes the middle ball forward with Q = 6.66 N
     # (the cluster rule, K_B = 3.3e4 N). At rho = -0.9 its stuck contact lets go at +2.95 N
     # (stick_line_release; stick_release +2.94 N, issue 25), so its K no longer holds and the
-    # train is unresolved from that step on (counted with the sliding ones, bounded, never
-    # dropped); at rho = -0.95 the release is +33.5 N and the train stays resolved.
+    # train is unresolved from that step on (counted as released, apart from the sliding
+    # ones, bounded, never dropped); at rho = -0.95 the release is +33.5 N and the train
+    # stays resolved.
     theta = np.radians(2.0)
     dbeta = np.array([-theta, theta, 0.0, 0.0])
     for rho, released in ((-0.9, True), (-0.95, False)):
@@ -223,8 +226,84 @@ def test_regime_b_ball_pushed_past_its_release_is_unresolved():
         state.normal_force[:, 1, :] = force
         state.contact_angle_deviation[:, 1, :] = dbeta
         out = fr.evaluate_friction(config, block.initial_gap, state)
-        assert out.sliding.all() == released and out.resolved.all() != released
+        assert out.released.all() == released and out.resolved.all() != released
+        assert not out.sliding.any()  # no ball beyond a capacity
         if not released:
             assert 3.0 < out.contact_force_max[0] < release[0, 0]
         else:
             assert release[0, 0] < 3.0
+
+
+def _stuck_middle_ball(rho, open_contact, eps0, regime):
+    """The three balls with the middle one on a stick line (case (a): theta = 2 deg on the
+    bottom groove, paired forces at ``rho``, N_y = 200 N, contact ``open_contact`` open or
+    None) in ``regime``, ball 0 at epsilon ``eps0``: (config, block, state, release)."""
+    theta = np.radians(2.0)
+    dbeta = np.array([-theta, theta, 0.0, 0.0])
+    force = np.array(paired_forces(rho * 200.0, 200.0))
+    if open_contact is not None:
+        force[open_contact] = 0.0
+    _, release, res = stick_line_release(dbeta[None], force[None], TABLE1)
+    assert res.regime[0] == 2  # one contact stuck (FullResult.regime)
+    config, block, state, _, _, _ = _setup()
+    state.velocity_deviation[:, 0] = eps0
+    state.velocity_deviation[:, 1] = res.velocity_deviation[0]
+    state.valid[:, 1] = True
+    state.regime[:, 1] = regime
+    state.normal_force[:, 1, :] = force
+    state.contact_angle_deviation[:, 1, :] = dbeta
+    return config, block, state, release[0]
+
+
+def test_three_point_ball_pushed_past_its_release_is_unresolved():
+    # The middle ball three-point (case (a) at rho = -0.85 with BR open): its BL contact
+    # sticks (full, regime 2) and lets go at +17.08 N / -39.82 N (stick_line_release; the
+    # reference scan stick_release gives +17.04 / -39.77 N, and the independent minimiser
+    # of D - P v_B agrees, tests/physics/test_train_regimes.py). Ball 0 at epsilon 2 % pushes
+    # it with about 13 N (the cluster rule: 2 x 6.61 N at 1 %), below the release: resolved;
+    # at 3 % with about 20 N, past it: the train is unresolved from then on, counted as
+    # released (not as sliding: no ball reaches a capacity, P_cap ~ 50 N). Before, a
+    # three-point ball had no release pushes (+-inf) and the train stayed resolved.
+    for eps0, released in ((0.02, False), (0.03, True)):
+        config, block, state, release = _stuck_middle_ball(-0.85, 1, eps0, BALL_THREE_POINT)
+        assert 17.0 < release[0] < 17.2
+        out = fr.evaluate_friction(config, block.initial_gap, state)
+        assert out.released.all() == released and out.resolved.all() != released
+        assert not out.sliding.any()
+        if not released:
+            assert 12.0 < out.contact_force_max[0] < release[0]
+        stats = FrictionStatistics()
+        stats.add(out)
+        assert stats.n_released == (4 if released else 0) and stats.n_sliding == 0
+        assert stats.n_resolved + stats.n_released == 4
+
+
+@pytest.mark.parametrize(("rho", "open_contact", "regime", "eps0"),
+                         [(-0.9, None, BALL_REGIME_B, 0.01), (-0.95, None, BALL_REGIME_B, 0.01),
+                          (-0.85, 1, BALL_THREE_POINT, 0.03)])
+def test_lazy_release_pushes_match_the_eager_ones(monkeypatch, rho, open_contact, regime,
+                                                  eps0):
+    # The trains compute the release pushes only for the balls a push reaches (lazy,
+    # settle_release_pushes); forcing regime_creep_coefficients to compute them for every
+    # ball (eager, as before) must give the same figures to the bit, on trains that are
+    # released (rho = -0.9, +2.95 N; the three-point ball at 3 %) and one that is not
+    # (rho = -0.95, +33.5 N). The lazy run computes the pushes of the middle ball only (the
+    # outer balls are in regime A: nothing to compute).
+    config, block, state, _ = _stuck_middle_ball(rho, open_contact, eps0, regime)
+    settled = []
+    settle = fr.settle_release_pushes
+
+    def counted(coefficients, need, bearing):
+        settled.append(settle(coefficients, need, bearing))
+        return settled[-1]
+
+    monkeypatch.setattr(fr, "settle_release_pushes", counted)
+    lazy = fr.evaluate_friction(config, block.initial_gap, state)
+    assert settled == [4]  # the middle ball of each of the 4 trains, once
+    original = fr.regime_creep_coefficients
+    monkeypatch.setattr(fr, "regime_creep_coefficients",
+                        lambda *a, **k: original(*a, **{**k, "lazy_release": False}))
+    eager = fr.evaluate_friction(config, block.initial_gap, state)
+    assert settled == [4, 0]  # nothing left pending
+    for name, value in lazy.__dict__.items():
+        assert_array_equal(value, getattr(eager, name), err_msg=name)

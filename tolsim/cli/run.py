@@ -279,6 +279,10 @@ def _friction_text(ds) -> list:
     if sliding:
         lines.append(f"  {sliding} assemblies with a sliding ball (push beyond its traction "
                      "capacity): unresolved from the onset of sliding")
+    released = int(ds.n_assemblies_released) if "n_assemblies_released" in ds else 0
+    if released:
+        lines.append(f"  {released} assemblies with a ball pushed off its stick line (push "
+                     "beyond the release push of its stuck contact): unresolved from then on")
     return lines
 
 

@@ -456,16 +456,22 @@ def friction_assumptions(ds, config, data) -> list:
         add("worst track per assembly", "one train per assembly: the assembly is its train",
             "tolsim.study.pipeline.track_friction (one row per assembly: the worst track)")
     sliding = integer(ds, "n_assemblies_sliding", None)
+    released = integer(ds, "n_assemblies_released", None)
     unresolved = integer(ds, "n_assemblies_friction_unresolved", None)
     add("sliding balls",
         "where a push reaches a ball's traction capacity, or its neighbours' forces stall its "
         "rotation, the linear creep law ends: the train is unresolved from the onset of "
         "sliding (never capped or dropped); its increase before the onset counts as a "
-        "certain exceedance when above the limit, the rest is bounded in P(exceedance)"
-        + (f"; {sliding:,} {contact_unit(ds)[1]} with a sliding ball and {unresolved:,} "
-           "unresolved without a certain exceedance here" if sliding is not None else ""),
+        "certain exceedance when above the limit, the rest is bounded in P(exceedance); so "
+        "is a train with a ball pushed past the release push of its stuck contact (it leaves "
+        "its stick line, whose K no longer holds)"
+        + (f"; {sliding:,} {contact_unit(ds)[1]} with a sliding ball"
+           + (f", {released:,} with a ball pushed off its stick line" if released is not None
+              else "")
+           + f" and {unresolved:,} unresolved without a certain exceedance here"
+           if sliding is not None else ""),
         "tolsim.study.pipeline.track_friction (unresolved and sliding trains); result file "
-        "(n_assemblies_sliding, n_assemblies_friction_unresolved)")
+        "(n_assemblies_sliding, n_assemblies_released, n_assemblies_friction_unresolved)")
     return rows
 
 

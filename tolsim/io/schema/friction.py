@@ -71,6 +71,9 @@ FRICTION_VARIABLES = {
                                                   "track and no certain exceedance", "i"),
     "n_assemblies_sliding": ((), "1", "assemblies with a ball that slides (push beyond its "
                                       "traction capacity or braking beyond its stall)", "i"),
+    "n_assemblies_released": ((), "1", "assemblies with no sliding ball but a ball pushed off "
+                                       "its stick line (push beyond the release push of its "
+                                       "stuck contact)", "i"),
     "n_friction_exceedance": ((), "1", "assemblies whose friction increase certainly "
                                        "exceeds its limit", "i"),
     "example_assembly": (("example",), "1", "assembly of the example (index in the study)",
@@ -163,6 +166,7 @@ def friction_variables(result) -> tuple:
         "n_assemblies_friction_resolved": np.int64(stats.n_resolved),
         "n_assemblies_friction_unresolved": np.int64(stats.n_unresolved),
         "n_assemblies_sliding": np.int64(stats.n_sliding),
+        "n_assemblies_released": np.int64(stats.n_released),
         "n_friction_exceedance": np.int64(stats.n_exceed),
     }
     for name, column in _HIST_COLUMN.items():

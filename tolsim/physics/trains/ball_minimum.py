@@ -72,6 +72,15 @@ def stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, 
         out[n] = 0.25 * (slope[1] - slope[0]) / step
 
 
+def _semi_axes(force, bearing):
+    """(Hertz constants, a, b [R_B]) of contacts under the forces ``force`` [N]."""
+    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                         bearing.poisson_ratio)
+    radius = bearing.ball_radius
+    return (hc, hc.semi_major_coefficient * np.cbrt(force) / radius,
+            hc.semi_minor_coefficient * np.cbrt(force) / radius)
+
+
 def _stick_line(contact_angle_deviation, normal_force, bearing):
     """The free solve of balls and their stick lines' inputs for the kernels: (result,
     beta, F, stuck contact, w at the minimum [v], a, b [R_B], quadrature grid)."""
@@ -79,12 +88,9 @@ def _stick_line(contact_angle_deviation, normal_force, bearing):
     force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
     v = 0.01
     res = full(dbeta, force, bearing, groove_velocity=v)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc, a, b = _semi_axes(force, bearing)
     radius = bearing.ball_radius
     beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / radius
     stuck = np.asarray(res.stuck_contact, dtype=np.int64)
     p = contact_directions(dbeta, bearing)
     k = np.clip(stuck, 0, 3)
@@ -458,6 +464,74 @@ def release_threshold_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo,
             out[n, side] = sign * 0.5 * (low + high)
 
 
+#: The inputs of a ball's release pushes kept with its coefficients, so that they can be
+#: computed later (:func:`release_pushes`): the stuck contact k, w [v] at the minimum on its
+#: stick line, dbeta_i [rad] and F_i [N]; NaN where nothing sticks or ``full`` does not certify
+#: the ball on a stick line.
+RELEASE_INPUTS = ("release_stuck_contact", "release_line_rate",
+                  *(f"release_contact_angle_deviation_{i}" for i in range(4)),
+                  *(f"release_normal_force_{i}" for i in range(4)))
+
+
+def stick_line_inputs(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+    """K [N] of balls on a stick line and the inputs of their release pushes, one free solve.
+
+    Parameters
+    ----------
+    contact_angle_deviation, normal_force : array_like, shape (n, 4)
+
+    Returns
+    -------
+    k : ndarray (n,)
+        :func:`stick_line_stiffness` (bit for bit).
+    inputs : ndarray, shape (n, len(RELEASE_INPUTS))
+        For :func:`release_pushes`; NaN rows where ``full`` does not certify the ball in
+        regime B (one contact, or both of a pair, stuck).
+    result : tolsim.physics.velocity.full.FullResult
+    """
+    res, beta, force, stuck, rate, a, b, grid = _stick_line(contact_angle_deviation,
+                                                            normal_force, bearing)
+    k = np.empty(len(beta))
+    stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, *grid, STICK_STEP, k)
+    certified = np.asarray(res.regime) == 2
+    dbeta = np.asarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
+    inputs = np.column_stack([stuck.astype(np.float64), rate, dbeta, force])
+    inputs[~certified] = np.nan
+    return np.where(certified, bearing.friction_coefficient * k, np.nan), inputs, res
+
+
+def release_pushes(inputs, bearing: Bearing = TABLE1):
+    """The forward and backward release pushes [N] from :func:`stick_line_inputs`' inputs.
+
+    Parameters
+    ----------
+    inputs : array_like, shape (n, len(RELEASE_INPUTS))
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+        As :func:`stick_line_release` (:func:`release_threshold_kernel` on the same inputs,
+        bit for bit); NaN for a NaN row.
+    """
+    inputs = np.asarray(inputs, dtype=np.float64).reshape(-1, len(RELEASE_INPUTS))
+    out = np.full((len(inputs), 2), np.nan)
+    rows = np.flatnonzero(np.isfinite(inputs[:, 0]))
+    if not len(rows):
+        return out
+    dbeta = np.ascontiguousarray(inputs[rows, 2:6])
+    force = np.ascontiguousarray(inputs[rows, 6:10])
+    hc, a, b = _semi_axes(force, bearing)
+    beta = bearing.nominal_contact_angle + dbeta
+    stuck = np.ascontiguousarray(inputs[rows, 0].astype(np.int64))
+    rate = np.ascontiguousarray(inputs[rows, 1])
+    grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
+    release = np.empty((len(rows), 2))
+    release_threshold_kernel(beta, force, stuck, rate, a, b, *grid, STICK_STEP, FAST_ANGLES,
+                             FAST_WINDOW_NODES, FAST_WINDOW_WIDTH, FAST_TOLERANCE, release)
+    out[rows] = bearing.friction_coefficient * release
+    return out
+
+
 def stick_line_release(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
     """K [N] and the release pushes [N] of balls in regime B from one free solve (fast).
 
@@ -485,19 +559,12 @@ def stick_line_release(contact_angle_deviation, normal_force, bearing: Bearing =
     (0.057 N / mu ... about 0.006 N on case (a)). A scan over fewer directions can only miss
     the least slope, so it errs towards larger |release|: on case (a) +0.2 % at rho = -0.9
     (+2.947 / -22.63 N against +2.940 / -22.60 N of the reference scan with 1024 window
-    directions) and < 0.15 % at rho = -0.95; about 0.5-1.5 ms per ball against 4-6 ms.
+    directions) and < 0.15 % at rho = -0.95; about 0.5-1.5 ms per ball against 4-6 ms. It is
+    :func:`stick_line_inputs` then :func:`release_pushes`, which the trains call apart (only
+    for the balls a push reaches, :func:`tolsim.physics.trains.regimes.settle_release_pushes`).
     """
-    res, beta, force, stuck, rate, a, b, grid = _stick_line(contact_angle_deviation,
-                                                            normal_force, bearing)
-    k = np.empty(len(beta))
-    stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, *grid, STICK_STEP, k)
-    release = np.empty((len(beta), 2))
-    release_threshold_kernel(beta, force, stuck, rate, a, b, *grid, STICK_STEP, FAST_ANGLES,
-                             FAST_WINDOW_NODES, FAST_WINDOW_WIDTH, FAST_TOLERANCE, release)
-    mu = bearing.friction_coefficient
-    certified = np.asarray(res.regime) == 2
-    return (np.where(certified, mu * k, np.nan),
-            np.where(certified[:, None], mu * release, np.nan), res)
+    k, inputs, res = stick_line_inputs(contact_angle_deviation, normal_force, bearing)
+    return k, release_pushes(inputs, bearing), res
 
 
 @pjit
@@ -571,15 +638,13 @@ def _three_point_solve(dbeta, force, bearing):
     """The free solve of three-point balls and what their coefficients need.
 
     Returns (K on the stick line, FullResult, the v_B row of H^-1 at a smooth minimum [1/N,
-    over mu], the state (v_B, Omega_x R, Omega_y R) / v); see :func:`three_point_stiffness`.
+    over mu], the state (v_B, Omega_x R, Omega_y R) / v, the inputs of the release pushes on
+    the stick line); see :func:`three_point_stiffness`, :func:`stick_line_inputs`.
     """
-    stick, res = stick_line_stiffness(dbeta, force, bearing)
+    stick, inputs, res = stick_line_inputs(dbeta, force, bearing)
     v = 0.01
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc, a, b = _semi_axes(force, bearing)
     beta = bearing.nominal_contact_angle + dbeta
-    a = hc.semi_major_coefficient * np.cbrt(force) / bearing.ball_radius
-    b = hc.semi_minor_coefficient * np.cbrt(force) / bearing.ball_radius
     state = np.empty((len(dbeta), 3))
     state[:, 0] = 0.5 * (1.0 + np.asarray(res.velocity_deviation))
     state[:, 1:] = np.asarray(res.angular_velocity)[:, :2] * bearing.ball_radius / v
@@ -587,7 +652,7 @@ def _three_point_solve(dbeta, force, bearing):
     row = np.empty((len(dbeta), 3))
     minimum_compliance_kernel(beta, force, np.ascontiguousarray(state), a, b, *grid,
                               STICK_STEP, row)
-    return stick, res, row, state
+    return stick, res, row, state, inputs
 
 
 def three_point_stiffness(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
@@ -624,14 +689,14 @@ def three_point_stiffness(contact_angle_deviation, normal_force, bearing: Bearin
     """
     dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
     force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    stick, res, row, _ = _three_point_solve(dbeta, force, bearing)
+    stick, res, row, _, _ = _three_point_solve(dbeta, force, bearing)
     smooth = bearing.friction_coefficient * 0.5 / row[:, 0]
     code = np.asarray(res.regime)
     return np.where(code == 2, stick, np.where(code == 1, smooth, np.nan)), res
 
 
 def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
-                             *, ball_friction=0.1):
+                             *, ball_friction=0.1, release_inputs=False):
     """The creep coefficients of three-point balls from their own minimum of D (issue 25).
 
     Parameters
@@ -641,14 +706,17 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
     bearing : Bearing
     ball_friction : float
         mu_bb [-].
+    release_inputs : bool
+        Add the inputs of the release pushes of a ball with a stuck contact
+        (:data:`RELEASE_INPUTS`, for :func:`release_pushes`; NaN where no contact sticks).
 
     Returns
     -------
     columns : dict of str to ndarray (n,)
         The :data:`tolsim.physics.velocity.analytic.LOAD_COLUMNS` at zero load (K [N], c
         [1/N], F_0 [N], a, b [-], P_cap, S_cap [N]) and the braking vector gamma
-        (``braking_vector_x``, ``_y`` [1/N], c = gamma . Omega_perp / |Omega_perp|); NaN
-        where ``full`` does not certify the ball.
+        (``braking_vector_x``, ``_y`` [1/N], c = gamma . Omega_perp / |Omega_perp|) (and the
+        release inputs); NaN where ``full`` does not certify the ball.
     rate : ndarray, shape (n, 2)
         Omega_perp R_B / v of its minimum (its actual rotation).
 
@@ -698,12 +766,15 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
       Jensen's inequality), M_stall from :func:`tolsim.physics.velocity.ball_loads.stall_moment`,
       over the three loaded contacts (:func:`point_capacity_kernel`).
 
-    Not modelled: a stuck contact letting go under a push before P_cap (the stick line's K
-    then gives way to the smooth one), as in regime B.
+    A stuck contact lets go under a push before P_cap, at the release pushes of its stick
+    line (:func:`stick_line_release`, the derivation of :func:`stick_release` with the open
+    contact's F = 0; ``release_inputs`` for the trains, which count a train in which it is
+    pushed past one as unresolved). Not modelled: the released state's own coefficients
+    (the smooth minimum's K under that push), as in regime B.
     """
     dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
     force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    stick, res, row, state = _three_point_solve(dbeta, force, bearing)
+    stick, res, row, state, inputs = _three_point_solve(dbeta, force, bearing)
     mu = bearing.friction_coefficient
     code = np.asarray(res.regime)
     smooth, stuck = code == 1, code == 2
@@ -729,6 +800,8 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
                "traction_capacity": mu * capacity[:, 0],
                "braking_capacity": braking_capacity,
                "braking_vector_x": gamma[:, 0], "braking_vector_y": gamma[:, 1]}
+    if release_inputs:
+        columns.update(zip(RELEASE_INPUTS, inputs.T, strict=True))
     solved = smooth | stuck
     columns = {name: np.where(solved, value, np.nan) for name, value in columns.items()}
     rate = np.where(solved[:, None], state[:, 1:], np.nan)

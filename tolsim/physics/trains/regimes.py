@@ -6,7 +6,8 @@ a push until its capacity); an unloaded ball is *pushed along* (K = 0: no epsilo
 own). :func:`regime_creep_coefficients` overrides the creep model's columns for those and
 adds each ball's rolling angular velocity; a three-point ball creeps with the coefficients of
 its own minimum of D (:mod:`tolsim.physics.trains.ball_minimum`, which also gives the pushes
-at which a stuck contact lets go: train columns of a ball in regime B);
+at which a stuck contact lets go: train columns of a ball on a stick line, computed when a
+push reaches it, :func:`settle_release_pushes`);
 :func:`pair_braking` gives the ball-ball friction of a pair from the two balls' actual
 rotations. The cluster rule with anchors is in the Notes of
 :func:`tolsim.physics.trains.cluster_velocities`.
@@ -16,8 +17,10 @@ import numpy as np
 
 from tolsim.physics.geometry import TABLE1, Bearing
 from tolsim.physics.trains.ball_minimum import (
+    RELEASE_INPUTS,
     contact_directions,
-    stick_line_release,
+    release_pushes,
+    stick_line_inputs,
     three_point_coefficients,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
@@ -35,15 +38,19 @@ from tolsim.physics.velocity.models import (
 #: regime (:data:`tolsim.physics.velocity.models.BALL_REGIMES`; NaN: regime A only) and its
 #: braking vector gamma [1/N] (x and y, NaN as the rates): d(epsilon)/dQ of a neighbour force Q
 #: whose friction moment lies along the unit vector u is gamma . u (Notes of
-#: :func:`directional_braking`), and the pushes P = Q_back - Q_front [N] at which a ball in
-#: regime B leaves its stick line (forward > 0, backward < 0; +-inf for every other ball).
+#: :func:`directional_braking`), the pushes P = Q_back - Q_front [N] at which a ball on a stick
+#: line (regime B, or three-point with a stuck contact) leaves it (forward > 0, backward < 0;
+#: +-inf for every other ball; NaN while not yet computed, :func:`settle_release_pushes`), and
+#: the inputs of those pushes (:data:`tolsim.physics.trains.ball_minimum.RELEASE_INPUTS`; NaN
+#: where none are pending).
 TRAIN_COLUMNS = (*LOAD_COLUMNS, "rolling_rate_x", "rolling_rate_y", "regime",
                  "braking_vector_x", "braking_vector_y", "release_push_forward",
-                 "release_push_backward")
+                 "release_push_backward", *RELEASE_INPUTS)
 #: Creep stiffness of an anchor and of a ball pushed along [N].
 ANCHOR_STIFFNESS, PUSHED_STIFFNESS = np.inf, 0.0
 
 _COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
+_INPUTS = slice(_COL[RELEASE_INPUTS[0]], _COL[RELEASE_INPUTS[-1]] + 1)
 
 
 def rigid_rolling_rate(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
@@ -95,7 +102,8 @@ def two_point_rolling_rate(contact_angle_deviation, normal_force, bearing: Beari
 
 
 def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
-                              bearing: Bearing = TABLE1, *, ball_friction=0.1):
+                              bearing: Bearing = TABLE1, *, ball_friction=0.1,
+                              lazy_release=False):
     """The train columns of balls from their regimes: anchors, soft balls, pushed balls.
 
     Parameters
@@ -109,6 +117,10 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     bearing : Bearing
     ball_friction : float
         mu_bb [-].
+    lazy_release : bool
+        Leave the release pushes of the balls on a stick line pending (NaN, with their
+        inputs) for :func:`settle_release_pushes`, which computes them only for the balls a
+        push reaches; else compute them here (the same numbers, bit for bit).
 
     Returns
     -------
@@ -151,16 +163,25 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     independent minimiser of D - P v_B: eps 0.0386 % at +2.65 N, 2.09 % at +3.24 N). Beyond
     it the ball leaves the stick line for the other branch (regime A's larger epsilon),
     which a linear K cannot follow: a train in which a ball in regime B is pushed past one
-    of them is unresolved from that step on, as one with a sliding ball (the sliding check
-    of :mod:`tolsim.study.pipeline.friction_kernels`). Not modelled: the released state's own
-    coefficients (regime A of the same contacts under that push), and the release of a
-    three-point ball on a stick line.
+    of them is unresolved from that step on, counted apart from those with a sliding ball
+    (``RELEASED``, the sliding check of :mod:`tolsim.study.pipeline.friction_kernels`). The
+    pushes cost a scan each (0.5-1.5 ms per ball), so with ``lazy_release`` they are left
+    pending and computed only for the balls a push reaches (:func:`settle_release_pushes`,
+    after a train's forces are known; a ball without a push cannot let go). Not modelled: the
+    released state's own coefficients (regime A of the same contacts under that push).
 
     **A three-point ball** (one contact open) creeps with the coefficients of its own minimum
     of D (:func:`~tolsim.physics.trains.ball_minimum.three_point_coefficients`): K and c from
     the Hessian there (smooth) or from its stick line (one contact stuck), a =
     -(1 + epsilon) / 2 and b = mu_bb R_B |Omega_perp| / v exactly (envelope theorem), the
-    capacities of its three loaded contacts, and its actual rotation.
+    capacities of its three loaded contacts, and its actual rotation. On a stick line it has
+    release pushes as a ball in regime B: the line's minimum of D - P v_B stops being the
+    minimum overall where the stuck contact's support function no longer outweighs the
+    slope of the others off the line, the condition of
+    :func:`~tolsim.physics.trains.ball_minimum.stick_release`, in which the open contact
+    (F = 0) drops out of D and of sum F (case (a) at rho = -0.85 with BR open: K = 32 091 N,
+    +17.08 N and -39.82 N, confirmed by the independent minimiser of D - P v_B: eps jumps
+    off the line between 0.97 and 1.03 of each push).
 
     **The braking vector** gamma (:func:`directional_braking`): c Omega_perp / |Omega_perp|
     in regime A (the creep model gives the response to a moment along the ball's own axis
@@ -179,6 +200,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     out[:, :len(LOAD_COLUMNS)] = load
     out[:, _COL["release_push_forward"]] = np.inf
     out[:, _COL["release_push_backward"]] = -np.inf
+    out[:, _INPUTS] = np.nan
     two = regime == BALL_TWO_POINT
     stick = regime == BALL_REGIME_B
     three = regime == BALL_THREE_POINT
@@ -208,10 +230,11 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
             out[two, _COL[name]] = value
         rate[two] = two_point_rolling_rate(dbeta[two], force[two], bearing)
     if stick.any():
-        stiffness, release, res = stick_line_release(dbeta[stick], force[stick], bearing)
+        stiffness, inputs, res = stick_line_inputs(dbeta[stick], force[stick], bearing)
         rows = np.flatnonzero(stick)
-        out[rows, _COL["release_push_forward"]] = release[:, 0]
-        out[rows, _COL["release_push_backward"]] = release[:, 1]
+        out[rows, _COL["release_push_forward"]] = np.nan  # pending (NaN where uncertified)
+        out[rows, _COL["release_push_backward"]] = np.nan
+        out[rows, _INPUTS] = inputs
         out[rows, _COL["creep_stiffness"]] = stiffness
         with np.errstate(divide="ignore", invalid="ignore"):
             out[rows, _COL["braking_sensitivity"]] = np.where(np.isfinite(stiffness),
@@ -222,10 +245,14 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
         rate[stick] = res.angular_velocity[:, :2] * bearing.ball_radius / 0.01
     if three.any():
         columns, rate[three] = three_point_coefficients(dbeta[three], force[three], bearing,
-                                                        ball_friction=ball_friction)
+                                                        ball_friction=ball_friction,
+                                                        release_inputs=True)
         for name, value in columns.items():
             out[three, _COL[name]] = value
         gamma[three] = out[three, _COL["braking_vector_x"]:_COL["release_push_forward"]]
+        stuck = three & np.isfinite(out[:, _COL[RELEASE_INPUTS[0]]])
+        out[stuck, _COL["release_push_forward"]] = np.nan  # pending
+        out[stuck, _COL["release_push_backward"]] = np.nan
     if pushed.any():
         values = {"free_rolling_velocity_deviation": np.nan, "creep_stiffness": PUSHED_STIFFNESS,
                   "braking_sensitivity": 0.0, "carriage_force": 0.0,
@@ -242,7 +269,41 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
         gamma[axial] = (out[axial, _COL["braking_sensitivity"], None] * rate[axial]
                         / np.hypot(rate[axial, 0], rate[axial, 1])[:, None])
     out[:, _COL["braking_vector_x"]:_COL["release_push_forward"]] = gamma
+    if not lazy_release:
+        settle_release_pushes(out, np.ones(n, dtype=bool), bearing)
     return out
+
+
+def settle_release_pushes(coefficients, need, bearing: Bearing = TABLE1):
+    """Compute the pending release pushes of the balls ``need``, in place, once each.
+
+    Parameters
+    ----------
+    coefficients : ndarray, shape (..., len(TRAIN_COLUMNS))
+        Train columns from :func:`regime_creep_coefficients` with ``lazy_release=True``.
+    need : array_like of bool, shape coefficients.shape[:-1]
+        The balls whose pushes are needed (a train's sliding check: a nonzero push on them).
+    bearing : Bearing
+
+    Returns
+    -------
+    int
+        The balls computed: those ``need`` with pending inputs; their release columns then
+        hold :func:`~tolsim.physics.trains.ball_minimum.release_pushes` (those of the eager
+        :func:`regime_creep_coefficients`, bit for bit) and their inputs are cleared (NaN), so
+        a second call computes nothing. A ball not computed keeps NaN pushes, which the
+        sliding check never crosses, as a push of 0 crosses no release push.
+    """
+    pending = np.isfinite(coefficients[..., _COL[RELEASE_INPUTS[0]]]) & np.asarray(need)
+    where = np.nonzero(pending)
+    if not len(where[0]):
+        return 0
+    release = release_pushes(coefficients[where][:, _INPUTS], bearing)
+    coefficients[(*where, _COL["release_push_forward"])] = release[:, 0]
+    coefficients[(*where, _COL["release_push_backward"])] = release[:, 1]
+    for k in range(_INPUTS.start, _INPUTS.stop):
+        coefficients[(*where, k)] = np.nan
+    return len(where[0])
 
 
 def directional_braking(coefficients, stiffness, braking):
@@ -390,4 +451,4 @@ def pair_braking(coefficients, ball_friction=0.1):
 
 __all__ = ["ANCHOR_STIFFNESS", "PUSHED_STIFFNESS", "TRAIN_COLUMNS", "directional_braking",
            "pair_braking", "regime_creep_coefficients", "rigid_rolling_rate",
-           "two_point_rolling_rate"]
+           "settle_release_pushes", "two_point_rolling_rate"]

@@ -352,6 +352,7 @@ def friction_content(ds, sens=None) -> dict:
     resolved = integer(ds, "n_assemblies_friction_resolved")
     unresolved = integer(ds, "n_assemblies_friction_unresolved")
     sliding = integer(ds, "n_assemblies_sliding")
+    released = integer(ds, "n_assemblies_released", None)
     exceed = integer(ds, "n_friction_exceedance")
     travel = 1e3 * number(ds, "horizon") * number(ds, "groove_velocity")
     mu_bb = number(ds, "ball_friction_coefficient")
@@ -428,11 +429,15 @@ def friction_content(ds, sens=None) -> dict:
          f"{resolved:,} / {unresolved:,} / {sliding:,} of {n_asm:,}",
          "n_assemblies_friction_resolved, _unresolved, n_assemblies_sliding"),
     ]
+    if released is not None:
+        rows.append((f"{many} with a ball pushed off its stick line (none sliding)",
+                     f"{released:,} of {n_asm:,}", "n_assemblies_released"))
     tables = [ReportTable(
         "Friction after contact at a glance", ("quantity", "value", "result file"),
         tuple(rows), (0.42, 0.33, 0.25),
         "Forces in N. Unresolved: a train with a ball outside the creep model (or "
-        "unresolved before contact), or one with a sliding ball, from the onset of sliding.",
+        "unresolved before contact), or one with a sliding ball, from the onset of sliding, "
+        "or with a ball pushed past the release push of its stuck contact, from then on.",
         (1,))]
     header = ("quantity [N]", "mean", "std", *(f"{100 * q:g} %" if q != 0.5 else "median"
                                                for q in FRICTION_LEVELS))

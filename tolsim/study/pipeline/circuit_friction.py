@@ -11,6 +11,7 @@ import numpy as np
 
 from tolsim._jit import jit
 from tolsim.physics.circuit import WHERE_INSIDE
+from tolsim.physics.trains.ball_minimum import RELEASE_INPUTS
 from tolsim.physics.trains.regimes import PUSHED_STIFFNESS, TRAIN_COLUMNS
 from tolsim.physics.velocity.models import BALL_UNLOADED
 from tolsim.study.pipeline.propagation import StepObserver
@@ -38,6 +39,7 @@ def column_coefficients() -> np.ndarray:
     row[_COL["braking_capacity"]] = np.inf
     row[_COL["release_push_forward"]] = np.inf
     row[_COL["release_push_backward"]] = -np.inf
+    row[[_COL[name] for name in RELEASE_INPUTS]] = np.nan  # no release pending
     row[_COL["free_rolling_velocity_deviation"]] = np.nan
     row[_COL["regime"]] = BALL_UNLOADED
     return row

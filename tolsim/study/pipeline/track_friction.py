@@ -25,6 +25,7 @@ from tolsim.physics.trains.regimes import (
     directional_braking,
     pair_braking,
     regime_creep_coefficients,
+    settle_release_pushes,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS, creep_coefficients_kernel
 from tolsim.study.pipeline.carriage_track import (
@@ -33,8 +34,13 @@ from tolsim.study.pipeline.carriage_track import (
 )
 from tolsim.study.pipeline.evaluate import BallState, evaluate_balls, loads_at
 from tolsim.study.pipeline.friction_kernels import (
+    RELEASED,
+    ROLLING,
+    SLIDING,
     step_friction_kernel,
+    step_pushed,
     stroke_friction_kernel,
+    stroke_pushed,
     train_inputs_kernel,
 )
 from tolsim.study.pipeline.propagation import (
@@ -152,7 +158,7 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
     mu_bb = config.contact.ball_friction_coefficient
     load = CREEP_MODELS[config.contact.creep_model](dbeta, force, config.bearing, mu_bb)
     load = regime_creep_coefficients(load, np.asarray(state.regime).reshape(-1), dbeta, force,
-                                     config.bearing, ball_friction=mu_bb)
+                                     config.bearing, ball_friction=mu_bb, lazy_release=True)
     unresolved = ~np.asarray(state.accounted).reshape(-1)
     if unresolved.any():
         load[unresolved] = np.nan
@@ -185,7 +191,12 @@ class FrictionState:
     exceeds : ndarray of bool (m,)
         The increase certainly exceeds the spec limit (False without a limit).
     sliding : ndarray of bool (m,)
-        Some ball of some track slides during the stroke (the assembly is unresolved).
+        Some ball of some track slides during the stroke (beyond a capacity; the assembly is
+        unresolved).
+    released : ndarray of bool (m,)
+        No track has a sliding ball, but in some track a ball on a stick line is pushed past
+        a release push (unresolved as well; ``sliding | released`` are the assemblies that
+        were counted as sliding before the two were told apart).
     """
 
     baseline: np.ndarray
@@ -199,6 +210,7 @@ class FrictionState:
     resolved: np.ndarray
     exceeds: np.ndarray
     sliding: np.ndarray
+    released: np.ndarray
 
     def rows(self, sl) -> "FrictionState":
         """The assemblies ``sl`` (a slice)."""
@@ -222,11 +234,12 @@ class _Trains:
 
 def _worst_tracks(config, m, *, track_ok, baseline, increase_max, increase_mean, ripple,
                   contact_force_max, contact_fraction, clusters_formed, bounded, rolling,
-                  sliding) -> FrictionState:
+                  onset) -> FrictionState:
     """One row per assembly from per-train figures (m * tracks trains): its worst track
     (Notes of :func:`evaluate_friction`). ``track_ok``: the train was followed over the whole
     stroke; ``bounded``: it was not, and ``rolling`` is its largest increase before the onset (a
-    lower bound of its maximum, for the certain exceedances); ``sliding``: it slid."""
+    lower bound of its maximum, for the certain exceedances); ``onset``: why it was not
+    (:data:`tolsim.study.pipeline.friction_kernels.SLIDING`, ``RELEASED``; else ``ROLLING``)."""
     tracks = config.n_tracks
     limit = config.contact.friction_increase_limit
     if limit > 0:
@@ -239,6 +252,7 @@ def _worst_tracks(config, m, *, track_ok, baseline, increase_max, increase_mean,
 
     ok = per_assembly(track_ok)
     resolved = ok.all(axis=1)
+    sliding = per_assembly(onset == SLIDING).any(axis=1)
     increase = np.where(ok, per_assembly(increase_max), -np.inf)
     ties = increase == increase.max(axis=1, keepdims=True)
     worst = np.argmax(np.where(ties, per_assembly(baseline), -np.inf), axis=1)
@@ -258,7 +272,8 @@ def _worst_tracks(config, m, *, track_ok, baseline, increase_max, increase_mean,
         worst_track=np.where(resolved, worst, -1).astype(np.int64),
         resolved=resolved,
         exceeds=per_assembly(certain).any(axis=1),
-        sliding=per_assembly(sliding).any(axis=1),
+        sliding=sliding,
+        released=per_assembly(onset == RELEASED).any(axis=1) & ~sliding,
     )
 
 
@@ -281,19 +296,22 @@ def follow_trains(config, initial_gap, state):
                                     eps, stiffness, config.motion.groove_velocity, horizon,
                                     braking_sensitivity=braking, segments=True)
     baseline, mean, high, low = (np.empty(trains) for _ in range(4))
-    sliding = np.empty(trains, dtype=np.bool_)
+    onset = np.empty(trains, dtype=np.int8)
     rolling = np.empty(trains)
     pairs = pair_braking(load, config.contact.ball_friction_coefficient)
+    settle_release_pushes(load, stroke_pushed(result.segment_start, result.segment_contact_force,
+                                              result.valid, horizon), config.bearing)
     stroke_friction_kernel(result.segment_start, result.segment_contact_force, result.valid,
-                           load, pairs, horizon, baseline, mean, high, low, sliding, rolling)
-    track_ok = result.valid & ~sliding & np.isfinite(baseline)
+                           load, pairs, horizon, baseline, mean, high, low, onset, rolling)
+    stopped = result.valid & (onset != ROLLING)
+    track_ok = result.valid & ~stopped & np.isfinite(baseline)
     figures = _worst_tracks(config, m, track_ok=track_ok, baseline=baseline, increase_max=high,
                             increase_mean=mean, ripple=high - low,
                             contact_force_max=result.contact_force_max,
                             contact_fraction=result.contact_fraction,
                             clusters_formed=result.clusters_formed.astype(float),
-                            bounded=result.valid & sliding, rolling=rolling,
-                            sliding=result.valid & sliding)
+                            bounded=stopped, rolling=rolling,
+                            onset=np.where(result.valid, onset, ROLLING))
     return figures, _Trains(load, result.valid, eps, stiffness, braking)
 
 
@@ -383,8 +401,11 @@ def evaluate_friction(config, initial_gap, state, block=None) -> FrictionState:
       :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`): a ball in regime B
       creeps with the stiffness of its stick line (about 3e4 N) while the push on it,
       P = Q_back - Q_front, stays between the pushes at which its stuck contact lets go
-      (:func:`tolsim.physics.trains.ball_minimum.stick_line_release`, as little as +2.9 N);
-      beyond them it is counted as a sliding ball (below); an exactly two-point ball
+      (:func:`tolsim.physics.trains.ball_minimum.stick_line_release`, as little as +2.9 N;
+      so does a three-point ball with a stuck contact); beyond them the train is unresolved
+      as with a sliding ball (below) but counted apart (``released``); the pushes are
+      computed only for the balls that carry a push once the train's forces are known
+      (:func:`tolsim.physics.trains.regimes.settle_release_pushes`); an exactly two-point ball
       keeps its epsilon (K = inf) and slides when |P| / P_cap + S / S_cap >= 1 (exact:
       |P| + mu_bb S >= 2 mu F); an
       unloaded ball gets the epsilon that closes both its gaps at once
@@ -562,7 +583,7 @@ class TrackFriction:
         rows = self.closed.shape[0]
         self.before = np.zeros_like(self.closed)  # in contact in the previous step
         self.alive = np.ones(rows, dtype=np.bool_)
-        self.sliding = np.zeros(rows, dtype=np.bool_)
+        self.onset = np.zeros(rows, dtype=np.int8)  # ROLLING, SLIDING or RELEASED
         self.rolling = np.full(rows, -np.inf)
         for name in ("baseline_sum", "increase_sum", "contact_sum", "formed_sum"):
             setattr(self, name, np.zeros(rows))
@@ -665,9 +686,11 @@ class TrackFriction:
         rows = len(ok)
         baseline, increase = np.empty(rows), np.empty(rows)
         pairs = pair_braking(load, self.config.contact.ball_friction_coefficient)
+        settle_release_pushes(load, step_pushed(member, force, ok, self.alive),
+                              self.config.bearing)
         step_friction_kernel(loaded, member, load, pairs, force, ok, contact,
                              np.asarray(formed, dtype=float), self.weight, self.alive,
-                             self.sliding, self.baseline_sum, self.increase_sum,
+                             self.onset, self.baseline_sum, self.increase_sum,
                              self.increase_high, self.friction_high, self.friction_low,
                              self.force_high, self.contact_sum, self.formed_sum, self.rolling,
                              baseline, increase)
@@ -696,7 +719,7 @@ class TrackFriction:
             ripple=live(self.friction_high - self.friction_low),
             contact_force_max=live(self.force_high), contact_fraction=live(self.contact_sum),
             clusters_formed=live(self.formed_sum), bounded=~alive, rolling=self.rolling,
-            sliding=self.sliding)
+            onset=self.onset)
 
 
 def follow_along_track(config, block, initial_state=None, record=False):

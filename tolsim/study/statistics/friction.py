@@ -31,7 +31,8 @@ FORCE_EDGES = np.concatenate([[0.0], np.logspace(-6.0, 4.0, 10 * 50 + 1)])
 class FrictionStatistics:
     """Mergeable statistics of the friction figures of assemblies (module docstring).
 
-    Exact counts (assemblies, resolved, sliding, certain exceedances); over the resolved
+    Exact counts (assemblies, resolved, sliding, released from a stick line, certain
+    exceedances); over the resolved
     assemblies the count, mean and M2 (Chan et al.), min and max of every column of
     :data:`COLUMNS`, and fixed-bin histograms (:data:`FORCE_EDGES`, with underflow and
     overflow counts) of :data:`HISTOGRAM_COLUMNS`. Merging in block order makes the result
@@ -44,8 +45,9 @@ class FrictionStatistics:
     """
 
     #: array attributes, in the order they are saved
-    FIELDS = ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_exceed", "count",
-              "mean", "m2", "minimum", "maximum", "histogram", "underflow", "overflow")
+    FIELDS = ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_released",
+              "n_exceed", "count", "mean", "m2", "minimum", "maximum", "histogram", "underflow",
+              "overflow")
 
     def __init__(self, friction_increase_limit=0.0):
         self.friction_increase_limit = float(friction_increase_limit)
@@ -55,7 +57,8 @@ class FrictionStatistics:
         self.n_assemblies = i8(0)
         self.n_resolved = i8(0)
         self.n_unresolved = i8(0)  # unresolved without a certain exceedance
-        self.n_sliding = i8(0)
+        self.n_sliding = i8(0)  # a ball beyond a capacity
+        self.n_released = i8(0)  # none, but a ball pushed off its stick line
         self.n_exceed = i8(0)
         self.count = i8(0)
         self.mean = np.zeros(c)
@@ -79,6 +82,7 @@ class FrictionStatistics:
         block.n_resolved = np.int64(np.count_nonzero(resolved))
         block.n_unresolved = np.int64(np.count_nonzero(~resolved & ~exceeds))
         block.n_sliding = np.int64(np.count_nonzero(figures.sliding))
+        block.n_released = np.int64(np.count_nonzero(figures.released))
         block.n_exceed = np.int64(np.count_nonzero(exceeds))
         x = figures.columns()[resolved]
         block.count = np.int64(len(x))
@@ -98,8 +102,8 @@ class FrictionStatistics:
 
     def merge(self, other: "FrictionStatistics"):
         """Merge ``other`` into self (the order of merges is part of the result)."""
-        for name in ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_exceed",
-                     "histogram", "underflow", "overflow"):
+        for name in ("n_assemblies", "n_resolved", "n_unresolved", "n_sliding", "n_released",
+                     "n_exceed", "histogram", "underflow", "overflow"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         count, self.mean, self.m2 = merge_moments(self.count, self.mean, self.m2,
                                                    other.count, other.mean, other.m2)
@@ -119,6 +123,8 @@ class FrictionStatistics:
         out = cls(float(state["friction_increase_limit"]))
         out.edges = np.array(state["edges"], dtype=float)
         for name in cls.FIELDS:
+            if name == "n_released" and name not in state:  # a checkpoint from before it
+                continue
             value = np.asarray(state[name])
             setattr(out, name, value.copy() if value.ndim else value[()])
         return out
