@@ -4,6 +4,7 @@ its figure, tables and headline sentence."""
 
 import numpy as np
 from matplotlib import colormaps
+from matplotlib.ticker import LogFormatterSciNotation, LogLocator, NullFormatter
 
 from tolsim.reports.result_view import (
     bin_edges,
@@ -42,6 +43,15 @@ FRICTION_HISTOGRAMS = {
     "contact_force_max": ("largest ball-to-ball force Q_max", "--"),
 }
 
+
+def _readable_log_ticks(axis, decades):
+    """Labels a log axis spanning ``decades`` at 1, 2 and 5 per decade up to three decades (at
+    the decades beyond), and no minor labels: matplotlib's default labels the minor ticks of
+    a short axis, whose wide 2x10^-3 labels overlap."""
+    subs = (1.0, 2.0, 5.0) if decades <= 3.0 else (1.0,)
+    axis.set_major_locator(LogLocator(base=10.0, subs=subs))
+    axis.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False))
+    axis.set_minor_formatter(NullFormatter())
 
 def without_output(sens, output=FRICTION_OUTPUT):
     """``sens`` without one of its outputs (the same object when it does not have it): the
@@ -184,6 +194,7 @@ def plot_friction(ds, sens=None, ball_diameter=np.nan):
         ax_d.set_yscale("log")
         ax_d.set_xlim(0.5 * low, 2.0 * top)
         ax_d.set_ylim(0.5 * floor, 1.6)
+        _readable_log_ticks(ax_d.xaxis, np.log10(4.0 * top / low))
     zero = curves.get("friction_increase")
     no_rise = 1.0 - zero[1] if zero is not None else np.nan
     ax_d.set_title(f"(a) over the {resolved:,} resolved {many}: "
