@@ -182,6 +182,14 @@ def readme_table(text: str) -> dict:
     return table
 
 
+def _stamp(text: str) -> str:
+    """The first line of the README table's stamp (a full ``--write`` run's), without what
+    earlier ``--only`` runs added."""
+    block = text[text.index(BEGIN) + len(BEGIN):text.index(END)]
+    line = next(x for x in block.splitlines() if x.startswith("Measured with"))
+    return line.split(" Rows of ")[0]
+
+
 def render(values: dict, stamp: str) -> str:
     """The README's table of ``values`` {row key: measured value}."""
     lines = [BEGIN, "", stamp, "",
@@ -265,6 +273,11 @@ def main(argv=None):
                  f"{time.strftime('%Y-%m-%d')}, on the 2-core development machine (load "
                  f"average {load:.1f} at the start). `--check` re-runs every benchmark and "
                  "compares.")
+        if args.only:  # say which rows this run measured; the others keep their stamp's
+            previous = _stamp(text)
+            stamp = (f"{previous} Rows of {', '.join(sorted(set(args.only)))} re-measured "
+                     f"on {time.strftime('%Y-%m-%d')} (`--only`, load average {load:.1f} at "
+                     "the start).")
         start, end = text.index(BEGIN), text.index(END) + len(END)
         README.write_text(text[:start] + render(values, stamp) + text[end:], encoding="utf-8")
         print(f"wrote the table of {README}")
