@@ -46,6 +46,7 @@ import signal
 import threading
 import time
 import uuid
+import warnings
 from collections import deque
 from concurrent.futures import CancelledError
 
@@ -165,11 +166,16 @@ def connect(scheduler: str, *, timeout=None):
     wait = {} if timeout is None else {"timeout": timeout}
     try:
         if kind == LOCAL:
-            # single-threaded worker processes, their kernels sharing the cores
-            cluster = distributed.LocalCluster(
-                n_workers=value, threads_per_worker=1, processes=True,
-                env={"NUMBA_NUM_THREADS": str(max(1, _cores() // value))},
-                preload=[__name__], silence_logs=logging.ERROR)
+            # single-threaded worker processes, their kernels sharing the cores; with the
+            # dashboard's port 8787 taken (another run) dask takes a free one and warns: the
+            # link returned is the one it took, so the warning says nothing more
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message=r"Port \d+ is already in use",
+                                        category=UserWarning)
+                cluster = distributed.LocalCluster(
+                    n_workers=value, threads_per_worker=1, processes=True,
+                    env={"NUMBA_NUM_THREADS": str(max(1, _cores() // value))},
+                    preload=[__name__], silence_logs=logging.ERROR)
             client = distributed.Client(cluster, set_as_default=False)
         elif kind == "file":
             client = distributed.Client(scheduler_file=value, set_as_default=False, **wait)
