@@ -290,7 +290,8 @@ class CircuitFrame(CarriageFrame):
         out = np.full(loaded.shape, np.nan)
         take = loaded if where is None else where
         if take.any():
-            pick = take[loaded]  # the loaded balls (flattened in ``loaded`` order) wanted
+            # the loaded balls (flattened in ``loaded`` order) wanted: all without ``where``
+            pick = slice(None) if where is None else take[loaded]
             dbeta = np.ascontiguousarray(balls.contact_angle_deviation.reshape(-1, 4)[pick])
             force = np.ascontiguousarray(balls.normal_force.reshape(-1, 4)[pick])
             k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
