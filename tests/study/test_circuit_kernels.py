@@ -10,7 +10,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from tolsim.study.pipeline.carriage_circuit import circuit_events, entering_velocity
+from tolsim.study.pipeline.carriage_circuit import (
+    circuit_events,
+    entering_velocity,
+    slots_kernel,
+)
 from tolsim.study.pipeline.circuit_kernels import (
     circuit_gaps_kernel,
     ring_inputs_kernel,
@@ -209,3 +213,43 @@ def test_step_contacts_match_the_numpy_chain(seed):
                          *got)
     for a, b in zip(got, want, strict=True):
         assert_array_equal(a, b)
+
+
+def test_slots_match_the_numpy_chain():
+    # CircuitFrame._slots at tolsim 1d166a1: the loaded balls of each circuit in z order (a
+    # stable sort: equal z in ring order), then ``ring_ok`` gathered with take_along_axis
+    # (True at empty slots); more loaded balls than slots empties the circuit (count -1)
+    rng = np.random.default_rng(3)
+    c = 50
+    loaded = zones(rng, c)
+    loaded[3] = False
+    loaded[3, :3] = True
+    length = rng.uniform(0.2, 0.3, c)
+    sigma = rng.uniform(-0.1, 0.6, (c, N))
+    sigma[3, 1] = sigma[3, 0]  # equal z: ring order
+    ring_id = rng.permutation(3 * N)[:N].astype(np.int64)
+    ring_ok = rng.random((c, N)) < 0.7
+    circuits = np.array([3, 0, 1, 2, *rng.integers(0, c, 30)])
+    k = len(circuits)
+    z, ids, ring = np.empty((k, SLOTS)), np.empty((k, SLOTS), dtype=np.int64), np.empty(
+        (k, SLOTS), dtype=np.int64)
+    ok, count = np.empty((k, SLOTS), dtype=bool), np.empty(k, dtype=np.int64)
+    slots_kernel(sigma, loaded, length, circuits, 0.03, ring_id, ring_ok, z, ids, ring, ok,
+                 count)
+    for i, line in enumerate(circuits):
+        balls = np.flatnonzero(loaded[line])
+        if len(balls) > SLOTS:
+            want_ring = np.full(SLOTS, -1)
+            assert count[i] == -1
+        else:
+            zz = 0.03 - np.mod(sigma[line, balls], length[line])
+            order = np.argsort(zz, kind="stable")
+            want_ring = np.full(SLOTS, -1)
+            want_ring[: len(balls)] = balls[order]
+            assert count[i] == len(balls)
+            assert_array_equal(z[i, : len(balls)], zz[order])
+            assert np.isnan(z[i, len(balls):]).all()
+        assert_array_equal(ring[i], want_ring)
+        assert_array_equal(ids[i], np.where(want_ring >= 0, ring_id[want_ring], -1))
+        want_ok = np.take_along_axis(ring_ok[line], np.maximum(want_ring, 0), axis=0)
+        assert_array_equal(ok[i], np.where(want_ring >= 0, want_ok, True))

@@ -59,19 +59,20 @@ def circuit_ball_ids(balls: int, circuit_balls: int) -> np.ndarray:
 
 
 @jit
-def slots_kernel(position, loaded, length, half_zone, ring_id, out_z, out_id, out_ring,
-                 out_count):
-    """The loaded balls of circuits (C, N) as carriage slots (C, S) in z order (trailing
-    first): z = L_z / 2 - (sigma mod L_c), the study id and the ring index of each (NaN, -1
-    past ``out_count``); ``out_count`` is set to -1 where a circuit has more loaded balls than
-    slots."""
-    circuits, n = position.shape
+def slots_kernel(position, loaded, length, circuits, half_zone, ring_id, ring_ok, out_z,
+                 out_id, out_ring, out_ok, out_count):
+    """The loaded balls of the circuits ``circuits`` (K,) of (C, N) arrays as carriage slots
+    (K, S) in z order (trailing first): z = L_z / 2 - (sigma mod L_c), the study id, the ring
+    index and ``ring_ok`` of each (NaN, -1, -1, True past ``out_count``); ``out_count`` is set
+    to -1 where a circuit has more loaded balls than slots."""
+    n = position.shape[1]
     slots = out_z.shape[1]
-    for c in range(circuits):
+    for c in range(len(circuits)):
+        line = circuits[c]
         count = 0
         for r in range(n):
-            if loaded[c, r]:
-                x = position[c, r] % length[c]
+            if loaded[line, r]:
+                x = position[line, r] % length[line]
                 z = half_zone - x
                 if count >= slots:
                     count = -1
@@ -92,6 +93,8 @@ def slots_kernel(position, loaded, length, half_zone, ring_id, out_z, out_id, ou
             out_z[c, j] = np.nan
             out_id[c, j] = -1
             out_ring[c, j] = -1
+        for j in range(slots):
+            out_ok[c, j] = True if out_ring[c, j] < 0 else ring_ok[line, out_ring[c, j]]
 
 
 def initial_circuits(config, block):
@@ -270,15 +273,15 @@ class CircuitFrame(CarriageFrame):
         z = np.empty((k * tracks, slots))
         ids = np.empty((k * tracks, slots), dtype=np.int64)
         ring = np.empty((k * tracks, slots), dtype=np.int64)
+        ok = np.empty((k * tracks, slots), dtype=bool)
         count = np.empty(k * tracks, dtype=np.int64)
-        slots_kernel(self.sigma[circuits], self.ring_loaded[circuits], self.length[circuits],
-                     self.half_zone, self.ring_id, z, ids, ring, count)
+        slots_kernel(self.sigma, self.ring_loaded, self.length, circuits, self.half_zone,
+                     self.ring_id, self.ring_ok, z, ids, ring, ok, count)
         self.position[rows] = z.reshape(k, tracks, slots)
         self.ball_id[rows] = ids.reshape(k, tracks, slots)
         self.slot_ring[rows] = ring.reshape(k, tracks, slots)
         self.count[rows] = np.maximum(count, 0).reshape(k, tracks)
-        ok = np.take_along_axis(self.ring_ok[circuits], np.maximum(ring, 0), axis=1)
-        self.ball_ok[rows] = np.where(ring >= 0, ok, True).reshape(k, tracks, slots)
+        self.ball_ok[rows] = ok.reshape(k, tracks, slots)
         overflow = (count < 0).reshape(k, tracks).any(axis=1)
         self.status[np.asarray(rows)[overflow]] |= STATUS_OVERFLOW_SLOTS
 
