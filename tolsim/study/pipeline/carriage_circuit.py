@@ -25,6 +25,13 @@ from tolsim.physics.circuit import (
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.study.pipeline.carriage_track import CarriageFrame
 from tolsim.study.pipeline.circuit_friction import CircuitTrains
+from tolsim.study.pipeline.circuit_kernels import (
+    circuit_events_kernel,
+    circuit_gaps_kernel,
+    entering_fill_kernel,
+    ring_inputs_kernel,
+    step_contacts_kernel,
+)
 from tolsim.study.pipeline.propagation import StepObserver, integrate
 from tolsim.study.pipeline.track_friction import CREEP_MODELS
 from tolsim.study.sampling import entering_capacity, moving_ball_values
@@ -52,19 +59,20 @@ def circuit_ball_ids(balls: int, circuit_balls: int) -> np.ndarray:
 
 
 @jit
-def slots_kernel(position, loaded, length, half_zone, ring_id, out_z, out_id, out_ring,
-                 out_count):
-    """The loaded balls of circuits (C, N) as carriage slots (C, S) in z order (trailing
-    first): z = L_z / 2 - (sigma mod L_c), the study id and the ring index of each (NaN, -1
-    past ``out_count``); ``out_count`` is set to -1 where a circuit has more loaded balls than
-    slots."""
-    circuits, n = position.shape
+def slots_kernel(position, loaded, length, circuits, half_zone, ring_id, ring_ok, out_z,
+                 out_id, out_ring, out_ok, out_count):
+    """The loaded balls of the circuits ``circuits`` (K,) of (C, N) arrays as carriage slots
+    (K, S) in z order (trailing first): z = L_z / 2 - (sigma mod L_c), the study id, the ring
+    index and ``ring_ok`` of each (NaN, -1, -1, True past ``out_count``); ``out_count`` is set
+    to -1 where a circuit has more loaded balls than slots."""
+    n = position.shape[1]
     slots = out_z.shape[1]
-    for c in range(circuits):
+    for c in range(len(circuits)):
+        line = circuits[c]
         count = 0
         for r in range(n):
-            if loaded[c, r]:
-                x = position[c, r] % length[c]
+            if loaded[line, r]:
+                x = position[line, r] % length[line]
                 z = half_zone - x
                 if count >= slots:
                     count = -1
@@ -85,6 +93,8 @@ def slots_kernel(position, loaded, length, half_zone, ring_id, out_z, out_id, ou
             out_z[c, j] = np.nan
             out_id[c, j] = -1
             out_ring[c, j] = -1
+        for j in range(slots):
+            out_ok[c, j] = True if out_ring[c, j] < 0 else ring_ok[line, out_ring[c, j]]
 
 
 def initial_circuits(config, block):
@@ -153,14 +163,8 @@ def entering_velocity(eps, stiffness, loaded, pushed=None):
     balls added 27 contacts and removed 1 at 25 steps, added 10 at 50 steps; with the ball
     ahead's epsilon 2 and 3 at 25 steps, 1 and 2 at 50.)
     """
-    entry = loaded & ~np.roll(loaded, 1, axis=1)  # its upstream neighbour is unloaded
-    rows = np.flatnonzero(entry.any(axis=1))
-    first = np.argmax(entry[rows], axis=1)
-    fill = ~loaded[rows]
-    for values in (eps, stiffness) if pushed is None else (eps, stiffness, pushed):
-        sub = values[rows]
-        sub[fill] = np.broadcast_to(sub[np.arange(len(rows)), first][:, None], sub.shape)[fill]
-        values[rows] = sub
+    entering_fill_kernel(loaded, eps, stiffness,
+                         np.zeros(loaded.shape, dtype=bool) if pushed is None else pushed)
 
 
 def circuit_events(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id, previous_id,
@@ -203,32 +207,13 @@ def circuit_events(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id, prev
     """
     shape = previous_id.shape
     slots = shape[-1]
-    exit_id = np.full(shape, -1, dtype=np.int64)
-    entry_id = np.full(shape, -1, dtype=np.int64)
-    exit_time, entry_time = np.full(shape, np.nan), np.full(shape, np.nan)
-    flat = (exit_id.reshape(-1, slots), exit_time.reshape(-1, slots),
-            entry_id.reshape(-1, slots), entry_time.reshape(-1, slots))
-    length = np.asarray(length)[:, None]
-    x0 = np.mod(sigma0, length)
-    span = sigma1 - sigma0
-    for leaving, boundary, (ids, times, where) in (
-            (loaded0 & ~loaded1, zone, (flat[0], flat[1], previous_id.reshape(-1, slots))),
-            (~loaded0 & loaded1, length, (flat[2], flat[3], None))):
-        line, ring = np.nonzero(leaving)
-        if line.size == 0:
-            continue
-        crossing = np.broadcast_to(boundary, sigma0.shape)[line, ring] - x0[line, ring]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            frac = np.where(span[line, ring] > 0, crossing / span[line, ring], 1.0)
-        when = t + np.clip(frac, 0.0, 1.0) * dt
-        if where is None:  # the slot it took
-            match = slot_ring.reshape(-1, slots)[line] == ring[:, None]
-        else:  # the slot it left
-            match = where[line] == ring_id[ring][:, None]
-        found = match.any(axis=1)
-        slot = np.argmax(match, axis=1)
-        ids[line[found], slot[found]] = ring_id[ring[found]]
-        times[line[found], slot[found]] = when[found]
+    exit_id, entry_id = (np.empty(shape, dtype=np.int64) for _ in range(2))
+    exit_time, entry_time = np.empty(shape), np.empty(shape)
+    circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, np.asarray(length, dtype=float),
+                          float(zone), ring_id, previous_id.reshape(-1, slots),
+                          slot_ring.reshape(-1, slots), float(t), float(dt),
+                          exit_id.reshape(-1, slots), exit_time.reshape(-1, slots),
+                          entry_id.reshape(-1, slots), entry_time.reshape(-1, slots))
     return [exit_id, exit_time, entry_id, entry_time]
 
 
@@ -273,12 +258,10 @@ class CircuitFrame(CarriageFrame):
     def gaps(self, rows=None) -> np.ndarray:
         """Gaps (C_k, N) of the circuits of assemblies ``rows`` (all: None) [m], ring order
         (gap c between balls c and c + 1; they sum to the slack)."""
-        circuits = slice(None) if rows is None else self._circuits(rows)
-        sigma, d, length = self.sigma[circuits], self.diameter_ring[circuits], \
-            self.length[circuits]
-        ahead = np.roll(sigma, -1, axis=1)
-        ahead[:, -1] += length
-        return ahead - sigma - 0.5 * (d + np.roll(d, -1, axis=1))
+        circuits = np.arange(len(self.sigma)) if rows is None else self._circuits(rows)
+        out = np.empty((len(circuits), self.sigma.shape[1]))
+        circuit_gaps_kernel(self.sigma, self.diameter_ring, self.length, circuits, out)
+        return out
 
     def _circuits(self, rows):
         return (np.asarray(rows)[:, None] * self.tracks + np.arange(self.tracks)).reshape(-1)
@@ -290,15 +273,15 @@ class CircuitFrame(CarriageFrame):
         z = np.empty((k * tracks, slots))
         ids = np.empty((k * tracks, slots), dtype=np.int64)
         ring = np.empty((k * tracks, slots), dtype=np.int64)
+        ok = np.empty((k * tracks, slots), dtype=bool)
         count = np.empty(k * tracks, dtype=np.int64)
-        slots_kernel(self.sigma[circuits], self.ring_loaded[circuits], self.length[circuits],
-                     self.half_zone, self.ring_id, z, ids, ring, count)
+        slots_kernel(self.sigma, self.ring_loaded, self.length, circuits, self.half_zone,
+                     self.ring_id, self.ring_ok, z, ids, ring, ok, count)
         self.position[rows] = z.reshape(k, tracks, slots)
         self.ball_id[rows] = ids.reshape(k, tracks, slots)
         self.slot_ring[rows] = ring.reshape(k, tracks, slots)
         self.count[rows] = np.maximum(count, 0).reshape(k, tracks)
-        ok = np.take_along_axis(self.ring_ok[circuits], np.maximum(ring, 0), axis=1)
-        self.ball_ok[rows] = np.where(ring >= 0, ok, True).reshape(k, tracks, slots)
+        self.ball_ok[rows] = ok.reshape(k, tracks, slots)
         overflow = (count < 0).reshape(k, tracks).any(axis=1)
         self.status[np.asarray(rows)[overflow]] |= STATUS_OVERFLOW_SLOTS
 
@@ -310,7 +293,8 @@ class CircuitFrame(CarriageFrame):
         out = np.full(loaded.shape, np.nan)
         take = loaded if where is None else where
         if take.any():
-            pick = take[loaded]  # the loaded balls (flattened in ``loaded`` order) wanted
+            # the loaded balls (flattened in ``loaded`` order) wanted: all without ``where``
+            pick = slice(None) if where is None else take[loaded]
             dbeta = np.ascontiguousarray(balls.contact_angle_deviation.reshape(-1, 4)[pick])
             force = np.ascontiguousarray(balls.normal_force.reshape(-1, 4)[pick])
             k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
@@ -334,21 +318,19 @@ class CircuitFrame(CarriageFrame):
         unresolved = ~(state1.valid & state2.valid)
         c, n = len(circuits), self.sigma.shape[1]
         ring = self.slot_ring[rows].reshape(c, -1)
-        ring_eps = np.zeros((c, n))
-        ring_k = np.full((c, n), fallback)
-        ring_pushed = np.zeros((c, n), dtype=bool)
-        line, slot = np.nonzero(ring >= 0)
-        target = ring[line, slot]
-        ring_eps[line, target] = eps.reshape(c, -1)[line, slot]
-        ring_k[line, target] = np.where(finite, stiff, fallback).reshape(c, -1)[line, slot]
         pushed = self.unloaded(state1, state2)  # no groove contact: pushed by the step
-        if pushed is not None:
-            ring_pushed[line, target] = pushed.reshape(c, -1)[line, slot]
-        ok = self.ring_ok[circuits]
-        ok[line, target] &= ~unresolved.reshape(c, -1)[line, slot]
-        self.ring_ok[circuits] = ok
+        if pushed is None:
+            pushed = np.zeros(ring.shape, dtype=bool)
         sigma, loaded = self.sigma[circuits], self.ring_loaded[circuits]
-        entering_velocity(ring_eps, ring_k, loaded, ring_pushed)  # entering within the step
+        ok = self.ring_ok[circuits]
+        ring_eps, ring_k = np.empty((c, n)), np.empty((c, n))
+        ring_pushed = np.empty((c, n), dtype=bool)
+        # the slot balls' values in ring order, those entering within the step from the
+        # entry ball (entering_velocity)
+        ring_inputs_kernel(ring, eps.reshape(c, -1), stiff.reshape(c, -1), fallback,
+                           pushed.reshape(c, -1), unresolved.reshape(c, -1), loaded, ok,
+                           ring_eps, ring_k, ring_pushed)
+        self.ring_ok[circuits] = ok
         closed, speed = self.ring_closed[circuits], self.ring_speed[circuits]
         velocity, force, mean_force = (np.empty((c, n)) for _ in range(3))
         column = np.empty((c, 4))
@@ -432,38 +414,28 @@ class CircuitContact(StepObserver):
     def moved(self, step):
         frame, rows, circ = self.frame, step.rows, step.circuit
         tracks, k = frame.tracks, len(rows)
-        ok, loaded, closed = circ["ok"], circ["loaded"], circ["closed"]
-        ahead_loaded = np.roll(loaded, -1, axis=1)
-        ahead_ok = np.roll(ok, -1, axis=1)
-        both_ok = ok & ahead_ok
+        loaded = circ["loaded"]
         # contact events: where they formed; a first contact is an event inside the zone
-        # (both balls loaded) of resolved balls
-        pair, where, travel = circ["pair"], circ["where"], circ["travel"]
-        for code in range(len(WHERE_NAMES)):
-            hits = (where == code).sum(axis=1).reshape(k, tracks).sum(axis=1)
-            self.where_count[rows, code] += hits
-        safe = np.maximum(pair, 0)
-        pair_ok = np.take_along_axis(both_ok, safe, axis=1) & (pair >= 0)
-        inside = (where == 0) & pair_ok
-        t_event = np.where(inside, travel / frame.v, np.inf)
-        # a closed pair of loaded, resolved balls that carries force at the end of the step
-        # (pushed in closed by the column, or closed before the step)
-        pressed = closed & loaded & ahead_loaded & both_ok & (circ["force"] > 0.0)
+        # (both balls loaded) of resolved balls, or a closed pair of loaded, resolved balls
+        # that carries force at the end of the step (pushed in closed by the column, or
+        # closed before the step)
         t_end = step.t + step.dt
-        t_pressed = np.where(pressed, t_end, np.inf)
-        t_all = np.minimum(t_event.min(axis=1) if t_event.shape[1] else np.inf,
-                           t_pressed.min(axis=1)).reshape(k, tracks)
+        hits = np.empty((k * tracks, len(WHERE_NAMES)), dtype=np.int64)
+        t_all, ring_pair = np.empty(k * tracks), np.empty(k * tracks, dtype=np.int64)
+        step_contacts_kernel(circ["ok"], loaded, circ["closed"], circ["force"], circ["pair"],
+                             circ["where"], circ["travel"], float(frame.v), float(t_end),
+                             len(WHERE_NAMES), hits, t_all, ring_pair)
+        self.where_count[rows] += hits.reshape(k, tracks, -1).sum(axis=1)
+        t_all = t_all.reshape(k, tracks)
         first_track = np.argmin(t_all, axis=1)
         t_first = t_all[np.arange(k), first_track]
         new = np.isfinite(t_first) & ~np.isfinite(self.time[rows]) & (t_first <= t_end)
         if new.any():
             for a in np.flatnonzero(new):
                 line = a * tracks + first_track[a]
-                ring_pair = self._ring_pair(inside[line], pair[line], travel[line],
-                                            pressed[line])
                 self.time[rows[a]] = t_first[a]
                 self.pair[rows[a]] = first_track[a] * (self.balls - 1) + self._slot_index(
-                    rows[a], first_track[a], (ring_pair + 1) % loaded.shape[1])
+                    rows[a], first_track[a], (ring_pair[line] + 1) % loaded.shape[1])
         column = circ["column"].reshape(k, tracks, 4)
         self.column_max[rows] = np.maximum(self.column_max[rows], column[:, :, :2].max(axis=1))
         self.column_mean[rows] += column[:, :, 2:].max(axis=1) * (frame.v * step.dt)
@@ -474,15 +446,6 @@ class CircuitContact(StepObserver):
         self.slack_error[rows] = np.maximum(self.slack_error[rows], error.max(axis=1))
         searching = self.searching  # as without the circuit: up to the first contact
         self.valid[rows[searching]] &= ~step.overflow[searching]
-
-    @staticmethod
-    def _ring_pair(inside, pair, travel, pressed):
-        """The ring pair of a circuit's first contact in the step: its first inside event,
-        else its first pressed pair."""
-        if inside.any():
-            slots = np.flatnonzero(inside)
-            return int(pair[slots[np.argmin(travel[slots])]])
-        return int(np.flatnonzero(pressed)[0])
 
     def _slot_index(self, row, track, ring_ball):
         """The zone position j (from the trailing end, at most balls - 2) of ring ball

@@ -1,0 +1,172 @@
+"""Compiled glue of the carriage's ball circuits (:mod:`tolsim.study.pipeline.carriage_circuit`):
+the step's ring inputs, the exits and entries of a step, the contacts seen in a step, the gaps.
+
+Each kernel does in one pass, element by element, what a chain of NumPy calls did: the same
+comparisons and the same values (a float ``%`` as ``np.mod``), so the results are
+bit-identical to those calls.
+"""
+
+import numpy as np
+
+from tolsim._jit import jit
+
+
+@jit
+def entering_fill_kernel(loaded, eps, stiffness, pushed):
+    """Give the unloaded balls of circuits (C, N) the values of the zone's entry ball, in place
+    (:func:`tolsim.study.pipeline.carriage_circuit.entering_velocity`): the entry ball is the
+    first loaded ball in ring order whose upstream neighbour (ring index - 1, cyclic) is
+    unloaded; a circuit without one (none or all loaded) is left as it is."""
+    circuits, n = loaded.shape
+    for c in range(circuits):
+        first = -1
+        for r in range(n):
+            if loaded[c, r] and not loaded[c, r - 1 if r > 0 else n - 1]:
+                first = r
+                break
+        if first < 0:
+            continue
+        for r in range(n):
+            if not loaded[c, r]:
+                eps[c, r] = eps[c, first]
+                stiffness[c, r] = stiffness[c, first]
+                pushed[c, r] = pushed[c, first]
+
+
+@jit
+def ring_inputs_kernel(slot_ring, eps, stiffness, fallback, pushed, unresolved, loaded,
+                       ring_ok, out_eps, out_k, out_pushed):
+    """The circuits' step inputs (C, N) in ring order from the slots (C, S) of
+    :meth:`tolsim.study.pipeline.carriage_circuit.CircuitFrame.advance`.
+
+    ``slot_ring`` the ring ball in each slot (-1: empty); ``eps``, ``stiffness`` [N] (NaN or
+    <= 0: ``fallback``), ``pushed`` and ``unresolved`` per slot. Writes each slot ball's
+    epsilon, K and pushed flag to ``out_eps`` (0 elsewhere), ``out_k`` (``fallback``
+    elsewhere) and ``out_pushed`` (False elsewhere), clears ``ring_ok`` (C, N) of unresolved
+    slot balls, then fills the unloaded balls from the entry ball
+    (:func:`entering_fill_kernel`)."""
+    circuits, n = out_eps.shape
+    slots = slot_ring.shape[1]
+    for c in range(circuits):
+        for r in range(n):
+            out_eps[c, r] = 0.0
+            out_k[c, r] = fallback
+            out_pushed[c, r] = False
+        for j in range(slots):
+            r = slot_ring[c, j]
+            if r < 0:
+                continue
+            out_eps[c, r] = eps[c, j]
+            k = stiffness[c, j]
+            out_k[c, r] = k if (np.isfinite(k) and k > 0) else fallback
+            out_pushed[c, r] = pushed[c, j]
+            ring_ok[c, r] = ring_ok[c, r] and not unresolved[c, j]
+    entering_fill_kernel(loaded, out_eps, out_k, out_pushed)
+
+
+@jit
+def circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id,
+                          previous_id, slot_ring, t, dt, exit_id, exit_time, entry_id,
+                          entry_time):
+    """Kernel of :func:`tolsim.study.pipeline.carriage_circuit.circuit_events` on circuits
+    (C, N) and their slots (C, S); fills the four outputs (C, S)."""
+    circuits, n = sigma0.shape
+    slots = previous_id.shape[1]
+    for c in range(circuits):
+        for j in range(slots):
+            exit_id[c, j] = -1
+            entry_id[c, j] = -1
+            exit_time[c, j] = np.nan
+            entry_time[c, j] = np.nan
+        for r in range(n):
+            leaving = loaded0[c, r] and not loaded1[c, r]
+            entering = loaded1[c, r] and not loaded0[c, r]
+            if not (leaving or entering):
+                continue
+            boundary = zone if leaving else length[c]
+            crossing = boundary - sigma0[c, r] % length[c]
+            span = sigma1[c, r] - sigma0[c, r]
+            frac = crossing / span if span > 0 else 1.0
+            when = t + min(max(frac, 0.0), 1.0) * dt
+            if leaving:  # the slot it left
+                for j in range(slots):
+                    if previous_id[c, j] == ring_id[r]:
+                        exit_id[c, j] = ring_id[r]
+                        exit_time[c, j] = when
+                        break
+            else:  # the slot it took
+                for j in range(slots):
+                    if slot_ring[c, j] == r:
+                        entry_id[c, j] = ring_id[r]
+                        entry_time[c, j] = when
+                        break
+
+
+@jit
+def circuit_gaps_kernel(sigma, diameter, length, circuits, out):
+    """Gaps (K, N) of the circuits ``circuits`` (K,) of (C, N) arrays [m], ring order (gap c
+    between balls c and c + 1; the last one across L_c), as
+    :meth:`tolsim.study.pipeline.carriage_circuit.CircuitFrame.gaps`."""
+    n = sigma.shape[1]
+    for i in range(len(circuits)):
+        c = circuits[i]
+        for r in range(n):
+            r1 = r + 1 if r + 1 < n else 0
+            ahead = sigma[c, r1] + length[c] if r1 == 0 else sigma[c, r1]
+            out[i, r] = ahead - sigma[c, r] - 0.5 * (diameter[c, r] + diameter[c, r1])
+
+
+@jit
+def step_contacts_kernel(ok, loaded, closed, force, pair, where, travel, v, t_end, codes,
+                         out_count, out_time, out_pair):
+    """The contacts of a circuit step (:meth:`tolsim.study.pipeline.carriage_circuit.
+    CircuitContact.moved`) on circuits (C, N) and their events (C, E).
+
+    ``out_count`` (C, codes): the events by where they form; ``out_time`` (C,) [s]: the
+    earliest of an inside event of resolved balls (``where`` 0, at ``travel`` / ``v``) and the
+    end of the step ``t_end`` where a closed pair of loaded, resolved balls carries force
+    (``inf`` for neither; NaN propagates as in ``np.min``); ``out_pair`` (C,): the ring pair
+    of the circuit's first contact: its inside event at the least travel (the first of
+    equals, a NaN travel first), else its first pressed pair, else -1.
+    """
+    circuits, n = ok.shape
+    events = pair.shape[1]
+    for c in range(circuits):
+        for code in range(codes):
+            out_count[c, code] = 0
+        t_min = np.inf
+        best = -1
+        best_travel = np.inf
+        for e in range(events):
+            code = where[c, e]
+            if 0 <= code < codes:
+                out_count[c, code] += 1
+            p = pair[c, e]
+            inside = False
+            if code == 0 and p >= 0:
+                inside = ok[c, p] and ok[c, p + 1 if p + 1 < n else 0]
+            if inside:
+                te = travel[c, e] / v
+                if np.isnan(te) or te < t_min:
+                    if not np.isnan(t_min):
+                        t_min = te
+                tr = travel[c, e]
+                if best < 0 or (not np.isnan(best_travel) and (np.isnan(tr)
+                                                                 or tr < best_travel)):
+                    best = p
+                    best_travel = tr
+        first_pressed = -1
+        for r in range(n):
+            r1 = r + 1 if r + 1 < n else 0
+            if (closed[c, r] and loaded[c, r] and loaded[c, r1] and ok[c, r] and ok[c, r1]
+                    and force[c, r] > 0.0):
+                if first_pressed < 0:
+                    first_pressed = r
+                if not np.isnan(t_min) and t_end < t_min:
+                    t_min = t_end
+        out_time[c] = t_min
+        out_pair[c] = best if best >= 0 else first_pressed
+
+
+__all__ = ["circuit_events_kernel", "circuit_gaps_kernel", "entering_fill_kernel",
+           "ring_inputs_kernel", "step_contacts_kernel"]
