@@ -47,7 +47,8 @@ along_track over that of constant). The along_track studies follow an assembly u
 first contact (the circuit: over the whole stroke). Then ``configs/friction_yaw.toml`` and
 ``configs/carriage_preload.toml`` along the track with ``[contact]`` against the same without
 it (the automatic step count is finer with ``[contact]``: the steps are printed). Sizes are
-assemblies (default 2000: a few 10^4 balls; the constant studies run ``--constant-factor``
+assemblies (default 2000: a few 10^4 balls; the free balls run 10 times more, whose study
+would otherwise last some 0.05 s; the constant studies run ``--constant-factor``
 times more assemblies, so that they last long enough to be timed); one worker. Report the
 load average with the numbers (the machine is shared).
 
@@ -299,11 +300,13 @@ def along_track(sizes, constant_factor=20.0):
     print(f"tolsim along_track studies against constant; one worker, {os.cpu_count()} cores, "
           f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     carriage = ROOT / "configs" / "carriage_preload.toml"
-    cases = ((ROOT / "configs" / "whatif_along_track.toml", "free", "free balls"),
-             (carriage, "free", "carriage"),
-             (carriage, "circuit", "carriage with [carriage.circuit]"))
-    for config, kind, label in cases:
-        balls = _balls_per_assembly(config)
+    # (config, kind, label, assemblies per --sizes assembly: the free balls' study lasts
+    # 0.05 s at 2 000 assemblies, too short to time)
+    cases = ((ROOT / "configs" / "whatif_along_track.toml", "free", "free balls", 10),
+             (carriage, "free", "carriage", 1),
+             (carriage, "circuit", "carriage with [carriage.circuit]", 1))
+    for config, kind, label, factor in cases:
+        balls = _balls_per_assembly(config) * factor
         for size in sizes:
             along = measure(size * balls, config=config, along_track=kind,
                             static_model="config")
@@ -311,7 +314,8 @@ def along_track(sizes, constant_factor=20.0):
                             along_track="constant", static_model="config")
             rate_a = along["balls"] / along["seconds"]
             rate_c = const["balls"] / const["seconds"]
-            print(f"  {config.name} ({label}): {along['balls'] // balls:.0f} assemblies "
+            print(f"  {config.name} ({label}): {along['balls'] // (balls // factor):.0f} "
+                  f"assemblies "
                   f"{along['balls']:.2e} balls along_track {along['seconds']:7.2f} s "
                   f"{rate_a:9.0f} balls/s; constant {rate_c:9.0f} balls/s "
                   f"({const['balls']:.2e} balls); cost per ball {rate_c / rate_a:6.1f}x "
