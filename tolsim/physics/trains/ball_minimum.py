@@ -235,6 +235,24 @@ def _scan_phases(angles, nodes, pivot, half):
     return phases
 
 
+@jit
+def _release_frame(beta, force, k, a, b, cin, sin_, win, xo, wo, tr, wr, angles, nodes, half):
+    """What both release kernels set up per ball stuck at contact k: its stick frame
+    (:func:`_stick_frame`), the grooves' speeds and the support scan of the directions
+    around the pivot (:func:`_scan_phases`, ``nodes`` within +- ``half`` of it;
+    :func:`_support_scan`). Returns (px, py, vgroove, others, total, t, dirs, sigma)."""
+    px = np.empty(4)
+    py = np.empty(4)
+    others = np.empty(4)
+    alone = np.empty(4)
+    total, t, e1, e2, pivot = _stick_frame(beta, force, k, px, py, others, alone)
+    vgroove = np.array([0.0, 0.0, 1.0, 1.0])
+    phases = _scan_phases(angles, nodes, pivot, half)
+    dirs, sigma = _support_scan(phases, e1, e2, px, py, alone, a, b, cin, sin_, win, xo, wo,
+                                tr, wr)
+    return px, py, vgroove, others, total, t, dirs, sigma
+
+
 @pjit
 def stick_release_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo, tr, wr, step,
                          angles, steps, out):
@@ -251,15 +269,9 @@ def stick_release_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo, wo,
         k = stuck[n]
         if k < 0 or k > 3:
             continue
-        px = np.empty(4)
-        py = np.empty(4)
-        others = np.empty(4)
-        alone = np.empty(4)
-        total, t, e1, e2, pivot = _stick_frame(beta[n], force[n], k, px, py, others, alone)
-        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        phases = _scan_phases(angles, angles + 1, pivot, RELEASE_WINDOW)
-        dirs, sigma = _support_scan(phases, e1, e2, px, py, alone, a[n], b[n], cin, sin_, win,
-                                    xo, wo, tr, wr)
+        px, py, vgroove, others, total, t, dirs, sigma = _release_frame(
+            beta[n], force[n], k, a[n], b[n], cin, sin_, win, xo, wo, tr, wr, angles,
+            angles + 1, RELEASE_WINDOW)
         w = np.empty(1)
         for side in range(2):
             sign = 1.0 if side == 0 else -1.0
@@ -389,15 +401,9 @@ def release_threshold_kernel(beta, force, stuck, rate, a, b, cin, sin_, win, xo,
         k = stuck[n]
         if k < 0 or k > 3:
             continue
-        px = np.empty(4)
-        py = np.empty(4)
-        others = np.empty(4)
-        alone = np.empty(4)
-        total, t, e1, e2, pivot = _stick_frame(beta[n], force[n], k, px, py, others, alone)
-        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
-        phases = _scan_phases(angles, nodes, pivot, width * a[n, k])
-        dirs, sigma = _support_scan(phases, e1, e2, px, py, alone, a[n], b[n], cin, sin_, win,
-                                    xo, wo, tr, wr)
+        px, py, vgroove, others, total, t, dirs, sigma = _release_frame(
+            beta[n], force[n], k, a[n], b[n], cin, sin_, win, xo, wo, tr, wr, angles, nodes,
+            width * a[n, k])
         loads = np.empty(5)
         contact = np.empty((4, 5))
         low_slope = _line_slope(rate[n] - step, t, px, py, vgroove, others, a[n], b[n], cin,
