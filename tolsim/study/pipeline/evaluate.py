@@ -465,10 +465,21 @@ class BallState:
         return self.valid | (self.regime == BALL_UNLOADED)
 
     def rows(self, sl):
-        """The balls of the assemblies ``sl`` (a slice of the first axis)."""
+        """The balls of the assemblies ``sl`` (a slice or an index array of the first axis)."""
         return BallState(self.velocity_deviation[sl], self.valid[sl], self.converged[sl],
                          self.loss_of_contact[sl], self.contact_angle_deviation[sl],
                          self.normal_force[sl], self.model[sl], 0.0, self.regime[sl])
+
+
+def concatenated_balls(first: BallState, second: BallState) -> BallState:
+    """The balls of two BallStates one after the other along the first axis (its
+    ``resolve_seconds``: 0)."""
+    def both(name):
+        return np.concatenate([getattr(first, name), getattr(second, name)])
+
+    return BallState(both("velocity_deviation"), both("valid"), both("converged"),
+                     both("loss_of_contact"), both("contact_angle_deviation"),
+                     both("normal_force"), both("model"), 0.0, both("regime"))
 
 
 def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:

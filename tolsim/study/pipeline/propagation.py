@@ -363,8 +363,8 @@ class Step:
     positions for free balls); ``gap_old``, ``gap_new``: the pairs' gaps there [m] (along
     the last axis), those of pairs with an unloaded ball the gaps that carry force
     (:func:`force_gaps`); ``ball_ok``: resolved at every evaluation so far; ``state1``, ``state2``:
-    the balls of the predictor (the frame's :meth:`AlongTrackFrame.start`: at the start of the
-    step for a carriage, the previous midpoint's for free balls) and at the midpoint.
+    the balls of the predictor (the frame's :meth:`AlongTrackFrame.start`: the previous
+    midpoint's, at t = 0 those at the start) and at the midpoint.
     """
 
     index: int
