@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tolsim._jit import jit
+
 #: Contact order used everywhere (paper Fig. 2).
 CONTACTS = ("BL", "BR", "TR", "TL")
 
@@ -131,6 +133,30 @@ def contact_frames(contact_angle):
     return position, x_axis, y_axis
 
 
+@jit(inline="always")
+def paired_force_pair(side_load, normal_load, sin0, cos0):
+    """The paired forces of one ball (:func:`paired_forces`): F_1 = F_BL = F_TR and
+    F_2 = F_BR = F_TL [N] from N_x, N_y [N] and sin b0, cos b0 (the one definition of the
+    formula; the kernels of the study call it per ball)."""
+    # Top-groove equilibrium: the ball pushes the groove outward at TR, (+sin, +cos) F_TR, and
+    # at TL, (-sin, +cos) F_TL, against the load (N_x, -N_y).  Ball equilibrium with equal
+    # angles makes the diagonals equal: F_BL = F_TR, F_BR = F_TL.
+    return ((normal_load / cos0 - side_load / sin0) / 2.0,
+            (normal_load / cos0 + side_load / sin0) / 2.0)
+
+
+@jit
+def paired_forces_kernel(side_load, normal_load, sin0, cos0, out):
+    """:func:`paired_force_pair` of n balls: ``side_load``, ``normal_load`` (n,) [N] into
+    ``out`` (n, 4) as F_BL, F_BR, F_TR, F_TL."""
+    for b in range(out.shape[0]):
+        f1, f2 = paired_force_pair(side_load[b], normal_load[b], sin0, cos0)
+        out[b, 0] = f1
+        out[b, 1] = f2
+        out[b, 2] = f1
+        out[b, 3] = f2
+
+
 def paired_forces(side_load, normal_load, nominal_contact_angle=np.pi / 4):
     """The paper's paired approximation of the four contact forces (Sec. 3.1).
 
@@ -150,18 +176,50 @@ def paired_forces(side_load, normal_load, nominal_contact_angle=np.pi / 4):
     Returns
     -------
     ndarray, shape (..., 4)
-        Normal forces F_BL, F_BR, F_TR, F_TL [N]. Not validated: a value <= 0 means the
-        paired approximation predicts loss of contact.
+        Normal forces F_BL, F_BR, F_TR, F_TL [N] (:func:`paired_force_pair` per ball). Not
+        validated: a value <= 0 means the paired approximation predicts loss of contact.
     """
-    nx = np.asarray(side_load, dtype=float)
-    ny = np.asarray(normal_load, dtype=float)
-    s0, c0 = np.sin(nominal_contact_angle), np.cos(nominal_contact_angle)
-    # Top-groove equilibrium: the ball pushes the groove outward at TR, (+sin, +cos) F_TR, and
-    # at TL, (-sin, +cos) F_TL, against the load (N_x, -N_y).  Ball equilibrium with equal
-    # angles makes the diagonals equal: F_BL = F_TR, F_BR = F_TL.
-    f1 = (ny / c0 - nx / s0) / 2.0
-    f2 = (ny / c0 + nx / s0) / 2.0
-    return np.stack([f1, f2, f1, f2], axis=-1)
+    nx, ny = np.broadcast_arrays(np.asarray(side_load, dtype=float),
+                                 np.asarray(normal_load, dtype=float))
+    out = np.empty(nx.shape + (4,))
+    paired_forces_kernel(np.ascontiguousarray(nx).reshape(-1),
+                         np.ascontiguousarray(ny).reshape(-1),
+                         np.sin(nominal_contact_angle), np.cos(nominal_contact_angle),
+                         out.reshape(-1, 4))
+    return out
+
+
+@jit(inline="always")
+def rigid_angle_deviations(tangential0, tangential1, tangential2, tangential3,
+                           bottom_rotation, top_rotation, centre_distance):
+    """Contact angle deviations of one ball in rigid grooves [rad], BL, BR, TR, TL.
+
+    dbeta_BL = -theta_b, dbeta_BR = +theta_b ([Lin2018] Sec. 3.1, Fig. 6), likewise
+    dbeta_TR = -theta_t, dbeta_TL = +theta_t for the top groove, plus t_i / (R_G - R_B) for
+    a tangential offset t_i [m] of arc centre i (positive toward increasing beta_i; the
+    contact lies on the line through the ball and arc centres, which are
+    ``centre_distance`` = R_G - R_B apart). The one definition of the mapping (the study's
+    ``paired`` model calls it, vectorised or per ball).
+    """
+    return (tangential0 / centre_distance - bottom_rotation,
+            tangential1 / centre_distance + bottom_rotation,
+            tangential2 / centre_distance - top_rotation,
+            tangential3 / centre_distance + top_rotation)
+
+
+@jit
+def rigid_angle_deviations_kernel(tangential, bottom_rotation, top_rotation, centre_distance,
+                                  out):
+    """:func:`rigid_angle_deviations` of n balls: ``tangential`` (n, 4) [m], the rotations
+    (n,) [rad], into ``out`` (n, 4) [rad]."""
+    for b in range(out.shape[0]):
+        d0, d1, d2, d3 = rigid_angle_deviations(
+            tangential[b, 0], tangential[b, 1], tangential[b, 2], tangential[b, 3],
+            bottom_rotation[b], top_rotation[b], centre_distance)
+        out[b, 0] = d0
+        out[b, 1] = d1
+        out[b, 2] = d2
+        out[b, 3] = d3
 
 
 def contact_force_resultant(contact_angle, normal_force):

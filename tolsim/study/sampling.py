@@ -57,10 +57,11 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import prange
 from scipy.special import ndtri
 from scipy.stats import qmc
 
-from tolsim._jit import jit, kernel_array
+from tolsim._jit import jit, kernel_array, pjit
 
 #: Grid points per correlation length of a rail random field.
 FIELD_POINTS_PER_CORRELATION_LENGTH = 16
@@ -101,24 +102,42 @@ class RailField:
     values: np.ndarray
     tracks: int = 1
 
-    def at(self, position):
+    def at(self, position, parallel=False):
         """Standard normal field value at rail positions [-].
 
         ``position``: shape (assemblies, ...) [m]; with several tracks the positions of each
         assembly track by track, (assemblies, tracks * k) or (assemblies, tracks, k).
+        ``parallel``: read the rows on Numba's threads (the same values; not from a thread
+        that draws while a parallel kernel may run, :func:`tolsim.study.execution.chunks
+        .prefetched`).
         """
         if self.tracks > 1:
             pos = np.asarray(position)
             rows = RailField(self.origin, self.spacing, self.values)
-            return rows.at(pos.reshape(self.values.shape[0], -1)).reshape(pos.shape)
+            return rows.at(pos.reshape(self.values.shape[0], -1), parallel).reshape(pos.shape)
         pos = np.asarray(position, dtype=np.float64)
         out = np.empty(pos.shape)
         values = np.ascontiguousarray(self.values, dtype=np.float64)
-        _field_at_kernel(values, np.arange(values.shape[0]), float(self.origin),
-                         float(self.spacing),
-                         np.ascontiguousarray(pos).reshape(values.shape[0], -1),
-                         out.reshape(values.shape[0], -1))
+        kernel = _field_at_parallel if parallel else _field_at_kernel
+        kernel(values, np.arange(values.shape[0]), float(self.origin), float(self.spacing),
+               np.ascontiguousarray(pos).reshape(values.shape[0], -1),
+               out.reshape(values.shape[0], -1))
         return out
+
+
+@jit(inline="always")
+def _field_row(values, index, origin, spacing, position, out, r):
+    """Row r of :func:`_field_at_kernel`."""
+    last = values.shape[1] - 2
+    v = values[index[r]]
+    for j in range(position.shape[1]):
+        x = (position[r, j] - origin) / spacing
+        if not np.isfinite(x):
+            out[r, j] = np.nan
+            continue
+        k = 0 if x < 0.0 else (last if x > last else min(int(np.floor(x)), last))
+        w = min(max(x - k, 0.0), 1.0)
+        out[r, j] = (1.0 - w) * v[k] + w * v[k + 1]
 
 
 @jit
@@ -126,17 +145,15 @@ def _field_at_kernel(values, index, origin, spacing, position, out):
     """Kernel of :meth:`RailField.at`: row r of ``position`` (rows, k) read on row
     ``index[r]`` of the grid ``values``, linear between its points, the end values beyond them
     (NaN at a NaN position)."""
-    last = values.shape[1] - 2
     for r in range(position.shape[0]):
-        v = values[index[r]]
-        for j in range(position.shape[1]):
-            x = (position[r, j] - origin) / spacing
-            if not np.isfinite(x):
-                out[r, j] = np.nan
-                continue
-            k = 0 if x < 0.0 else (last if x > last else min(int(np.floor(x)), last))
-            w = min(max(x - k, 0.0), 1.0)
-            out[r, j] = (1.0 - w) * v[k] + w * v[k + 1]
+        _field_row(values, index, origin, spacing, position, out, r)
+
+
+@pjit
+def _field_at_parallel(values, index, origin, spacing, position, out):
+    """:func:`_field_at_kernel` with its rows on Numba's threads."""
+    for r in prange(position.shape[0]):
+        _field_row(values, index, origin, spacing, position, out, r)
 
 
 @dataclass
@@ -406,7 +423,7 @@ def block_from_draws(config, index: int, start: int, raw: dict) -> Block:
     return Block(index, start, size, draws, fields, gaps, position, entering_gap, entering)
 
 
-def error_values(config, block: Block, rail_position=None):
+def error_values(config, block: Block, rail_position=None, parallel=False):
     """Error source values per ball in SI, shape (size, balls) each.
 
     Parameters
@@ -416,6 +433,8 @@ def error_values(config, block: Block, rail_position=None):
     rail_position : ndarray, shape (size, balls), optional
         Ball centres along the rail [m] at which rail fields are read (t = 0 positions by
         default).
+    parallel : bool
+        Read the rail fields on Numba's threads (:meth:`RailField.at`).
 
     Returns
     -------
@@ -427,7 +446,7 @@ def error_values(config, block: Block, rail_position=None):
     z = {}
     for t in config.tolerances:
         if t.source in block.fields:
-            z[t.source] = block.fields[t.source].at(pos)
+            z[t.source] = block.fields[t.source].at(pos, parallel)
         else:
             z[t.source] = np.broadcast_to(block.normals[t.source], shape)
     for group in config.correlations:

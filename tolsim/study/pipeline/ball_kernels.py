@@ -1,13 +1,41 @@
 """Compiled glue of the ball evaluations (:mod:`tolsim.study.pipeline.evaluate`,
-:mod:`tolsim.study.pipeline.carriage_track`): contact counts, outcomes, loaded-ball gathers.
+:mod:`tolsim.study.pipeline.carriage_track`): contact counts, outcomes, loaded-ball gathers,
+loads along the carriage and the ``paired`` model's balls in one pass.
 
 Each kernel does in one pass, element by element, what a chain of NumPy calls did: the same
 comparisons and the same values, so the results are bit-identical to those calls.
 """
 
 import numpy as np
+from numba import prange
 
-from tolsim._jit import jit
+from tolsim._jit import jit, pjit
+from tolsim.physics.geometry import paired_force_pair, rigid_angle_deviations
+
+
+@jit(inline="always")
+def _settle_ball(force, b, limit, out_count, out_clipped):
+    """:func:`contact_counts_kernel` of ball ``b``; returns 1 if it is settled, else 0."""
+    count = 0
+    tension = False
+    small = True
+    for i in range(4):
+        f = force[b, i]
+        count += f > 0.0
+        tension |= f < 0.0
+        small &= f <= limit
+    if tension:
+        count = -1
+    if count > 0 and small:
+        out_count[b] = 0
+        for i in range(4):
+            out_clipped[b, i] = 0.0
+        return 1
+    out_count[b] = count
+    for i in range(4):
+        f = force[b, i]
+        out_clipped[b, i] = f if (f > 0.0 or f != f) else 0.0  # as np.maximum(f, 0.0)
+    return 0
 
 
 @jit
@@ -23,26 +51,116 @@ def contact_counts_kernel(force, limit, out_count, out_clipped):
     """
     settled = 0
     for b in range(force.shape[0]):
-        count = 0
-        tension = False
-        small = True
-        for i in range(4):
-            f = force[b, i]
-            count += f > 0.0
-            tension |= f < 0.0
-            small &= f <= limit
-        if tension:
-            count = -1
-        if count > 0 and small:
-            settled += 1
-            out_count[b] = 0
-            for i in range(4):
-                out_clipped[b, i] = 0.0
-            continue
-        out_count[b] = count
-        for i in range(4):
-            f = force[b, i]
-            out_clipped[b, i] = f if (f > 0.0 or f != f) else 0.0  # as np.maximum(f, 0.0)
+        settled += _settle_ball(force, b, limit, out_count, out_clipped)
+    return settled
+
+
+@jit(inline="always")
+def interp_index(x, xp):
+    """Where ``np.interp`` reads x in xp (strictly increasing, two or more points): -1 below
+    xp[0], len(xp) - 1 at or above xp[-1], else the j with xp[j] <= x < xp[j + 1] (a finite
+    x; NumPy's binary search finds the same j)."""
+    last = xp.shape[0] - 1
+    if x < xp[0]:
+        return -1
+    if x >= xp[last]:
+        return last
+    j = 0
+    for k in range(1, last):  # a count, not a search: no branches (a few slots)
+        j += xp[k] <= x
+    return j
+
+
+@jit(inline="always")
+def interp_at(x, j, xp, fp):
+    """``np.interp(x, xp, fp)`` of a finite x at j = :func:`interp_index`, bit for bit: fp[0]
+    below xp[0], fp[-1] above xp[-1], fp[j] at a point, else the same slope and the same
+    fallbacks as NumPy's (``arr_interp``)."""
+    last = xp.shape[0] - 1
+    if j < 0:
+        return fp[0]
+    if j >= last or xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    value = slope * (x - xp[j]) + fp[j]
+    if np.isnan(value):  # NumPy: "if we get nan in one direction, try the other"
+        value = slope * (x - xp[j + 1]) + fp[j + 1]
+        if np.isnan(value) and fp[j] == fp[j + 1]:
+            value = fp[j]
+    return value
+
+
+@jit(inline="always")
+def loads_at_one(x, slots, side_slots, normal_slots):
+    """(N_x, N_y) [N] at carriage position x [m] as
+    :func:`tolsim.study.pipeline.evaluate.loads_at`: the one slot's loads (a single slot),
+    else ``np.interp`` between the slots (NaN at a NaN x)."""
+    if slots.shape[0] == 1:
+        return side_slots[0], normal_slots[0]
+    if np.isnan(x):
+        return x, x
+    j = interp_index(x, slots)
+    return interp_at(x, j, slots, side_slots), interp_at(x, j, slots, normal_slots)
+
+
+@jit
+def loads_at_kernel(position, slots, side_slots, normal_slots, out_side, out_normal):
+    """(N_x, N_y) [N] at the n carriage ``position`` [m] from the loads ``side_slots``,
+    ``normal_slots`` at the ``slots`` (:func:`loads_at_one` per ball)."""
+    for b in range(position.shape[0]):
+        out_side[b], out_normal[b] = loads_at_one(position[b], slots, side_slots,
+                                                  normal_slots)
+
+
+@jit(inline="always")
+def _source_at(values, b):
+    """Ball ``b``'s value of a source given per ball (n,) or once (1,)."""
+    return values[b] if values.shape[0] > 1 else values[0]
+
+
+@pjit
+def paired_balls_kernel(tangential0, tangential1, tangential2, tangential3, bottom_rotation,
+                        top_rotation, centre_distance, side_load, normal_load, position, slots,
+                        side_slots, normal_slots, sin0, cos0, limit, out_dbeta, out_force,
+                        out_four_point, out_count, out_clipped):
+    """The ``paired`` static model of n balls and their contact counts, in one pass.
+
+    Per ball: the rigid angle deviations
+    (:func:`tolsim.physics.geometry.rigid_angle_deviations`) from the tangential arc-centre
+    offsets ``tangential0..3`` [m] and the groove rotations [rad] (each (n,), or (1,) for one
+    value for all: 0.0 for a source the study does not have), the loads (N_x, N_y)
+    [N], the ``side_load``, ``normal_load`` (n,) or, if ``position`` (n,) is not empty,
+    :func:`loads_at_one` the carriage position [m]; the paired forces
+    (:func:`tolsim.physics.geometry.paired_force_pair`); four-point (all forces > 0) and
+    :func:`contact_counts_kernel`'s counts and clipped forces. Writes ``out_dbeta``,
+    ``out_force``, ``out_clipped`` (n, 4), ``out_four_point``, ``out_count`` (n,); returns
+    the number of settled balls. As ``paired_static`` of
+    :mod:`tolsim.study.pipeline.evaluate` on the GrooveErrors fields, then
+    :func:`contact_counts_kernel`, bit for bit.
+    """
+    settled = 0
+    along = position.shape[0] > 0
+    for b in prange(out_force.shape[0]):
+        d0, d1, d2, d3 = rigid_angle_deviations(
+            _source_at(tangential0, b), _source_at(tangential1, b),
+            _source_at(tangential2, b), _source_at(tangential3, b),
+            _source_at(bottom_rotation, b), _source_at(top_rotation, b), centre_distance)
+        out_dbeta[b, 0] = d0
+        out_dbeta[b, 1] = d1
+        out_dbeta[b, 2] = d2
+        out_dbeta[b, 3] = d3
+        if along:
+            nx, ny = loads_at_one(position[b], slots, side_slots, normal_slots)
+        else:
+            nx = side_load[b]
+            ny = normal_load[b]
+        f1, f2 = paired_force_pair(nx, ny, sin0, cos0)
+        out_force[b, 0] = f1
+        out_force[b, 1] = f2
+        out_force[b, 2] = f1
+        out_force[b, 3] = f2
+        out_four_point[b] = f1 > 0.0 and f2 > 0.0  # the four forces are f1, f2, f1, f2
+        settled += _settle_ball(out_force, b, limit, out_count, out_clipped)
     return settled
 
 
@@ -123,18 +241,22 @@ def scatter_loaded_kernel(loaded, values, fill, out):
                     out[a, t, j] = fill
 
 
+@jit(inline="always")
+def nan_to_num_one(v):
+    """``np.nan_to_num`` of one float64: NaN -> 0, +-inf -> +-the largest double."""
+    if np.isnan(v):
+        return 0.0
+    if v == np.inf:
+        return np.finfo(np.float64).max
+    if v == -np.inf:
+        return -np.finfo(np.float64).max
+    return v
+
+
 @jit
 def _nan_to_num_kernel(values, out):
-    big = np.finfo(np.float64).max
     for i in range(values.size):
-        v = values[i]
-        if np.isnan(v):
-            v = 0.0
-        elif v == np.inf:
-            v = big
-        elif v == -np.inf:
-            v = -big
-        out[i] = v
+        out[i] = nan_to_num_one(values[i])
 
 
 def nan_to_num(x):

@@ -16,7 +16,12 @@ import numpy as np
 from tolsim.study.pipeline.carriage import CarriageState, evaluate_carriage
 from tolsim.study.pipeline.carriage_circuit import first_contact_carriage_circuit
 from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
-from tolsim.study.pipeline.evaluate import BallState, evaluate_balls, loads_at, loads_per_ball
+from tolsim.study.pipeline.evaluate import (
+    BallState,
+    evaluate_balls,
+    evaluate_balls_at,
+    loads_per_ball,
+)
 from tolsim.study.pipeline.propagation import (
     first_contact_along_track,
     first_contact_tracks,
@@ -123,8 +128,7 @@ def _free_start_constant(config, block, values):
 
 def _free_start_along_track(config, block, values):
     # loads at the carriage positions, as during the integration
-    nx, ny = loads_at(config, block.initial_position)
-    return evaluate_balls(config, values, nx, ny), None
+    return evaluate_balls_at(config, values, block.initial_position), None
 
 
 def _carriage_start(config, block, values):

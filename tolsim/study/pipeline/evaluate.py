@@ -4,7 +4,10 @@ Two registries, picked by name from the config (no if/elif chains):
 
 ``STATIC_MODELS``
     name -> ``f(errors, side_load, normal_load, bearing) -> StaticResult`` with the loaded
-    contact angle deviations dbeta_i and forces F_i per ball.
+    contact angle deviations dbeta_i and forces F_i per ball. ``paired`` runs in one compiled
+    pass from the source values, with its loads along the carriage and the contact counts
+    (``ONE_PASS_STATIC_MODELS``, :func:`paired_balls`: the same numbers, without the
+    GrooveErrors fields).
 
     * ``paired``: the paper's paired forces (Sec. 3.1, :func:`paired_forces`) and the rigid
       mapping of the angular error sources (rotations, Sec. 3.1; tangential arc-centre
@@ -47,8 +50,8 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-from tolsim._jit import compile_seconds
-from tolsim.physics.geometry import K_F_PAPER, paired_forces
+from tolsim._jit import compile_seconds, kernel_array
+from tolsim.physics.geometry import K_F_PAPER, paired_forces, rigid_angle_deviations_kernel
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.velocity.analytic import (
     MAX_ANGLE_DEVIATION,
@@ -71,7 +74,12 @@ from tolsim.physics.velocity.models import (
     MODEL_UNRESOLVED,
     ball_regime,
 )
-from tolsim.study.pipeline.ball_kernels import ball_outcomes_kernel, contact_counts_kernel
+from tolsim.study.pipeline.ball_kernels import (
+    ball_outcomes_kernel,
+    contact_counts_kernel,
+    loads_at_kernel,
+    paired_balls_kernel,
+)
 
 CONTACTS = ("BL", "BR", "TR", "TL")
 
@@ -157,33 +165,100 @@ class StaticResult:
 
 
 def rigid_angle_deviation(errors: dict, bearing) -> np.ndarray:
-    """Contact angle deviations of rigid grooves from rotations and tangential arc offsets.
-
-    dbeta_BL = -theta_b, dbeta_BR = +theta_b ([Lin2018] Sec. 3.1, Fig. 6), likewise
-    dbeta_TR = -theta_t, dbeta_TL = +theta_t for the top groove, plus t_i / (R_G - R_B) for
-    a tangential offset t_i of arc centre i (positive toward increasing beta_i; the contact
-    lies on the line through the ball and arc centres, which are R_G - R_B apart).
+    """Contact angle deviations of rigid grooves from rotations and tangential arc offsets
+    (:func:`tolsim.physics.geometry.rigid_angle_deviations` per ball).
 
     Returns
     -------
     ndarray, shape (n, 4)
         dbeta_i [rad].
     """
-    centre_distance = bearing.groove_radius - bearing.ball_radius
-    dbeta = errors["arc_centre_offset_tangential"] / centre_distance
-    dbeta[:, 0] -= errors["bottom_rotation"]
-    dbeta[:, 1] += errors["bottom_rotation"]
-    dbeta[:, 2] -= errors["top_rotation"]
-    dbeta[:, 3] += errors["top_rotation"]
+    tangential = kernel_array(errors["arc_centre_offset_tangential"])
+    dbeta = np.empty(tangential.shape)
+    rigid_angle_deviations_kernel(tangential, kernel_array(errors["bottom_rotation"]),
+                                  kernel_array(errors["top_rotation"]),
+                                  bearing.groove_radius - bearing.ball_radius, dbeta)
     return dbeta
 
 
 def paired_static(errors, side_load, normal_load, bearing) -> StaticResult:
-    """``paired``: paired forces ([Lin2018] Sec. 3.1) and rigid angle deviations."""
+    """``paired``: paired forces ([Lin2018] Sec. 3.1) and rigid angle deviations.
+
+    :func:`evaluate_balls` takes the one-pass route of :func:`paired_balls` instead (the same
+    numbers, without the GrooveErrors fields).
+    """
     dbeta = rigid_angle_deviation(errors, bearing)
     force = np.ascontiguousarray(
         paired_forces(side_load, normal_load, bearing.nominal_contact_angle))
     return StaticResult(dbeta, force, np.ones(len(dbeta), dtype=bool))
+
+
+#: The sources the ``paired`` model reads: tangential arc-centre offsets, groove rotations.
+PAIRED_SOURCES = tuple(f"arc_centre_offset_tangential_{c}" for c in CONTACTS) + (
+    "bottom_rotation", "top_rotation")
+
+
+def paired_balls(config, values: dict, shape, side_load=None, normal_load=None,
+                 carriage_position=None):
+    """The ``paired`` model of balls and their contact counts in one compiled pass.
+
+    The numbers of :func:`paired_static` on :func:`groove_error_fields` and of the contact
+    counts of :func:`ball_velocities` (``paired_balls_kernel`` of
+    :mod:`tolsim.study.pipeline.ball_kernels`), without the GrooveErrors fields.
+
+    Parameters
+    ----------
+    config : StudyConfig
+    values : dict
+        source -> ndarray broadcastable to ``shape`` [m or rad].
+    shape : tuple
+        The per-ball shape, n = prod(shape) balls.
+    side_load, normal_load : ndarray, optional
+        N_x, N_y per ball [N], broadcastable to ``shape``; or
+    carriage_position : ndarray, optional
+        Positions along the carriage [m] (``shape``): the loads there, as :func:`loads_at`.
+
+    Returns
+    -------
+    static : StaticResult
+        n balls, flattened.
+    counts : tuple
+        (count (n,) int8, clipped forces (n, 4), number of settled balls), as
+        ``ball_velocities`` takes them.
+    """
+    n = int(np.prod(shape))
+
+    def per_ball(v):  # (n,), or (1,) for one value for all balls
+        if v is None:
+            return _ZERO
+        if np.shape(v) != tuple(shape):
+            v = np.array(np.broadcast_to(v, shape), dtype=np.float64, order="C")
+        return kernel_array(v).reshape(n)
+
+    bearing = config.bearing
+    dbeta, force, clipped = np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4))
+    four_point = np.empty(n, dtype=np.bool_)
+    count = np.empty(n, dtype=np.int8)
+    if carriage_position is None:
+        nx, ny, position = per_ball(side_load), per_ball(normal_load), _NONE
+        slots = side_slots = normal_slots = _NONE
+    else:
+        nx = ny = _NONE
+        position = per_ball(carriage_position)
+        slots, side_slots, normal_slots = _slot_loads(config)
+    angle = bearing.nominal_contact_angle
+    with serial_if_small(n):
+        settled = paired_balls_kernel(
+            *(per_ball(values.get(name)) for name in PAIRED_SOURCES),
+            bearing.groove_radius - bearing.ball_radius, nx, ny, position, slots, side_slots,
+            normal_slots, np.sin(angle), np.cos(angle), round_off_force(bearing), dbeta, force,
+            four_point, count, clipped)
+    static = StaticResult(dbeta, force, np.ones(n, dtype=bool), four_point)
+    return static, (count, clipped, settled)
+
+
+_ZERO = np.zeros(1)
+_NONE = np.empty(0)
 
 
 def _static_solver(function="solve_static", **options):
@@ -248,6 +323,11 @@ STATIC_MODELS = {
     "solved": _static_solver(),
     "linearised": linearised_static,
 }
+
+#: Static models that :func:`evaluate_balls` runs from the source values in one compiled pass
+#: with the contact counts, name -> ``f(config, values, shape, side_load, normal_load,
+#: carriage_position) -> (StaticResult, counts)`` (the same numbers as ``STATIC_MODELS``).
+ONE_PASS_STATIC_MODELS = {"paired": paired_balls}
 
 
 # --------------------------------------------------------------------------------------------
@@ -487,7 +567,7 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
 
     The static model gives each ball's loaded contact state, the study's velocity model its
     epsilon; balls outside that model's validity are re-solved with the full model (see the
-    module docstring).
+    module docstring). The ``paired`` model runs in one pass (:func:`paired_balls`).
 
     Parameters
     ----------
@@ -503,6 +583,10 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
     """
     shape = np.broadcast_shapes(np.shape(side_load), np.shape(normal_load),
                                 *(np.shape(v) for v in values.values()))
+    one_pass = ONE_PASS_STATIC_MODELS.get(config.study.static_model)
+    if one_pass is not None:
+        static, counts = one_pass(config, values, shape, side_load, normal_load)
+        return ball_velocities(config, static, shape, counts)
     n = int(np.prod(shape))
     errors = groove_error_fields({k: np.broadcast_to(v, shape) for k, v in values.items()},
                                  shape)
@@ -513,7 +597,22 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
     return ball_velocities(config, static, shape)
 
 
-def ball_velocities(config, static: StaticResult, shape) -> BallState:
+def evaluate_balls_at(config, values: dict, carriage_position) -> BallState:
+    """:func:`evaluate_balls` with the loads at positions along the carriage [m]
+    (:func:`loads_at`; read in the same pass by the ``paired`` model, :func:`paired_balls`).
+
+    ``values``: source -> ndarray broadcastable to the shape of ``carriage_position``.
+    """
+    one_pass = ONE_PASS_STATIC_MODELS.get(config.study.static_model)
+    if one_pass is None:
+        return evaluate_balls(config, values, *loads_at(config, carriage_position))
+    shape = np.broadcast_shapes(np.shape(carriage_position),
+                                *(np.shape(v) for v in values.values()))
+    static, counts = one_pass(config, values, shape, carriage_position=carriage_position)
+    return ball_velocities(config, static, shape, counts)
+
+
+def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallState:
     """The study's velocity model on balls in a known contact state, with the re-solves.
 
     Parameters
@@ -523,6 +622,10 @@ def ball_velocities(config, static: StaticResult, shape) -> BallState:
         n = prod(shape) balls, flattened.
     shape : tuple
         Shape of the returned per-ball arrays.
+    counts : tuple, optional
+        (count, clipped, settled): ``contact_counts_kernel`` of
+        :mod:`tolsim.study.pipeline.ball_kernels` on ``static.normal_force``, if the caller
+        has them (:func:`paired_balls`); computed here if not.
 
     Returns
     -------
@@ -534,9 +637,14 @@ def ball_velocities(config, static: StaticResult, shape) -> BallState:
     with serial_if_small(n):
         force = static.normal_force
         dbeta = static.contact_angle_deviation
-        count = np.empty(n, dtype=np.int8)
-        clipped = np.empty((n, 4))  # max(F, 0) of the settled forces, for the fast model
-        if contact_counts_kernel(force, round_off_force(config.bearing), count, clipped):
+        if counts is None:
+            count = np.empty(n, dtype=np.int8)
+            clipped = np.empty((n, 4))  # max(F, 0) of the settled forces, for the fast model
+            settled = contact_counts_kernel(force, round_off_force(config.bearing), count,
+                                            clipped)
+        else:
+            count, clipped, settled = counts
+        if settled:
             force = settle_round_off_contacts(force, loaded_contacts(force),
                                               config.bearing)[0]
         eps = np.empty(n)
@@ -582,16 +690,24 @@ def loads_per_ball(config, shape):
             np.broadcast_to(np.asarray(config.loads.normal_load), shape))
 
 
+def _slot_loads(config):
+    """The nominal slot positions [m] and the per-ball (N_x, N_y) [N] there, as kernel
+    arrays."""
+    slots = config.train.slot_positions(2.0 * config.bearing.ball_radius)
+    return (kernel_array(slots), kernel_array(np.asarray(config.loads.side_load)),
+            kernel_array(np.asarray(config.loads.normal_load)))
+
+
 def loads_at(config, carriage_position):
     """(N_x, N_y) [N] at positions along the carriage [m] (along-track propagation).
 
     The per-ball loads of the config are taken at the nominal slot positions and
-    interpolated linearly between them (constant beyond the end slots).
+    interpolated linearly between them (constant beyond the end slots; ``np.interp``, bit for
+    bit, in ``loads_at_kernel`` of :mod:`tolsim.study.pipeline.ball_kernels`); with a single
+    slot its loads everywhere.
     """
-    slots = config.train.slot_positions(2.0 * config.bearing.ball_radius)
-    nx = np.asarray(config.loads.side_load)
-    ny = np.asarray(config.loads.normal_load)
-    if len(slots) == 1:
-        return (np.full(np.shape(carriage_position), nx[0]),
-                np.full(np.shape(carriage_position), ny[0]))
-    return np.interp(carriage_position, slots, nx), np.interp(carriage_position, slots, ny)
+    position = np.asarray(carriage_position, dtype=np.float64)
+    side, normal = np.empty(position.shape), np.empty(position.shape)
+    loads_at_kernel(kernel_array(position).reshape(-1), *_slot_loads(config),
+                    side.reshape(-1), normal.reshape(-1))
+    return side, normal

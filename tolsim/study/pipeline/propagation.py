@@ -49,8 +49,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import prange
 
-from tolsim._jit import jit, pjit
-from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
+from tolsim._jit import jit, kernel_array, pjit
+from tolsim.study.pipeline.evaluate import evaluate_balls_at, serial_if_small
+from tolsim.study.pipeline.frame_kernels import (
+    first_contact_kernel,
+    free_motion_kernel,
+    gaps_kernel,
+)
 from tolsim.study.pipeline.propagation_rules import time_steps
 from tolsim.study.sampling import error_values
 
@@ -354,6 +359,26 @@ def first_contact_tracks(initial_gap, velocity_deviation, groove_velocity, horiz
     return t, np.where(np.isfinite(t), first * (balls - 1) + pair[rows, first], -1)
 
 
+def free_motion(position, w, h, v):
+    """Free balls' positions after h [s] at epsilon ``w`` (NaN: nominal) [m]:
+    z + h (1 + epsilon) v / 2 (:func:`~tolsim.study.pipeline.frame_kernels.free_motion_kernel`);
+    ``position``, ``w`` of one shape, v [m/s]."""
+    position = kernel_array(position)
+    out = np.empty(position.shape)
+    free_motion_kernel(position.reshape(-1), kernel_array(w).reshape(-1), float(h), float(v),
+                       out.reshape(-1))
+    return out
+
+
+def gaps(position, diameter):
+    """The gaps between adjacent balls of (m, balls) centres [m] (``np.diff`` less the
+    diameter, :func:`~tolsim.study.pipeline.frame_kernels.gaps_kernel`)."""
+    position = kernel_array(position)
+    out = np.empty((position.shape[0], max(position.shape[1] - 1, 0)))
+    gaps_kernel(position, float(diameter), out)
+    return out
+
+
 @dataclass
 class Step:
     """One midpoint step of :func:`integrate`, as its observers see it.
@@ -514,8 +539,10 @@ class FreeBalls(AlongTrackFrame):
     """The frame of free balls (single trains, the rail frame): every ball at its rail
     position and carriage position, epsilon from the error sources read at the rail position
     and the loads interpolated at the carriage position
-    (:func:`tolsim.study.pipeline.evaluate.loads_at`). Whole blocks are integrated over the
-    whole stroke (the error values are read for the block).
+    (:func:`tolsim.study.pipeline.evaluate.evaluate_balls_at`; with the ``paired`` model one
+    compiled pass to the static model's inputs). The motion, the gaps and the first contact
+    are compiled passes too (:func:`free_motion`, :func:`gaps`, :class:`FirstContact`). Whole
+    blocks are integrated over the whole stroke (the error values are read for the block).
 
     ``ball_ok`` (size, balls): resolved at every evaluation so far; ``resolve_seconds``: time
     spent re-solving balls with the full model [s].
@@ -535,9 +562,9 @@ class FreeBalls(AlongTrackFrame):
 
     def evaluate(self, position, t):
         config, block = self.config, self.block
-        values = error_values(config, block, rail_position=position)
-        nx, ny = loads_at(config, position - self.v * t)
-        state = evaluate_balls(config, values, nx, ny)
+        with serial_if_small(position.size):
+            values = error_values(config, block, rail_position=position, parallel=True)
+        state = evaluate_balls_at(config, values, position - self.v * t)
         self.resolve_seconds += state.resolve_seconds
         return state
 
@@ -559,20 +586,19 @@ class FreeBalls(AlongTrackFrame):
         unloaded = state.unloaded
         if not unloaded.any():
             return state.velocity_deviation
-        return pushed_along(np.diff(self.position, axis=1) - self.diameter,
-                            state.velocity_deviation, unloaded)
+        return pushed_along(gaps(self.position, self.diameter), state.velocity_deviation,
+                            unloaded)
 
     def move(self, position, w, h):
-        return position + h * (1.0 + np.nan_to_num(w)) * 0.5 * self.v
+        return free_motion(position, w, h, self.v)
 
     def step(self, k, t, dt, position, new, state1, state2):
         # an unloaded ball is accounted for (pushed along); its pairs close as one
         self.ball_ok &= state1.accounted & state2.accounted
         self.midpoint = state2
         unloaded = state2.unloaded
-        gap_old = force_gaps(np.diff(position, axis=1) - self.diameter, unloaded,
-                             ok=self.ball_ok)
-        gap_new = force_gaps(np.diff(new, axis=1) - self.diameter, unloaded, ok=self.ball_ok)
+        gap_old = force_gaps(gaps(position, self.diameter), unloaded, ok=self.ball_ok)
+        gap_new = force_gaps(gaps(new, self.diameter), unloaded, ok=self.ball_ok)
         return Step(k, t, dt, position, new, gap_old, gap_new, self.ball_ok, state1, state2)
 
     def advance(self, step, new):
@@ -627,7 +653,8 @@ def integrate_along_track(config, block, initial_state=None, observers=()):
 class FirstContact(StepObserver):
     """The first contact of each train: ``time`` [s] (inf: none) and ``pair`` (-1: none),
     located by linear interpolation of the gap within the step in which it closes, for a
-    pair whose two balls are resolved so far (module docstring)."""
+    pair whose two balls are resolved so far (module docstring; one compiled pass per step,
+    :func:`tolsim.study.pipeline.frame_kernels.first_contact_kernel`)."""
 
     def begin(self, block, position):
         self.time = np.full(block.size, np.inf)
@@ -637,16 +664,9 @@ class FirstContact(StepObserver):
         return ~np.isfinite(self.time)
 
     def observe(self, step):
-        gap_old, gap_new, ball_ok = step.gap_old, step.gap_new, step.ball_ok
-        closing = (gap_new <= 0.0) & (gap_old > gap_new) & ball_ok[:, :-1] & ball_ok[:, 1:]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            frac = np.where(gap_old <= 0.0, 0.0, gap_old / (gap_old - gap_new))
-        tc = np.where(closing, step.t + frac * step.dt, np.inf)
-        first = np.argmin(tc, axis=1)
-        tmin = tc[np.arange(len(tc)), first]
-        hit = np.isfinite(tmin) & ~np.isfinite(self.time)
-        self.time[hit] = tmin[hit]
-        self.pair[hit] = first[hit]
+        first_contact_kernel(kernel_array(step.gap_old), kernel_array(step.gap_new),
+                             kernel_array(step.ball_ok, np.bool_), float(step.t),
+                             float(step.dt), self.time, self.pair)
 
 
 class TrainMotion(StepObserver):
@@ -679,10 +699,10 @@ class TrainMotion(StepObserver):
         eps2 = step.state2.velocity_deviation
         unloaded = step.state2.unloaded
         if unloaded.any():  # pushed along, as in the free motion
-            eps2 = pushed_along(np.diff(position, axis=1) - friction.diameter, eps2, unloaded)
+            eps2 = pushed_along(gaps(position, friction.diameter), eps2, unloaded)
         w2 = friction.velocity(eps2, friction.coefficients(step.state2, everyone), everyone,
                                everyone)
-        return friction.advance(position, position + dt * (1.0 + np.nan_to_num(w2)) * 0.5 * v)
+        return friction.advance(position, free_motion(position, w2, dt, v))
 
 
 def first_contact_along_track(config, block, initial_state=None, *, friction=None):

@@ -32,7 +32,7 @@ from tolsim.study.pipeline.carriage_track import (
     carry_pairs_kernel,
     first_contact_carriage_track,
 )
-from tolsim.study.pipeline.evaluate import BallState, evaluate_balls, loads_at
+from tolsim.study.pipeline.evaluate import BallState, evaluate_balls_at
 from tolsim.study.pipeline.friction_kernels import (
     RELEASED,
     ROLLING,
@@ -738,8 +738,7 @@ def follow_along_track(config, block, initial_state=None, record=False):
         return (*out, state, carriage, friction)
     state = initial_state
     if state is None:  # loads at the carriage positions, as during the integration
-        nx, ny = loads_at(config, block.initial_position)
-        state = evaluate_balls(config, error_values(config, block), nx, ny)
+        state = evaluate_balls_at(config, error_values(config, block), block.initial_position)
     out = first_contact_along_track(config, block, state, friction=friction)
     return (*out, state, None, friction)
 
