@@ -82,8 +82,8 @@ def time_steps(config) -> int:
     steps) P(contact) lay inside its own 95 % interval, as it did from 5 steps on (c = 1);
     the paired change against the reference (assemblies that touch only at n / only in the
     reference) was +2/-5 (free balls), +9/-5 (carriage) and +3/-5 (circuit), and the mean
-    change of the time to first contact 8.1, 10 and 4.8 ms of a 500 ms stroke (27, 18 and
-    9.4 ms at 10 steps; 0.43, 4.4 and 3.5 ms at 40). The error falls at first order for the
+    change of the time to first contact 8.1, 10 and 4.5 ms of a 500 ms stroke (27, 18 and
+    12 ms at 10 steps; 0.43, 4.4 and 3.5 ms at 40). The error falls at first order for the
     carriage (balls enter and leave at step ends) and the circuit, at up to second order for
     free balls. With ``[contact]`` the largest increase and the ripple are extremes of
     step-mean friction forces, which converge at first order from below: on the free balls
