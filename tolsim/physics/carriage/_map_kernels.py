@@ -2,14 +2,15 @@
 the singular-tangent test against the largest eigenvalue of sum_b A_b^T A_b."""
 
 import numpy as np
+from numba import prange
 
-from tolsim._jit import jit
+from tolsim._jit import jit, pjit
 
 #: Cyclic Jacobi sweeps of :func:`largest_eigenvalue` at most (a 5 x 5 matrix needs 4 to 6).
 _JACOBI_SWEEPS = 30
 
 
-@jit
+@pjit
 def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_amaps, out_zetas):
     """Scaled groove maps of balls at their own axial positions, in the three layouts of
     :func:`tolsim.physics.carriage._batch_kernels.carriage_batch_kernel`.
@@ -26,7 +27,7 @@ def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_amaps, out
     """
     m, tracks, n = z.shape
     nball = tracks * n
-    for a in range(m):
+    for a in prange(m):  # each assembly writes its own rows: the same values on any threads
         maps, amaps = out_maps[a], out_amaps[a]
         for t in range(tracks):
             c, s, ms, mc, gx, gy = (track[t, 0], track[t, 1], track[t, 2], track[t, 3],
