@@ -513,7 +513,7 @@ def _unloaded_outputs(loaded, a, out_dbeta, out_force, out_side, out_normal, out
 
 
 @pjit
-def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, geometric_maxs,
+def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric_maxs,
                           loaded, load, start, e_n, e_t, rot_b, rot_t, off_b, off_t,
                           oversize_error,
                           oversize, scale, beta0, dist, k, tol, max_iter, ball_tol,
@@ -527,8 +527,8 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
     1 (the ball's oversize is ``oversize_error`` + ``oversize``, the two of
     :func:`solve_carriage`); ``load`` (m or 1, 5) holds Q [N, N m] and ``start`` (m or 1, 5)
     the scaled start of q.
-    ``groove_maps`` (m or 1, n_balls, 2, 5) is the scaled A of each assembly and ``amaps``
-    (m or 1, 10, n_balls) the same by rows (row 5 c + j: A[:, c, j]); ``frame`` (n_tracks, 4)
+    ``groove_maps`` (m or 1, n_balls, 2, 5) is the scaled A of each assembly (copied by rows
+    into the tile's scratch for the joint Newton: row 5 c + j: A[:, c, j]); ``frame`` (n_tracks, 4)
     holds cos phi, sin phi, x / L and y / L of each track and ``zetas`` (m or 1, n_balls)
     z_b / L (:func:`_track_assembly`); ``free`` the indices of the free DOFs, ``geometrics``
     (m or 1, 5, 5) sum_b A_b^T A_b and ``geometric_maxs`` (m or 1,) the largest eigenvalue of
@@ -578,12 +578,18 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
         work = np.empty((4, 6))
         unit = np.empty((4, 2))
         approach = np.empty((nball, 4))
+        amap = np.empty((10, nball))
         for a in range(tile * _ASSEMBLY_TILE, min(nasm, (tile + 1) * _ASSEMBLY_TILE)):
             il = a if load.shape[0] > 1 else 0
             i_s = a if start.shape[0] > 1 else 0
             ig = a if groove_maps.shape[0] > 1 else 0
             iz = a if loaded.shape[0] > 1 else 0
-            groove_map, amap, zeta = groove_maps[ig], amaps[ig], zetas[ig]
+            groove_map, zeta = groove_maps[ig], zetas[ig]
+            if ig > 0 or a == tile * _ASSEMBLY_TILE:  # A by rows
+                for b in range(nball):
+                    for c in range(2):
+                        for j in range(5):
+                            amap[5 * c + j, b] = groove_map[b, c, j]
             geometric, geometric_max = geometrics[ig], geometric_maxs[ig]
             load_norm = 0.0
             for j in range(5):
