@@ -65,6 +65,8 @@ _L_ROWS = 44
 # The errors of the balls, gathered before the first pass into rows that the passes
 # overwrite: e_n (4), e_t (4), rotations (rail, carriage), offsets (rail x, y, carriage x, y).
 _L_EN, _L_ET, _L_ROT, _L_OFF = 15, 19, 23, 25
+# And the sine and cosine - 1 of the rail and carriage rotations (sin_cosm1_small).
+_L_SC = 29
 
 
 @jit(inline="always")
@@ -214,21 +216,30 @@ def _lane_arc_centres(a, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, w, 
     up to SMALL_ANGLE = 0.2 rad); a ball with a larger rotation gets ``arc_centres`` itself.
     """
     nball = w.shape[1]
-    for b in range(nball):  # gather (inputs have a first axis of m n_balls or 1)
+    # gather (inputs have a first axis of m n_balls or 1: row n times 1 or 0)
+    se, st_, sb, sq = (int(e_n.shape[0] > 1), int(e_t.shape[0] > 1), int(rot_b.shape[0] > 1),
+                       int(rot_t.shape[0] > 1))
+    so, sp = int(off_b.shape[0] > 1), int(off_t.shape[0] > 1)
+    for b in range(nball):
         n = a * nball + b
-        ie = n if e_n.shape[0] > 1 else 0
-        it = n if e_t.shape[0] > 1 else 0
+        ie, it = n * se, n * st_
         for i in range(4):
             w[_L_EN + i, b] = e_n[ie, i]
             w[_L_ET + i, b] = e_t[it, i]
-        w[_L_ROT, b] = rot_b[n if rot_b.shape[0] > 1 else 0]
-        w[_L_ROT + 1, b] = rot_t[n if rot_t.shape[0] > 1 else 0]
-        ib = n if off_b.shape[0] > 1 else 0
-        iq = n if off_t.shape[0] > 1 else 0
+        w[_L_ROT, b] = rot_b[n * sb]
+        w[_L_ROT + 1, b] = rot_t[n * sq]
+        ib, iq = n * so, n * sp
         w[_L_OFF, b] = off_b[ib, 0]
         w[_L_OFF + 1, b] = off_b[ib, 1]
         w[_L_OFF + 2, b] = off_t[iq, 0]
         w[_L_OFF + 3, b] = off_t[iq, 1]
+    for b in range(nball):  # sine and cosine - 1 of each groove's rotation, once per ball
+        s_b, c_b = sin_cosm1_small(w[_L_ROT, b])
+        s_t, c_t = sin_cosm1_small(w[_L_ROT + 1, b])
+        w[_L_SC, b] = s_b
+        w[_L_SC + 1, b] = c_b
+        w[_L_SC + 2, b] = s_t
+        w[_L_SC + 3, b] = c_t
     for i in range(4):
         groove = i // 2
         sx = -1.0 if (i == 0 or i == 3) else 1.0
@@ -236,7 +247,7 @@ def _lane_arc_centres(a, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, w, 
         nx, ny = sx * s0, sy * c0  # n_i
         tx, ty = sx * c0, -sy * s0  # t_i = dn_i/dbeta
         for b in range(nball):
-            st, cm1 = sin_cosm1_small(w[_L_ROT + groove, b])
+            st, cm1 = w[_L_SC + 2 * groove, b], w[_L_SC + 2 * groove + 1, b]
             ct = 1.0 + cm1
             en, et = w[_L_EN + i, b], w[_L_ET + i, b]
             x = en * nx - et * tx
@@ -502,7 +513,7 @@ def _unloaded_outputs(loaded, a, out_dbeta, out_force, out_side, out_normal, out
 
 
 @pjit
-def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, geometric_maxs,
+def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric_maxs,
                           loaded, load, start, e_n, e_t, rot_b, rot_t, off_b, off_t,
                           oversize_error,
                           oversize, scale, beta0, dist, k, tol, max_iter, ball_tol,
@@ -516,8 +527,8 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
     1 (the ball's oversize is ``oversize_error`` + ``oversize``, the two of
     :func:`solve_carriage`); ``load`` (m or 1, 5) holds Q [N, N m] and ``start`` (m or 1, 5)
     the scaled start of q.
-    ``groove_maps`` (m or 1, n_balls, 2, 5) is the scaled A of each assembly and ``amaps``
-    (m or 1, 10, n_balls) the same by rows (row 5 c + j: A[:, c, j]); ``frame`` (n_tracks, 4)
+    ``groove_maps`` (m or 1, n_balls, 2, 5) is the scaled A of each assembly (copied by rows
+    into the tile's scratch for the joint Newton: row 5 c + j: A[:, c, j]); ``frame`` (n_tracks, 4)
     holds cos phi, sin phi, x / L and y / L of each track and ``zetas`` (m or 1, n_balls)
     z_b / L (:func:`_track_assembly`); ``free`` the indices of the free DOFs, ``geometrics``
     (m or 1, 5, 5) sum_b A_b^T A_b and ``geometric_maxs`` (m or 1,) the largest eigenvalue of
@@ -567,12 +578,18 @@ def carriage_batch_kernel(groove_maps, amaps, frame, zetas, free, geometrics, ge
         work = np.empty((4, 6))
         unit = np.empty((4, 2))
         approach = np.empty((nball, 4))
+        amap = np.empty((10, nball))
         for a in range(tile * _ASSEMBLY_TILE, min(nasm, (tile + 1) * _ASSEMBLY_TILE)):
             il = a if load.shape[0] > 1 else 0
             i_s = a if start.shape[0] > 1 else 0
             ig = a if groove_maps.shape[0] > 1 else 0
             iz = a if loaded.shape[0] > 1 else 0
-            groove_map, amap, zeta = groove_maps[ig], amaps[ig], zetas[ig]
+            groove_map, zeta = groove_maps[ig], zetas[ig]
+            if ig > 0 or a == tile * _ASSEMBLY_TILE:  # A by rows
+                for b in range(nball):
+                    for c in range(2):
+                        for j in range(5):
+                            amap[5 * c + j, b] = groove_map[b, c, j]
             geometric, geometric_max = geometrics[ig], geometric_maxs[ig]
             load_norm = 0.0
             for j in range(5):

@@ -11,24 +11,22 @@ _JACOBI_SWEEPS = 30
 
 
 @pjit
-def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_amaps, out_zetas):
-    """Scaled groove maps of balls at their own axial positions, in the three layouts of
+def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_zetas):
+    """Scaled groove maps of balls at their own axial positions, in the two layouts of
     :func:`tolsim.physics.carriage._batch_kernels.carriage_batch_kernel`.
 
     ``z`` (m, n_tracks, n) [m] and ``loaded`` (m, n_tracks, n) the balls, C-contiguous;
     ``track`` (n_tracks, 6) per track c, s (cos and sin of its orientation), -s, -c,
     s x - c y and c x + s y [m]; ``scale`` (5,) the DOF scales, ``length`` [m] the layout's
     length scale. Writes ``out_maps`` (m, n_balls, 2, 5) the rows of A = E_t^T B(p) at each
-    ball's z times ``scale`` (0 for a ball that is not loaded; ball b = t n + j),
-    ``out_amaps`` (m, 10, n_balls) the same by rows (row 5 i + k: A[:, i, k]) and
+    ball's z times ``scale`` (0 for a ball that is not loaded; ball b = t n + j) and
     ``out_zetas`` (m, n_balls) z / ``length``. The same operations, element by element, as
     :meth:`tolsim.physics.carriage.CarriageLayout.groove_map_at` times ``scale`` with
     ``np.where`` on the unloaded balls.
     """
     m, tracks, n = z.shape
-    nball = tracks * n
     for a in prange(m):  # each assembly writes its own rows: the same values on any threads
-        maps, amaps = out_maps[a], out_amaps[a]
+        maps = out_maps[a]
         for t in range(tracks):
             c, s, ms, mc, gx, gy = (track[t, 0], track[t, 1], track[t, 2], track[t, 3],
                                     track[t, 4], track[t, 5])
@@ -49,10 +47,6 @@ def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_amaps, out
                     maps[b, 1, 2] = (mc * zz) * scale[2]
                     maps[b, 1, 3] = (ms * zz) * scale[3]
                     maps[b, 1, 4] = gy * scale[4]
-        for r in range(10):  # by rows: the transposed copy
-            i, k = r // 5, r % 5
-            for b in range(nball):
-                amaps[r, b] = maps[b, i, k]
 
 
 @jit(inline="always")

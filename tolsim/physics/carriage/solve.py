@@ -697,8 +697,7 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
         a_s = np.ascontiguousarray(layout.groove_map().reshape(nball, 2, 5) * scale)
         geometric = np.einsum("bik,bil->kl", a_s, a_s)
         geometric_max = float(np.linalg.eigvalsh(geometric[np.ix_(free, free)])[-1])
-        amap = np.ascontiguousarray(a_s.transpose(1, 2, 0).reshape(10, nball))
-        maps = (a_s[None], amap[None], np.tile(layout.ball_z / length, t)[None],
+        maps = (a_s[None], np.tile(layout.ball_z / length, t)[None],
                 geometric[None], np.array([geometric_max]), np.ones((1, nball), np.bool_))
     else:  # balls at their own z, in or out of the loaded zone (per assembly)
         z, mask = _ball_positions(layout, ball_z, loaded)
@@ -711,13 +710,12 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
                                       bearing)
         z = np.ascontiguousarray(np.broadcast_to(z, (m, t, n)))
         mask = np.ascontiguousarray(np.broadcast_to(mask, (m, t, n)))
-        a_s, amap, zeta = np.empty((m, nball, 2, 5)), np.empty((m, 10, nball)), np.empty(
-            (m, nball))
-        moving_groove_maps(z, mask, _track_rows(layout), scale, length, a_s, amap, zeta)
+        a_s, zeta = np.empty((m, nball, 2, 5)), np.empty((m, nball))
+        moving_groove_maps(z, mask, _track_rows(layout), scale, length, a_s, zeta)
         flat = a_s.reshape(-1, 2 * nball, 5)
         geometric = np.matmul(flat.transpose(0, 2, 1), flat)
         geometric_max = np.full(m, np.nan)  # bounds from the trace (singular_pivot)
-        maps = (a_s, amap, zeta, geometric, geometric_max, mask.reshape(-1, nball))
+        maps = (a_s, zeta, geometric, geometric_max, mask.reshape(-1, nball))
 
     if start is not None:
         start = np.asarray(start, dtype=float)
@@ -753,9 +751,9 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
     fallback = np.empty(m, dtype=np.bool_)
     frame = np.stack([np.cos(layout.track_orientation), np.sin(layout.track_orientation),
                       layout.track_x / length, layout.track_y / length], axis=1)
-    groove_maps, amaps, zetas, geometrics, geometric_maxs, loaded_rows = maps
+    groove_maps, zetas, geometrics, geometric_maxs, loaded_rows = maps
     loaded_rows = kernel_array(loaded_rows, np.bool_)
-    carriage_batch_kernel(groove_maps, amaps, frame, zetas, free_index, geometrics,
+    carriage_batch_kernel(groove_maps, frame, zetas, free_index, geometrics,
                           geometric_maxs, loaded_rows, q_ext[None, :], start, *inputs, scale,
                           bearing.nominal_contact_angle,
                           bearing.groove_radius - bearing.ball_radius, hertz_k(bearing),
