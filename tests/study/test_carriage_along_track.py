@@ -447,6 +447,27 @@ def test_the_carriage_is_solved_once_per_step():
     assert_allclose(t1[hit], t2[hit], rtol=0, atol=1e-3)
 
 
+class _Growing(StepObserver):
+    """Follows row 1, then rows 0 and 1: a row followed again after a step without it."""
+
+    def __init__(self):
+        self.steps = 0
+
+    def following(self):
+        return np.array([self.steps > 0, True, False])
+
+    def observe(self, step):
+        self.steps += 1
+
+
+def test_a_row_followed_again_is_refused():
+    # The carried states (CarriageFrame._carried) need the rows followed to shrink only, as
+    # every observer's do; a row followed again would read another row's balls: refused.
+    c = config(samples=3, steps=4)
+    with pytest.raises(RuntimeError, match="followed again"):
+        integrate(c, CarriageFrame(c, sample_block(c, 0)), [_Growing()])
+
+
 def test_carry_slots_follows_the_balls_by_id():
     # carry_slots_kernel against a plain lookup: old slots with exits at the trailing end
     # (ids shift down), entries at the end (new ids, fresh), empty slots (-1), unloaded

@@ -505,11 +505,12 @@ class CarriageFrame(AlongTrackFrame):
         return balls
 
     def _carried(self):
-        """The balls of the previous step's midpoint in this step's slots, carried by their
-        ids through the exits and entries (:func:`carry_slots_kernel`); a ball that entered
-        at the end of that step is in none (``fresh``) until :meth:`_joined`."""
+        """The previous step's midpoint balls in this step's slots, carried by id through the
+        exits and entries (:func:`carry_slots_kernel`); an entered ball is ``fresh``."""
         last = self.last
         old_row = np.searchsorted(last.rows, self.rows)  # the rows followed only shrink
+        if not np.array_equal(last.rows[np.minimum(old_row, len(last.rows) - 1)], self.rows):
+            raise RuntimeError("carriage frame: a row is followed again after a step without it")
         shape, mid = self.ids.shape, last.state2
         loaded, valid, unloaded, fresh = (np.empty(shape, dtype=bool) for _ in range(4))
         eps, index = np.empty(shape), np.empty(shape, dtype=np.int64)
