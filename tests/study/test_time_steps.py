@@ -14,6 +14,7 @@ from tolsim.study.pipeline.carriage_track import CarriageFrame
 from tolsim.study.pipeline.propagation_rules import (
     MIN_TIME_STEPS,
     epsilon_lengths,
+    propagation_assumption,
     time_steps,
 )
 from tolsim.study.sampling import sample_block
@@ -36,6 +37,15 @@ def test_time_steps_is_auto_by_default_or_a_number():
     assert packaged("whatif_along_track", '"auto"').study.time_steps is None
     c = packaged("whatif_along_track", 37)
     assert c.study.time_steps == 37 and time_steps(c) == 37
+
+
+def test_the_assumption_says_whether_the_step_count_is_automatic():
+    # the summary, report and file give the step count and where it came from
+    auto = propagation_assumption("along_track", 20, automatic=True)
+    given = propagation_assumption("along_track", 37)
+    assert '20 steps chosen automatically: study.time_steps = "auto")' in auto
+    assert "37 steps (study.time_steps)" in given and "automatic" not in given
+    assert "steps" not in propagation_assumption("constant", 20, automatic=True)
 
 
 def test_automatic_steps_of_the_packaged_configs():

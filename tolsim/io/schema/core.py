@@ -381,7 +381,8 @@ def collect(result, history=None) -> tuple:
             "them"),
         "full_model_resolve_seconds": float(acc.resolve_seconds),
         "propagation_assumption": propagation_assumption(
-            st.propagation, time_steps(cfg) if cfg.is_along_track else None),
+            st.propagation, time_steps(cfg) if cfg.is_along_track else None,
+            automatic=st.time_steps is None),
         "propagation_caveat": propagation_caveat(cfg),
         "elapsed_seconds": float(result.elapsed),
         # Numba compilation (a cold kernel cache) and kernel-cache loading in the run, not part

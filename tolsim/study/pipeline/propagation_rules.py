@@ -19,13 +19,17 @@ PROPAGATION_ASSUMPTIONS = {
 }
 
 
-def propagation_assumption(propagation: str, steps: int | None = None) -> str:
+def propagation_assumption(propagation: str, steps: int | None = None,
+                           automatic: bool = False) -> str:
     """The one-sentence assumption of a propagation model (:data:`PROPAGATION_ASSUMPTIONS`),
     with the number of steps of an ``along_track`` study when ``steps`` is given
-    (:func:`time_steps`)."""
+    (:func:`time_steps`), and whether that number is the automatic one (``automatic``:
+    ``study.time_steps = "auto"``) or the config's."""
     text = PROPAGATION_ASSUMPTIONS[propagation]
     if steps is not None and propagation == "along_track":
-        text = text.replace("study.time_steps steps", f"{int(steps)} steps (study.time_steps)")
+        count = (f'{int(steps)} steps chosen automatically: study.time_steps = "auto"'
+                 if automatic else f"{int(steps)} steps (study.time_steps)")
+        text = text.replace("study.time_steps steps", count)
     return text
 
 
