@@ -4,6 +4,7 @@ import numpy as np
 from numpy.testing import assert_array_equal
 
 from tolsim.study.pipeline.carriage_track_kernels import (
+    carriage_motion_kernel,
     first_contact_kernel,
     newton_start_kernel,
     remember_kernel,
@@ -120,3 +121,17 @@ def test_first_contact_kernel_matches_its_numpy_twin():
     hits = np.isfinite(twin[0]) & ~np.isfinite(time)
     assert 10 < hits.sum() < m - 10  # both branches seen
     assert (twin[1][hits] >= balls - 1).any() and (twin[1][hits] < balls - 1).any()
+
+
+def test_carriage_motion_kernel_matches_the_numpy_expression():
+    # Source: the NumPy expression of CarriageFrame.move it replaced; tolerance 0 (bit for
+    # bit): epsilon finite, NaN (nominal), +-inf, -0.0.
+    rng = np.random.default_rng(5)
+    position = rng.uniform(-0.06, 0.06, 4000)
+    w = rng.normal(0.0, 1e-3, 4000)
+    w[:10], w[10:20], w[20:30], w[30:40] = np.nan, np.inf, -np.inf, -0.0
+    for h in (0.0125, 0.025):
+        got = np.empty(position.shape)
+        carriage_motion_kernel(position, w, h, 0.2, got)
+        assert_array_equal(_bits(got), _bits(position - h * (1.0 - np.nan_to_num(w)) * 0.5
+                                             * 0.2))

@@ -37,6 +37,7 @@ from tolsim.study.pipeline.ball_kernels import (
 from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.carriage_track_kernels import (
     advance_kernel,
+    carriage_motion_kernel,
     carry_pairs_kernel,
     carry_slots_kernel,
     first_contact_kernel,
@@ -56,6 +57,7 @@ from tolsim.study.pipeline.propagation import (
     Step,
     StepObserver,
     force_gaps,
+    gaps,
     integrate,
     pushed_along,
 )
@@ -402,7 +404,11 @@ class CarriageFrame(AlongTrackFrame):
         return nan_to_num(self.pushed(state.velocity_deviation, unloaded, ~state.loaded))
 
     def move(self, position, w, h):
-        return position - h * (1.0 - nan_to_num(w)) * 0.5 * self.v
+        position = kernel_array(position)
+        out = np.empty(position.shape)
+        carriage_motion_kernel(position.reshape(-1), kernel_array(w).reshape(-1), float(h),
+                               float(self.v), out.reshape(-1))
+        return out
 
     def velocity(self, state1, state2):
         # a ball outside the zone at the midpoint keeps epsilon_1
@@ -434,9 +440,8 @@ class CarriageFrame(AlongTrackFrame):
     def step(self, k, t, dt, position, new, state1, state2):
         state1 = self._joined(state1, state2)
         ok = self.ball_ok[self.rows] & state1.valid & state2.valid
-        with np.errstate(invalid="ignore"):
-            gap_old = position[..., 1:] - position[..., :-1] - self.diameter
-            gap_new = new[..., 1:] - new[..., :-1] - self.diameter
+        gap_old, gap_new = (gaps(x.reshape(-1, self.slots), self.diameter).reshape(
+            x.shape[:-1] + (-1,)) for x in (position, new))
         unloaded = self.unloaded(state1, state2)
         if unloaded is not None:  # pairs with an unloaded ball close as one
             edge = ~(state1.loaded | state2.loaded)

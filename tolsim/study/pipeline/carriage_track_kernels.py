@@ -1,14 +1,15 @@
 """Compiled glue of the carriage along the track (:mod:`tolsim.study.pipeline.carriage_track`):
-the exits and entries of a step, the balls and pair flags carried to new slots by their ids,
-each assembly's Newton start and the step's first contacts.
+the balls' motion in the carriage frame, the exits and entries of a step, the balls and pair
+flags carried to new slots by their ids, each assembly's Newton start and the step's first
+contacts.
 
 Each kernel does in one pass, element by element, what a chain of NumPy calls did: the same
-comparisons and the same values, so the results are bit-identical to those calls.
-"""
+comparisons and the same values, so the results are bit-identical to those calls."""
 
 import numpy as np
 
 from tolsim._jit import jit
+from tolsim.study.pipeline.ball_kernels import nan_to_num_one
 
 
 @jit
@@ -244,3 +245,12 @@ def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, 
         if np.isfinite(best):
             time[r] = best
             pair[r] = where
+
+
+@jit
+def carriage_motion_kernel(position, w, h, v, out):
+    """``out`` = position - h (1 - nan_to_num(w)) / 2 v, as ``position - h * (1.0 -
+    np.nan_to_num(w)) * 0.5 * v``: the balls' motion in the carriage frame (flat arrays;
+    positions [m], epsilon [-], h [s], v [m/s])."""
+    for i in range(position.shape[0]):
+        out[i] = position[i] - h * (1.0 - nan_to_num_one(w[i])) * 0.5 * v
