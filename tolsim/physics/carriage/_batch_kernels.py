@@ -28,8 +28,9 @@ from tolsim.physics.static import (
 )
 
 #: Assemblies per parallel work item of :func:`carriage_batch_kernel` (scratch arrays are
-#: allocated once per item).
-_ASSEMBLY_TILE = 8
+#: allocated once per item, 21 of them: fewer, larger items allocate less; an assembly's
+#: result does not depend on its item).
+_ASSEMBLY_TILE = 32
 #: Steps of the joint Newton (:func:`_joint_newton`) before the nested fallback.
 _JOINT_MAX_ITER = 12
 #: Relative ball imbalance above which the joint Newton first solves the ball alone.

@@ -2,15 +2,14 @@
 the singular-tangent test against the largest eigenvalue of sum_b A_b^T A_b."""
 
 import numpy as np
-from numba import prange
 
-from tolsim._jit import jit, pjit
+from tolsim._jit import jit
 
 #: Cyclic Jacobi sweeps of :func:`largest_eigenvalue` at most (a 5 x 5 matrix needs 4 to 6).
 _JACOBI_SWEEPS = 30
 
 
-@pjit
+@jit
 def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_zetas):
     """Scaled groove maps of balls at their own axial positions, in the two layouts of
     :func:`tolsim.physics.carriage._batch_kernels.carriage_batch_kernel`.
@@ -25,7 +24,9 @@ def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_zetas):
     ``np.where`` on the unloaded balls.
     """
     m, tracks, n = z.shape
-    for a in prange(m):  # each assembly writes its own rows: the same values on any threads
+    # serial: it streams memory (about 4 us per assembly of configs/carriage_preload.toml
+    # either way), and a parallel launch waits for a second core on a busy machine
+    for a in range(m):
         maps = out_maps[a]
         for t in range(tracks):
             c, s, ms, mc, gx, gy = (track[t, 0], track[t, 1], track[t, 2], track[t, 3],

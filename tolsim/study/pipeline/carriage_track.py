@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tolsim._jit import jit
+from tolsim._jit import kernel_array
 from tolsim.physics.carriage import (
     STATUS_CONVERGED,
     CarriageLayout,
@@ -35,6 +35,15 @@ from tolsim.study.pipeline.ball_kernels import (
     scatter_loaded_kernel,
 )
 from tolsim.study.pipeline.carriage import CarriageState
+from tolsim.study.pipeline.carriage_track_kernels import (
+    advance_kernel,
+    carriage_motion_kernel,
+    carry_pairs_kernel,
+    carry_slots_kernel,
+    first_contact_kernel,
+    newton_start_kernel,
+    remember_kernel,
+)
 from tolsim.study.pipeline.evaluate import (
     BallState,
     StaticResult,
@@ -48,6 +57,7 @@ from tolsim.study.pipeline.propagation import (
     Step,
     StepObserver,
     force_gaps,
+    gaps,
     integrate,
     pushed_along,
 )
@@ -116,150 +126,6 @@ class TrackTrace(StepObserver):
                 out.append((rows[a], tr, ident[a, tr, j], when[a, tr, j]))
 
 
-@jit
-def advance_kernel(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_zone,
-                   diameter, balls, t0, dt, overflow, exit_id, exit_time, entry_id,
-                   entry_time):
-    """Exits and entries at the end of a step, per assembly and track (in place).
-
-    ``z0``, ``z1`` (m, T, S): positions at the start and end of the step [m], slots in z
-    order (``count`` occupied); ``ball_id``, ``ball_ok`` move with their balls. A ball with
-    z1 < -half_zone leaves (exit time interpolated); the remaining ones close up; then, while
-    the leading ball is at or behind half_zone - diameter - g (g = ``entering_gap`` of the
-    next entering ball, ``entered`` so far), a ball enters with id balls + k: at the time the
-    leading ball passed that point, at z = half_zone, and moves with the leading ball for the
-    rest of the step (at its start if there was room before it: a zone longer than the
-    train). ``overflow`` is set where the slots or the drawn entering balls run out, or
-    the zone is empty. Events: ``exit_id``/``exit_time`` at the slot the ball left,
-    ``entry_id``/``entry_time`` at the slot it took (-1 / NaN elsewhere). The model: Notes of
-    :func:`first_contact_carriage_track`, "Loaded zone, exit and entry".
-    """
-    m, tracks, slots = z1.shape
-    capacity = entering_gap.shape[2]
-    for a in range(m):
-        for tr in range(tracks):
-            for j in range(slots):
-                exit_id[a, tr, j] = -1
-                exit_time[a, tr, j] = np.nan
-                entry_id[a, tr, j] = -1
-                entry_time[a, tr, j] = np.nan
-            c = count[a, tr]
-            keep = 0
-            lead0 = np.nan
-            for j in range(c):
-                if z1[a, tr, j] < -half_zone:
-                    exit_id[a, tr, j] = ball_id[a, tr, j]
-                    span = z0[a, tr, j] - z1[a, tr, j]
-                    frac = (z0[a, tr, j] + half_zone) / span if span > 0.0 else 0.0
-                    exit_time[a, tr, j] = t0 + min(max(frac, 0.0), 1.0) * dt
-                    continue
-                z0[a, tr, keep] = z0[a, tr, j]
-                z1[a, tr, keep] = z1[a, tr, j]
-                ball_id[a, tr, keep] = ball_id[a, tr, j]
-                ball_ok[a, tr, keep] = ball_ok[a, tr, j]
-                keep += 1
-            c = keep
-            if c == 0:
-                overflow[a] = True
-            else:
-                lead0 = z0[a, tr, c - 1]
-                drift = lead0 - z1[a, tr, c - 1]  # the leading ball's travel in the step
-                while True:
-                    k = entered[a, tr]
-                    if k >= capacity:
-                        overflow[a] = True
-                        break
-                    znew = z1[a, tr, c - 1] + diameter + entering_gap[a, tr, k]
-                    if znew > half_zone:
-                        break
-                    if c >= slots:
-                        overflow[a] = True
-                        break
-                    # it enters at L/2 when there is room, then moves with the ball ahead
-                    frac = (half_zone - znew) / drift if drift > 0.0 else 1.0
-                    if frac > 1.0:  # room since before the step: enters at its start
-                        frac = 1.0
-                        znew = half_zone - max(drift, 0.0)
-                    z1[a, tr, c] = znew
-                    z0[a, tr, c] = znew + drift
-                    ball_id[a, tr, c] = balls + k
-                    ball_ok[a, tr, c] = True
-                    entry_id[a, tr, c] = balls + k
-                    entry_time[a, tr, c] = t0 + dt - frac * dt
-                    entered[a, tr] = k + 1
-                    c += 1
-            for j in range(c, slots):
-                z0[a, tr, j] = np.nan
-                z1[a, tr, j] = np.nan
-                ball_id[a, tr, j] = -1
-                ball_ok[a, tr, j] = True
-            count[a, tr] = c
-
-
-@jit
-def carry_pairs_kernel(old_id, old_flag, new_id, out_flag):
-    """Flags of adjacent slot pairs (rows, S - 1) moved with their balls: the pair of new
-    slots j, j + 1 keeps the flag of the old slots of the same two balls when they were
-    adjacent there, False otherwise (a ball that entered, an empty slot)."""
-    rows, slots = new_id.shape
-    for r in range(rows):
-        for j in range(slots - 1):
-            out_flag[r, j] = False
-            a, b = new_id[r, j], new_id[r, j + 1]
-            if a < 0 or b < 0:
-                continue
-            for p in range(slots - 1):
-                if old_id[r, p] == a:
-                    out_flag[r, j] = old_flag[r, p] and old_id[r, p + 1] == b
-                    break
-
-
-@jit
-def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old_row, new_id,
-                       out_loaded, out_eps, out_valid, out_unloaded, out_fresh, out_index):
-    """The balls of slot arrays (m, T, S) carried to new slots by their ids: new slot j of
-    row r, track t takes the values of the old slot of row ``old_row[r]`` and track t that
-    held the same ball (``loaded``, epsilon, ``valid``, ``unloaded``) and ``out_index`` its
-    loaded ball's index among the old loaded slots in C order (-1: not loaded); a ball that
-    was in no old slot (it entered) or an empty slot is ``out_fresh`` (a ball id >= 0 only)
-    and takes not loaded, NaN, valid, not unloaded."""
-    rows, tracks, slots = new_id.shape
-    first = np.empty(old_id.shape[:2], dtype=np.int64)  # each old track's first loaded index
-    k = 0
-    for a in range(old_id.shape[0]):
-        for t in range(tracks):
-            first[a, t] = k
-            for p in range(slots):
-                if old_loaded[a, t, p]:
-                    k += 1
-    for r in range(rows):
-        a = old_row[r]
-        for t in range(tracks):
-            for j in range(slots):
-                ident = new_id[r, t, j]
-                out_loaded[r, t, j] = False
-                out_eps[r, t, j] = np.nan
-                out_valid[r, t, j] = True
-                out_unloaded[r, t, j] = False
-                out_fresh[r, t, j] = ident >= 0
-                out_index[r, t, j] = -1
-                if ident < 0:
-                    continue
-                k = first[a, t]
-                for p in range(slots):
-                    if old_id[a, t, p] == ident:
-                        out_fresh[r, t, j] = False
-                        out_loaded[r, t, j] = old_loaded[a, t, p]
-                        out_eps[r, t, j] = old_eps[a, t, p]
-                        out_valid[r, t, j] = old_valid[a, t, p]
-                        out_unloaded[r, t, j] = old_unloaded[a, t, p]
-                        if old_loaded[a, t, p]:
-                            out_index[r, t, j] = k
-                        break
-                    if old_loaded[a, t, p]:
-                        k += 1
-
-
 class _Evaluation:
     """The loaded balls of a block's assemblies at given positions: carriage, then epsilon."""
 
@@ -302,11 +168,12 @@ class _Evaluation:
         z = np.where(occupied, ball_z, 0.0)
         values = moving_ball_values(config, self.block, ball_id,
                                     z + config.motion.groove_velocity * t, rows, self.fixed)
-        fields = groove_error_fields(values, shape)
+        fields = groove_error_fields(values, shape, compact=True)  # (absent fields: 0)
         if carriage.end_relief_depth > 0:  # the carriage flanks TR, TL recede at the ends
             h = end_relief(z, config.train.loaded_zone_length, carriage.end_relief_depth,
                            carriage.end_relief_length)
-            fields["arc_centre_offset_normal"][:, 2:4] += h.reshape(-1, 1)
+            normal = fields.setdefault("arc_centre_offset_normal", np.zeros((z.size, 4)))
+            normal[:, 2:4] += h.reshape(-1, 1)
         errors = GrooveErrors(**{k: v.reshape(shape + v.shape[1:]) for k, v in fields.items()})
         with serial_if_small(z.size):  # as evaluate_carriage (no effect on the results)
             batch = solve_carriage_batch(self.layout, carriage.load, config.bearing,
@@ -347,23 +214,15 @@ class _Evaluation:
         tolerance, and an assembly's start depends only on its own history (not on the
         batch, chunking or threads).
         """
-        (q0, q1), (t0, t1) = self.solution[:, rows], self.solved_at[:, rows]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            w = (t - t1) / (t1 - t0)
-        line = np.isfinite(w) & (w > 0.0) & np.isfinite(q0).all(axis=1)
-        start = self.start[rows]
-        start[line] = q1[line] + w[line, None] * (q1[line] - q0[line])
+        start = np.empty((len(rows), 5))
+        newton_start_kernel(self.solution, self.solved_at, self.start, rows, float(t), start)
         return start
 
     def remember(self, rows, t, batch, solved):
         """Keep the converged (``solved``) solutions of assemblies ``rows`` at time t [s]; an
         assembly that did not converge starts its next Newton from its latest solution."""
-        done, failed = rows[solved], rows[~solved]
-        self.start[done] = batch.displacement[solved]
-        self.solution[0, done], self.solved_at[0, done] = (self.solution[1, done],
-                                                           self.solved_at[1, done])
-        self.solution[1, done], self.solved_at[1, done] = batch.displacement[solved], t
-        self.solution[:, failed], self.solved_at[:, failed] = np.nan, np.nan
+        remember_kernel(rows, float(t), batch.displacement, solved, self.start, self.solution,
+                        self.solved_at)
 
 
 def _initial_state(config, ball_z, loaded, batch, state):
@@ -545,7 +404,11 @@ class CarriageFrame(AlongTrackFrame):
         return nan_to_num(self.pushed(state.velocity_deviation, unloaded, ~state.loaded))
 
     def move(self, position, w, h):
-        return position - h * (1.0 - nan_to_num(w)) * 0.5 * self.v
+        position = kernel_array(position)
+        out = np.empty(position.shape)
+        carriage_motion_kernel(position.reshape(-1), kernel_array(w).reshape(-1), float(h),
+                               float(self.v), out.reshape(-1))
+        return out
 
     def velocity(self, state1, state2):
         # a ball outside the zone at the midpoint keeps epsilon_1
@@ -577,9 +440,8 @@ class CarriageFrame(AlongTrackFrame):
     def step(self, k, t, dt, position, new, state1, state2):
         state1 = self._joined(state1, state2)
         ok = self.ball_ok[self.rows] & state1.valid & state2.valid
-        with np.errstate(invalid="ignore"):
-            gap_old = position[..., 1:] - position[..., :-1] - self.diameter
-            gap_new = new[..., 1:] - new[..., :-1] - self.diameter
+        gap_old, gap_new = (gaps(x.reshape(-1, self.slots), self.diameter).reshape(
+            x.shape[:-1] + (-1,)) for x in (position, new))
         unloaded = self.unloaded(state1, state2)
         if unloaded is not None:  # pairs with an unloaded ball close as one
             edge = ~(state1.loaded | state2.loaded)
@@ -626,28 +488,16 @@ class CarriageFirstContact(StepObserver):
         return ~np.isfinite(self.time)
 
     def observe(self, step):
-        rows, half, slots, n = step.rows, self.half_zone, self.slots, self.balls
-        z0, z1, ok = step.position, step.free, step.ball_ok
-        gap0, gap1 = step.gap_old, step.gap_new
-        searching = ~np.isfinite(self.time[rows])  # no first contact yet
-        self.searching = searching
-        resolved = step.state1.valid & step.state2.valid
-        self.valid[rows[searching]] &= resolved.all(axis=(1, 2))[searching]
-        # contacts between adjacent loaded balls, both resolved so far
-        with np.errstate(invalid="ignore", divide="ignore"):
-            closing = (gap1 <= 0.0) & (gap0 > gap1) & ok[..., 1:] & ok[..., :-1]
-            frac = np.where(gap0 <= 0.0, 0.0, gap0 / (gap0 - gap1))
-            behind = z0[..., :-1] + frac * (z1[..., :-1] - z0[..., :-1])
-            ahead = z0[..., 1:] + frac * (z1[..., 1:] - z0[..., 1:])
-            closing &= (behind >= -half) & (ahead <= half)
-        tc = np.where(closing, step.t + frac * step.dt, np.inf).reshape(len(rows), -1)
-        if tc.shape[1]:  # (a zone that holds one ball has no pairs)
-            first = np.argmin(tc, axis=1)  # the first track, then the trailing pair, on ties
-            tmin = tc[np.arange(len(rows)), first]
-            hit = np.isfinite(tmin) & searching
-            self.time[rows[hit]] = tmin[hit]
-            track, slot = np.divmod(first[hit], slots - 1)
-            self.pair[rows[hit]] = track * (n - 1) + np.minimum(slot, max(n - 2, 0))
+        # contacts between adjacent loaded balls, both resolved so far, of the rows with no
+        # first contact yet (``searching``; first_contact_kernel)
+        rows = step.rows
+        self.searching = np.empty(len(rows), dtype=bool)
+        first_contact_kernel(rows, *(kernel_array(x) for x in (
+            step.position, step.free, step.gap_old, step.gap_new)),
+            *(kernel_array(x, np.bool_) for x in (step.ball_ok, step.state1.valid,
+                                                   step.state2.valid)),
+            self.half_zone, float(step.t), float(step.dt), self.balls, self.time, self.pair,
+            self.valid, self.searching)
 
     def moved(self, step):
         searching = self.searching

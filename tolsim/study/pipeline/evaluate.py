@@ -103,7 +103,21 @@ def friction_module():
 # --------------------------------------------------------------------------------------------
 # Error sources -> GrooveErrors fields
 # --------------------------------------------------------------------------------------------
-def groove_error_fields(values: dict, shape) -> dict:
+#: The sources of each :class:`tolsim.physics.static.GrooveErrors` field, in its trailing
+#: order (one source: a field of one value per ball, no trailing axis).
+GROOVE_ERROR_SOURCES = {
+    "arc_centre_offset_normal": tuple(f"arc_centre_offset_normal_{c}" for c in CONTACTS),
+    "arc_centre_offset_tangential": tuple(f"arc_centre_offset_tangential_{c}"
+                                          for c in CONTACTS),
+    "bottom_rotation": ("bottom_rotation",),
+    "top_rotation": ("top_rotation",),
+    "bottom_offset": ("bottom_offset_x", "bottom_offset_y"),
+    "top_offset": ("top_offset_x", "top_offset_y"),
+    "ball_oversize": ("ball_oversize",),
+}
+
+
+def groove_error_fields(values: dict, shape, compact: bool = False) -> dict:
     """Assemble the :class:`tolsim.physics.static.GrooveErrors` fields from source values.
 
     Parameters
@@ -112,6 +126,10 @@ def groove_error_fields(values: dict, shape) -> dict:
         source name (:data:`tolsim.study.spec.SOURCES`) -> ndarray of ``shape`` [m or rad].
     shape : tuple
         Shape of one per-ball array, e.g. (assemblies, balls).
+    compact : bool
+        Leave out the fields none of whose sources is in ``values`` (zero everywhere: the
+        default of :class:`tolsim.physics.static.GrooveErrors`) instead of filling them with
+        zeros.
 
     Returns
     -------
@@ -129,19 +147,9 @@ def groove_error_fields(values: dict, shape) -> dict:
             out[..., i] = values.get(name, 0.0)
         return out.reshape(n, len(names))
 
-    def single(name):
-        return group([name])[:, 0]
-
-    return {
-        "arc_centre_offset_normal": group([f"arc_centre_offset_normal_{c}" for c in CONTACTS]),
-        "arc_centre_offset_tangential": group(
-            [f"arc_centre_offset_tangential_{c}" for c in CONTACTS]),
-        "bottom_rotation": single("bottom_rotation"),
-        "top_rotation": single("top_rotation"),
-        "bottom_offset": group(["bottom_offset_x", "bottom_offset_y"]),
-        "top_offset": group(["top_offset_x", "top_offset_y"]),
-        "ball_oversize": single("ball_oversize"),
-    }
+    return {field: group(names) if len(names) > 1 else group(names)[:, 0]  # (n,): per ball
+            for field, names in GROOVE_ERROR_SOURCES.items()
+            if not compact or any(name in values for name in names)}
 
 
 # --------------------------------------------------------------------------------------------

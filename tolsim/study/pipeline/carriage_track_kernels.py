@@ -1,0 +1,256 @@
+"""Compiled glue of the carriage along the track (:mod:`tolsim.study.pipeline.carriage_track`):
+the balls' motion in the carriage frame, the exits and entries of a step, the balls and pair
+flags carried to new slots by their ids, each assembly's Newton start and the step's first
+contacts.
+
+Each kernel does in one pass, element by element, what a chain of NumPy calls did: the same
+comparisons and the same values, so the results are bit-identical to those calls."""
+
+import numpy as np
+
+from tolsim._jit import jit
+from tolsim.study.pipeline.ball_kernels import nan_to_num_one
+
+
+@jit
+def advance_kernel(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_zone,
+                   diameter, balls, t0, dt, overflow, exit_id, exit_time, entry_id,
+                   entry_time):
+    """Exits and entries at the end of a step, per assembly and track (in place).
+
+    ``z0``, ``z1`` (m, T, S): positions at the start and end of the step [m], slots in z
+    order (``count`` occupied); ``ball_id``, ``ball_ok`` move with their balls. A ball with
+    z1 < -half_zone leaves (exit time interpolated); the remaining ones close up; then, while
+    the leading ball is at or behind half_zone - diameter - g (g = ``entering_gap`` of the
+    next entering ball, ``entered`` so far), a ball enters with id balls + k: at the time the
+    leading ball passed that point, at z = half_zone, and moves with the leading ball for the
+    rest of the step (at its start if there was room before it: a zone longer than the
+    train). ``overflow`` is set where the slots or the drawn entering balls run out, or
+    the zone is empty. Events: ``exit_id``/``exit_time`` at the slot the ball left,
+    ``entry_id``/``entry_time`` at the slot it took (-1 / NaN elsewhere). The model: Notes of
+    :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`, "Loaded zone,
+    exit and entry".
+    """
+    m, tracks, slots = z1.shape
+    capacity = entering_gap.shape[2]
+    for a in range(m):
+        for tr in range(tracks):
+            for j in range(slots):
+                exit_id[a, tr, j] = -1
+                exit_time[a, tr, j] = np.nan
+                entry_id[a, tr, j] = -1
+                entry_time[a, tr, j] = np.nan
+            c = count[a, tr]
+            keep = 0
+            lead0 = np.nan
+            for j in range(c):
+                if z1[a, tr, j] < -half_zone:
+                    exit_id[a, tr, j] = ball_id[a, tr, j]
+                    span = z0[a, tr, j] - z1[a, tr, j]
+                    frac = (z0[a, tr, j] + half_zone) / span if span > 0.0 else 0.0
+                    exit_time[a, tr, j] = t0 + min(max(frac, 0.0), 1.0) * dt
+                    continue
+                z0[a, tr, keep] = z0[a, tr, j]
+                z1[a, tr, keep] = z1[a, tr, j]
+                ball_id[a, tr, keep] = ball_id[a, tr, j]
+                ball_ok[a, tr, keep] = ball_ok[a, tr, j]
+                keep += 1
+            c = keep
+            if c == 0:
+                overflow[a] = True
+            else:
+                lead0 = z0[a, tr, c - 1]
+                drift = lead0 - z1[a, tr, c - 1]  # the leading ball's travel in the step
+                while True:
+                    k = entered[a, tr]
+                    if k >= capacity:
+                        overflow[a] = True
+                        break
+                    znew = z1[a, tr, c - 1] + diameter + entering_gap[a, tr, k]
+                    if znew > half_zone:
+                        break
+                    if c >= slots:
+                        overflow[a] = True
+                        break
+                    # it enters at L/2 when there is room, then moves with the ball ahead
+                    frac = (half_zone - znew) / drift if drift > 0.0 else 1.0
+                    if frac > 1.0:  # room since before the step: enters at its start
+                        frac = 1.0
+                        znew = half_zone - max(drift, 0.0)
+                    z1[a, tr, c] = znew
+                    z0[a, tr, c] = znew + drift
+                    ball_id[a, tr, c] = balls + k
+                    ball_ok[a, tr, c] = True
+                    entry_id[a, tr, c] = balls + k
+                    entry_time[a, tr, c] = t0 + dt - frac * dt
+                    entered[a, tr] = k + 1
+                    c += 1
+            for j in range(c, slots):
+                z0[a, tr, j] = np.nan
+                z1[a, tr, j] = np.nan
+                ball_id[a, tr, j] = -1
+                ball_ok[a, tr, j] = True
+            count[a, tr] = c
+
+
+@jit
+def carry_pairs_kernel(old_id, old_flag, new_id, out_flag):
+    """Flags of adjacent slot pairs (rows, S - 1) moved with their balls: the pair of new
+    slots j, j + 1 keeps the flag of the old slots of the same two balls when they were
+    adjacent there, False otherwise (a ball that entered, an empty slot)."""
+    rows, slots = new_id.shape
+    for r in range(rows):
+        for j in range(slots - 1):
+            out_flag[r, j] = False
+            a, b = new_id[r, j], new_id[r, j + 1]
+            if a < 0 or b < 0:
+                continue
+            for p in range(slots - 1):
+                if old_id[r, p] == a:
+                    out_flag[r, j] = old_flag[r, p] and old_id[r, p + 1] == b
+                    break
+
+
+@jit
+def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old_row, new_id,
+                       out_loaded, out_eps, out_valid, out_unloaded, out_fresh, out_index):
+    """The balls of slot arrays (m, T, S) carried to new slots by their ids: new slot j of
+    row r, track t takes the values of the old slot of row ``old_row[r]`` and track t that
+    held the same ball (``loaded``, epsilon, ``valid``, ``unloaded``) and ``out_index`` its
+    loaded ball's index among the old loaded slots in C order (-1: not loaded); a ball that
+    was in no old slot (it entered) or an empty slot is ``out_fresh`` (a ball id >= 0 only)
+    and takes not loaded, NaN, valid, not unloaded."""
+    rows, tracks, slots = new_id.shape
+    first = np.empty(old_id.shape[:2], dtype=np.int64)  # each old track's first loaded index
+    k = 0
+    for a in range(old_id.shape[0]):
+        for t in range(tracks):
+            first[a, t] = k
+            for p in range(slots):
+                if old_loaded[a, t, p]:
+                    k += 1
+    for r in range(rows):
+        a = old_row[r]
+        for t in range(tracks):
+            for j in range(slots):
+                ident = new_id[r, t, j]
+                out_loaded[r, t, j] = False
+                out_eps[r, t, j] = np.nan
+                out_valid[r, t, j] = True
+                out_unloaded[r, t, j] = False
+                out_fresh[r, t, j] = ident >= 0
+                out_index[r, t, j] = -1
+                if ident < 0:
+                    continue
+                k = first[a, t]
+                for p in range(slots):
+                    if old_id[a, t, p] == ident:
+                        out_fresh[r, t, j] = False
+                        out_loaded[r, t, j] = old_loaded[a, t, p]
+                        out_eps[r, t, j] = old_eps[a, t, p]
+                        out_valid[r, t, j] = old_valid[a, t, p]
+                        out_unloaded[r, t, j] = old_unloaded[a, t, p]
+                        if old_loaded[a, t, p]:
+                            out_index[r, t, j] = k
+                        break
+                    if old_loaded[a, t, p]:
+                        k += 1
+
+
+@jit
+def newton_start_kernel(solution, solved_at, start, rows, t, out):
+    """Where the carriage Newton of assemblies ``rows`` starts at time t [s]
+    (:meth:`tolsim.study.pipeline.carriage_track.CarriageFrame` Notes of ``newton_start``):
+    ``out[a]`` = q1 + w (q1 - q0), w = (t - t1) / (t1 - t0), from the assembly's two latest
+    solutions ``solution`` (2, size, 5) at ``solved_at`` (2, size) where w is finite and > 0
+    and q0 finite, else ``start[rows[a]]``."""
+    for a in range(rows.shape[0]):
+        r = rows[a]
+        t0, t1 = solved_at[0, r], solved_at[1, r]
+        w = (t - t1) / (t1 - t0)
+        line = np.isfinite(w) and w > 0.0
+        for j in range(5):
+            line = line and np.isfinite(solution[0, r, j])
+        for j in range(5):
+            if line:
+                q1 = solution[1, r, j]
+                out[a, j] = q1 + w * (q1 - solution[0, r, j])
+            else:
+                out[a, j] = start[r, j]
+
+
+@jit
+def remember_kernel(rows, t, displacement, solved, start, solution, solved_at):
+    """Keep the solutions ``displacement`` (m, 5) of assemblies ``rows`` solved at time t
+    [s], in place: where ``solved``, the start of the next Newton and the latest of the two
+    solutions (the previous latest becomes the older); elsewhere both solutions NaN."""
+    for a in range(rows.shape[0]):
+        r = rows[a]
+        if solved[a]:
+            for j in range(5):
+                start[r, j] = displacement[a, j]
+                solution[0, r, j] = solution[1, r, j]
+                solution[1, r, j] = displacement[a, j]
+            solved_at[0, r] = solved_at[1, r]
+            solved_at[1, r] = t
+        else:
+            for j in range(5):
+                solution[0, r, j] = np.nan
+                solution[1, r, j] = np.nan
+            solved_at[0, r] = np.nan
+            solved_at[1, r] = np.nan
+
+
+@jit
+def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, dt, balls,
+                         time, pair, valid, searching):
+    """The first contacts of a step (:class:`tolsim.study.pipeline.carriage_track.
+    CarriageFirstContact`), in place.
+
+    Per row a (assembly ``rows[a]``) still searching (``time`` not finite; ``searching[a]``
+    written): ``valid`` &= every ball resolved at both evaluations (``valid1``, ``valid2``
+    (m, T, S)); a pair j of track tr (gaps ``gap0`` -> ``gap1`` (m, T, S - 1) [m], both balls
+    ``ok``) closes when gap1 <= 0 < gap0 - gap1, at frac = 0 (gap0 <= 0) or gap0 / (gap0 -
+    gap1) of the step, if both balls, interpolated from ``z0`` to ``z1``, are in [-half,
+    half] then; the earliest, t + frac dt (first track, then trailing pair, on ties), is the
+    row's ``time`` and ``pair`` tr (balls - 1) + min(j, balls - 2).
+    """
+    m, tracks, pairs = gap0.shape
+    for a in range(m):
+        r = rows[a]
+        searching[a] = not np.isfinite(time[r])
+        if not searching[a]:
+            continue
+        resolved = True
+        for tr in range(tracks):
+            for j in range(pairs + 1):
+                resolved = resolved and valid1[a, tr, j] and valid2[a, tr, j]
+        valid[r] = valid[r] and resolved
+        best = np.inf
+        where = -1
+        for tr in range(tracks):
+            for j in range(pairs):
+                g0, g1 = gap0[a, tr, j], gap1[a, tr, j]
+                if not (g1 <= 0.0 and g0 > g1 and ok[a, tr, j + 1] and ok[a, tr, j]):
+                    continue
+                frac = 0.0 if g0 <= 0.0 else g0 / (g0 - g1)
+                behind = z0[a, tr, j] + frac * (z1[a, tr, j] - z0[a, tr, j])
+                ahead = z0[a, tr, j + 1] + frac * (z1[a, tr, j + 1] - z0[a, tr, j + 1])
+                if not (behind >= -half and ahead <= half):
+                    continue
+                tc = t + frac * dt
+                if tc < best:
+                    best = tc
+                    where = tr * (balls - 1) + min(j, max(balls - 2, 0))
+        if np.isfinite(best):
+            time[r] = best
+            pair[r] = where
+
+
+@jit
+def carriage_motion_kernel(position, w, h, v, out):
+    """``out`` = position - h (1 - nan_to_num(w)) / 2 v, as ``position - h * (1.0 -
+    np.nan_to_num(w)) * 0.5 * v``: the balls' motion in the carriage frame (flat arrays;
+    positions [m], epsilon [-], h [s], v [m/s])."""
+    for i in range(position.shape[0]):
+        out[i] = position[i] - h * (1.0 - nan_to_num_one(w[i])) * 0.5 * v
