@@ -241,7 +241,8 @@ ANALYTIC_TILE = 256
 
 @jit(inline="always")
 def analytic_tile(dbeta, force, m, nominal_angle, ball_radius, semi_major_coefficient,
-                  elliptic_e, k_f, max_ratio, max_angle, max_eps, out_eps, out_valid, at):
+                  elliptic_e, k_f, max_ratio, max_angle, max_eps, out_eps, out_valid, at,
+                  paired=False):
     """epsilon and validity of the m balls of a tile, written to ``out_eps[at + i]``,
     ``out_valid[at + i]`` (the numbers of :func:`_analytic_solve`, bit for bit).
 
@@ -263,10 +264,13 @@ def analytic_tile(dbeta, force, m, nominal_angle, ball_radius, semi_major_coeffi
         s1, c1 = sin_cos_series(sin_b0, cos_b0, d1)
         s2, c2 = sin_cos_series(sin_b0, cos_b0, d2)
         s3, c3 = sin_cos_series(sin_b0, cos_b0, d3)
+        r0, r1 = cbrt_halley(f0), cbrt_halley(f1)
+        r2 = r0 if paired else cbrt_halley(f2)
+        r3 = r1 if paired else cbrt_halley(f3)
         eps, _, _, _, _, ok = analytic_ball(
-            d0, d1, d2, d3, s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, cbrt_halley(f0),
-            cbrt_halley(f1), cbrt_halley(f2), cbrt_halley(f3), half_tan, ball_radius,
-            semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps)
+            d0, d1, d2, d3, s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, r0, r1, r2, r3,
+            half_tan, ball_radius, semi_major_coefficient, elliptic_e, k_f, max_ratio,
+            max_angle, max_eps)
         out_eps[at + i] = eps
         out_valid[at + i] = ok
         odd |= _outside_series(d0, d1, d2, d3, f0, f1, f2, f3)

@@ -216,7 +216,7 @@ def paired_analytic_kernel(tangential0, tangential1, tangential2, tangential3, b
                 clipped_t[c, i] = clipped[i, c]
         analytic_tile(dbeta_t, clipped_t, m, nominal_angle, ball_radius,
                       semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps,
-                      out_eps, out_valid, at)
+                      out_eps, out_valid, at, True)
     return settled
 
 
