@@ -511,3 +511,32 @@ def test_analytic_kernel_skips_eq22_and_gamma_on_request(rng):
     beta = TABLE1.nominal_contact_angle + dbeta + gamma  # Eq. (22) was computed
     assert_allclose(eps22, [A.eq22_velocity_deviation(b[0], b[1], b[3]) for b in beta],
                     rtol=1e-12, atol=1e-15)
+
+
+def test_analytic_tiles_are_the_per_ball_solve_bit_for_bit(rng):
+    # source: the per-ball solve (_analytic_solve, libm-fallback sin/cos and the array cube
+    # root), which analytic_kernel runs when Eq. (22) is asked for; tolerance: the bits of
+    # epsilon and validity. Balls beyond SMALL_ANGLE (libm sin/cos), a NaN angle, forces 0,
+    # subnormal, beyond 1e300 and inf (libm cube root), tiles partly filled (n not a multiple
+    # of ANALYTIC_TILE), a tile without such balls.
+    n = 3 * A.ANALYTIC_TILE + 17
+    dbeta = rng.normal(0, np.deg2rad(0.5), (n, 4))
+    force = rng.uniform(20.0, 300.0, (n, 4))
+    dbeta[5:20] *= 60.0  # |dbeta| up to ~0.5 rad
+    dbeta[21, 2] = np.nan
+    force[30:33, 1] = [0.0, 5e-310, 2e300]
+    force[34, 3] = np.inf
+    dbeta[A.ANALYTIC_TILE + 3, 0] = 0.3  # one odd ball in the second tile
+    hc = hertz_constants(TABLE1.ball_radius, TABLE1.conformity, TABLE1.youngs_modulus,
+                         TABLE1.poisson_ratio)
+    args = (dbeta, force, TABLE1.nominal_contact_angle, TABLE1.ball_radius,
+            hc.semi_major_coefficient, hc.elliptic_e, K_F_PAPER, A.MAX_ZERO_VELOCITY_RATIO,
+            A.MAX_ANGLE_SUM, A.MAX_VELOCITY_DEVIATION)
+    eps, eps22, gamma, valid = np.empty(n), np.empty(n), np.empty((n, 4)), np.empty(n, bool)
+    eps_t, valid_t = np.empty(n), np.empty(n, bool)
+    with np.errstate(all="ignore"):
+        A.analytic_kernel(*args, eps, eps22, gamma, valid)
+        A.analytic_kernel(*args, eps_t, np.empty(0), np.empty((0, 4)), valid_t)
+    assert np.array_equal(eps.view(np.int64), eps_t.view(np.int64))
+    assert np.array_equal(valid, valid_t)
+    assert valid.sum() > n // 2 and not valid[5:35].all()  # both kinds of ball

@@ -74,6 +74,35 @@ def test_carriage_with_contact_same_in_one_chunk_or_block_by_block():
     assert int(one.statistics.n_contact) > 0
 
 
+def test_first_chunk_in_two_parts_gives_the_same_study(monkeypatch):
+    # source: the same study block by block (chunk_blocks=1); tolerance: every statistic bit
+    # for bit. With chunk_blocks=4 prefetched evaluates the first chunk as its first block,
+    # then the other three (drawn meanwhile), and yields the chunk as one.
+    import tolsim.study.execution.chunks as chunks
+
+    c = study("whatif_along_track.toml", 8 * 16, 16, 6)
+    evaluated, yielded = [], []
+    run_chunk, prefetched = chunks.run_chunk, chunks.prefetched
+
+    def recording_run(config, blocks, *args, **kwargs):
+        evaluated.append(list(blocks))
+        return run_chunk(config, blocks, *args, **kwargs)
+
+    def recording_prefetched(*args, **kwargs):
+        for result in prefetched(*args, **kwargs):
+            yielded.append([index for index, _, _ in result])
+            yield result
+
+    one = run_study(c, chunk_blocks=1)
+    monkeypatch.setattr(chunks, "run_chunk", recording_run)
+    monkeypatch.setattr("tolsim.study.execution.runner.prefetched", recording_prefetched)
+    four = run_study(c, chunk_blocks=4)
+    assert evaluated == [[0], [1, 2, 3], [4, 5, 6, 7]]
+    assert yielded == [[0, 1, 2, 3], [4, 5, 6, 7]]
+    assert_same_statistics(one, four)
+    assert int(one.statistics.n_contact) > 0
+
+
 def test_openmp_threads_wait_passively_unless_told_otherwise():
     # tolsim._jit sets OMP_WAIT_POLICY before any parallel kernel runs, unless it is set
     code = "import os, tolsim._jit; print(os.environ['OMP_WAIT_POLICY'])"

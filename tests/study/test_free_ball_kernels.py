@@ -10,10 +10,19 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from tolsim.io.config import load_config
-from tolsim.physics.geometry import TABLE1
+from tolsim.physics.geometry import K_F_PAPER, TABLE1
+from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.velocity.analytic import (
+    ANALYTIC_TILE,
+    MAX_ANGLE_SUM,
+    MAX_VELOCITY_DEVIATION,
+    MAX_ZERO_VELOCITY_RATIO,
+    analytic_kernel,
+)
 from tolsim.study.pipeline.ball_kernels import (
     contact_counts_kernel,
     loads_at_kernel,
+    paired_analytic_kernel,
     paired_balls_kernel,
 )
 from tolsim.study.pipeline.evaluate import (
@@ -163,6 +172,55 @@ def test_paired_balls_kernel_is_the_numpy_chain(absent, slots):
     if len(slots) > 1:  # every case is exercised
         assert want_settled > 0 and (want_count == -1).any() and (want_count == 0).any()
         assert np.isnan(want_force).any() and want.four_point.any()
+
+
+@pytest.mark.parametrize("along", [True, False])
+def test_paired_analytic_kernel_is_the_paired_pass_then_the_analytic_solve(along):
+    # source: paired_balls_kernel, then analytic_kernel on its clipped forces through the
+    # per-ball solve (Eq. (22) asked for: _analytic_solve, libm-fallback sin/cos, the array
+    # cube root), the chain of ball_velocities before the fused kernel; tolerance: the bits of
+    # every output. Balls settled, in tension, unloaded, with a NaN position or a NaN or
+    # large rotation (libm sin/cos), one value for all balls (top_rotation); n not a multiple
+    # of the tile.
+    rng = np.random.default_rng(33)
+    n = 5 * ANALYTIC_TILE + 41
+    slots = np.linspace(-0.0275, 0.0275, 6)
+    x = _positions(rng, slots, n)
+    side = rng.uniform(-250.0, 250.0, len(slots))
+    normal = rng.uniform(-20.0, 300.0, len(slots))
+    side[2], normal[2] = 0.0, 0.0  # zero forces at a slot
+    side[3], normal[3] = 1e-9, 2e-9  # round-off forces: settled
+    values = _values(rng, n)
+    values["bottom_rotation"][10:20] = rng.uniform(-0.4, 0.4, 10)  # beyond SMALL_ANGLE
+    sources = [np.ascontiguousarray(values[name]) for name in PAIRED_SOURCES]
+    sources[5] = np.array([1.5e-3])  # top_rotation: one value for all balls
+    nx, ny = rng.uniform(-250.0, 250.0, n), rng.uniform(-20.0, 300.0, n)
+    nx[100:150], ny[100:150] = 1e-9, 2e-9  # round-off forces: settled
+    nx[150:160], ny[150:160] = 0.0, 0.0
+    b0 = TABLE1.nominal_contact_angle
+    paired = (*sources, TABLE1.groove_radius - TABLE1.ball_radius, nx, ny,
+              x if along else np.empty(0), slots, side, normal, np.sin(b0), np.cos(b0),
+              round_off_force(TABLE1))
+    hc = hertz_constants(TABLE1.ball_radius, TABLE1.conformity, TABLE1.youngs_modulus,
+                         TABLE1.poisson_ratio)
+    analytic = (b0, TABLE1.ball_radius, hc.semi_major_coefficient, hc.elliptic_e, K_F_PAPER,
+                MAX_ZERO_VELOCITY_RATIO, MAX_ANGLE_SUM, MAX_VELOCITY_DEVIATION)
+
+    def outputs():
+        return (np.empty((n, 4)), np.empty((n, 4)), np.empty(n, bool), np.empty(n, np.int8),
+                np.empty(n), np.empty(n, bool))
+
+    dbeta, force, four_point, count, eps, valid = want = outputs()
+    clipped = np.empty((n, 4))
+    with np.errstate(all="ignore"):
+        want_settled = paired_balls_kernel(*paired, dbeta, force, four_point, count, clipped)
+        analytic_kernel(dbeta, clipped, *analytic, eps, np.empty(n), np.empty((n, 4)), valid)
+        got = outputs()
+        settled = paired_analytic_kernel(*paired, *analytic, *got)
+    for g, w in zip(got, want, strict=True):
+        assert_array_equal(_bits(g), _bits(w))
+    assert settled == want_settled > 0
+    assert (count == -1).any() and (count == 0).any() and valid.any() and not valid.all()
 
 
 def _whatif():

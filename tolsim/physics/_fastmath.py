@@ -8,9 +8,8 @@ y <- y (y^3 + 2x) / (2 y^3 + x) (cubic convergence: ~3e-2 -> ~1e-5 -> ~1e-15 -> 
 Written as the ratio form so that nothing overflows or underflows for any normal double.
 Accuracy against ``np.cbrt``: a few ulp (tests/physics/test_fastmath.py).
 
-The seed pass reads the input through an int64 view. It is a separate kernel from the
-refinement because Numba assumes distinct arrays do not alias, and the float and int views of
-the output do.
+Per value (:func:`cbrt_one`, which the fused kernels call inline), or over an array
+(:func:`cbrt_nonnegative`).
 """
 
 import numpy as np
@@ -21,30 +20,77 @@ from tolsim._jit import jit, pjit
 _CBRT_MAGIC = 0x2A9F7893782DA1CE  # bit pattern of ~1 shifted so that bits/3 + magic ~ cbrt
 
 
-@pjit
-def _cbrt_seed(src_bits, dst_bits):
-    for i in prange(src_bits.size):
-        dst_bits[i] = src_bits[i] // 3 + _CBRT_MAGIC
+#: Where :func:`cbrt_halley` is used; libm ``cbrt`` outside (0, subnormals: a bad seed; near
+#: overflow: y^3 overflows). The bounds are exclusive.
+CBRT_RANGE = (1e-300, 1e300)
+
+
+@jit(inline="always")
+def cbrt_seed(x):
+    """The magic-constant seed of cbrt x (x >= 0): the int64 bit pattern b of x mapped to
+    b // 3 + magic, read back as a float.
+
+    The division by 3 is written as two exact float divisions of 32-bit halves, so that loops
+    calling it vectorise (an int64 division does not): b = h 2^32 + l with h < 2^31, and
+    b // 3 = (h // 3) 2^32 + ((h mod 3) 2^32 + l) // 3, each quotient below 2^32 and taken as
+    floor of a correctly rounded double quotient, which is exact there (k + 2/3 with k < 2^32
+    rounds to below k + 1). The same integer as ``b // 3`` for every b >= 0.
+    """
+    bits = np.float64(x).view(np.int64)
+    high = bits >> 32
+    q_high = np.int64(np.floor(np.float64(high) / 3.0))
+    low = (high - 3 * q_high) * 4294967296 + (bits & 0xFFFFFFFF)
+    q_low = np.int64(np.floor(np.float64(low) / 3.0))
+    return np.int64(q_high * 4294967296 + q_low + _CBRT_MAGIC).view(np.float64)
+
+
+@jit(inline="always")
+def cbrt_halley(x):
+    """cbrt x for x inside :data:`CBRT_RANGE`: :func:`cbrt_seed` and three Halley steps, no
+    branch (loops over it vectorise); callers redo values outside the range with
+    :func:`cbrt_one`."""
+    y = cbrt_seed(x)
+    for _ in range(3):
+        y3 = y * y * y
+        y = y * ((y3 + 2.0 * x) / (2.0 * y3 + x))
+    return y
+
+
+@jit(inline="always")
+def cbrt_in_range(x):
+    """Whether :func:`cbrt_halley` takes x (False for NaN)."""
+    return CBRT_RANGE[0] < x < CBRT_RANGE[1]
+
+
+@jit(inline="always")
+def cbrt_one(x):
+    """cbrt x of a finite x >= 0 (:func:`cbrt_halley` in :data:`CBRT_RANGE`, libm outside)."""
+    if cbrt_in_range(x):
+        return cbrt_halley(x)
+    return np.cbrt(x)
+
+
+#: Values per tile of :func:`_cbrt_tiles` (its scratch stays in the L1 cache).
+_CBRT_TILE = 512
 
 
 @pjit
-def _cbrt_refine(src, dst):
-    for i in prange(src.size):
-        x = src[i]
-        y = dst[i]
-        for _ in range(3):
-            y3 = y * y * y
-            y = y * ((y3 + 2.0 * x) / (2.0 * y3 + x))
-        dst[i] = y
-
-
-@pjit
-def _cbrt_fixup(src, dst):
-    # A separate pass keeps the refinement loop branch-free (it vectorises).
-    for i in prange(src.size):
-        x = src[i]
-        if not (1e-300 < x < 1e300):  # 0, subnormals (bad seed), near overflow: libm
-            dst[i] = np.cbrt(x)
+def _cbrt_tiles(src, dst):
+    """:func:`cbrt_one` of every value: per tile a branch-free (vectorised) loop of
+    :func:`cbrt_halley`, then libm for the tile's values outside :data:`CBRT_RANGE`."""
+    n = src.size
+    for k in prange((n + _CBRT_TILE - 1) // _CBRT_TILE):
+        lo = k * _CBRT_TILE
+        hi = min(lo + _CBRT_TILE, n)
+        odd = False
+        for i in range(lo, hi):
+            x = src[i]
+            dst[i] = cbrt_halley(x)
+            odd |= not cbrt_in_range(x)
+        if odd:
+            for i in range(lo, hi):
+                if not cbrt_in_range(src[i]):
+                    dst[i] = np.cbrt(src[i])
 
 
 def cbrt_nonnegative(values, out=None):
@@ -64,11 +110,7 @@ def cbrt_nonnegative(values, out=None):
     """
     if out is None:
         out = np.empty_like(values)
-    flat_in = values.reshape(-1)
-    flat_out = out.reshape(-1)
-    _cbrt_seed(flat_in.view(np.int64), flat_out.view(np.int64))
-    _cbrt_refine(flat_in, flat_out)
-    _cbrt_fixup(flat_in, flat_out)
+    _cbrt_tiles(values.reshape(-1), out.reshape(-1))
     return out
 
 
@@ -99,15 +141,22 @@ def sin_cosm1_small(t):
 
 
 @jit(inline="always")
+def sin_cos_series(sin0, cos0, t):
+    """sin and cos of base + t by angle addition with the series (|t| <= SMALL_ANGLE; the
+    branch of :func:`sin_cos_near` there, without its test: loops over it vectorise)."""
+    st, cm1 = sin_cosm1_small(t)
+    return sin0 + (sin0 * cm1 + cos0 * st), cos0 + (cos0 * cm1 - sin0 * st)
+
+
+@jit(inline="always")
 def sin_cos_near(sin0, cos0, base, t):
     """sin and cos of base + t from sin0 = sin(base), cos0 = cos(base).
 
     Angle addition with the series for |t| <= SMALL_ANGLE (more accurate than rounding
-    base + t first), libm beyond.
+    base + t first, :func:`sin_cos_series`), libm beyond (and for a NaN t).
     """
     if abs(t) <= SMALL_ANGLE:
-        st, cm1 = sin_cosm1_small(t)
-        return sin0 + (sin0 * cm1 + cos0 * st), cos0 + (cos0 * cm1 - sin0 * st)
+        return sin_cos_series(sin0, cos0, t)
     return np.sin(base + t), np.cos(base + t)
 
 

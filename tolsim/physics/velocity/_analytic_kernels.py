@@ -4,7 +4,15 @@ import numpy as np
 from numba import prange
 
 from tolsim._jit import jit, pjit
-from tolsim.physics._fastmath import cbrt_nonnegative, sin_cos_near
+from tolsim.physics._fastmath import (
+    SMALL_ANGLE,
+    cbrt_halley,
+    cbrt_in_range,
+    cbrt_nonnegative,
+    cbrt_one,
+    sin_cos_near,
+    sin_cos_series,
+)
 from tolsim.physics.velocity.ball_loads import point_traction_capacity, rolling_axis, stall_moment
 
 
@@ -109,18 +117,87 @@ def analytic_kernel(
 ):
     """Solve Eqs. (17), (18) [ERRATA 8 sign], (21) for dgamma_i; unchecked fast path.
 
-    ``dbeta``, ``force``: C-contiguous (n, 4) float64. The cube roots F_i^(1/3) (for a_i) are
-    taken for all balls at once with the vectorised cube root, then the per-ball solve runs.
-    ``out_eps22`` of length 0 skips Eq. (22), ``out_gamma`` with 0 rows skips storing dgamma
-    (a study needs neither). ``out_valid``: all forces > 0, |c_i/a_i| <= ``max_ratio`` and
+    ``dbeta``, ``force``: C-contiguous (n, 4) float64. ``out_eps22`` of length 0 skips
+    Eq. (22), ``out_gamma`` with 0 rows skips storing dgamma (a study needs neither: then the
+    balls are solved in tiles, :func:`analytic_tile`; else the cube roots F_i^(1/3) (for a_i)
+    are taken for all balls at once with the vectorised cube root, then the per-ball solve
+    runs: the same numbers). ``out_valid``: all forces > 0, |c_i/a_i| <= ``max_ratio`` and
     |dbeta_i + dgamma_i| <= ``max_angle`` at every contact, and |eps| <= ``max_eps`` (the
     module constants ``MAX_ZERO_VELOCITY_RATIO``, ``MAX_ANGLE_SUM``,
     ``MAX_VELOCITY_DEVIATION``).
     """
+    if out_eps22.shape[0] == 0 and out_gamma.shape[0] == 0:
+        _analytic_tiles(dbeta, force, nominal_angle, ball_radius, semi_major_coefficient,
+                        elliptic_e, k_f, max_ratio, max_angle, max_eps, out_eps, out_valid)
+        return
     force_cbrt = cbrt_nonnegative(force)
     _analytic_solve(dbeta, force, force_cbrt, nominal_angle, ball_radius,
                     semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps,
                     out_eps, out_eps22, out_gamma, out_valid)
+
+
+@jit(inline="always")
+def analytic_ball(d0, d1, d2, d3, s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, r0, r1, r2,
+                  r3, half_tan, ball_radius, semi_major_coefficient, elliptic_e, k_f, max_ratio,
+                  max_angle, max_eps):
+    """The closed-form solve of Eqs. (17), (18), (21) and epsilon (23) of one ball.
+
+    dbeta_i ``d0..d3`` [rad], sin and cos of beta_0 + dbeta_i ``s0, c0 .. s3, c3``, forces
+    ``f0..f3`` [N] and their cube roots ``r0..r3``, in the order BL, BR, TR, TL. Returns
+    (epsilon, dgamma_0..3, valid) (the criteria of :func:`analytic_kernel`). No branch: the
+    loops over it vectorise.
+    """
+    # local x axes: BL (c,-s) BR (c,s) TR (-c,s) TL (-c,-s)
+    x0, y0 = c0, -s0
+    x1, y1 = c1, s1
+    x2, y2 = -c2, s2
+    x3, y3 = -c3, -s3
+    # inward normals y_i: BL (s,c) BR (-s,c) TR (-s,-c) TL (s,-c)
+    ok = min(min(f0, f1), min(f2, f3)) > 0.0
+    a0 = semi_major_coefficient * r0
+    a1 = semi_major_coefficient * r1
+    a2 = semi_major_coefficient * r2
+    a3 = semi_major_coefficient * r3
+    # u_i = q_i dgamma_i = friction force / mu; q_i = k_f R F_i / a_i * g_i, g = (-,-,+,+)
+    q0 = -k_f * ball_radius * f0 / a0
+    q1 = -k_f * ball_radius * f1 / a1
+    q2 = k_f * ball_radius * f2 / a2
+    q3 = k_f * ball_radius * f3 / a3
+    # spin moments / (mu R): m_i = 3/8 F_i a_i E(e) / R, signed with sgn(omega) = (+,-,-,+)
+    sc = 0.375 * elliptic_e / ball_radius
+    m0 = sc * f0 * a0
+    m1 = -sc * f1 * a1
+    m2 = -sc * f2 * a2
+    m3 = sc * f3 * a3
+    # Moment rows (ERRATA 8): sum u_i x_i + sum m_i y_i = 0
+    r2_ = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
+    r3_ = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
+    # Null vector of rows (1,1,1,1), (x_i), (y_i): n_j = (-1)^j det(without column j)
+    d012 = det3(1.0, 1.0, 1.0, x0, x1, x2, y0, y1, y2)
+    n0 = det3(1.0, 1.0, 1.0, x1, x2, x3, y1, y2, y3)
+    n1 = -det3(1.0, 1.0, 1.0, x0, x2, x3, y0, y2, y3)
+    n2 = det3(1.0, 1.0, 1.0, x0, x1, x3, y0, y1, y3)
+    n3 = -d012
+    # Particular solution with u_3 = 0 (Cramer); rhs (0, r2, r3)
+    p0 = det3(0.0, 1.0, 1.0, r2_, x1, x2, r3_, y1, y2) / d012
+    p1 = det3(1.0, 0.0, 1.0, x0, r2_, x2, y0, r3_, y2) / d012
+    p2 = det3(1.0, 1.0, 0.0, x0, x1, r2_, y0, y1, r3_) / d012
+    # Eq. (21): g_BL - g_BR - g_TR + g_TL = -(db_BL + db_TL - db_BR - db_TR)
+    rhs = -(d0 + d3 - d1 - d2)
+    w0, w1, w2, w3 = 1.0 / q0, -1.0 / q1, -1.0 / q2, 1.0 / q3
+    t = (rhs - (w0 * p0 + w1 * p1 + w2 * p2)) / (w0 * n0 + w1 * n1 + w2 * n2 + w3 * n3)
+    g0 = (p0 + t * n0) / q0
+    g1 = (p1 + t * n1) / q1
+    g2 = (p2 + t * n2) / q2
+    g3 = (t * n3) / q3
+    eps = half_tan * (-d1 - g1 + d3 + g3)
+    ok &= ball_radius * abs(g0) <= max_ratio * a0
+    ok &= ball_radius * abs(g1) <= max_ratio * a1
+    ok &= ball_radius * abs(g2) <= max_ratio * a2
+    ok &= ball_radius * abs(g3) <= max_ratio * a3
+    ok &= (abs(d0 + g0) <= max_angle) & (abs(d1 + g1) <= max_angle)
+    ok &= (abs(d2 + g2) <= max_angle) & (abs(d3 + g3) <= max_angle)
+    return eps, g0, g1, g2, g3, ok & (abs(eps) <= max_eps)
 
 
 @pjit
@@ -128,79 +205,121 @@ def _analytic_solve(
     dbeta, force, force_cbrt, nominal_angle, ball_radius, semi_major_coefficient, elliptic_e,
     k_f, max_ratio, max_angle, max_eps, out_eps, out_eps22, out_gamma, out_valid,
 ):
-    """Per-ball closed-form solve of Eqs. (17), (18), (21); epsilon from (23) and (22)."""
+    """Per-ball closed-form solve of Eqs. (17), (18), (21) (:func:`analytic_ball`); epsilon
+    from (23) and (22)."""
     half_tan = 0.5 * np.tan(nominal_angle)
     sin_b0, cos_b0 = np.sin(nominal_angle), np.cos(nominal_angle)
     with_eq22 = out_eps22.shape[0] > 0
     with_gamma = out_gamma.shape[0] > 0
     for n in prange(dbeta.shape[0]):
-        # Contact angles and axes. x_i, y_i components (global x, y), order BL, BR, TR, TL.
         s0, c0 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 0])
         s1, c1 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 1])
         s2, c2 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 2])
         s3, c3 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 3])
-        # local x axes: BL (c,-s) BR (c,s) TR (-c,s) TL (-c,-s)
-        x0, y0 = c0, -s0
-        x1, y1 = c1, s1
-        x2, y2 = -c2, s2
-        x3, y3 = -c3, -s3
-        # inward normals y_i: BL (s,c) BR (-s,c) TR (-s,-c) TL (s,-c)
-        f0, f1, f2, f3 = force[n, 0], force[n, 1], force[n, 2], force[n, 3]
-        ok = min(min(f0, f1), min(f2, f3)) > 0.0
-        a0 = semi_major_coefficient * force_cbrt[n, 0]
-        a1 = semi_major_coefficient * force_cbrt[n, 1]
-        a2 = semi_major_coefficient * force_cbrt[n, 2]
-        a3 = semi_major_coefficient * force_cbrt[n, 3]
-        # u_i = q_i dgamma_i = friction force / mu; q_i = k_f R F_i / a_i * g_i, g = (-,-,+,+)
-        q0 = -k_f * ball_radius * f0 / a0
-        q1 = -k_f * ball_radius * f1 / a1
-        q2 = k_f * ball_radius * f2 / a2
-        q3 = k_f * ball_radius * f3 / a3
-        # spin moments / (mu R): m_i = 3/8 F_i a_i E(e) / R, signed with sgn(omega) = (+,-,-,+)
-        sc = 0.375 * elliptic_e / ball_radius
-        m0 = sc * f0 * a0
-        m1 = -sc * f1 * a1
-        m2 = -sc * f2 * a2
-        m3 = sc * f3 * a3
-        # Moment rows (ERRATA 8): sum u_i x_i + sum m_i y_i = 0
-        r2 = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
-        r3 = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
-        # Null vector of rows (1,1,1,1), (x_i), (y_i): n_j = (-1)^j det(without column j)
-        d012 = det3(1.0, 1.0, 1.0, x0, x1, x2, y0, y1, y2)
-        n0 = det3(1.0, 1.0, 1.0, x1, x2, x3, y1, y2, y3)
-        n1 = -det3(1.0, 1.0, 1.0, x0, x2, x3, y0, y2, y3)
-        n2 = det3(1.0, 1.0, 1.0, x0, x1, x3, y0, y1, y3)
-        n3 = -d012
-        # Particular solution with u_3 = 0 (Cramer); rhs (0, r2, r3)
-        p0 = det3(0.0, 1.0, 1.0, r2, x1, x2, r3, y1, y2) / d012
-        p1 = det3(1.0, 0.0, 1.0, x0, r2, x2, y0, r3, y2) / d012
-        p2 = det3(1.0, 1.0, 0.0, x0, x1, r2, y0, y1, r3) / d012
-        # Eq. (21): g_BL - g_BR - g_TR + g_TL = -(db_BL + db_TL - db_BR - db_TR)
-        rhs = -(dbeta[n, 0] + dbeta[n, 3] - dbeta[n, 1] - dbeta[n, 2])
-        w0, w1, w2, w3 = 1.0 / q0, -1.0 / q1, -1.0 / q2, 1.0 / q3
-        t = (rhs - (w0 * p0 + w1 * p1 + w2 * p2)) / (w0 * n0 + w1 * n1 + w2 * n2 + w3 * n3)
-        g0 = (p0 + t * n0) / q0
-        g1 = (p1 + t * n1) / q1
-        g2 = (p2 + t * n2) / q2
-        g3 = (t * n3) / q3
+        eps, g0, g1, g2, g3, ok = analytic_ball(
+            dbeta[n, 0], dbeta[n, 1], dbeta[n, 2], dbeta[n, 3], s0, c0, s1, c1, s2, c2, s3,
+            c3, force[n, 0], force[n, 1], force[n, 2], force[n, 3], force_cbrt[n, 0],
+            force_cbrt[n, 1], force_cbrt[n, 2], force_cbrt[n, 3], half_tan, ball_radius,
+            semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps)
         if with_gamma:
             out_gamma[n, 0] = g0
             out_gamma[n, 1] = g1
             out_gamma[n, 2] = g2
             out_gamma[n, 3] = g3
-        eps = half_tan * (-dbeta[n, 1] - g1 + dbeta[n, 3] + g3)
         out_eps[n] = eps
         if with_eq22:
             out_eps22[n] = eq22_velocity_deviation(nominal_angle + dbeta[n, 0] + g0,
                                                    nominal_angle + dbeta[n, 1] + g1,
                                                    nominal_angle + dbeta[n, 3] + g3)
-        ok = ok and ball_radius * abs(g0) <= max_ratio * a0
-        ok = ok and ball_radius * abs(g1) <= max_ratio * a1
-        ok = ok and ball_radius * abs(g2) <= max_ratio * a2
-        ok = ok and ball_radius * abs(g3) <= max_ratio * a3
-        ok = ok and abs(dbeta[n, 0] + g0) <= max_angle and abs(dbeta[n, 1] + g1) <= max_angle
-        ok = ok and abs(dbeta[n, 2] + g2) <= max_angle and abs(dbeta[n, 3] + g3) <= max_angle
-        out_valid[n] = ok and abs(eps) <= max_eps
+        out_valid[n] = ok
+
+
+#: Balls per tile of :func:`analytic_tile` (its scratch, (4, TILE) angles and forces, stays
+#: in the L1 cache).
+ANALYTIC_TILE = 256
+
+
+@jit(inline="always")
+def analytic_tile(dbeta, force, m, nominal_angle, ball_radius, semi_major_coefficient,
+                  elliptic_e, k_f, max_ratio, max_angle, max_eps, out_eps, out_valid, at,
+                  paired=False):
+    """epsilon and validity of the m balls of a tile, written to ``out_eps[at + i]``,
+    ``out_valid[at + i]`` (the numbers of :func:`_analytic_solve`, bit for bit).
+
+    ``dbeta``, ``force`` (4, >= m): the tile's balls contact by contact (so that the loop
+    vectorises). One branch-free loop with the series sin and cos
+    (:func:`~tolsim.physics._fastmath.sin_cos_series`) and the Halley cube root
+    (:func:`~tolsim.physics._fastmath.cbrt_halley`), then the tile's balls outside their
+    ranges (|dbeta_i| > SMALL_ANGLE, F_i outside CBRT_RANGE, NaN) again with
+    :func:`~tolsim.physics._fastmath.sin_cos_near` and
+    :func:`~tolsim.physics._fastmath.cbrt_one`, which are the same functions inside them.
+    """
+    half_tan = 0.5 * np.tan(nominal_angle)
+    sin_b0, cos_b0 = np.sin(nominal_angle), np.cos(nominal_angle)
+    odd = False
+    for i in range(m):
+        d0, d1, d2, d3 = dbeta[0, i], dbeta[1, i], dbeta[2, i], dbeta[3, i]
+        f0, f1, f2, f3 = force[0, i], force[1, i], force[2, i], force[3, i]
+        s0, c0 = sin_cos_series(sin_b0, cos_b0, d0)
+        s1, c1 = sin_cos_series(sin_b0, cos_b0, d1)
+        s2, c2 = sin_cos_series(sin_b0, cos_b0, d2)
+        s3, c3 = sin_cos_series(sin_b0, cos_b0, d3)
+        r0, r1 = cbrt_halley(f0), cbrt_halley(f1)
+        r2 = r0 if paired else cbrt_halley(f2)
+        r3 = r1 if paired else cbrt_halley(f3)
+        eps, _, _, _, _, ok = analytic_ball(
+            d0, d1, d2, d3, s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, r0, r1, r2, r3,
+            half_tan, ball_radius, semi_major_coefficient, elliptic_e, k_f, max_ratio,
+            max_angle, max_eps)
+        out_eps[at + i] = eps
+        out_valid[at + i] = ok
+        odd |= _outside_series(d0, d1, d2, d3, f0, f1, f2, f3)
+    if not odd:
+        return
+    for i in range(m):
+        d0, d1, d2, d3 = dbeta[0, i], dbeta[1, i], dbeta[2, i], dbeta[3, i]
+        f0, f1, f2, f3 = force[0, i], force[1, i], force[2, i], force[3, i]
+        if not _outside_series(d0, d1, d2, d3, f0, f1, f2, f3):
+            continue
+        s0, c0 = sin_cos_near(sin_b0, cos_b0, nominal_angle, d0)
+        s1, c1 = sin_cos_near(sin_b0, cos_b0, nominal_angle, d1)
+        s2, c2 = sin_cos_near(sin_b0, cos_b0, nominal_angle, d2)
+        s3, c3 = sin_cos_near(sin_b0, cos_b0, nominal_angle, d3)
+        eps, _, _, _, _, ok = analytic_ball(
+            d0, d1, d2, d3, s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, cbrt_one(f0),
+            cbrt_one(f1), cbrt_one(f2), cbrt_one(f3), half_tan, ball_radius,
+            semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps)
+        out_eps[at + i] = eps
+        out_valid[at + i] = ok
+
+
+@jit(inline="always")
+def _outside_series(d0, d1, d2, d3, f0, f1, f2, f3):
+    """Whether a ball needs more than :func:`analytic_tile`'s branch-free loop: an angle
+    beyond SMALL_ANGLE (or NaN), a force outside CBRT_RANGE."""
+    angles = ((abs(d0) <= SMALL_ANGLE) & (abs(d1) <= SMALL_ANGLE) & (abs(d2) <= SMALL_ANGLE)
+              & (abs(d3) <= SMALL_ANGLE))
+    forces = cbrt_in_range(f0) & cbrt_in_range(f1) & cbrt_in_range(f2) & cbrt_in_range(f3)
+    return not (angles & forces)
+
+
+@pjit
+def _analytic_tiles(dbeta, force, nominal_angle, ball_radius, semi_major_coefficient,
+                    elliptic_e, k_f, max_ratio, max_angle, max_eps, out_eps, out_valid):
+    """:func:`analytic_kernel` without Eq. (22) and dgamma: the balls in tiles
+    (:func:`analytic_tile`), each gathered contact by contact."""
+    n = dbeta.shape[0]
+    for k in prange((n + ANALYTIC_TILE - 1) // ANALYTIC_TILE):
+        at = k * ANALYTIC_TILE
+        m = min(ANALYTIC_TILE, n - at)
+        d = np.empty((4, ANALYTIC_TILE))
+        f = np.empty((4, ANALYTIC_TILE))
+        for i in range(m):
+            for c in range(4):
+                d[c, i] = dbeta[at + i, c]
+                f[c, i] = force[at + i, c]
+        analytic_tile(d, f, m, nominal_angle, ball_radius, semi_major_coefficient, elliptic_e,
+                      k_f, max_ratio, max_angle, max_eps, out_eps, out_valid, at)
 
 
 #: Columns of ``out_load`` of :func:`analytic_loaded_kernel`.

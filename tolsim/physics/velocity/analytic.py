@@ -43,9 +43,11 @@ from tolsim._jit import kernel_array
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.velocity._analytic_kernels import (
+    ANALYTIC_TILE,
     LOAD_COLUMNS,
     analytic_kernel,
     analytic_loaded_kernel,
+    analytic_tile,
     count_bad_inputs,
     creep_coefficients_kernel,
     det3,
@@ -382,6 +384,7 @@ def point(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1) -> V
 
 
 __all__ = [
+    "ANALYTIC_TILE",
     "LOAD_COLUMNS",
     "MAX_ANGLE_DEVIATION",
     "MAX_ANGLE_SUM",
@@ -396,6 +399,7 @@ __all__ = [
     "analytic",
     "analytic_kernel",
     "analytic_loaded_kernel",
+    "analytic_tile",
     "as_ball_arrays",
     "count_bad_inputs",
     "creep_coefficients_kernel",

@@ -149,23 +149,43 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
     return out
 
 
+#: The first chunk of :func:`prefetched` is evaluated in two parts, the first holding this
+#: share of its blocks: only that part's draw is waited for, the rest is drawn meanwhile.
+FIRST_PART = 0.25
+
+
 def prefetched(config, chunks, spot_indices, save_samples=0):
     """``run_chunk`` over the chunks in order, drawing chunk i + 1 in a second thread while
     chunk i is evaluated (NumPy's generators and ufuncs and the Numba kernels release the
     GIL, so drawing overlaps the kernels). The draws are the same as without the thread.
     Drawing must not launch parallel (``prange``) kernels: Numba's ``workqueue`` threading
-    layer, the fallback where no OpenMP or TBB is installed, cannot run two at once."""
+    layer, the fallback where no OpenMP or TBB is installed, cannot run two at once.
+
+    Nothing is evaluated before the first draw: the first chunk of several blocks is drawn and
+    evaluated in two parts (the first :data:`FIRST_PART` of its blocks, then the rest, drawn
+    while the first part is evaluated), and yielded as one (the same rows: blocks evaluated
+    together do not depend on their batch,
+    :func:`tolsim.study.pipeline.block.evaluates_blocks_together`)."""
     if not evaluates_blocks_together(config) or len(chunks) < 2:
         for c in chunks:
             yield run_chunk(config, c, spot_indices, None, save_samples)
         return
+    split = 0 if len(chunks[0]) > 1 else 1  # after a probe block alone, the chunk after it
+    parts = []
+    for i, c in enumerate(chunks):
+        cut = int(len(c) * FIRST_PART) if i == split else 0
+        parts += [(i, list(c[:cut])), (i, list(c[cut:]))] if cut >= 1 else [(i, list(c))]
     with ThreadPoolExecutor(1, thread_name_prefix="tolsim-draw") as pool:
-        pending = pool.submit(draw_chunk, config, chunks[0])
-        for i, c in enumerate(chunks):
+        pending = pool.submit(draw_chunk, config, parts[0][1])
+        done = []
+        for k, (i, blocks) in enumerate(parts):
             drawn = pending.result()
-            if i + 1 < len(chunks):
-                pending = pool.submit(draw_chunk, config, chunks[i + 1])
-            yield run_chunk(config, c, spot_indices, drawn, save_samples)
+            if k + 1 < len(parts):
+                pending = pool.submit(draw_chunk, config, parts[k + 1][1])
+            done += run_chunk(config, blocks, spot_indices, drawn, save_samples)
+            if k + 1 == len(parts) or parts[k + 1][0] != i:
+                yield done
+                done = []
 
 
 #: glibc ``mallopt`` parameters and the values :func:`retain_freed_memory` sets.

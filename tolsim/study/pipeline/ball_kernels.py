@@ -1,6 +1,7 @@
 """Compiled glue of the ball evaluations (:mod:`tolsim.study.pipeline.evaluate`,
 :mod:`tolsim.study.pipeline.carriage_track`): contact counts, outcomes, loaded-ball gathers,
-loads along the carriage and the ``paired`` model's balls in one pass.
+loads along the carriage and the ``paired`` model's balls in one pass (with the ``analytic``
+velocity model too).
 
 Each kernel does in one pass, element by element, what a chain of NumPy calls did: the same
 comparisons and the same values, so the results are bit-identical to those calls.
@@ -11,6 +12,7 @@ from numba import prange
 
 from tolsim._jit import jit, pjit
 from tolsim.physics.geometry import paired_force_pair, rigid_angle_deviations
+from tolsim.physics.velocity.analytic import ANALYTIC_TILE, analytic_tile
 
 
 @jit(inline="always")
@@ -119,6 +121,33 @@ def _source_at(values, b):
     return values[b] if values.shape[0] > 1 else values[0]
 
 
+@jit(inline="always")
+def _paired_ball(tangential0, tangential1, tangential2, tangential3, bottom_rotation,
+                 top_rotation, centre_distance, side_load, normal_load, position, slots,
+                 side_slots, normal_slots, sin0, cos0, b, out_dbeta, out_force, out_four_point):
+    """The ``paired`` static model of ball ``b`` (:func:`paired_balls_kernel`): writes
+    ``out_dbeta[b]``, ``out_force[b]``, ``out_four_point[b]``."""
+    d0, d1, d2, d3 = rigid_angle_deviations(
+        _source_at(tangential0, b), _source_at(tangential1, b),
+        _source_at(tangential2, b), _source_at(tangential3, b),
+        _source_at(bottom_rotation, b), _source_at(top_rotation, b), centre_distance)
+    out_dbeta[b, 0] = d0
+    out_dbeta[b, 1] = d1
+    out_dbeta[b, 2] = d2
+    out_dbeta[b, 3] = d3
+    if position.shape[0] > 0:
+        nx, ny = loads_at_one(position[b], slots, side_slots, normal_slots)
+    else:
+        nx = side_load[b]
+        ny = normal_load[b]
+    f1, f2 = paired_force_pair(nx, ny, sin0, cos0)
+    out_force[b, 0] = f1
+    out_force[b, 1] = f2
+    out_force[b, 2] = f1
+    out_force[b, 3] = f2
+    out_four_point[b] = f1 > 0.0 and f2 > 0.0  # the four forces are f1, f2, f1, f2
+
+
 @pjit
 def paired_balls_kernel(tangential0, tangential1, tangential2, tangential3, bottom_rotation,
                         top_rotation, centre_distance, side_load, normal_load, position, slots,
@@ -140,28 +169,55 @@ def paired_balls_kernel(tangential0, tangential1, tangential2, tangential3, bott
     :func:`contact_counts_kernel`, bit for bit.
     """
     settled = 0
-    along = position.shape[0] > 0
     for b in prange(out_force.shape[0]):
-        d0, d1, d2, d3 = rigid_angle_deviations(
-            _source_at(tangential0, b), _source_at(tangential1, b),
-            _source_at(tangential2, b), _source_at(tangential3, b),
-            _source_at(bottom_rotation, b), _source_at(top_rotation, b), centre_distance)
-        out_dbeta[b, 0] = d0
-        out_dbeta[b, 1] = d1
-        out_dbeta[b, 2] = d2
-        out_dbeta[b, 3] = d3
-        if along:
-            nx, ny = loads_at_one(position[b], slots, side_slots, normal_slots)
-        else:
-            nx = side_load[b]
-            ny = normal_load[b]
-        f1, f2 = paired_force_pair(nx, ny, sin0, cos0)
-        out_force[b, 0] = f1
-        out_force[b, 1] = f2
-        out_force[b, 2] = f1
-        out_force[b, 3] = f2
-        out_four_point[b] = f1 > 0.0 and f2 > 0.0  # the four forces are f1, f2, f1, f2
+        _paired_ball(tangential0, tangential1, tangential2, tangential3, bottom_rotation,
+                     top_rotation, centre_distance, side_load, normal_load, position, slots,
+                     side_slots, normal_slots, sin0, cos0, b, out_dbeta, out_force,
+                     out_four_point)
         settled += _settle_ball(out_force, b, limit, out_count, out_clipped)
+    return settled
+
+
+@pjit
+def paired_analytic_kernel(tangential0, tangential1, tangential2, tangential3, bottom_rotation,
+                           top_rotation, centre_distance, side_load, normal_load, position,
+                           slots, side_slots, normal_slots, sin0, cos0, limit, nominal_angle,
+                           ball_radius, semi_major_coefficient, elliptic_e, k_f, max_ratio,
+                           max_angle, max_eps, out_dbeta, out_force, out_four_point, out_count,
+                           out_eps, out_valid):
+    """:func:`paired_balls_kernel` and the ``analytic`` velocity model of n balls, in one pass.
+
+    The arguments of :func:`paired_balls_kernel` up to ``limit`` and its outputs but the
+    clipped forces, which stay in a tile's scratch; then those of
+    :func:`tolsim.physics.velocity.analytic.analytic_kernel` from ``nominal_angle`` to
+    ``max_eps``, writing epsilon and its validity into ``out_eps``, ``out_valid`` (n,).
+    Per tile of ``ANALYTIC_TILE`` balls: the paired model of each ball, then
+    :func:`tolsim.physics.velocity.analytic.analytic_tile` on their clipped forces. The
+    numbers of :func:`paired_balls_kernel` then ``analytic_kernel`` on its clipped forces, bit
+    for bit. Returns the number of settled balls.
+    """
+    n = out_force.shape[0]
+    settled = 0
+    for k in prange((n + ANALYTIC_TILE - 1) // ANALYTIC_TILE):
+        at = k * ANALYTIC_TILE
+        m = min(ANALYTIC_TILE, n - at)
+        clipped = np.empty((ANALYTIC_TILE, 4))
+        dbeta_t = np.empty((4, ANALYTIC_TILE))
+        clipped_t = np.empty((4, ANALYTIC_TILE))
+        force = out_force[at:at + m]
+        count = out_count[at:at + m]
+        for i in range(m):
+            _paired_ball(tangential0, tangential1, tangential2, tangential3, bottom_rotation,
+                         top_rotation, centre_distance, side_load, normal_load, position,
+                         slots, side_slots, normal_slots, sin0, cos0, at + i, out_dbeta,
+                         out_force, out_four_point)
+            settled += _settle_ball(force, i, limit, count, clipped)
+            for c in range(4):
+                dbeta_t[c, i] = out_dbeta[at + i, c]
+                clipped_t[c, i] = clipped[i, c]
+        analytic_tile(dbeta_t, clipped_t, m, nominal_angle, ball_radius,
+                      semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps,
+                      out_eps, out_valid, at, True)
     return settled
 
 

@@ -78,6 +78,7 @@ from tolsim.study.pipeline.ball_kernels import (
     ball_outcomes_kernel,
     contact_counts_kernel,
     loads_at_kernel,
+    paired_analytic_kernel,
     paired_balls_kernel,
 )
 
@@ -212,7 +213,9 @@ def paired_balls(config, values: dict, shape, side_load=None, normal_load=None,
 
     The numbers of :func:`paired_static` on :func:`groove_error_fields` and of the contact
     counts of :func:`ball_velocities` (``paired_balls_kernel`` of
-    :mod:`tolsim.study.pipeline.ball_kernels`), without the GrooveErrors fields.
+    :mod:`tolsim.study.pipeline.ball_kernels`), without the GrooveErrors fields. With
+    ``velocity_model = "analytic"`` the same pass gives the balls' epsilon too
+    (``paired_analytic_kernel``: the numbers of :func:`_analytic` on the clipped forces).
 
     Parameters
     ----------
@@ -231,8 +234,9 @@ def paired_balls(config, values: dict, shape, side_load=None, normal_load=None,
     static : StaticResult
         n balls, flattened.
     counts : tuple
-        (count (n,) int8, clipped forces (n, 4), number of settled balls), as
-        ``ball_velocities`` takes them.
+        (count (n,) int8, clipped forces (n, 4), number of settled balls, fast), as
+        ``ball_velocities`` takes them: ``fast`` is (epsilon, valid) (n,) of the analytic
+        model (then the clipped forces are None), or None.
     """
     n = int(np.prod(shape))
 
@@ -244,7 +248,7 @@ def paired_balls(config, values: dict, shape, side_load=None, normal_load=None,
         return kernel_array(v).reshape(n)
 
     bearing = config.bearing
-    dbeta, force, clipped = np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4))
+    dbeta, force = np.empty((n, 4)), np.empty((n, 4))
     four_point = np.empty(n, dtype=np.bool_)
     count = np.empty(n, dtype=np.int8)
     if carriage_position is None:
@@ -255,14 +259,22 @@ def paired_balls(config, values: dict, shape, side_load=None, normal_load=None,
         position = per_ball(carriage_position)
         slots, side_slots, normal_slots = _slot_loads(config)
     angle = bearing.nominal_contact_angle
+    paired = (*(per_ball(values.get(name)) for name in PAIRED_SOURCES),
+              bearing.groove_radius - bearing.ball_radius, nx, ny, position, slots, side_slots,
+              normal_slots, np.sin(angle), np.cos(angle), round_off_force(bearing))
+    clipped, fast = None, None
     with serial_if_small(n):
-        settled = paired_balls_kernel(
-            *(per_ball(values.get(name)) for name in PAIRED_SOURCES),
-            bearing.groove_radius - bearing.ball_radius, nx, ny, position, slots, side_slots,
-            normal_slots, np.sin(angle), np.cos(angle), round_off_force(bearing), dbeta, force,
-            four_point, count, clipped)
+        if config.study.velocity_model == "analytic":
+            eps, valid = np.empty(n), np.empty(n, dtype=np.bool_)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                settled = paired_analytic_kernel(*paired, *_analytic_arguments(bearing), dbeta,
+                                                 force, four_point, count, eps, valid)
+            fast = (eps, valid)
+        else:
+            clipped = np.empty((n, 4))
+            settled = paired_balls_kernel(*paired, dbeta, force, four_point, count, clipped)
     static = StaticResult(dbeta, force, np.ones(n, dtype=bool), four_point)
-    return static, (count, clipped, settled)
+    return static, (count, clipped, settled, fast)
 
 
 _ZERO = np.zeros(1)
@@ -347,14 +359,19 @@ def _eq24(dbeta, force, bearing, out_eps, out_valid):
                 out_eps, out_valid)
 
 
-def _analytic(dbeta, force, bearing, out_eps, out_valid):
+def _analytic_arguments(bearing):
+    """The arguments of ``analytic_kernel`` from ``nominal_angle`` to ``max_eps``."""
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                          bearing.poisson_ratio)
+    return (bearing.nominal_contact_angle, bearing.ball_radius, hc.semi_major_coefficient,
+            hc.elliptic_e, K_F_PAPER, MAX_ZERO_VELOCITY_RATIO, MAX_ANGLE_SUM,
+            MAX_VELOCITY_DEVIATION)
+
+
+def _analytic(dbeta, force, bearing, out_eps, out_valid):
     eps22, gamma = np.empty(0), np.empty((0, 4))  # not needed: skipped
-    analytic_kernel(dbeta, force, bearing.nominal_contact_angle, bearing.ball_radius,
-                    hc.semi_major_coefficient, hc.elliptic_e, K_F_PAPER,
-                    MAX_ZERO_VELOCITY_RATIO, MAX_ANGLE_SUM, MAX_VELOCITY_DEVIATION, out_eps,
-                    eps22, gamma, out_valid)
+    analytic_kernel(dbeta, force, *_analytic_arguments(bearing), out_eps, eps22, gamma,
+                    out_valid)
 
 
 def _full(dbeta, force, bearing, out_eps, out_valid):
@@ -631,9 +648,10 @@ def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallSta
     shape : tuple
         Shape of the returned per-ball arrays.
     counts : tuple, optional
-        (count, clipped, settled): ``contact_counts_kernel`` of
+        (count, clipped, settled, fast): ``contact_counts_kernel`` of
         :mod:`tolsim.study.pipeline.ball_kernels` on ``static.normal_force``, if the caller
-        has them (:func:`paired_balls`); computed here if not.
+        has them (:func:`paired_balls`), and the fast model's (epsilon, valid) if it has
+        them too (else None); computed here if not.
 
     Returns
     -------
@@ -650,14 +668,17 @@ def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallSta
             clipped = np.empty((n, 4))  # max(F, 0) of the settled forces, for the fast model
             settled = contact_counts_kernel(force, round_off_force(config.bearing), count,
                                             clipped)
+            computed = None
         else:
-            count, clipped, settled = counts
+            count, clipped, settled, computed = counts
         if settled:
             force = settle_round_off_contacts(force, loaded_contacts(force),
                                               config.bearing)[0]
         eps = np.empty(n)
         valid = np.zeros(n, dtype=np.bool_)
-        if fast:
+        if fast and computed is not None:
+            eps, valid = computed
+        elif fast:
             with np.errstate(divide="ignore", invalid="ignore"):
                 VELOCITY_KERNELS[config.study.velocity_model](dbeta, clipped, config.bearing,
                                                               eps, valid)
