@@ -27,13 +27,12 @@ from tolsim.physics.geometry import TABLE1
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.static import GrooveErrors
 from tolsim.study.execution.runner import run_study
+from tolsim.study.pipeline.carriage_track_kernels import advance_kernel, carry_slots_kernel
 from tolsim.study.pipeline.carriage_track import (
     CarriageBalls,
     CarriageFirstContact,
     CarriageFrame,
     TrackTrace,
-    advance_kernel,
-    carry_slots_kernel,
     first_contact_carriage_track,
     slot_capacity,
 )
@@ -392,7 +391,7 @@ class _StartSolved(CarriageFrame):
 
     def start(self, k, t, position):
         if k > 0 and self.start_solved:
-            self.fresh = None
+            self._carried()  # the balls that entered (``fresh``), which move from their entry
             return CarriageBalls(*self.evaluation(position, self.ids, t, self.rows))
         return super().start(k, t, position)
 

@@ -40,6 +40,8 @@ from tolsim.study.pipeline.carriage_track_kernels import (
     carriage_motion_kernel,
     carry_pairs_kernel,
     carry_slots_kernel,
+    entering_by_kernel,
+    entry_shift_kernel,
     first_contact_kernel,
     newton_start_kernel,
     remember_kernel,
@@ -284,13 +286,23 @@ class CarriageBalls:
             self._unloaded = out
         return self._unloaded
 
+    def without(self, slots):
+        """These balls with those in ``slots`` (a mask) taken out, as empty slots."""
+        keep = self.loaded & ~slots
+        index = np.flatnonzero(keep[self.loaded])
+        return CarriageBalls(np.where(slots, np.nan, self.velocity_deviation),
+                             self.valid | slots, keep, self.batch,
+                             lambda: self.balls.rows(index), self.unloaded & ~slots)
+
 
 @dataclass
 class CarriageStep(Step):
     """A :class:`tolsim.study.pipeline.propagation.Step` of the carriage frame: ``rows`` the
     assemblies integrated, ``ball_id`` their balls' ids (re-mapped in place by the frame's
     advance); after it, ``previous_id`` the ids before, ``overflow`` (m_k,) and ``events``
-    (exit ids, exit times, entry ids, entry times) of :func:`advance_kernel`."""
+    (exit ids, exit times, entry ids, entry times) of
+    :func:`.carriage_track_kernels.advance_kernel`; ``closed`` (m_k, T, S - 1) the time a pair closed
+    in the previous step after an entry, NaN elsewhere (:func:`.carriage_track_kernels.entry_shift_kernel`; None: none)."""
 
     rows: np.ndarray = None
     ball_id: np.ndarray = None
@@ -298,6 +310,7 @@ class CarriageStep(Step):
     previous_id: np.ndarray = None
     overflow: np.ndarray = None
     events: list = None
+    closed: np.ndarray = None
 
 
 class CarriageFrame(AlongTrackFrame):
@@ -305,7 +318,7 @@ class CarriageFrame(AlongTrackFrame):
     slots (size, tracks, slots) at carriage-frame positions z, moving at
     dz/dt = -(1 - epsilon) v / 2; the rows still followed, each evaluation one batched,
     warm-started carriage solve (:class:`_Evaluation`); exits and entries at the end of each
-    step (:func:`advance_kernel`).
+    step (:func:`.carriage_track_kernels.advance_kernel`).
 
     ``initial_state``, ``initial_carriage``: the balls and the carriages at t = 0;
     ``resolve_seconds``: full-model re-solves after the start of the stroke [s]. An unloaded
@@ -315,6 +328,10 @@ class CarriageFrame(AlongTrackFrame):
     """
 
     pushes_unloaded = True
+    #: The balls enter with the drawn gaps, in the midpoint solves from their entry and at
+    #: their own epsilon from it (:func:`.carriage_track_kernels.entering_by_kernel`,
+    #: :func:`.carriage_track_kernels.entry_shift_kernel`).
+    draws_entries = True
 
     def __init__(self, config, block):
         self.config = config
@@ -340,6 +357,9 @@ class CarriageFrame(AlongTrackFrame):
         self.resolve_seconds = 0.0
         self.rows = self.ids = None
         self.midpoint = self.last = self.fresh = None
+        # each slot's entry in the step before (its time, the ball ahead's epsilon)
+        self.entry_time, self.entry_velocity = np.full(ball_z.shape, np.nan), np.zeros(
+            ball_z.shape)
 
     def select(self, following):
         rows = np.flatnonzero(following)
@@ -350,9 +370,21 @@ class CarriageFrame(AlongTrackFrame):
 
     def evaluate(self, position, t):
         self.midpoint = position
-        balls = CarriageBalls(*self.evaluation(position, self.ids, t, self.rows))
+        z, ids, entering = (self._entering(position) if self.draws_entries
+                            else (position, self.ids, None))
+        balls = CarriageBalls(*self.evaluation(z, ids, t, self.rows))
         self.resolve_seconds += balls.balls.resolve_seconds
-        return balls
+        return balls if entering is None else balls.without(entering)
+
+    def _entering(self, position):
+        """The slots at ``position`` (the midpoint) with the balls that have entered by then
+        (:func:`.carriage_track_kernels.entering_by_kernel`), and those (None: none)."""
+        z, ids = np.empty_like(position), np.empty_like(self.ids)
+        entering = np.empty(position.shape, dtype=bool)
+        entering_by_kernel(position, self.ids, self.rows, self.count, self.entered,
+                           self.entering_gap, self.half_zone, self.diameter, self.balls, z,
+                           ids, entering)
+        return (z, ids, entering) if entering.any() else (position, self.ids, None)
 
     def start(self, k, t, position):
         if k > 0:  # the previous midpoint's balls (Notes of first_contact_carriage_track)
@@ -365,7 +397,8 @@ class CarriageFrame(AlongTrackFrame):
 
     def _carried(self):
         """The previous step's midpoint balls in this step's slots, carried by id through the
-        exits and entries (:func:`carry_slots_kernel`); an entered ball is ``fresh``."""
+        exits and entries (:func:`.carriage_track_kernels.carry_slots_kernel`); an entered ball is
+        ``fresh``."""
         last = self.last
         old_row = np.searchsorted(last.rows, self.rows)  # the rows followed only shrink
         if not np.array_equal(last.rows[np.minimum(old_row, len(last.rows) - 1)], self.rows):
@@ -439,6 +472,13 @@ class CarriageFrame(AlongTrackFrame):
 
     def step(self, k, t, dt, position, new, state1, state2):
         state1 = self._joined(state1, state2)
+        closed = None
+        if (self.draws_entries and self.fresh is not None
+                and (take := self.fresh & state2.loaded).any()):
+            closed = np.empty(position.shape[:2] + (max(self.slots - 1, 0),))
+            entry_shift_kernel(position, new, take, nan_to_num(state2.velocity_deviation),
+                               self.entry_time, self.entry_velocity, self.rows, t,
+                               self.diameter, 0.5 * self.v, closed)
         ok = self.ball_ok[self.rows] & state1.valid & state2.valid
         gap_old, gap_new = (gaps(x.reshape(-1, self.slots), self.diameter).reshape(
             x.shape[:-1] + (-1,)) for x in (position, new))
@@ -449,7 +489,7 @@ class CarriageFrame(AlongTrackFrame):
             gap_new = force_gaps(gap_new, unloaded, edge, ok)
         self.last = CarriageStep(k, t, dt, position, new, gap_old, gap_new, ok, state1,
                                  state2, rows=self.rows, ball_id=self.ids,
-                                 midpoint=self.midpoint)
+                                 midpoint=self.midpoint, closed=closed)
         return self.last
 
     def advance(self, step, new):
@@ -466,6 +506,8 @@ class CarriageFrame(AlongTrackFrame):
         self.position[rows], self.ball_id[rows], self.ball_ok[rows] = new, ids, ok
         self.count[rows], self.entered[rows] = sub_count, sub_entered
         step.overflow, step.events = overflow, events
+        self.entry_time[rows] = events[3]  # the ball ahead's epsilon from its travel:
+        self.entry_velocity[rows] = 1.0 - (z0 - new) / (0.5 * self.v * step.dt)
 
 
 class CarriageFirstContact(StepObserver):
@@ -497,7 +539,8 @@ class CarriageFirstContact(StepObserver):
             *(kernel_array(x, np.bool_) for x in (step.ball_ok, step.state1.valid,
                                                    step.state2.valid)),
             self.half_zone, float(step.t), float(step.dt), self.balls, self.time, self.pair,
-            self.valid, self.searching)
+            self.valid, self.searching,
+            np.empty((0, 0, 0)) if step.closed is None else step.closed)
 
     def moved(self, step):
         searching = self.searching
@@ -663,7 +706,7 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     ``study.time_steps`` steps of dt: the positions at the midpoint with epsilon_1, epsilon_2
     with the carriage solved there (a ball outside the zone at the midpoint keeps epsilon_1),
     then the step with epsilon_2. epsilon_1 is the previous step's epsilon_2, each ball's own,
-    carried through the exits and entries by its id (:func:`carry_slots_kernel`; at t = 0 the
+    carried through the exits and entries by its id (:func:`.carriage_track_kernels.carry_slots_kernel`; at t = 0 the
     carriage solved at the start), as for free balls (Notes of
     :func:`tolsim.study.pipeline.propagation.integrate_along_track`): it only places the
     midpoint, half a step early, so the step stays second order between the exits and entries
@@ -709,7 +752,7 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     midpoint and (free motion) end, so a ball leaving at the trailing end drops its contacts in
     the step in which it leaves, and an entering ball joins from the next step with its drawn
     gap open; the pair flags follow the balls through the exits and entries
-    (:func:`carry_pairs_kernel`). Unloaded balls are in no train and pass through as above. The
+    (:func:`.carriage_track_kernels.carry_pairs_kernel`). Unloaded balls are in no train and pass through as above. The
     first contact, its pair and ``train_valid`` are located on the free motion of each step and
     counted only up to the first contact, so they are those of the run without ``[contact]``,
     bit for bit. The friction figures: Notes of
@@ -745,5 +788,4 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
 
 
 __all__ = ["CarriageBalls", "CarriageFirstContact", "CarriageFrame", "CarriageStep",
-           "CarriageTrains", "TrackTrace", "advance_kernel", "carry_pairs_kernel",
-           "first_contact_carriage_track", "slot_capacity"]
+           "CarriageTrains", "TrackTrace", "first_contact_carriage_track", "slot_capacity"]

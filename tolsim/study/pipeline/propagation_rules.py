@@ -34,10 +34,17 @@ def propagation_assumption(propagation: str, steps: int | None = None,
 
 
 #: Automatic ``study.time_steps``: steps per shortest length over which a ball's epsilon
-#: changes (:func:`time_steps`, which gives the measurements).
+#: changes (:func:`time_steps`, which gives the measurements): free balls and a carriage
+#: with ``[carriage.circuit]``.
 STEPS_PER_LENGTH = 4.0
+#: The same for a carriage without a circuit, whose entering balls are in the midpoint solve
+#: from their entry and move at their own epsilon from it (second order between events).
+STEPS_PER_LENGTH_CARRIAGE = 2.0
+#: The same for a carriage without a circuit with an end relief (balls unload and reload
+#: within it, and most first contacts form there).
+STEPS_PER_LENGTH_RELIEF = 8.0
 #: The same with ``[contact]`` (the friction figures' extremes are taken over step means) or
-#: an end relief (balls unload and reload within it: first order, and slow).
+#: an end relief with a circuit (first order, and slow).
 STEPS_PER_LENGTH_CONTACT = 40.0
 #: The fewest automatic steps over the stroke.
 MIN_TIME_STEPS = 8
@@ -116,9 +123,14 @@ def time_steps(config) -> int:
     lengths = epsilon_lengths(config)
     if not lengths:
         return MIN_TIME_STEPS
-    fine = config.contact is not None or (config.carriage is not None
-                                          and config.carriage.end_relief_depth > 0)
-    per_length = STEPS_PER_LENGTH_CONTACT if fine else STEPS_PER_LENGTH
+    carriage = config.carriage
+    relief = carriage is not None and carriage.end_relief_depth > 0
+    if config.contact is not None or (relief and carriage.circuit is not None):
+        per_length = STEPS_PER_LENGTH_CONTACT
+    elif carriage is not None and carriage.circuit is None:
+        per_length = STEPS_PER_LENGTH_RELIEF if relief else STEPS_PER_LENGTH_CARRIAGE
+    else:
+        per_length = STEPS_PER_LENGTH
     travel = 0.5 * config.motion.stroke
     return max(MIN_TIME_STEPS,
                int(np.ceil(per_length * travel / min(lengths.values()) * (1 - 1e-12))))
