@@ -207,11 +207,12 @@ class _Evaluation:
         -----
         The carriage moves smoothly between two evaluations (the midpoints, dt apart) except
         when a ball enters or leaves the zone, so the line through the two latest solutions
-        starts the Newton O(dt^2) from the solution instead of O(dt): with the automatic step
-        (:func:`tolsim.study.pipeline.propagation_rules.time_steps`) of
-        ``configs/carriage_preload.toml`` (20 steps) it takes 2.74 joint Newton steps on
-        average instead of 3.0 (256 assemblies, seed 12; at 200 steps 2.08 against 2.05, where
-        the start is close either way).
+        starts the Newton O(dt^2) from the solution instead of O(dt). On
+        ``configs/carriage_preload.toml`` (256 assemblies, seed 12) that gave 2.74 joint Newton
+        steps on average instead of 3.0 at 20 steps, but nothing at its automatic 10 steps
+        (:func:`tolsim.study.pipeline.propagation_rules.time_steps`: 3.0 either way, half a
+        ball pitch apart: an entry between every two solves) nor at 200 steps (2.07 against
+        2.04, where the start is close either way).
         The Newton's convergence test is the same, so the solution changes only within its
         tolerance, and an assembly's start depends only on its own history (not on the
         batch, chunking or threads).
@@ -673,10 +674,19 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
       distribution (draw 5 of :mod:`tolsim.study.sampling`, one independent gap per entering
       ball, in order of entry): the k-th ball to enter a track enters when the ball ahead of it
       (the zone's leading ball) has drifted to L/2 - D - g_k, so that it sits at L/2 with the gap
-      g_k: as soon as there is room for it. At the end of the step it is placed at
-      z_ahead + D + g_k (it is taken to move with the ball ahead during the part of the step
-      after its entry: a position error of at most |epsilon_k - epsilon_ahead| v dt / 2), and
-      its entry time is interpolated as the exit's. In a zone longer than the initial train the
+      g_k: as soon as there is room for it. Its entry time is interpolated as the exit's. The
+      carriage solve at a step's midpoint holds the balls that have entered by then (z_ahead +
+      D + g_k <= L/2 at the midpoint, :func:`.carriage_slots.entering_by_kernel`), as it drops
+      the balls that have left, so the carriage sees an entry at the first midpoint after it;
+      their own epsilon there is not used (the step's balls leave them out). At the end of the
+      step the entering ball is placed at z_ahead + D + g_k, having moved with the ball ahead
+      since its entry; in the next step, once its own epsilon is known at the midpoint, it is
+      moved by tau (epsilon_k - epsilon_ahead) v / 2 (tau the time since its entry,
+      :func:`.carriage_slots.entry_shift_kernel`), so that it moves at its own epsilon from
+      its entry, to O(tau dt); a pair that this closes closed at the time interpolated
+      linearly since the entry, its first contact then. Without either the step's error of
+      the time to first contact falls at first order (Notes of
+      :func:`.propagation_rules.time_steps`). In a zone longer than the initial train the
       balls enter one by one at the start of a step in which there is room, each at L/2.
       It brings its own ``ball`` tolerances (draw 5), its track's rail and carriage values, and
       reads the rail fields at its rail position.
@@ -713,11 +723,8 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     and costs one carriage solve instead of two. A ball that entered at the end of the previous
     step has no epsilon_1: it moves to the midpoint at epsilon = 0 and then takes its midpoint
     state for the step's start as well, so that it is in the step's trains and checks as when
-    the start was solved. On ``configs/carriage_preload.toml`` (2 000 assemblies, seed 12, the
-    automatic 20 steps) the same 519 assemblies touch at the same pairs as when the start of
-    every step was solved, their times within 4.7e-5 s (mean 1.1e-6 s) of a 0.5 s stroke,
-    where the step's own error is some 10 ms (:func:`.propagation_rules.time_steps`); of the
-    packaged sweeps' points one moved by one assembly in 256. Each evaluation is one batched
+    the start was solved (:func:`.propagation_rules.time_steps` gives the step's error). Each
+    evaluation is one batched
     carriage solve over the assemblies still being followed, and every Newton starts from the
     assembly's own solution of its previous evaluation (so an assembly's results depend only
     on its own history, not on the batch, chunking or threads). Exits and entries are applied
