@@ -27,7 +27,6 @@ from tolsim.physics.geometry import TABLE1
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.static import GrooveErrors
 from tolsim.study.execution.runner import run_study
-from tolsim.study.pipeline.carriage_track_kernels import advance_kernel, carry_slots_kernel
 from tolsim.study.pipeline.carriage_track import (
     CarriageBalls,
     CarriageFirstContact,
@@ -36,6 +35,7 @@ from tolsim.study.pipeline.carriage_track import (
     first_contact_carriage_track,
     slot_capacity,
 )
+from tolsim.study.pipeline.carriage_track_kernels import advance_kernel, carry_slots_kernel
 from tolsim.study.pipeline.propagation import (
     StepObserver,
     first_contact_tracks,

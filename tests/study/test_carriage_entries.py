@@ -9,12 +9,12 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import load_config
+from tolsim.study.pipeline.carriage_track import CarriageFrame, first_contact_carriage_track
 from tolsim.study.pipeline.carriage_track_kernels import (
     entering_by_kernel,
     entry_shift_kernel,
     first_contact_kernel,
 )
-from tolsim.study.pipeline.carriage_track import CarriageFrame, first_contact_carriage_track
 from tolsim.study.sampling import sample_block
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -59,7 +59,7 @@ def test_entering_by_kernel_matches_its_twin():
     out = (np.empty_like(z), np.empty_like(ids), np.empty(z.shape, dtype=bool))
     entering_by_kernel(z, ids, rows, count, entered, gap, half, d, balls, *out)
     ref = entering_by_twin(z, ids, rows, count, entered, gap, half, d, balls)
-    for got, want in zip(out, ref):
+    for got, want in zip(out, ref, strict=True):
         assert_array_equal(got, want)
     assert 50 < out[2].sum() < z.size / 2 and (out[2].sum(axis=2) > 1).any()
 

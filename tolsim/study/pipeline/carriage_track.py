@@ -38,7 +38,6 @@ from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.carriage_track_kernels import (
     advance_kernel,
     carriage_motion_kernel,
-    carry_pairs_kernel,
     carry_slots_kernel,
     entering_by_kernel,
     entry_shift_kernel,
@@ -302,8 +301,8 @@ class CarriageStep(Step):
     assemblies integrated, ``ball_id`` their balls' ids (re-mapped in place by the frame's
     advance); after it, ``previous_id`` the ids before, ``overflow`` (m_k,) and ``events``
     (exit ids, exit times, entry ids, entry times) of
-    :func:`.carriage_track_kernels.advance_kernel`; ``closed`` (m_k, T, S - 1) the time a pair closed
-    in the previous step after an entry, NaN elsewhere (:func:`.carriage_track_kernels.entry_shift_kernel`; None: none)."""
+    :func:`advance_kernel`; ``closed`` (m_k, T, S - 1) the time a pair closed
+    in the previous step after an entry, NaN elsewhere (:func:`entry_shift_kernel`; None: none)."""
 
     rows: np.ndarray = None
     ball_id: np.ndarray = None
@@ -319,7 +318,7 @@ class CarriageFrame(AlongTrackFrame):
     slots (size, tracks, slots) at carriage-frame positions z, moving at
     dz/dt = -(1 - epsilon) v / 2; the rows still followed, each evaluation one batched,
     warm-started carriage solve (:class:`_Evaluation`); exits and entries at the end of each
-    step (:func:`.carriage_track_kernels.advance_kernel`).
+    step (:func:`advance_kernel`).
 
     ``initial_state``, ``initial_carriage``: the balls and the carriages at t = 0;
     ``resolve_seconds``: full-model re-solves after the start of the stroke [s]. An unloaded
@@ -330,8 +329,8 @@ class CarriageFrame(AlongTrackFrame):
 
     pushes_unloaded = True
     #: The balls enter with the drawn gaps, in the midpoint solves from their entry and at
-    #: their own epsilon from it (:func:`.carriage_track_kernels.entering_by_kernel`,
-    #: :func:`.carriage_track_kernels.entry_shift_kernel`).
+    #: their own epsilon from it (:func:`entering_by_kernel`,
+    #: :func:`entry_shift_kernel`).
     draws_entries = True
 
     def __init__(self, config, block):
@@ -379,7 +378,7 @@ class CarriageFrame(AlongTrackFrame):
 
     def _entering(self, position):
         """The slots at ``position`` (the midpoint) with the balls that have entered by then
-        (:func:`.carriage_track_kernels.entering_by_kernel`), and those (None: none)."""
+        (:func:`entering_by_kernel`), and those (None: none)."""
         z, ids = np.empty_like(position), np.empty_like(self.ids)
         entering = np.empty(position.shape, dtype=bool)
         entering_by_kernel(position, self.ids, self.rows, self.count, self.entered,
@@ -398,7 +397,7 @@ class CarriageFrame(AlongTrackFrame):
 
     def _carried(self):
         """The previous step's midpoint balls in this step's slots, carried by id through the
-        exits and entries (:func:`.carriage_track_kernels.carry_slots_kernel`); an entered ball is
+        exits and entries (:func:`carry_slots_kernel`); an entered ball is
         ``fresh``."""
         last = self.last
         old_row = np.searchsorted(last.rows, self.rows)  # the rows followed only shrink
@@ -676,13 +675,13 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
       (the zone's leading ball) has drifted to L/2 - D - g_k, so that it sits at L/2 with the gap
       g_k: as soon as there is room for it. Its entry time is interpolated as the exit's. The
       carriage solve at a step's midpoint holds the balls that have entered by then (z_ahead +
-      D + g_k <= L/2 at the midpoint, :func:`.carriage_slots.entering_by_kernel`), as it drops
+      D + g_k <= L/2 at the midpoint, :func:`entering_by_kernel`), as it drops
       the balls that have left, so the carriage sees an entry at the first midpoint after it;
       their own epsilon there is not used (the step's balls leave them out). At the end of the
       step the entering ball is placed at z_ahead + D + g_k, having moved with the ball ahead
       since its entry; in the next step, once its own epsilon is known at the midpoint, it is
       moved by tau (epsilon_k - epsilon_ahead) v / 2 (tau the time since its entry,
-      :func:`.carriage_slots.entry_shift_kernel`), so that it moves at its own epsilon from
+      :func:`entry_shift_kernel`), so that it moves at its own epsilon from
       its entry, to O(tau dt); a pair that this closes closed at the time interpolated
       linearly since the entry, its first contact then. Without either the step's error of
       the time to first contact falls at first order (Notes of
@@ -716,7 +715,7 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     ``study.time_steps`` steps of dt: the positions at the midpoint with epsilon_1, epsilon_2
     with the carriage solved there (a ball outside the zone at the midpoint keeps epsilon_1),
     then the step with epsilon_2. epsilon_1 is the previous step's epsilon_2, each ball's own,
-    carried through the exits and entries by its id (:func:`.carriage_track_kernels.carry_slots_kernel`; at t = 0 the
+    carried through the exits and entries by its id (:func:`carry_slots_kernel`; at t = 0 the
     carriage solved at the start), as for free balls (Notes of
     :func:`tolsim.study.pipeline.propagation.integrate_along_track`): it only places the
     midpoint, half a step early, so the step stays second order between the exits and entries
@@ -759,7 +758,7 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     midpoint and (free motion) end, so a ball leaving at the trailing end drops its contacts in
     the step in which it leaves, and an entering ball joins from the next step with its drawn
     gap open; the pair flags follow the balls through the exits and entries
-    (:func:`.carriage_track_kernels.carry_pairs_kernel`). Unloaded balls are in no train and pass through as above. The
+    (:func:`carry_pairs_kernel`). Unloaded balls are in no train and pass through as above. The
     first contact, its pair and ``train_valid`` are located on the free motion of each step and
     counted only up to the first contact, so they are those of the run without ``[contact]``,
     bit for bit. The friction figures: Notes of
