@@ -143,7 +143,7 @@ ROWS = (
     Row("along_free_ratio", "free balls: cost per ball along the track / constant (target: ≤ 5)",
         ALONG_STUDY, _ALONG.format(r"whatif_along_track\.toml", "free balls")
         + r"cost per ball\s+([\d.]+)x", "×", 0),
-    Row("along_carriage", "`carriage_preload.toml` along the track (automatic step: 20 steps)",
+    Row("along_carriage", "`carriage_preload.toml` along the track (automatic step: 10 steps)",
         ALONG_STUDY,
         _ALONG.format(r"carriage_preload\.toml", "carriage")
         + r"along_track\s+\S+ s\s+(\d+) balls/s", "balls/s", -2),

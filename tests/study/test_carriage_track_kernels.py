@@ -111,7 +111,7 @@ def test_first_contact_kernel_matches_its_numpy_twin():
                                                             valid.copy()]
     searching = np.empty(m, dtype=bool)
     first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, 0.2, 0.025, balls,
-                         *mine, searching)
+                         *mine, searching, np.empty((0, 0, 0)))
     want = first_contact_twin(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, 0.2, 0.025,
                               balls, *twin)
     assert_array_equal(searching, want)

@@ -33,7 +33,8 @@ from tolsim.physics.trains.regimes import TRAIN_COLUMNS
 from tolsim.study.analyses import friction_examples as fx
 from tolsim.study.execution.runner import run_study
 from tolsim.study.pipeline import track_friction as fr
-from tolsim.study.pipeline.carriage_track import carry_pairs_kernel, first_contact_carriage_track
+from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
+from tolsim.study.pipeline.carriage_track_kernels import carry_pairs_kernel
 from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
 from tolsim.study.pipeline.propagation import first_contact_along_track
 from tolsim.study.sampling import error_values, sample_block

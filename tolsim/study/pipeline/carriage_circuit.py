@@ -155,7 +155,7 @@ def entering_velocity(eps, stiffness, loaded, pushed=None):
     outside the zone at the step's evaluations, so it has none of its own, and moves for the
     rest of the step with those of the ball ahead of it (the zone's entry ball, the last to
     have entered), as the open carriage's entering ball
-    (:func:`tolsim.study.pipeline.carriage_track.advance_kernel`). Its position error is at
+    (:func:`tolsim.study.pipeline.carriage_track_kernels.advance_kernel`). Its position error is at
     most |epsilon_k - epsilon_ahead| v dt / 2, against |epsilon_k| v dt / 2 at epsilon = 0:
     neighbours at the zone's entry share the carriage's load there and their track's rail and
     carriage errors, so only the ball's own part of epsilon remains. (Measured with
@@ -171,7 +171,7 @@ def entering_velocity(eps, stiffness, loaded, pushed=None):
 def circuit_events(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id, previous_id,
                    slot_ring, t, dt):
     """The exits and entries of a step of circuits, as the open carriage's
-    (:func:`tolsim.study.pipeline.carriage_track.advance_kernel`, for a
+    (:func:`tolsim.study.pipeline.carriage_track_kernels.advance_kernel`, for a
     :class:`tolsim.study.pipeline.carriage_track.TrackTrace`).
 
     Parameters
@@ -235,6 +235,7 @@ class CircuitFrame(CarriageFrame):
     """
 
     pushes_unloaded = True
+    draws_entries = False  # the circuit brings its balls (advance)
 
     def __init__(self, config, block):
         super().__init__(config, block)

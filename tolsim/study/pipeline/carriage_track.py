@@ -38,8 +38,9 @@ from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.carriage_track_kernels import (
     advance_kernel,
     carriage_motion_kernel,
-    carry_pairs_kernel,
     carry_slots_kernel,
+    entering_by_kernel,
+    entry_shift_kernel,
     first_contact_kernel,
     newton_start_kernel,
     remember_kernel,
@@ -205,11 +206,12 @@ class _Evaluation:
         -----
         The carriage moves smoothly between two evaluations (the midpoints, dt apart) except
         when a ball enters or leaves the zone, so the line through the two latest solutions
-        starts the Newton O(dt^2) from the solution instead of O(dt): with the automatic step
-        (:func:`tolsim.study.pipeline.propagation_rules.time_steps`) of
-        ``configs/carriage_preload.toml`` (20 steps) it takes 2.74 joint Newton steps on
-        average instead of 3.0 (256 assemblies, seed 12; at 200 steps 2.08 against 2.05, where
-        the start is close either way).
+        starts the Newton O(dt^2) from the solution instead of O(dt). On
+        ``configs/carriage_preload.toml`` (256 assemblies, seed 12) that gave 2.74 joint Newton
+        steps on average instead of 3.0 at 20 steps, but nothing at its automatic 10 steps
+        (:func:`tolsim.study.pipeline.propagation_rules.time_steps`: 3.0 either way, half a
+        ball pitch apart: an entry between every two solves) nor at 200 steps (2.07 against
+        2.04, where the start is close either way).
         The Newton's convergence test is the same, so the solution changes only within its
         tolerance, and an assembly's start depends only on its own history (not on the
         batch, chunking or threads).
@@ -284,13 +286,23 @@ class CarriageBalls:
             self._unloaded = out
         return self._unloaded
 
+    def without(self, slots):
+        """These balls with those in ``slots`` (a mask) taken out, as empty slots."""
+        keep = self.loaded & ~slots
+        index = np.flatnonzero(keep[self.loaded])
+        return CarriageBalls(np.where(slots, np.nan, self.velocity_deviation),
+                             self.valid | slots, keep, self.batch,
+                             lambda: self.balls.rows(index), self.unloaded & ~slots)
+
 
 @dataclass
 class CarriageStep(Step):
     """A :class:`tolsim.study.pipeline.propagation.Step` of the carriage frame: ``rows`` the
     assemblies integrated, ``ball_id`` their balls' ids (re-mapped in place by the frame's
     advance); after it, ``previous_id`` the ids before, ``overflow`` (m_k,) and ``events``
-    (exit ids, exit times, entry ids, entry times) of :func:`advance_kernel`."""
+    (exit ids, exit times, entry ids, entry times) of
+    :func:`advance_kernel`; ``closed`` (m_k, T, S - 1) the time a pair closed
+    in the previous step after an entry, NaN elsewhere (:func:`entry_shift_kernel`; None: none)."""
 
     rows: np.ndarray = None
     ball_id: np.ndarray = None
@@ -298,6 +310,7 @@ class CarriageStep(Step):
     previous_id: np.ndarray = None
     overflow: np.ndarray = None
     events: list = None
+    closed: np.ndarray = None
 
 
 class CarriageFrame(AlongTrackFrame):
@@ -315,6 +328,10 @@ class CarriageFrame(AlongTrackFrame):
     """
 
     pushes_unloaded = True
+    #: The balls enter with the drawn gaps, in the midpoint solves from their entry and at
+    #: their own epsilon from it (:func:`entering_by_kernel`,
+    #: :func:`entry_shift_kernel`).
+    draws_entries = True
 
     def __init__(self, config, block):
         self.config = config
@@ -340,6 +357,9 @@ class CarriageFrame(AlongTrackFrame):
         self.resolve_seconds = 0.0
         self.rows = self.ids = None
         self.midpoint = self.last = self.fresh = None
+        # each slot's entry in the step before (its time, the ball ahead's epsilon)
+        self.entry_time, self.entry_velocity = np.full(ball_z.shape, np.nan), np.zeros(
+            ball_z.shape)
 
     def select(self, following):
         rows = np.flatnonzero(following)
@@ -350,9 +370,21 @@ class CarriageFrame(AlongTrackFrame):
 
     def evaluate(self, position, t):
         self.midpoint = position
-        balls = CarriageBalls(*self.evaluation(position, self.ids, t, self.rows))
+        z, ids, entering = (self._entering(position) if self.draws_entries
+                            else (position, self.ids, None))
+        balls = CarriageBalls(*self.evaluation(z, ids, t, self.rows))
         self.resolve_seconds += balls.balls.resolve_seconds
-        return balls
+        return balls if entering is None else balls.without(entering)
+
+    def _entering(self, position):
+        """The slots at ``position`` (the midpoint) with the balls that have entered by then
+        (:func:`entering_by_kernel`), and those (None: none)."""
+        z, ids = np.empty_like(position), np.empty_like(self.ids)
+        entering = np.empty(position.shape, dtype=bool)
+        entering_by_kernel(position, self.ids, self.rows, self.count, self.entered,
+                           self.entering_gap, self.half_zone, self.diameter, self.balls, z,
+                           ids, entering)
+        return (z, ids, entering) if entering.any() else (position, self.ids, None)
 
     def start(self, k, t, position):
         if k > 0:  # the previous midpoint's balls (Notes of first_contact_carriage_track)
@@ -365,7 +397,8 @@ class CarriageFrame(AlongTrackFrame):
 
     def _carried(self):
         """The previous step's midpoint balls in this step's slots, carried by id through the
-        exits and entries (:func:`carry_slots_kernel`); an entered ball is ``fresh``."""
+        exits and entries (:func:`carry_slots_kernel`); an entered ball is
+        ``fresh``."""
         last = self.last
         old_row = np.searchsorted(last.rows, self.rows)  # the rows followed only shrink
         if not np.array_equal(last.rows[np.minimum(old_row, len(last.rows) - 1)], self.rows):
@@ -439,6 +472,13 @@ class CarriageFrame(AlongTrackFrame):
 
     def step(self, k, t, dt, position, new, state1, state2):
         state1 = self._joined(state1, state2)
+        closed = None
+        if (self.draws_entries and self.fresh is not None
+                and (take := self.fresh & state2.loaded).any()):
+            closed = np.empty(position.shape[:2] + (max(self.slots - 1, 0),))
+            entry_shift_kernel(position, new, take, nan_to_num(state2.velocity_deviation),
+                               self.entry_time, self.entry_velocity, self.rows, t,
+                               self.diameter, 0.5 * self.v, closed)
         ok = self.ball_ok[self.rows] & state1.valid & state2.valid
         gap_old, gap_new = (gaps(x.reshape(-1, self.slots), self.diameter).reshape(
             x.shape[:-1] + (-1,)) for x in (position, new))
@@ -449,7 +489,7 @@ class CarriageFrame(AlongTrackFrame):
             gap_new = force_gaps(gap_new, unloaded, edge, ok)
         self.last = CarriageStep(k, t, dt, position, new, gap_old, gap_new, ok, state1,
                                  state2, rows=self.rows, ball_id=self.ids,
-                                 midpoint=self.midpoint)
+                                 midpoint=self.midpoint, closed=closed)
         return self.last
 
     def advance(self, step, new):
@@ -466,6 +506,8 @@ class CarriageFrame(AlongTrackFrame):
         self.position[rows], self.ball_id[rows], self.ball_ok[rows] = new, ids, ok
         self.count[rows], self.entered[rows] = sub_count, sub_entered
         step.overflow, step.events = overflow, events
+        self.entry_time[rows] = events[3]  # the ball ahead's epsilon from its travel:
+        self.entry_velocity[rows] = 1.0 - (z0 - new) / (0.5 * self.v * step.dt)
 
 
 class CarriageFirstContact(StepObserver):
@@ -497,7 +539,8 @@ class CarriageFirstContact(StepObserver):
             *(kernel_array(x, np.bool_) for x in (step.ball_ok, step.state1.valid,
                                                    step.state2.valid)),
             self.half_zone, float(step.t), float(step.dt), self.balls, self.time, self.pair,
-            self.valid, self.searching)
+            self.valid, self.searching,
+            np.empty((0, 0, 0)) if step.closed is None else step.closed)
 
     def moved(self, step):
         searching = self.searching
@@ -630,10 +673,19 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
       distribution (draw 5 of :mod:`tolsim.study.sampling`, one independent gap per entering
       ball, in order of entry): the k-th ball to enter a track enters when the ball ahead of it
       (the zone's leading ball) has drifted to L/2 - D - g_k, so that it sits at L/2 with the gap
-      g_k: as soon as there is room for it. At the end of the step it is placed at
-      z_ahead + D + g_k (it is taken to move with the ball ahead during the part of the step
-      after its entry: a position error of at most |epsilon_k - epsilon_ahead| v dt / 2), and
-      its entry time is interpolated as the exit's. In a zone longer than the initial train the
+      g_k: as soon as there is room for it. Its entry time is interpolated as the exit's. The
+      carriage solve at a step's midpoint holds the balls that have entered by then (z_ahead +
+      D + g_k <= L/2 at the midpoint, :func:`entering_by_kernel`), as it drops
+      the balls that have left, so the carriage sees an entry at the first midpoint after it;
+      their own epsilon there is not used (the step's balls leave them out). At the end of the
+      step the entering ball is placed at z_ahead + D + g_k, having moved with the ball ahead
+      since its entry; in the next step, once its own epsilon is known at the midpoint, it is
+      moved by tau (epsilon_k - epsilon_ahead) v / 2 (tau the time since its entry,
+      :func:`entry_shift_kernel`), so that it moves at its own epsilon from
+      its entry, to O(tau dt); a pair that this closes closed at the time interpolated
+      linearly since the entry, its first contact then. Without either the step's error of
+      the time to first contact falls at first order (Notes of
+      :func:`.propagation_rules.time_steps`). In a zone longer than the initial train the
       balls enter one by one at the start of a step in which there is room, each at L/2.
       It brings its own ``ball`` tolerances (draw 5), its track's rail and carriage values, and
       reads the rail fields at its rail position.
@@ -670,11 +722,8 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     and costs one carriage solve instead of two. A ball that entered at the end of the previous
     step has no epsilon_1: it moves to the midpoint at epsilon = 0 and then takes its midpoint
     state for the step's start as well, so that it is in the step's trains and checks as when
-    the start was solved. On ``configs/carriage_preload.toml`` (2 000 assemblies, seed 12, the
-    automatic 20 steps) the same 519 assemblies touch at the same pairs as when the start of
-    every step was solved, their times within 4.7e-5 s (mean 1.1e-6 s) of a 0.5 s stroke,
-    where the step's own error is some 10 ms (:func:`.propagation_rules.time_steps`); of the
-    packaged sweeps' points one moved by one assembly in 256. Each evaluation is one batched
+    the start was solved (:func:`.propagation_rules.time_steps` gives the step's error). Each
+    evaluation is one batched
     carriage solve over the assemblies still being followed, and every Newton starts from the
     assembly's own solution of its previous evaluation (so an assembly's results depend only
     on its own history, not on the batch, chunking or threads). Exits and entries are applied
@@ -745,5 +794,4 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
 
 
 __all__ = ["CarriageBalls", "CarriageFirstContact", "CarriageFrame", "CarriageStep",
-           "CarriageTrains", "TrackTrace", "advance_kernel", "carry_pairs_kernel",
-           "first_contact_carriage_track", "slot_capacity"]
+           "CarriageTrains", "TrackTrace", "first_contact_carriage_track", "slot_capacity"]

@@ -1,5 +1,6 @@
 """Compiled glue of the carriage along the track (:mod:`tolsim.study.pipeline.carriage_track`):
-the balls' motion in the carriage frame, the exits and entries of a step, the balls and pair
+the balls' motion in the carriage frame, the exits and entries of a step, the balls that have
+entered by its midpoint and an entering ball's own motion from its entry, the balls and pair
 flags carried to new slots by their ids, each assembly's Newton start and the step's first
 contacts.
 
@@ -203,7 +204,7 @@ def remember_kernel(rows, t, displacement, solved, start, solution, solved_at):
 
 @jit
 def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, dt, balls,
-                         time, pair, valid, searching):
+                         time, pair, valid, searching, closed):
     """The first contacts of a step (:class:`tolsim.study.pipeline.carriage_track.
     CarriageFirstContact`), in place.
 
@@ -213,7 +214,9 @@ def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, 
     ``ok``) closes when gap1 <= 0 < gap0 - gap1, at frac = 0 (gap0 <= 0) or gap0 / (gap0 -
     gap1) of the step, if both balls, interpolated from ``z0`` to ``z1``, are in [-half,
     half] then; the earliest, t + frac dt (first track, then trailing pair, on ties), is the
-    row's ``time`` and ``pair`` tr (balls - 1) + min(j, balls - 2).
+    row's ``time`` and ``pair`` tr (balls - 1) + min(j, balls - 2). ``closed`` (m, T, S - 1),
+    when it has rows: a pair (both balls ``ok``) that closed before the step at that time
+    (:func:`entry_shift_kernel`; NaN elsewhere) counts as closing then.
     """
     m, tracks, pairs = gap0.shape
     for a in range(m):
@@ -231,6 +234,10 @@ def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, 
         for tr in range(tracks):
             for j in range(pairs):
                 g0, g1 = gap0[a, tr, j], gap1[a, tr, j]
+                if closed.shape[0] and ok[a, tr, j + 1] and ok[a, tr, j] and (
+                        closed[a, tr, j] < best):  # (False for NaN)
+                    best = closed[a, tr, j]
+                    where = tr * (balls - 1) + min(j, max(balls - 2, 0))
                 if not (g1 <= 0.0 and g0 > g1 and ok[a, tr, j + 1] and ok[a, tr, j]):
                     continue
                 frac = 0.0 if g0 <= 0.0 else g0 / (g0 - g1)
@@ -254,3 +261,76 @@ def carriage_motion_kernel(position, w, h, v, out):
     positions [m], epsilon [-], h [s], v [m/s])."""
     for i in range(position.shape[0]):
         out[i] = position[i] - h * (1.0 - nan_to_num_one(w[i])) * 0.5 * v
+
+
+@jit
+def entering_by_kernel(z, ball_id, rows, count, entered, entering_gap, half_zone, diameter,
+                       balls, out_z, out_id, out_entering):
+    """The slots (m_k, T, S) at positions ``z`` with the balls that have entered by then.
+
+    ``z``, ``ball_id``: the slots of assemblies ``rows`` (the frame's ``count``, ``entered``
+    and ``entering_gap`` (size, T, capacity) are indexed by assembly); copied to ``out_z``,
+    ``out_id``, then, as in :func:`advance_kernel`, while the next entering ball's place
+    z_lead + D + g_k is inside the zone (<= ``half_zone``) it takes the next free slot there
+    with id ``balls`` + k (``out_entering`` True), as long as slots and drawn balls remain.
+    The step's midpoint carriage solve thus holds the balls that entered in its first half.
+    """
+    m, tracks, slots = z.shape
+    capacity = entering_gap.shape[2]
+    for r in range(m):
+        a = rows[r]
+        for tr in range(tracks):
+            for j in range(slots):
+                out_z[r, tr, j] = z[r, tr, j]
+                out_id[r, tr, j] = ball_id[r, tr, j]
+                out_entering[r, tr, j] = False
+            c, k = count[a, tr], entered[a, tr]
+            while 0 < c < slots and k < capacity:
+                znew = out_z[r, tr, c - 1] + diameter + entering_gap[a, tr, k]
+                if znew > half_zone:
+                    break
+                out_z[r, tr, c], out_id[r, tr, c], out_entering[r, tr, c] = znew, balls + k, True
+                c += 1
+                k += 1
+
+
+@jit
+def entry_shift_kernel(position, free, take, eps, entry_time, entry_velocity, rows, t,
+                       diameter, half_v, out_closed):
+    """An entering ball's own motion from its entry, in place (rows m_k, T, S).
+
+    A ball that entered in the previous step at ``entry_time`` moved with the ball ahead of it
+    (epsilon ``entry_velocity``, the ball ahead's over that step) until that step's end t; where
+    ``take`` (it is loaded at this step's midpoint) it is moved by
+    tau (epsilon - epsilon_ahead) v / 2, tau = t - entry_time, at its own ``eps`` of this
+    midpoint, in ``position`` (at t) and ``free`` (the end of this step): the position it
+    would have had at its own epsilon, to O(tau dt). The frame arrays ``entry_time`` and
+    ``entry_velocity`` (size, T, S) are indexed by assembly (``rows``); ``half_v`` = v / 2.
+    ``out_closed`` (m_k, T, S - 1): for a pair whose gap that moves to below zero, the time in
+    (t - tau, t] at which it closed (linear in between; tau the later entry's); NaN elsewhere.
+    """
+    m, tracks, slots = position.shape
+    for r in range(m):
+        a = rows[r]
+        for tr in range(tracks):
+            for j in range(slots - 1):
+                out_closed[r, tr, j] = np.nan
+            for j in range(slots):
+                if not take[r, tr, j]:
+                    continue
+                tau = t - entry_time[a, tr, j]
+                shift = tau * (eps[r, tr, j] - entry_velocity[a, tr, j]) * half_v
+                position[r, tr, j] += shift
+                free[r, tr, j] += shift
+                if j == 0:
+                    continue
+                after = position[r, tr, j] - position[r, tr, j - 1] - diameter
+                if after < 0.0:
+                    before = after - shift  # the pair's gap without the shifts
+                    if take[r, tr, j - 1]:  # the ball ahead entered too (shifted already)
+                        ahead = t - entry_time[a, tr, j - 1]
+                        before += ahead * (eps[r, tr, j - 1] - entry_velocity[a, tr, j - 1]) * (
+                            half_v)
+                        tau = min(tau, ahead)
+                    frac = -after / (before - after) if before > after else 1.0
+                    out_closed[r, tr, j - 1] = t - min(frac, 1.0) * tau

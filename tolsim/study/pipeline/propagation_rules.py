@@ -34,10 +34,17 @@ def propagation_assumption(propagation: str, steps: int | None = None,
 
 
 #: Automatic ``study.time_steps``: steps per shortest length over which a ball's epsilon
-#: changes (:func:`time_steps`, which gives the measurements).
+#: changes (:func:`time_steps`, which gives the measurements): free balls and a carriage
+#: with ``[carriage.circuit]``.
 STEPS_PER_LENGTH = 4.0
+#: The same for a carriage without a circuit, whose entering balls are in the midpoint solve
+#: from their entry and move at their own epsilon from it (second order between events).
+STEPS_PER_LENGTH_CARRIAGE = 2.0
+#: The same for a carriage without a circuit with an end relief (balls unload and reload
+#: within it, and most first contacts form there).
+STEPS_PER_LENGTH_RELIEF = 8.0
 #: The same with ``[contact]`` (the friction figures' extremes are taken over step means) or
-#: an end relief (balls unload and reload within it: first order, and slow).
+#: an end relief with a circuit (first order, and slow).
 STEPS_PER_LENGTH_CONTACT = 40.0
 #: The fewest automatic steps over the stroke.
 MIN_TIME_STEPS = 8
@@ -72,53 +79,70 @@ def time_steps(config) -> int:
     A ball moves along the rail and through the carriage at about v / 2, so over the stroke
     s it travels s / 2 in either frame, and its epsilon changes over the lengths l of
     :func:`epsilon_lengths`. The automatic step lets a ball travel 1 / c of the shortest of
-    them: n = max(:data:`MIN_TIME_STEPS`, ceil(c (s / 2) / l_min)), c =
-    :data:`STEPS_PER_LENGTH` (4), or :data:`STEPS_PER_LENGTH_CONTACT` (40) with
-    ``[contact]`` or an end relief; :data:`MIN_TIME_STEPS` without any length (epsilon then
-    changes only
-    through the unloaded balls, the trains after contact, or not at all).
+    them: n = max(:data:`MIN_TIME_STEPS`, ceil(c (s / 2) / l_min)), with c =
+    :data:`STEPS_PER_LENGTH` (4) for free balls and a carriage with ``[carriage.circuit]``,
+    :data:`STEPS_PER_LENGTH_CARRIAGE` (2) for a carriage without one,
+    :data:`STEPS_PER_LENGTH_RELIEF` (8) for that carriage with an end relief, and
+    :data:`STEPS_PER_LENGTH_CONTACT` (40) with ``[contact]`` or an end relief with a circuit;
+    :data:`MIN_TIME_STEPS` without any length (epsilon then changes only through the
+    unloaded balls, the trains after contact, or not at all).
 
     The factors come from ``benchmarks/convergence_along_track.py`` (each config's seed,
-    paired against a fine-step reference on the same assemblies). c = 4 gives 20 steps on
-    ``configs/whatif_along_track.toml`` (the 10.05 mm ball spacing of its yaw-moment loads;
-    its rail field: 20 mm) and ``configs/carriage_preload.toml`` (10.05 mm ball pitch), 42 on
-    ``configs/carriage_circuit.toml`` (4.8 mm pitch). There (600 assemblies, reference 800
-    steps) P(contact) lay inside its own 95 % interval, as it did from 5 steps on (c = 1);
-    the paired change against the reference (assemblies that touch only at n / only in the
-    reference) was +2/-5 (free balls), +9/-5 (carriage) and +3/-5 (circuit), and the mean
-    change of the time to first contact 8.1, 10 and 4.5 ms of a 500 ms stroke (27, 18 and
-    12 ms at 10 steps; 0.43, 4.4 and 3.5 ms at 40). The error falls at first order for the
-    carriage (balls enter and leave at step ends) and the circuit, at up to second order for
-    free balls. With ``[contact]`` the largest increase and the ripple are extremes of
-    step-mean friction forces, which converge at first order from below: on the free balls
-    (1 000 assemblies) the ripple was 0.1711 N at 40 steps against 0.1737 N at 400, outside
-    its own (narrow, +-0.0007 N) interval, and 0.1734 N at 200 steps against 0.1739 N at
-    800, inside; hence c = 40 (200 steps there, the former fixed default). On the carriage
-    (600 assemblies, reference 800 steps) the largest and the mean increase are inside their
-    intervals from 10 steps, but the ripple does not converge: 0.1275, 0.1294, 0.1298,
-    0.1141 and 0.1181 N at 20, 40, 80, 200 and 400 steps against 0.1274 N. Its extremes
-    are set by the short windows in which the zone holds one ball fewer or one more (between
-    an exit and the next entry), about one ball's F_0 (0.07-0.1 N) for as long as the gaps
-    make the window last (2.1 ms in the first assembly of seed 12); a step sees a window
-    only when its midpoint falls in it, and an entering ball is evaluated from the next step
-    on. A convergent ripple needs the carriage solved in each window, at the exit and entry
-    events (not built; README, "Carriage and preload").
+    paired against a fine-step reference on the same assemblies, 600 assemblies, reference
+    800 steps). P(contact) lay inside its own 95 % interval from 5 steps on everywhere.
+    c = 4 gives 20 steps on ``configs/whatif_along_track.toml`` (the 10.05 mm ball spacing
+    of its yaw-moment loads; its rail field: 20 mm) and 42 on
+    ``configs/carriage_circuit.toml`` (4.8 mm pitch): the paired change against the
+    reference (assemblies that touch only at n / only in the reference) was +2/-5 and
+    +3/-5, the mean change of the time to first contact 8.1 and 4.5 ms of a 500 ms stroke
+    (27 and 12 ms at 10 steps, 0.43 and 3.5 ms at 40): second order for free balls, first
+    order for the circuit, whose balls enter at the step ends. A carriage without a circuit
+    solves its midpoint with the balls that have entered by then and moves an entering ball
+    at its own epsilon from its entry (Notes of :func:`tolsim.study.pipeline.carriage_track.
+    first_contact_carriage_track`, "Entry"), so its error falls at second order between the
+    exits and entries: on ``configs/carriage_preload.toml`` (10.05 mm pitch) the mean change
+    was 37, 7.0, 2.9 and 0.86 ms at 5, 10, 20 and 40 steps (+18/-9, +5/-8, +1/-3, +0/-0),
+    where entering balls solved from the next step and moving with the ball ahead gave
+    18, 10 and 4.4 ms at 10, 20 and 40 steps (+18/-11, +9/-5, +2/-3): first order. Hence
+    c = 2 there (10 steps, more accurate than the former 20).
+
+    With ``[contact]`` the largest increase and the ripple are extremes of step-mean friction
+    forces, which converge at first order from below: on the free balls (1 000 assemblies)
+    the ripple was 0.1711 N at 40 steps against 0.1737 N at 400, outside its own (narrow,
+    +-0.0007 N) interval, and 0.1734 N at 200 steps against 0.1739 N at 800, inside; hence
+    c = 40 (200 steps there, the former fixed default). On the open carriage the mean
+    increase is inside its interval from 10 steps and the largest from 40 (0.00056, 0.00062
+    and 0.00067 N at 10, 20 and 40 steps against 0.00074 N), but the ripple does not
+    converge: 0.148, 0.150, 0.152, 0.157 and 0.165 N at 10, 20, 40, 80 and 200 steps against
+    0.178 N at 800 (the reference outside each interval). Its extremes are set by the short
+    windows in which the zone holds one ball fewer or one more (between an exit and the next
+    entry), about one ball's F_0 (0.07-0.1 N) for as long as the gaps make the window last
+    (about 2 ms); a step sees a window only when its midpoint falls in it, so the extremes
+    grow as the steps shrink towards the windows' length. A convergent ripple needs
+    the carriage solved at the exit and entry events (not built; README, "Carriage and
+    preload").
 
     An end relief converges slowly: its balls unload near the zone's ends and load again, and
     most first contacts form there. ``configs/carriage_preload.toml`` with 1 um / 15 mm of
-    relief (2 000 assemblies, seed 12): P(contact) 0.4845, 0.5275, 0.5430, 0.5545 and 0.5560
-    at 20, 40, 80, 200 and 400 steps, so c = 4 (20 steps) lies outside the 400-step
-    reference's interval [0.5339, 0.5779] and c = 40 (200 steps) inside it; hence the fine
-    factor with a relief.
+    relief (2 000 assemblies, seed 12): P(contact) 0.4465, 0.5315, 0.5520, 0.5580 and 0.5595
+    at 10, 20, 40, 80 and 400 steps; 20 steps lie outside the 400-step reference's interval
+    [0.5374, 0.5814] and 40 inside it, hence c = 8 (40 steps). Entering balls solved from the
+    next step and moving with the ball ahead needed 200 steps (0.4845, 0.5275, 0.5430, 0.5545
+    and 0.5560 at 20, 40, 80, 200 and 400), as a circuit with a relief still does (c = 40).
     """
     if config.study.time_steps is not None:
         return int(config.study.time_steps)
     lengths = epsilon_lengths(config)
     if not lengths:
         return MIN_TIME_STEPS
-    fine = config.contact is not None or (config.carriage is not None
-                                          and config.carriage.end_relief_depth > 0)
-    per_length = STEPS_PER_LENGTH_CONTACT if fine else STEPS_PER_LENGTH
+    carriage = config.carriage
+    relief = carriage is not None and carriage.end_relief_depth > 0
+    if config.contact is not None or (relief and carriage.circuit is not None):
+        per_length = STEPS_PER_LENGTH_CONTACT
+    elif carriage is not None and carriage.circuit is None:
+        per_length = STEPS_PER_LENGTH_RELIEF if relief else STEPS_PER_LENGTH_CARRIAGE
+    else:
+        per_length = STEPS_PER_LENGTH
     travel = 0.5 * config.motion.stroke
     return max(MIN_TIME_STEPS,
                int(np.ceil(per_length * travel / min(lengths.values()) * (1 - 1e-12))))

@@ -28,10 +28,8 @@ from tolsim.physics.trains.regimes import (
     settle_release_pushes,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS, creep_coefficients_kernel
-from tolsim.study.pipeline.carriage_track import (
-    carry_pairs_kernel,
-    first_contact_carriage_track,
-)
+from tolsim.study.pipeline.carriage_track import first_contact_carriage_track
+from tolsim.study.pipeline.carriage_track_kernels import carry_pairs_kernel
 from tolsim.study.pipeline.evaluate import BallState, evaluate_balls_at
 from tolsim.study.pipeline.friction_kernels import (
     RELEASED,
