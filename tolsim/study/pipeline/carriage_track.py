@@ -300,9 +300,9 @@ class CarriageStep(Step):
     """A :class:`tolsim.study.pipeline.propagation.Step` of the carriage frame: ``rows`` the
     assemblies integrated, ``ball_id`` their balls' ids (re-mapped in place by the frame's
     advance); after it, ``previous_id`` the ids before, ``overflow`` (m_k,) and ``events``
-    (exit ids, exit times, entry ids, entry times) of
-    :func:`advance_kernel`; ``closed`` (m_k, T, S - 1) the time a pair closed
-    in the previous step after an entry, NaN elsewhere (:func:`entry_shift_kernel`; None: none)."""
+    (exit ids, exit times, entry ids, entry times) of :func:`advance_kernel`; ``closed``
+    (m_k, T, S - 1) the time a pair closed in the previous step after an entry, NaN elsewhere
+    (:func:`entry_shift_kernel`; None: none)."""
 
     rows: np.ndarray = None
     ball_id: np.ndarray = None
@@ -329,8 +329,7 @@ class CarriageFrame(AlongTrackFrame):
 
     pushes_unloaded = True
     #: The balls enter with the drawn gaps, in the midpoint solves from their entry and at
-    #: their own epsilon from it (:func:`entering_by_kernel`,
-    #: :func:`entry_shift_kernel`).
+    #: their own epsilon from it (:func:`entering_by_kernel`, :func:`entry_shift_kernel`).
     draws_entries = True
 
     def __init__(self, config, block):
@@ -397,8 +396,7 @@ class CarriageFrame(AlongTrackFrame):
 
     def _carried(self):
         """The previous step's midpoint balls in this step's slots, carried by id through the
-        exits and entries (:func:`carry_slots_kernel`); an entered ball is
-        ``fresh``."""
+        exits and entries (:func:`carry_slots_kernel`); an entered ball is ``fresh``."""
         last = self.last
         old_row = np.searchsorted(last.rows, self.rows)  # the rows followed only shrink
         if not np.array_equal(last.rows[np.minimum(old_row, len(last.rows) - 1)], self.rows):
@@ -675,15 +673,15 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
       (the zone's leading ball) has drifted to L/2 - D - g_k, so that it sits at L/2 with the gap
       g_k: as soon as there is room for it. Its entry time is interpolated as the exit's. The
       carriage solve at a step's midpoint holds the balls that have entered by then (z_ahead +
-      D + g_k <= L/2 at the midpoint, :func:`entering_by_kernel`), as it drops
-      the balls that have left, so the carriage sees an entry at the first midpoint after it;
-      their own epsilon there is not used (the step's balls leave them out). At the end of the
-      step the entering ball is placed at z_ahead + D + g_k, having moved with the ball ahead
-      since its entry; in the next step, once its own epsilon is known at the midpoint, it is
-      moved by tau (epsilon_k - epsilon_ahead) v / 2 (tau the time since its entry,
-      :func:`entry_shift_kernel`), so that it moves at its own epsilon from
-      its entry, to O(tau dt); a pair that this closes closed at the time interpolated
-      linearly since the entry, its first contact then. Without either the step's error of
+      D + g_k <= L/2 at the midpoint, :func:`entering_by_kernel`), as it drops the balls that
+      have left, so the carriage sees an entry at the first midpoint after it; their own
+      epsilon there is not used (the step's balls leave them out). At the end of the step the
+      entering ball is placed at z_ahead + D + g_k, having moved with the ball ahead since its
+      entry; in the next step, once its own epsilon is known at the midpoint, it is moved by
+      tau (epsilon_k - epsilon_ahead) v / 2 (tau the time since its entry,
+      :func:`entry_shift_kernel`), so that it moves at its own epsilon from its entry, to
+      O(tau dt); a pair that this closes closed at the time interpolated linearly since the
+      entry, its first contact then. Without either the step's error of
       the time to first contact falls at first order (Notes of
       :func:`.propagation_rules.time_steps`). In a zone longer than the initial train the
       balls enter one by one at the start of a step in which there is room, each at L/2.
@@ -723,14 +721,14 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     step has no epsilon_1: it moves to the midpoint at epsilon = 0 and then takes its midpoint
     state for the step's start as well, so that it is in the step's trains and checks as when
     the start was solved (:func:`.propagation_rules.time_steps` gives the step's error). Each
-    evaluation is one batched
-    carriage solve over the assemblies still being followed, and every Newton starts from the
-    assembly's own solution of its previous evaluation (so an assembly's results depend only
-    on its own history, not on the batch, chunking or threads). Exits and entries are applied
-    at the end of each step. Contacts are counted between loaded balls: adjacent balls of a
-    track (in z order), both inside the zone at the time of contact and both resolved at every
-    evaluation so far; the contact time is the linear interpolation of the gap within the
-    step. An assembly's first contact is the
+    evaluation is one batched carriage solve over the assemblies still being followed, and
+    every Newton starts from the assembly's own solution of its previous evaluation (so an
+    assembly's results depend only on its own history, not on the batch, chunking or
+    threads). Exits and entries are applied at the end of each step (the entering balls'
+    motion and the midpoint solves from their entry: "Entry" above). Contacts are counted
+    between loaded balls: adjacent balls of a track (in z order), both inside the zone at the
+    time of contact and both resolved at every evaluation so far; the contact time is the
+    linear interpolation of the gap within the step. An assembly's first contact is the
     earliest over its tracks; it is not followed after it.
 
     Unresolved balls (no velocity model takes them, :mod:`tolsim.study.pipeline.evaluate`; every
