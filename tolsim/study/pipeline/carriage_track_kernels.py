@@ -26,7 +26,9 @@ def advance_kernel(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_
     next entering ball, ``entered`` so far), a ball enters with id balls + k: at the time the
     leading ball passed that point, at z = half_zone, and moves with the leading ball for the
     rest of the step (at its start if there was room before it: a zone longer than the
-    train). ``overflow`` is set where the slots or the drawn entering balls run out, or
+    train; the next step moves it at its own epsilon from its entry,
+    :func:`entry_shift_kernel`, from ``entry_time`` and the slots' travel ``z0`` - ``z1``).
+    ``overflow`` is set where the slots or the drawn entering balls run out, or
     the zone is empty. Events: ``exit_id``/``exit_time`` at the slot the ball left,
     ``entry_id``/``entry_time`` at the slot it took (-1 / NaN elsewhere). The model: Notes of
     :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`, "Loaded zone,
