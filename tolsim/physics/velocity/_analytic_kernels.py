@@ -328,6 +328,47 @@ LOAD_COLUMNS = ("free_rolling_velocity_deviation", "creep_stiffness", "braking_s
                 "carriage_force_per_neighbour_force", "traction_capacity", "braking_capacity")
 
 
+@jit(inline="always")
+def creep_frame(dbeta, force, force_cbrt, n, sin_b0, cos_b0, nominal_angle, ball_radius,
+                semi_major_coefficient, k_f, inv_mu):
+    """What the creep kernels compute first for ball ``n``, with the free solve's arithmetic:
+    the sines and cosines of its contact angles, its forces, the semi-major axes a_i and
+    friction weights q_i, the null vector n_i (with d012) of the rows (1, 1, 1, 1), (x_i),
+    (y_i), w_i = +-1 / q_i with w . n, and the unit push's particular solution pp_0..2 and
+    multiplier tp (:func:`_analytic_loaded_solve`, :func:`creep_coefficients_kernel`,
+    :func:`tolsim.physics.velocity.creep_stiffness.creep_stiffness_kernel`)."""
+    s0, c0 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 0])
+    s1, c1 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 1])
+    s2, c2 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 2])
+    s3, c3 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 3])
+    x0, y0 = c0, -s0
+    x1, y1 = c1, s1
+    x2, y2 = -c2, s2
+    x3, y3 = -c3, -s3
+    f0, f1, f2, f3 = force[n, 0], force[n, 1], force[n, 2], force[n, 3]
+    a0 = semi_major_coefficient * force_cbrt[n, 0]
+    a1 = semi_major_coefficient * force_cbrt[n, 1]
+    a2 = semi_major_coefficient * force_cbrt[n, 2]
+    a3 = semi_major_coefficient * force_cbrt[n, 3]
+    q0 = -k_f * ball_radius * f0 / a0
+    q1 = -k_f * ball_radius * f1 / a1
+    q2 = k_f * ball_radius * f2 / a2
+    q3 = k_f * ball_radius * f3 / a3
+    d012 = det3(1.0, 1.0, 1.0, x0, x1, x2, y0, y1, y2)
+    n0 = det3(1.0, 1.0, 1.0, x1, x2, x3, y1, y2, y3)
+    n1 = -det3(1.0, 1.0, 1.0, x0, x2, x3, y0, y2, y3)
+    n2 = det3(1.0, 1.0, 1.0, x0, x1, x3, y0, y1, y3)
+    n3 = -d012
+    w0, w1, w2, w3 = 1.0 / q0, -1.0 / q1, -1.0 / q2, 1.0 / q3
+    wn = w0 * n0 + w1 * n1 + w2 * n2 + w3 * n3
+    pp0 = det3(-inv_mu, 1.0, 1.0, 0.0, x1, x2, 0.0, y1, y2) / d012
+    pp1 = det3(1.0, -inv_mu, 1.0, x0, 0.0, x2, y0, 0.0, y2) / d012
+    pp2 = det3(1.0, 1.0, -inv_mu, x0, x1, 0.0, y0, y1, 0.0) / d012
+    tp = -(w0 * pp0 + w1 * pp1 + w2 * pp2) / wn
+    return (s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, a0, a1, a2, a3, q0, q1, q2, q3,
+            d012, n0, n1, n2, n3, w0, w1, w2, w3, wn, pp0, pp1, pp2, tp)
+
+
 def analytic_loaded_kernel(
     dbeta, force, push, neighbour_force_sum, nominal_angle, ball_radius, semi_major_coefficient,
     elliptic_e, k_f, friction_coefficient, ball_friction, max_ratio, max_angle, max_eps,
@@ -376,25 +417,16 @@ def _analytic_loaded_solve(
     inv_mu = 1.0 / friction_coefficient
     braking_ratio = ball_friction * inv_mu  # (mu_bb / mu) per newton of Q_back + Q_front
     for n in prange(dbeta.shape[0]):
-        # --- the system of analytic_kernel, same arithmetic ---
-        s0, c0 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 0])
-        s1, c1 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 1])
-        s2, c2 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 2])
-        s3, c3 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 3])
+        # --- the system of analytic_kernel, same arithmetic; the unit push: rhs (-1/mu, 0,
+        # 0), Eq. (21) homogeneous (creep_frame) ---
+        (s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, a0, a1, a2, a3, q0, q1, q2, q3, d012,
+         n0, n1, n2, n3, w0, w1, w2, w3, wn, pp0, pp1, pp2, tp) = creep_frame(
+            dbeta, force, force_cbrt, n, sin_b0, cos_b0, nominal_angle, ball_radius,
+            semi_major_coefficient, k_f, inv_mu)
         x0, y0 = c0, -s0
         x1, y1 = c1, s1
         x2, y2 = -c2, s2
-        x3, y3 = -c3, -s3
-        f0, f1, f2, f3 = force[n, 0], force[n, 1], force[n, 2], force[n, 3]
         ok = min(min(f0, f1), min(f2, f3)) > 0.0
-        a0 = semi_major_coefficient * force_cbrt[n, 0]
-        a1 = semi_major_coefficient * force_cbrt[n, 1]
-        a2 = semi_major_coefficient * force_cbrt[n, 2]
-        a3 = semi_major_coefficient * force_cbrt[n, 3]
-        q0 = -k_f * ball_radius * f0 / a0
-        q1 = -k_f * ball_radius * f1 / a1
-        q2 = k_f * ball_radius * f2 / a2
-        q3 = k_f * ball_radius * f3 / a3
         sc = 0.375 * elliptic_e / ball_radius
         m0 = sc * f0 * a0
         m1 = -sc * f1 * a1
@@ -402,28 +434,16 @@ def _analytic_loaded_solve(
         m3 = sc * f3 * a3
         r2 = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
         r3 = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
-        d012 = det3(1.0, 1.0, 1.0, x0, x1, x2, y0, y1, y2)
-        n0 = det3(1.0, 1.0, 1.0, x1, x2, x3, y1, y2, y3)
-        n1 = -det3(1.0, 1.0, 1.0, x0, x2, x3, y0, y2, y3)
-        n2 = det3(1.0, 1.0, 1.0, x0, x1, x3, y0, y1, y3)
-        n3 = -d012
         p0 = det3(0.0, 1.0, 1.0, r2, x1, x2, r3, y1, y2) / d012
         p1 = det3(1.0, 0.0, 1.0, x0, r2, x2, y0, r3, y2) / d012
         p2 = det3(1.0, 1.0, 0.0, x0, x1, r2, y0, y1, r3) / d012
         rhs = -(dbeta[n, 0] + dbeta[n, 3] - dbeta[n, 1] - dbeta[n, 2])
-        w0, w1, w2, w3 = 1.0 / q0, -1.0 / q1, -1.0 / q2, 1.0 / q3
-        wn = w0 * n0 + w1 * n1 + w2 * n2 + w3 * n3
         t = (rhs - (w0 * p0 + w1 * p1 + w2 * p2)) / wn
         g0 = (p0 + t * n0) / q0
         g1 = (p1 + t * n1) / q1
         g2 = (p2 + t * n2) / q2
         g3 = (t * n3) / q3
         eps = half_tan * (-dbeta[n, 1] - g1 + dbeta[n, 3] + g3)
-        # --- unit push: rhs (-1/mu, 0, 0), Eq. (21) homogeneous ---
-        pp0 = det3(-inv_mu, 1.0, 1.0, 0.0, x1, x2, 0.0, y1, y2) / d012
-        pp1 = det3(1.0, -inv_mu, 1.0, x0, 0.0, x2, y0, 0.0, y2) / d012
-        pp2 = det3(1.0, 1.0, -inv_mu, x0, x1, 0.0, y0, y1, 0.0) / d012
-        tp = -(w0 * pp0 + w1 * pp1 + w2 * pp2) / wn
         # --- unit Q_back + Q_front: braking -(mu_bb/mu) e in the moment rows ---
         beta = np.empty(4)
         for i in range(4):
@@ -522,23 +542,14 @@ def creep_coefficients_kernel(dbeta, force, force_cbrt, nominal_angle, ball_radi
     braking_ratio = ball_friction * inv_mu
     for n in prange(dbeta.shape[0]):
         # --- the free solve of analytic_kernel, same arithmetic ---
-        s0, c0 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 0])
-        s1, c1 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 1])
-        s2, c2 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 2])
-        s3, c3 = sin_cos_near(sin_b0, cos_b0, nominal_angle, dbeta[n, 3])
+        (s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, a0, a1, a2, a3, q0, q1, q2, q3, d012,
+         n0, n1, n2, n3, w0, w1, w2, w3, wn, pp0, pp1, pp2, tp) = creep_frame(
+            dbeta, force, force_cbrt, n, sin_b0, cos_b0, nominal_angle, ball_radius,
+            semi_major_coefficient, k_f, inv_mu)
         x0, y0 = c0, -s0
         x1, y1 = c1, s1
         x2, y2 = -c2, s2
         x3, y3 = -c3, -s3
-        f0, f1, f2, f3 = force[n, 0], force[n, 1], force[n, 2], force[n, 3]
-        a0 = semi_major_coefficient * force_cbrt[n, 0]
-        a1 = semi_major_coefficient * force_cbrt[n, 1]
-        a2 = semi_major_coefficient * force_cbrt[n, 2]
-        a3 = semi_major_coefficient * force_cbrt[n, 3]
-        q0 = -k_f * ball_radius * f0 / a0
-        q1 = -k_f * ball_radius * f1 / a1
-        q2 = k_f * ball_radius * f2 / a2
-        q3 = k_f * ball_radius * f3 / a3
         sc = 0.375 * elliptic_e / ball_radius
         m0 = sc * f0 * a0
         m1 = -sc * f1 * a1
@@ -546,26 +557,14 @@ def creep_coefficients_kernel(dbeta, force, force_cbrt, nominal_angle, ball_radi
         m3 = sc * f3 * a3
         r2 = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
         r3 = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
-        d012 = det3(1.0, 1.0, 1.0, x0, x1, x2, y0, y1, y2)
-        n0 = det3(1.0, 1.0, 1.0, x1, x2, x3, y1, y2, y3)
-        n1 = -det3(1.0, 1.0, 1.0, x0, x2, x3, y0, y2, y3)
-        n2 = det3(1.0, 1.0, 1.0, x0, x1, x3, y0, y1, y3)
-        n3 = -d012
         p0 = det3(0.0, 1.0, 1.0, r2, x1, x2, r3, y1, y2) / d012
         p1 = det3(1.0, 0.0, 1.0, x0, r2, x2, y0, r3, y2) / d012
         p2 = det3(1.0, 1.0, 0.0, x0, x1, r2, y0, y1, r3) / d012
         rhs = -(dbeta[n, 0] + dbeta[n, 3] - dbeta[n, 1] - dbeta[n, 2])
-        w0, w1, w2, w3 = 1.0 / q0, -1.0 / q1, -1.0 / q2, 1.0 / q3
-        wn = w0 * n0 + w1 * n1 + w2 * n2 + w3 * n3
         t = (rhs - (w0 * p0 + w1 * p1 + w2 * p2)) / wn
         g1 = (p1 + t * n1) / q1
         g3 = (t * n3) / q3
         eps = half_tan * (-dbeta[n, 1] - g1 + dbeta[n, 3] + g3)
-        # --- unit push ---
-        pp0 = det3(-inv_mu, 1.0, 1.0, 0.0, x1, x2, 0.0, y1, y2) / d012
-        pp1 = det3(1.0, -inv_mu, 1.0, x0, 0.0, x2, y0, 0.0, y2) / d012
-        pp2 = det3(1.0, 1.0, -inv_mu, x0, x1, 0.0, y0, y1, 0.0) / d012
-        tp = -(w0 * pp0 + w1 * pp1 + w2 * pp2) / wn
         # --- rolling axis (ball_loads.rolling_axis): rows (1, p_y, -p_x), p_y = -x, p_x = y ---
         ex, ey = _creep_rolling_axis(x0, y0, x1, y1, x2, y2, x3, y3, f0, f1, f2, f3)
         # --- unit Q_back + Q_front ---
