@@ -47,9 +47,12 @@ along_track over that of constant). The along_track studies follow an assembly u
 first contact (the circuit: over the whole stroke). Then ``configs/friction_yaw.toml`` and
 ``configs/carriage_preload.toml`` along the track with ``[contact]`` against the same without
 it (the automatic step count is finer with ``[contact]``: the steps are printed). Sizes are
-assemblies (default 2000: a few 10^4 balls; the free balls run 10 times more, whose study
-would otherwise last some 0.05 s; the constant studies run ``--constant-factor``
-times more assemblies, so that they last long enough to be timed); one worker. Report the
+assemblies (default 2000), times a factor per study so that every timed run lasts a second
+or more (a run of 0.2-0.3 s moved by +-15 % from one reading to the next): the free balls
+run 100 times more (200 000 assemblies, 1.2e6 balls), the carriage 10 times and the
+circuit 5 times; the constant studies run ``--constant-factor`` times more assemblies than
+their along_track study (default per study: 2 for the free balls, 5 for the carriage, 10 for
+the circuit, about a second each); one worker. Report the
 load average with the numbers (the machine is shared).
 
 Run: ``python benchmarks/bench_study.py [--sizes 1e6 1e7] [--workers 1 2]
@@ -148,6 +151,25 @@ def numpy_pipeline(config):
     return total
 
 
+def _count_carriage_solves():
+    """Count the carriage solves of this process: every batched solve calls the compiled
+    kernel through the name in :mod:`tolsim.physics.carriage.solve`, wrapped here to add the
+    assemblies it solves and its wall time to the returned dict."""
+    from tolsim.physics.carriage import solve
+
+    tally = {"solve_assemblies": 0, "solve_seconds": 0.0}
+    kernel = solve.carriage_batch_kernel
+
+    def counted(*args):
+        start = time.perf_counter()
+        kernel(*args)
+        tally["solve_seconds"] += time.perf_counter() - start
+        tally["solve_assemblies"] += len(args[-3])  # out_status: one per assembly
+
+    solve.carriage_batch_kernel = counted
+    return tally
+
+
 def child(balls_total, workers, baseline, static_model, config=CONFIG, along_track=None):
     from tolsim.study.execution.runner import run_study
 
@@ -155,6 +177,7 @@ def child(balls_total, workers, baseline, static_model, config=CONFIG, along_tra
     warm = 2048 if along_track in (None, "constant") else min(c.study.block_size,
                                                                c.study.samples)
     run_study(c.with_overrides(samples=warm), workers=workers)  # load / compile kernels
+    tally = _count_carriage_solves() if c.carriage is not None and workers == 1 else {}
     start = time.perf_counter()
     if baseline:
         numpy_pipeline(c)
@@ -165,7 +188,8 @@ def child(balls_total, workers, baseline, static_model, config=CONFIG, along_tra
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     balls = c.study.samples * c.balls
     print(json.dumps({"balls": balls, "seconds": elapsed, "peak_mib": peak_kib / 1024,
-                      "child_peak_mib": children / 1024}))
+                      "child_peak_mib": children / 1024, "assemblies": c.study.samples,
+                      **tally}))
 
 
 def resolve_child(name, balls_total):
@@ -222,9 +246,10 @@ def main():
                    help="time along_track studies against constant ones of the same config "
                         "(whatif_along_track, carriage_preload, with a circuit) and with "
                         "against without [contact]; --sizes in assemblies")
-    p.add_argument("--constant-factor", type=float, default=20.0,
+    p.add_argument("--constant-factor", type=float, default=None,
                    help="with --along-track: the constant studies run this many times more "
-                        "assemblies than the along_track ones")
+                        "assemblies than the along_track ones (default per study: 2 free "
+                        "balls, 5 carriage, 10 circuit)")
     p.add_argument("--config", help=argparse.SUPPRESS)
     p.add_argument("--along-track-child", help=argparse.SUPPRESS)
     args = p.parse_args()
@@ -293,24 +318,25 @@ def _steps(config, kind) -> int:
     return time_steps(study(1, "config", config, kind))
 
 
-def along_track(sizes, constant_factor=20.0):
+def along_track(sizes, constant_factor=None):
     """Print along_track studies against constant ones, and with [contact] against without
     it; ``sizes`` in assemblies."""
     load = os.getloadavg()
     print(f"tolsim along_track studies against constant; one worker, {os.cpu_count()} cores, "
           f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     carriage = ROOT / "configs" / "carriage_preload.toml"
-    # (config, kind, label, assemblies per --sizes assembly: the free balls' study lasts
-    # 0.05 s at 2 000 assemblies, too short to time)
-    cases = ((ROOT / "configs" / "whatif_along_track.toml", "free", "free balls", 10),
-             (carriage, "free", "carriage", 1),
-             (carriage, "circuit", "carriage with [carriage.circuit]", 1))
-    for config, kind, label, factor in cases:
+    # (config, kind, label, assemblies per --sizes assembly, constant factor): each run
+    # lasts a second or more on an idle machine
+    cases = ((ROOT / "configs" / "whatif_along_track.toml", "free", "free balls", 100, 2),
+             (carriage, "free", "carriage", 10, 5),
+             (carriage, "circuit", "carriage with [carriage.circuit]", 5, 10))
+    for config, kind, label, factor, const_factor in cases:
         balls = _balls_per_assembly(config) * factor
+        const_factor = const_factor if constant_factor is None else constant_factor
         for size in sizes:
             along = measure(size * balls, config=config, along_track=kind,
                             static_model="config")
-            const = measure(size * constant_factor * balls, config=config,
+            const = measure(size * const_factor * balls, config=config,
                             along_track="constant", static_model="config")
             rate_a = along["balls"] / along["seconds"]
             rate_c = const["balls"] / const["seconds"]
@@ -321,6 +347,12 @@ def along_track(sizes, constant_factor=20.0):
                   f"({const['balls']:.2e} balls); cost per ball {rate_c / rate_a:6.1f}x "
                   f"constant (target <= 5x); {_steps(config, kind)} steps, "
                   f"{_static_model(config)} static")
+            if along.get("solve_assemblies") and const.get("solve_assemblies"):
+                alone = (along["solve_seconds"] / along["assemblies"]) / (
+                    const["seconds"] / const["assemblies"])
+                print(f"    carriage solves per assembly {_solves(along)} along_track, "
+                      f"{_solves(const)} constant; the along_track solves alone cost "
+                      f"{alone:.1f}x the whole constant study per assembly")
     print(f"tolsim along_track study after contact, with and without [contact]; one worker, "
           f"{os.cpu_count()} cores")
     for config in (FRICTION_CONFIG, carriage):
@@ -340,6 +372,14 @@ def along_track(sizes, constant_factor=20.0):
                   "the study without it")
     load = os.getloadavg()
     print(f"load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+
+
+def _solves(r):
+    """Carriage solves per assembly of a child's run, their wall time per solve and their
+    share of the run, as text."""
+    per = r["solve_assemblies"] / r["assemblies"]
+    each = r["solve_seconds"] / r["solve_assemblies"] * 1e6
+    return f"{per:.1f} ({each:.1f} us each, {r['solve_seconds'] / r['seconds']:.0%} of the run)"
 
 
 def _balls_per_assembly(config):

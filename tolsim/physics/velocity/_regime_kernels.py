@@ -408,7 +408,7 @@ def candidate_order(force):
     other at one, the "single" contact) first tries the contact of the loaded pair on the
     other groove than the single one: that is the one that sticks, in every one of 73 905
     three-point regime-B balls of ``configs/carriage_preload.toml`` at 0 um oversize along
-    the track (200 assemblies, seed 12), against 43 % for the heavier contact. Only the
+    the track (200 assemblies, seed 12, 20 steps), against 43 % for the heavier contact. Only the
     order changes, so the same certified line is found with one line solve instead of two
     where the heavier contact does not stick.
     """
