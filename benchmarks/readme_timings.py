@@ -153,6 +153,11 @@ ROWS = (
     Row("along_circuit_ratio", "the same with a default `[carriage.circuit]`", ALONG_STUDY,
         _ALONG.format(r"carriage_preload\.toml", r"carriage with \[carriage\.circuit\]")
         + r"cost per ball\s+([\d.]+)x", "×", 0),
+    Row("along_carriage_solves",
+        "carriage: its carriage solves alone (one per step and assembly) against the whole "
+        "constant study, per assembly", ALONG_STUDY,
+        _ALONG.format(r"carriage_preload\.toml", "carriage")
+        + r".*\n\s+carriage solves per assembly.*?solves alone cost ([\d.]+)x", "×", 1),
     Row("cold", "default study on a cold kernel cache against a warm one (CPU)", COLD,
         r"cold / warm: \S+ \(wall\), ([\d.]+) \(CPU\)", "×", 1),
     Row("warmed", "the same after `tolsim warmup` (wall)", COLD,
