@@ -4,10 +4,14 @@ import numpy as np
 from numpy.testing import assert_array_equal
 
 from tolsim.study.pipeline.carriage_track_kernels import (
+    advance_frame_kernel,
+    advance_kernel,
     carriage_motion_kernel,
     first_contact_kernel,
+    joined_kernel,
     newton_start_kernel,
     remember_kernel,
+    step_velocity_kernel,
 )
 
 
@@ -135,3 +139,108 @@ def test_carriage_motion_kernel_matches_the_numpy_expression():
         carriage_motion_kernel(position, w, h, 0.2, got)
         assert_array_equal(_bits(got), _bits(position - h * (1.0 - np.nan_to_num(w)) * 0.5
                                              * 0.2))
+
+
+def _trains(rng, m, tracks, slots):
+    """Random slots near the trailing end of a 60 mm zone (as the advance_kernel test of
+    tests/study/test_carriage_along_track.py): positions at the start and end of a step, ids,
+    resolved flags, counts."""
+    half, d = 0.03, 0.01
+    count = rng.integers(1, slots + 1, (m, tracks)).astype(np.int64)
+    z0 = np.full((m, tracks, slots), np.nan)
+    ids = np.full((m, tracks, slots), -1, dtype=np.int64)
+    for a in range(m):
+        for t in range(tracks):
+            c = count[a, t]
+            z0[a, t, :c] = rng.uniform(-half - 0.014, -half - 0.004) + np.cumsum(
+                rng.uniform(d, d + 0.002, c))
+            ids[a, t, :c] = np.arange(c)
+    z1 = z0 - rng.uniform(0.0, 0.003, (m, tracks, 1))
+    return z0, z1, ids, rng.random((m, tracks, slots)) < 0.9, count
+
+
+def test_advance_frame_kernel_is_advance_kernel_written_back():
+    # Source: CarriageFrame.advance before the kernel (advance_kernel on the rows' copies of
+    # count, entered and entering_gap, then the NumPy writes to the frame and the epsilon of
+    # the slots' travel); tolerance 0 (bit for bit): exits, entries, overflow, a subset of rows.
+    rng = np.random.default_rng(21)
+    size, m, tracks, slots, balls, cap = 300, 220, 2, 6, 4, 3
+    half, d, t0, dt, v = 0.03, 0.01, 0.3, 0.01, 0.2
+    rows = np.sort(rng.choice(size, m, replace=False)).astype(np.int64)
+    z0, z1, ids, ok, sub_count = _trains(rng, m, tracks, slots)
+    count = np.zeros((size, tracks), np.int64)
+    count[rows] = sub_count
+    entered = rng.integers(0, cap + 1, (size, tracks)).astype(np.int64)
+    gap = rng.uniform(0.0, 0.003, (size, tracks, cap))
+    frame = [rng.normal(size=(size, tracks, slots)), np.zeros((size, tracks, slots), np.int64),
+             np.zeros((size, tracks, slots), bool), rng.normal(size=(size, tracks, slots)),
+             rng.normal(size=(size, tracks, slots))]  # position, id, ok, entry time, velocity
+    want = [x.copy() for x in frame]
+    want_count, want_entered = count.copy(), entered.copy()
+    w0, w1, wid, wok = z0.copy(), z1.copy(), ids.copy(), ok.copy()
+    w_overflow = np.zeros(m, bool)
+    w_events = [np.empty(z0.shape, np.int64), np.empty(z0.shape),
+                np.empty(z0.shape, np.int64), np.empty(z0.shape)]
+    sub_count, sub_entered = want_count[rows], want_entered[rows]
+    advance_kernel(w0, w1, wid, wok, sub_count, sub_entered, gap[rows], half, d, balls, t0, dt,
+                   w_overflow, *w_events)
+    want[0][rows], want[1][rows], want[2][rows] = w1, wid, wok
+    want_count[rows], want_entered[rows] = sub_count, sub_entered
+    want[3][rows] = w_events[3]
+    want[4][rows] = 1.0 - (w0 - w1) / (0.5 * v * dt)
+    overflow = np.zeros(m, bool)
+    events = [np.empty(z0.shape, np.int64), np.empty(z0.shape), np.empty(z0.shape, np.int64),
+              np.empty(z0.shape)]
+    advance_frame_kernel(rows, z0, z1, ids, ok, count, entered, gap, half, d, balls, t0, dt,
+                         0.5 * v * dt, overflow, *events, *frame)
+    for got, ref in zip([z0, z1, ids, ok, count, entered, overflow, *events, *frame],
+                        [w0, w1, wid, wok, want_count, want_entered, w_overflow, *w_events,
+                         *want], strict=True):
+        assert_array_equal(_bits(got) if got.dtype == np.float64 else got,
+                           _bits(ref) if ref.dtype == np.float64 else ref)
+    assert overflow.any() and (w_events[0] >= 0).sum() > 50 and (w_events[2] >= 0).sum() > 50
+
+
+def joined_twin(take, loaded1, loaded2, eps1, eps2, valid1, valid2, unloaded1, unloaded2):
+    """The NumPy code of CarriageFrame._joined (session 13)."""
+    loaded = loaded1 | take
+    n1 = int(np.count_nonzero(loaded1))
+    src = np.where(take.reshape(-1), np.cumsum(loaded2) - 1 + n1,
+                   np.cumsum(loaded1) - 1)[loaded.reshape(-1)]
+    return (loaded, np.where(take, eps2, eps1), np.where(take, valid2, valid1),
+            np.where(take, unloaded2, unloaded1), src)
+
+
+def test_joined_kernel_matches_its_numpy_twin():
+    # Source: the NumPy code it replaced (twin above); tolerance 0 (bit for bit), with NaN
+    # epsilon, balls taken where the start had none loaded and where it had.
+    rng = np.random.default_rng(22)
+    shape = (40, 2, 13)
+    loaded1, loaded2 = rng.random(shape) < 0.7, rng.random(shape) < 0.7
+    take = loaded2 & (rng.random(shape) < 0.2)
+    eps1, eps2 = (np.where(rng.random(shape) < 0.1, np.nan, rng.normal(size=shape))
+                  for _ in range(2))
+    flags = [rng.random(shape) < 0.5 for _ in range(4)]
+    want = joined_twin(take, loaded1, loaded2, eps1, eps2, *flags)
+    got = [np.empty(shape, bool), np.empty(shape), np.empty(shape, bool),
+           np.empty(shape, bool), np.empty(take.size, np.int64)]
+    n = joined_kernel(take, loaded1, loaded2, eps1, eps2, *flags, *got)
+    got[4] = got[4][:n]
+    assert (take & ~loaded1).any() and (take & loaded1).any()
+    for g, w in zip(got, want, strict=True):
+        assert_array_equal(_bits(g) if g.dtype == np.float64 else g,
+                           _bits(w) if w.dtype == np.float64 else w)
+
+
+def test_step_velocity_kernel_matches_the_numpy_expression():
+    # Source: the NumPy expression of CarriageFrame.velocity it replaced; tolerance 0 (bit
+    # for bit): epsilon finite, NaN, +-inf, -0.0.
+    rng = np.random.default_rng(23)
+    eps1, eps2 = rng.normal(size=4000), rng.normal(size=4000)
+    for eps in (eps1, eps2):
+        eps[rng.integers(0, 4000, 200)] = rng.choice([np.nan, np.inf, -np.inf, -0.0], 200)
+    loaded2 = rng.random(4000) < 0.6
+    got = np.empty(4000)
+    step_velocity_kernel(loaded2, eps2, eps1, got)
+    assert_array_equal(_bits(got), _bits(np.where(loaded2, np.nan_to_num(eps2),
+                                                  np.nan_to_num(eps1))))

@@ -282,6 +282,91 @@ def gather_loaded_kernel(loaded, dbeta, force, ball_converged, solved, out_dbeta
                 k += 1
 
 
+@pjit
+def gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit, nominal_angle,
+                           ball_radius, semi_major_coefficient, elliptic_e, k_f, max_ratio,
+                           max_angle, max_eps, out_dbeta, out_force, out_converged,
+                           out_four_point, out_count, out_eps, out_valid):
+    """:func:`gather_loaded_kernel`, :func:`contact_counts_kernel` and the ``analytic``
+    velocity model of the loaded balls of slot arrays, in one pass.
+
+    The arguments and outputs of :func:`gather_loaded_kernel`, then ``limit`` of
+    :func:`contact_counts_kernel` and its ``out_count`` (its clipped forces stay in a tile's
+    scratch), then those of :func:`tolsim.physics.velocity.analytic.analytic_kernel` from
+    ``nominal_angle`` to ``max_eps``, writing epsilon and its validity into ``out_eps``,
+    ``out_valid`` (n,). Per tile of ``ANALYTIC_TILE`` loaded balls (C order): the gather and
+    the counts of each ball, then :func:`tolsim.physics.velocity.analytic.analytic_tile` on
+    their clipped forces. The numbers of the three kernels one after the other, bit for bit.
+    Returns the number of settled balls.
+    """
+    m, tracks, slots = loaded.shape
+    n = out_force.shape[0]
+    where = np.empty(n, dtype=np.int64)  # the loaded slots, flat, in C order
+    k = 0
+    for a in range(m):
+        for t in range(tracks):
+            for j in range(slots):
+                if loaded[a, t, j]:
+                    where[k] = (a * tracks + t) * slots + j
+                    k += 1
+    settled = 0
+    for tile in prange((n + ANALYTIC_TILE - 1) // ANALYTIC_TILE):
+        at = tile * ANALYTIC_TILE
+        size = min(ANALYTIC_TILE, n - at)
+        clipped = np.empty((ANALYTIC_TILE, 4))
+        dbeta_t = np.empty((4, ANALYTIC_TILE))
+        clipped_t = np.empty((4, ANALYTIC_TILE))
+        force_t = out_force[at:at + size]
+        count_t = out_count[at:at + size]
+        for i in range(size):
+            b = at + i
+            s = where[b]
+            j = s % slots
+            a = s // slots // tracks
+            t = s // slots % tracks
+            four = True
+            for c in range(4):
+                out_dbeta[b, c] = dbeta[a, t, j, c]
+                f = force[a, t, j, c]
+                f = f if np.isfinite(f) else 0.0
+                out_force[b, c] = f
+                four &= f > 0.0
+            out_converged[b] = ball_converged[a, t, j] and solved[a]
+            out_four_point[b] = four
+            settled += _settle_ball(force_t, i, limit, count_t, clipped)
+            for c in range(4):
+                dbeta_t[c, i] = out_dbeta[b, c]
+                clipped_t[c, i] = clipped[i, c]
+        analytic_tile(dbeta_t, clipped_t, size, nominal_angle, ball_radius,
+                      semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps,
+                      out_eps, out_valid, at)
+    return settled
+
+
+@jit
+def scatter_loaded_balls_kernel(loaded, eps, valid, regime, regime_unloaded, pushes, out_eps,
+                                out_ok, out_unloaded):
+    """The loaded balls' outcomes in their slots (m, T, S), as :func:`scatter_loaded_kernel`
+    of each, in one pass: ``out_eps`` epsilon (NaN where not loaded), ``out_unloaded`` regime
+    == ``regime_unloaded`` (False where not loaded) and ``out_ok`` ``valid``, or unloaded too
+    if ``pushes`` (an unloaded ball is accounted for, pushed along; True where not loaded)."""
+    m, tracks, slots = loaded.shape
+    k = 0
+    for a in range(m):
+        for t in range(tracks):
+            for j in range(slots):
+                if loaded[a, t, j]:
+                    unloaded = regime[k] == regime_unloaded
+                    out_eps[a, t, j] = eps[k]
+                    out_ok[a, t, j] = valid[k] or (pushes and unloaded)
+                    out_unloaded[a, t, j] = unloaded
+                    k += 1
+                else:
+                    out_eps[a, t, j] = np.nan
+                    out_ok[a, t, j] = True
+                    out_unloaded[a, t, j] = False
+
+
 @jit
 def scatter_loaded_kernel(loaded, values, fill, out):
     """``out`` (m, T, S) = ``fill`` with ``values`` at the loaded slots, in C order (as
