@@ -8,6 +8,7 @@ from tolsim.study.pipeline.carriage_track_kernels import (
     advance_kernel,
     carriage_motion_kernel,
     first_contact_kernel,
+    initial_balls_kernel,
     joined_kernel,
     newton_start_kernel,
     remember_kernel,
@@ -244,3 +245,35 @@ def test_step_velocity_kernel_matches_the_numpy_expression():
     step_velocity_kernel(loaded2, eps2, eps1, got)
     assert_array_equal(_bits(got), _bits(np.where(loaded2, np.nan_to_num(eps2),
                                                   np.nan_to_num(eps1))))
+
+
+def initial_balls_twin(loaded, n, values, fills):
+    """The NumPy code of _initial_state (session 13): full arrays, x[loaded] = values, the
+    first n slots."""
+    out = []
+    for v, fill in zip(values, fills, strict=True):
+        x = np.full(loaded.shape + v.shape[1:], fill, dtype=v.dtype)
+        x[loaded] = v
+        out.append(np.ascontiguousarray(x[:, :, :n]))
+    return out
+
+
+def test_initial_balls_kernel_matches_its_numpy_twin():
+    # Source: the NumPy code it replaced (twin above); tolerance 0 (bit for bit): loaded
+    # balls in the first n slots and beyond, NaN epsilon, every fill.
+    rng = np.random.default_rng(24)
+    shape, n = (30, 2, 13), 12
+    loaded = rng.random(shape) < 0.7
+    k = int(loaded.sum())
+    values = [np.where(rng.random(k) < 0.1, np.nan, rng.normal(size=k)), rng.random(k) < 0.5,
+              rng.random(k) < 0.5, rng.random(k) < 0.5, rng.normal(size=(k, 4)),
+              rng.normal(size=(k, 4)), rng.integers(0, 3, k).astype(np.int8),
+              rng.integers(0, 6, k).astype(np.int8)]
+    fills = [np.nan, False, True, True, np.nan, 0.0, 2, 5]
+    want = initial_balls_twin(loaded, n, values, fills)
+    got = [np.empty(shape[:2] + (n,) + v.shape[1:], v.dtype) for v in values]
+    initial_balls_kernel(loaded, *values, 2, 5, *got)
+    assert loaded[:, :, n:].any()
+    for g, w in zip(got, want, strict=True):
+        assert_array_equal(_bits(g) if g.dtype == np.float64 else g,
+                           _bits(w) if w.dtype == np.float64 else w)

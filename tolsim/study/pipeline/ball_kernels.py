@@ -294,49 +294,55 @@ def gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit, 
     :func:`contact_counts_kernel` and its ``out_count`` (its clipped forces stay in a tile's
     scratch), then those of :func:`tolsim.physics.velocity.analytic.analytic_kernel` from
     ``nominal_angle`` to ``max_eps``, writing epsilon and its validity into ``out_eps``,
-    ``out_valid`` (n,). Per tile of ``ANALYTIC_TILE`` loaded balls (C order): the gather and
-    the counts of each ball, then :func:`tolsim.physics.velocity.analytic.analytic_tile` on
-    their clipped forces. The numbers of the three kernels one after the other, bit for bit.
-    Returns the number of settled balls.
+    ``out_valid`` (n,). Per tile of rows with at most ``ANALYTIC_TILE`` slots (or one row):
+    the gather and the counts of each loaded ball (C order), then
+    :func:`tolsim.physics.velocity.analytic.analytic_tile` on their clipped forces (each
+    ball's numbers are its own, whatever the tile). The numbers of the three kernels one
+    after the other, bit for bit. Returns the number of settled balls.
     """
     m, tracks, slots = loaded.shape
-    n = out_force.shape[0]
-    where = np.empty(n, dtype=np.int64)  # the loaded slots, flat, in C order
-    k = 0
+    per_row = tracks * slots
+    start = np.empty(m + 1, dtype=np.int64)  # each row's first loaded ball
+    start[0] = 0
     for a in range(m):
+        c = 0
         for t in range(tracks):
             for j in range(slots):
-                if loaded[a, t, j]:
-                    where[k] = (a * tracks + t) * slots + j
-                    k += 1
+                c += loaded[a, t, j]
+        start[a + 1] = start[a] + c
+    rows = max(1, ANALYTIC_TILE // per_row)  # the rows of a tile: at most one tile of balls
+    tile = max(ANALYTIC_TILE, per_row)
     settled = 0
-    for tile in prange((n + ANALYTIC_TILE - 1) // ANALYTIC_TILE):
-        at = tile * ANALYTIC_TILE
-        size = min(ANALYTIC_TILE, n - at)
-        clipped = np.empty((ANALYTIC_TILE, 4))
-        dbeta_t = np.empty((4, ANALYTIC_TILE))
-        clipped_t = np.empty((4, ANALYTIC_TILE))
+    for block in prange((m + rows - 1) // rows):
+        first, last = block * rows, min(m, block * rows + rows)
+        at = start[first]
+        size = start[last] - at
+        clipped = np.empty((tile, 4))
+        dbeta_t = np.empty((4, tile))
+        clipped_t = np.empty((4, tile))
         force_t = out_force[at:at + size]
         count_t = out_count[at:at + size]
-        for i in range(size):
-            b = at + i
-            s = where[b]
-            j = s % slots
-            a = s // slots // tracks
-            t = s // slots % tracks
-            four = True
-            for c in range(4):
-                out_dbeta[b, c] = dbeta[a, t, j, c]
-                f = force[a, t, j, c]
-                f = f if np.isfinite(f) else 0.0
-                out_force[b, c] = f
-                four &= f > 0.0
-            out_converged[b] = ball_converged[a, t, j] and solved[a]
-            out_four_point[b] = four
-            settled += _settle_ball(force_t, i, limit, count_t, clipped)
-            for c in range(4):
-                dbeta_t[c, i] = out_dbeta[b, c]
-                clipped_t[c, i] = clipped[i, c]
+        i = 0
+        for a in range(first, last):
+            for t in range(tracks):
+                for j in range(slots):
+                    if not loaded[a, t, j]:
+                        continue
+                    b = at + i
+                    four = True
+                    for c in range(4):
+                        out_dbeta[b, c] = dbeta[a, t, j, c]
+                        f = force[a, t, j, c]
+                        f = f if np.isfinite(f) else 0.0
+                        out_force[b, c] = f
+                        four &= f > 0.0
+                    out_converged[b] = ball_converged[a, t, j] and solved[a]
+                    out_four_point[b] = four
+                    settled += _settle_ball(force_t, i, limit, count_t, clipped)
+                    for c in range(4):
+                        dbeta_t[c, i] = out_dbeta[b, c]
+                        clipped_t[c, i] = clipped[i, c]
+                    i += 1
         analytic_tile(dbeta_t, clipped_t, size, nominal_angle, ball_radius,
                       semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps,
                       out_eps, out_valid, at)

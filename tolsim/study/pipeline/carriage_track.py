@@ -38,6 +38,7 @@ from tolsim.study.pipeline.carriage_track_kernels import (
     entering_by_kernel,
     entry_shift_kernel,
     first_contact_kernel,
+    initial_balls_kernel,
     joined_kernel,
     newton_start_kernel,
     remember_kernel,
@@ -226,29 +227,19 @@ def _initial_state(config, ball_z, loaded, batch, state):
     and the CarriageState of the t = 0 solve."""
     m, tracks, slots = ball_z.shape
     n = config.train.balls
-    full = (m, tracks, slots)
-    eps = np.full(full, np.nan)
-    valid = np.zeros(full, dtype=bool)
-    converged = np.ones(full, dtype=bool)
-    lost = np.ones(full, dtype=bool)  # outside the zone: no contact with the grooves
-    dbeta = np.full(full + (4,), np.nan)
-    force = np.zeros(full + (4,))
-    model = np.full(full, MODEL_UNRESOLVED, dtype=state.model.dtype)
-    regime = np.full(full, BALL_UNRESOLVED, dtype=state.regime.dtype)  # as ``lost``
-    eps[loaded] = state.velocity_deviation
-    valid[loaded] = state.valid
-    converged[loaded] = state.converged
-    lost[loaded] = state.loss_of_contact
-    dbeta[loaded] = state.contact_angle_deviation
-    force[loaded] = state.normal_force
-    model[loaded] = state.model
-    regime[loaded] = state.regime
-
-    def first(x):
-        return np.ascontiguousarray(x[:, :, :n].reshape((m, tracks * n) + x.shape[3:]))
-
-    balls = BallState(first(eps), first(valid), first(converged), first(lost), first(dbeta),
-                      first(force), first(model), state.resolve_seconds, first(regime))
+    first = (m, tracks, n)
+    out = (np.empty(first), np.empty(first, dtype=bool), np.empty(first, dtype=bool),
+           np.empty(first, dtype=bool), np.empty(first + (4,)), np.empty(first + (4,)),
+           np.empty(first, dtype=state.model.dtype), np.empty(first, dtype=state.regime.dtype))
+    # outside the zone: lost (no contact with the grooves), its regime as ``lost``
+    initial_balls_kernel(loaded, *(kernel_array(x, x.dtype) for x in (
+        state.velocity_deviation, state.valid, state.converged, state.loss_of_contact,
+        state.contact_angle_deviation, state.normal_force, state.model, state.regime)),
+        MODEL_UNRESOLVED, BALL_UNRESOLVED, *out)
+    eps, valid, converged, lost, dbeta, force, model, regime = (
+        x.reshape((m, tracks * n) + x.shape[3:]) for x in out)
+    balls = BallState(eps, valid, converged, lost, dbeta, force, model, state.resolve_seconds,
+                      regime)
     stiffness = np.ascontiguousarray(np.diagonal(batch.stiffness, axis1=1, axis2=2))
     carriage = CarriageState(batch.displacement, stiffness, batch.status.astype(np.int8))
     return balls, carriage

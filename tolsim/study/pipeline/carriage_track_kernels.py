@@ -423,3 +423,45 @@ def entry_shift_kernel(position, free, take, eps, entry_time, entry_velocity, ro
                         tau = min(tau, ahead)
                     frac = -after / (before - after) if before > after else 1.0
                     out_closed[r, tr, j - 1] = t - min(frac, 1.0) * tau
+
+
+@jit
+def initial_balls_kernel(loaded, eps, valid, converged, lost, dbeta, force, model, regime,
+                         model_fill, regime_fill, out_eps, out_valid, out_converged, out_lost,
+                         out_dbeta, out_force, out_model, out_regime):
+    """The BallState arrays of the first n slots (m, T, n) from the loaded balls' (flat, C
+    order over ``loaded`` (m, T, S), S >= n): each value where loaded, else epsilon NaN, not
+    valid, converged, lost (no contact with the grooves), dbeta NaN, force 0, ``model_fill``,
+    ``regime_fill``. As ``np.full`` of each and ``x[loaded] = values``, then ``x[:, :, :n]``
+    (:func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`'s t = 0 balls).
+    """
+    m, tracks, slots = loaded.shape
+    n = out_eps.shape[2]
+    k = 0
+    for a in range(m):
+        for t in range(tracks):
+            for j in range(slots):
+                if j >= n:
+                    k += loaded[a, t, j]
+                    continue
+                if loaded[a, t, j]:
+                    out_eps[a, t, j] = eps[k]
+                    out_valid[a, t, j] = valid[k]
+                    out_converged[a, t, j] = converged[k]
+                    out_lost[a, t, j] = lost[k]
+                    for c in range(4):
+                        out_dbeta[a, t, j, c] = dbeta[k, c]
+                        out_force[a, t, j, c] = force[k, c]
+                    out_model[a, t, j] = model[k]
+                    out_regime[a, t, j] = regime[k]
+                    k += 1
+                else:
+                    out_eps[a, t, j] = np.nan
+                    out_valid[a, t, j] = False
+                    out_converged[a, t, j] = True
+                    out_lost[a, t, j] = True
+                    for c in range(4):
+                        out_dbeta[a, t, j, c] = np.nan
+                        out_force[a, t, j, c] = 0.0
+                    out_model[a, t, j] = model_fill
+                    out_regime[a, t, j] = regime_fill
