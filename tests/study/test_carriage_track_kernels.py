@@ -7,11 +7,13 @@ from tolsim.study.pipeline.carriage_track_kernels import (
     advance_frame_kernel,
     advance_kernel,
     carriage_motion_kernel,
+    carry_slots_kernel,
     first_contact_kernel,
     initial_balls_kernel,
     joined_kernel,
     newton_start_kernel,
     remember_kernel,
+    slot_inputs_kernel,
     step_velocity_kernel,
 )
 
@@ -277,3 +279,79 @@ def test_initial_balls_kernel_matches_its_numpy_twin():
     for g, w in zip(got, want, strict=True):
         assert_array_equal(_bits(g) if g.dtype == np.float64 else g,
                            _bits(w) if w.dtype == np.float64 else w)
+
+
+def carry_slots_twin(old_id, old_loaded, old_eps, old_valid, old_unloaded, old_row, new_id):
+    """carry_slots_kernel as a plain lookup (the kernel before it searched from the previous
+    ball's slot): each new slot's ball in its old track, the index among the old loaded
+    slots in C order."""
+    flat = np.cumsum(old_loaded.reshape(-1)).reshape(old_id.shape) - 1
+    out = [np.zeros(new_id.shape, bool), np.full(new_id.shape, np.nan),
+           np.ones(new_id.shape, bool), np.zeros(new_id.shape, bool), new_id >= 0,
+           np.full(new_id.shape, -1, np.int64)]
+    for r, a in enumerate(old_row):
+        for t, j in np.ndindex(new_id.shape[1:]):
+            where = np.flatnonzero(old_id[a, t] == new_id[r, t, j])
+            if new_id[r, t, j] < 0 or len(where) == 0:
+                continue
+            p = where[0]
+            out[0][r, t, j], out[1][r, t, j] = old_loaded[a, t, p], old_eps[a, t, p]
+            out[2][r, t, j], out[3][r, t, j] = old_valid[a, t, p], old_unloaded[a, t, p]
+            out[4][r, t, j] = False
+            out[5][r, t, j] = flat[a, t, p] if old_loaded[a, t, p] else -1
+    return out
+
+
+def test_carry_slots_kernel_matches_a_lookup_in_any_order():
+    # Source: a plain lookup by id (twin above); tolerance 0 (bit for bit): the balls in their
+    # order with exits and entries, and (not arising in the frame) shuffled, so that the
+    # search from the previous ball's slot has to start again from the first.
+    rng = np.random.default_rng(25)
+    m, tracks, slots = 60, 2, 9
+    old_id = np.full((m, tracks, slots), -1, dtype=np.int64)
+    new_id = np.full((m, tracks, slots), -1, dtype=np.int64)
+    for a, t in np.ndindex(m, tracks):
+        n = rng.integers(1, slots + 1)
+        old_id[a, t, :n] = 10 * t + np.arange(n)
+        ids = list(range(10 * t + rng.integers(0, 3), 10 * t + n)) + [100, 101][
+            :rng.integers(0, 3)]
+        ids = ids[:slots]
+        if a % 3 == 0:
+            rng.shuffle(ids)
+        new_id[a, t, :len(ids)] = ids
+    old_loaded = (old_id >= 0) & (rng.random(old_id.shape) < 0.8)
+    old_eps = np.where(old_loaded, rng.normal(size=old_id.shape), np.nan)
+    old_valid = ~old_loaded | (rng.random(old_id.shape) < 0.9)
+    old_unloaded = old_loaded & (rng.random(old_id.shape) < 0.2)
+    rows = np.sort(rng.choice(m, 40, replace=False))
+    new = new_id[rows]
+    got = [np.empty(new.shape, bool), np.empty(new.shape), np.empty(new.shape, bool),
+           np.empty(new.shape, bool), np.empty(new.shape, bool),
+           np.empty(new.shape, np.int64)]
+    carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, rows, new, *got)
+    want = carry_slots_twin(old_id, old_loaded, old_eps, old_valid, old_unloaded, rows, new)
+    assert want[4].any() and (want[5] >= 0).any()
+    for g, w in zip(got, want, strict=True):
+        assert_array_equal(_bits(g) if g.dtype == np.float64 else g,
+                           _bits(w) if w.dtype == np.float64 else w)
+
+
+def test_slot_inputs_kernel_matches_the_numpy_expressions():
+    # Source: the NumPy expressions of the carriage evaluation it replaced; tolerance 0 (bit
+    # for bit): empty slots (id -1, z NaN), the zone's ends, NaN z of an occupied slot.
+    rng = np.random.default_rng(26)
+    z = rng.uniform(-0.07, 0.07, 5000)
+    ids = rng.integers(-1, 20, 5000)
+    z[ids < 0] = np.nan
+    z[:4], ids[:4] = [0.06, -0.06, np.nan, -0.0], [1, 2, 3, 4]
+    half, shift = 0.06, 0.2 * 0.137
+    occupied = ids >= 0
+    with np.errstate(invalid="ignore"):
+        want_loaded = occupied & (np.abs(z) <= half)
+    want_z = np.where(occupied, z, 0.0)
+    got = np.empty(5000, bool), np.empty(5000), np.empty(5000)
+    slot_inputs_kernel(z, ids, half, shift, *got)
+    assert want_loaded[:2].all() and not want_loaded[2]
+    assert_array_equal(got[0], want_loaded)
+    assert_array_equal(_bits(got[1]), _bits(want_z))
+    assert_array_equal(_bits(got[2]), _bits(want_z + shift))

@@ -42,6 +42,7 @@ from tolsim.study.pipeline.carriage_track_kernels import (
     joined_kernel,
     newton_start_kernel,
     remember_kernel,
+    slot_inputs_kernel,
     step_velocity_kernel,
 )
 from tolsim.study.pipeline.evaluate import (
@@ -161,14 +162,14 @@ class _Evaluation:
         """
         config, carriage = self.config, self.config.carriage
         shape = ball_z.shape
-        occupied = ball_id >= 0
-        with np.errstate(invalid="ignore"):
-            loaded = occupied & (np.abs(ball_z) <= self.half_zone)
-        z = np.where(occupied, ball_z, 0.0)
+        loaded, z, rail = np.empty(shape, dtype=bool), np.empty(shape), np.empty(shape)
+        slot_inputs_kernel(kernel_array(ball_z).reshape(-1),
+                           kernel_array(ball_id, np.int64).reshape(-1), self.half_zone,
+                           config.motion.groove_velocity * t, loaded.reshape(-1),
+                           z.reshape(-1), rail.reshape(-1))
         # the values straight into the GrooveErrors fields (absent fields: 0)
         fields, columns = groove_error_buffers({s.source for s in config.tolerances}, shape)
-        moving_ball_values(config, self.block, ball_id, z + config.motion.groove_velocity * t,
-                           rows, self.fixed, columns)
+        moving_ball_values(config, self.block, ball_id, rail, rows, self.fixed, columns)
         if carriage.end_relief_depth > 0:  # the carriage flanks TR, TL recede at the ends
             h = end_relief(z, config.train.loaded_zone_length, carriage.end_relief_depth,
                            carriage.end_relief_length)

@@ -209,7 +209,8 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
     held the same ball (``loaded``, epsilon, ``valid``, ``unloaded``) and ``out_index`` its
     loaded ball's index among the old loaded slots in C order (-1: not loaded); a ball that
     was in no old slot (it entered) or an empty slot is ``out_fresh`` (a ball id >= 0 only)
-    and takes not loaded, NaN, valid, not unloaded."""
+    and takes not loaded, NaN, valid, not unloaded. (The balls keep their order: each is
+    searched for from the old slot of the one before, then from the first.)"""
     rows, tracks, slots = new_id.shape
     first = np.empty(old_id.shape[:2], dtype=np.int64)  # each old track's first loaded index
     k = 0
@@ -222,6 +223,7 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
     for r in range(rows):
         a = old_row[r]
         for t in range(tracks):
+            p, k = 0, first[a, t]  # the old slot searched from, its first loaded index
             for j in range(slots):
                 ident = new_id[r, t, j]
                 out_loaded[r, t, j] = False
@@ -232,19 +234,24 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
                 out_index[r, t, j] = -1
                 if ident < 0:
                     continue
-                k = first[a, t]
-                for p in range(slots):
-                    if old_id[a, t, p] == ident:
-                        out_fresh[r, t, j] = False
-                        out_loaded[r, t, j] = old_loaded[a, t, p]
-                        out_eps[r, t, j] = old_eps[a, t, p]
-                        out_valid[r, t, j] = old_valid[a, t, p]
-                        out_unloaded[r, t, j] = old_unloaded[a, t, p]
-                        if old_loaded[a, t, p]:
-                            out_index[r, t, j] = k
+                found = False
+                for _ in range(2):  # from where the previous ball was found, then from 0
+                    while p < slots and old_id[a, t, p] != ident:
+                        k += old_loaded[a, t, p]
+                        p += 1
+                    if p < slots:
+                        found = True
                         break
-                    if old_loaded[a, t, p]:
-                        k += 1
+                    p, k = 0, first[a, t]
+                if not found:
+                    continue
+                out_fresh[r, t, j] = False
+                out_loaded[r, t, j] = old_loaded[a, t, p]
+                out_eps[r, t, j] = old_eps[a, t, p]
+                out_valid[r, t, j] = old_valid[a, t, p]
+                out_unloaded[r, t, j] = old_unloaded[a, t, p]
+                if old_loaded[a, t, p]:
+                    out_index[r, t, j] = k
 
 
 @jit
@@ -465,3 +472,19 @@ def initial_balls_kernel(loaded, eps, valid, converged, lost, dbeta, force, mode
                         out_force[a, t, j, c] = 0.0
                     out_model[a, t, j] = model_fill
                     out_regime[a, t, j] = regime_fill
+
+
+@jit
+def slot_inputs_kernel(ball_z, ball_id, half_zone, shift, out_loaded, out_z, out_rail):
+    """The carriage solve's inputs of slots (flat arrays): ``out_loaded`` occupied (id >= 0)
+    and |z| <= ``half_zone`` (False for a NaN z), ``out_z`` z where occupied else 0 and
+    ``out_rail`` = out_z + ``shift`` (the rail position, shift = v t), as the NumPy
+    expressions of :class:`tolsim.study.pipeline.carriage_track.CarriageFrame`'s
+    evaluation."""
+    for i in range(ball_z.shape[0]):
+        occupied = ball_id[i] >= 0
+        z = ball_z[i]
+        out_loaded[i] = occupied and abs(z) <= half_zone
+        z = z if occupied else 0.0
+        out_z[i] = z
+        out_rail[i] = z + shift
