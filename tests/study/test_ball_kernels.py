@@ -20,7 +20,6 @@ from tolsim.study.pipeline.ball_kernels import (
     gather_loaded_kernel,
     nan_to_num,
     scatter_loaded_balls_kernel,
-    scatter_loaded_kernel,
 )
 from tolsim.study.pipeline.evaluate import (
     analytic_arguments,
@@ -91,9 +90,9 @@ def test_ball_outcomes_are_the_numpy_outcomes():
         assert_array_equal(_bits(eps), _bits(want_eps))
 
 
-def test_gather_and_scatter_are_boolean_indexing():
-    # source: x[loaded] and out[loaded] = values of NumPy (C order), with the force's
-    # non-finite values set to 0 and four_point all F > 0; tolerance: the bits
+def test_gather_is_boolean_indexing():
+    # source: x[loaded] of NumPy (C order), with the force's non-finite values set to 0 and
+    # four_point all F > 0; tolerance: the bits
     rng = np.random.default_rng(13)
     shape = (9, 2, 7)
     loaded = rng.random(shape) < 0.7
@@ -109,12 +108,6 @@ def test_gather_and_scatter_are_boolean_indexing():
     assert_array_equal(_bits(out[1]), _bits(want_force))
     assert_array_equal(out[2], (ball_converged & solved[:, None, None])[loaded])
     assert_array_equal(out[3], np.all(want_force > 0.0, axis=1))
-    values = rng.normal(size=n)
-    got = np.empty(shape)
-    scatter_loaded_kernel(loaded, values, np.nan, got)
-    want = np.full(shape, np.nan)
-    want[loaded] = values
-    assert_array_equal(_bits(got), _bits(want))
 
 
 def test_nan_to_num_is_numpy_nan_to_num():
@@ -168,9 +161,10 @@ def test_gather_analytic_is_gather_then_counts_then_analytic():
 
 
 def test_scatter_loaded_balls_is_three_scatters():
-    # source: scatter_loaded_kernel of epsilon (NaN fill), of BallState.accounted (or valid)
-    # (True fill) and of the unloaded balls (regime BALL_UNLOADED) as out[loaded] = ..., the
-    # carriage's evaluation before the fused kernel; tolerance: the bits
+    # source: out[loaded] = values of NumPy (C order) of epsilon (NaN elsewhere), of
+    # BallState.accounted or valid (True elsewhere) and of the unloaded balls (regime
+    # BALL_UNLOADED; False elsewhere), the carriage's evaluation before the fused kernel
+    # (which scattered the first two with scatter_loaded_kernel); tolerance: the bits
     rng = np.random.default_rng(16)
     shape = (11, 2, 9)
     loaded = rng.random(shape) < 0.7
@@ -181,9 +175,9 @@ def test_scatter_loaded_balls_is_three_scatters():
     unloaded = regime == BALL_UNLOADED
     assert (unloaded & ~valid).any()
     for pushes in (True, False):
-        want_eps, want_ok = np.empty(shape), np.empty(shape, bool)
-        scatter_loaded_kernel(loaded, eps, np.nan, want_eps)
-        scatter_loaded_kernel(loaded, valid | unloaded if pushes else valid, True, want_ok)
+        want_eps, want_ok = np.full(shape, np.nan), np.ones(shape, bool)
+        want_eps[loaded] = eps
+        want_ok[loaded] = valid | unloaded if pushes else valid
         want_unloaded = np.zeros(shape, bool)
         want_unloaded[loaded] = unloaded
         got = np.empty(shape), np.empty(shape, bool), np.empty(shape, bool)

@@ -270,16 +270,24 @@ def gather_loaded_kernel(loaded, dbeta, force, ball_converged, solved, out_dbeta
             for j in range(slots):
                 if not loaded[a, t, j]:
                     continue
-                four = True
-                for i in range(4):
-                    out_dbeta[k, i] = dbeta[a, t, j, i]
-                    f = force[a, t, j, i]
-                    f = f if np.isfinite(f) else 0.0
-                    out_force[k, i] = f
-                    four &= f > 0.0
-                out_converged[k] = ball_converged[a, t, j] and solved[a]
-                out_four_point[k] = four
+                _gather_ball(dbeta, force, ball_converged, solved, a, t, j, k, out_dbeta,
+                             out_force, out_converged, out_four_point)
                 k += 1
+
+
+@jit(inline="always")
+def _gather_ball(dbeta, force, ball_converged, solved, a, t, j, k, out_dbeta, out_force,
+                 out_converged, out_four_point):
+    """:func:`gather_loaded_kernel` of the ball in slot (a, t, j), the k-th loaded one."""
+    four = True
+    for i in range(4):
+        out_dbeta[k, i] = dbeta[a, t, j, i]
+        f = force[a, t, j, i]
+        f = f if np.isfinite(f) else 0.0
+        out_force[k, i] = f
+        four &= f > 0.0
+    out_converged[k] = ball_converged[a, t, j] and solved[a]
+    out_four_point[k] = four
 
 
 @pjit
@@ -329,15 +337,8 @@ def gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit, 
                     if not loaded[a, t, j]:
                         continue
                     b = at + i
-                    four = True
-                    for c in range(4):
-                        out_dbeta[b, c] = dbeta[a, t, j, c]
-                        f = force[a, t, j, c]
-                        f = f if np.isfinite(f) else 0.0
-                        out_force[b, c] = f
-                        four &= f > 0.0
-                    out_converged[b] = ball_converged[a, t, j] and solved[a]
-                    out_four_point[b] = four
+                    _gather_ball(dbeta, force, ball_converged, solved, a, t, j, b, out_dbeta,
+                                 out_force, out_converged, out_four_point)
                     settled += _settle_ball(force_t, i, limit, count_t, clipped)
                     for c in range(4):
                         dbeta_t[c, i] = out_dbeta[b, c]
@@ -352,10 +353,11 @@ def gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit, 
 @jit
 def scatter_loaded_balls_kernel(loaded, eps, valid, regime, regime_unloaded, pushes, out_eps,
                                 out_ok, out_unloaded):
-    """The loaded balls' outcomes in their slots (m, T, S), as :func:`scatter_loaded_kernel`
-    of each, in one pass: ``out_eps`` epsilon (NaN where not loaded), ``out_unloaded`` regime
-    == ``regime_unloaded`` (False where not loaded) and ``out_ok`` ``valid``, or unloaded too
-    if ``pushes`` (an unloaded ball is accounted for, pushed along; True where not loaded)."""
+    """The loaded balls' outcomes in their slots (m, T, S), in C order (as ``out[loaded] =
+    values`` of each, in one pass): ``out_eps`` epsilon (NaN where not loaded),
+    ``out_unloaded`` regime == ``regime_unloaded`` (False where not loaded) and ``out_ok``
+    ``valid``, or unloaded too if ``pushes`` (an unloaded ball is accounted for, pushed
+    along; True where not loaded)."""
     m, tracks, slots = loaded.shape
     k = 0
     for a in range(m):
@@ -371,22 +373,6 @@ def scatter_loaded_balls_kernel(loaded, eps, valid, regime, regime_unloaded, pus
                     out_eps[a, t, j] = np.nan
                     out_ok[a, t, j] = True
                     out_unloaded[a, t, j] = False
-
-
-@jit
-def scatter_loaded_kernel(loaded, values, fill, out):
-    """``out`` (m, T, S) = ``fill`` with ``values`` at the loaded slots, in C order (as
-    ``out[loaded] = values``)."""
-    m, tracks, slots = loaded.shape
-    k = 0
-    for a in range(m):
-        for t in range(tracks):
-            for j in range(slots):
-                if loaded[a, t, j]:
-                    out[a, t, j] = values[k]
-                    k += 1
-                else:
-                    out[a, t, j] = fill
 
 
 @jit(inline="always")
