@@ -479,10 +479,9 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
         every step: those sources are taken from it instead of being transformed again (the
         same values, bit for bit: the transforms are elementwise).
     out : dict, optional
-        source -> (ndarray (m T S, k), column) to write the values into (every source of the
-        config; the GrooveErrors fields of
-        :func:`tolsim.study.pipeline.evaluate.groove_error_buffers`), the ``fixed`` ones in
-        one compiled pass (:func:`_take_fixed_kernel`).
+        source -> ndarray (m, T, S) to write the values into (every source of the config;
+        views of the GrooveErrors fields,
+        :func:`tolsim.study.pipeline.evaluate.groove_error_buffers`).
 
     Returns
     -------
@@ -511,24 +510,17 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
         _correlate(group, z)
     given = out is not None
     out = out if given else {}
-    taken = []  # the fixed sources written into ``out``: values, by ball, field, column
     for t in config.tolerances:
         if t.source not in fixed:
             value = t.distribution.from_normal(z[t.source])
             if given:
-                flat, i = out[t.source]
-                flat.reshape(shape + flat.shape[1:])[..., i] = value
+                out[t.source][...] = value
             else:
                 out[t.source] = value
-        elif given:
-            taken.append((kernel_array(fixed[t.source]), t.scope == "ball", *out[t.source]))
         else:  # by ball id, or the track's one value
-            out[t.source] = np.empty(shape)
+            if not given:
+                out[t.source] = np.empty(shape)
             _take_balls_kernel(fixed[t.source], rows, ids, t.scope == "ball", out[t.source])
-    if taken:
-        values, by_ball, fields, columns = zip(*taken, strict=True)
-        _take_fixed_kernel(values, np.array(by_ball), kernel_array(rows, np.int64),
-                           kernel_array(ids, np.int64), fields, np.array(columns))
     return out
 
 
@@ -543,23 +535,6 @@ def _take_balls_kernel(values, rows, ids, by_ball, out):
         for t in range(tracks):
             for j in range(slots):
                 out[a, t, j] = values[r, t, ids[a, t, j] if by_ball else 0]
-
-
-@jit
-def _take_fixed_kernel(values, by_ball, rows, ids, fields, columns):
-    """:func:`_take_balls_kernel` of several sources into their GrooveErrors fields, in one
-    pass: ``fields[f][b, columns[f]]`` = ``values[f][rows[a], t, ids[a, t, j]]`` (``by_ball[f]``)
-    or ``values[f][rows[a], t, 0]``, b the flat index of slot (a, t, j) of ``ids`` (m, T, S);
-    ``values``, ``fields`` tuples of arrays (size, T, K_f) and (m T S, k_f)."""
-    m, tracks, slots = ids.shape
-    for a in range(m):
-        r = rows[a]
-        for t in range(tracks):
-            for j in range(slots):
-                b = (a * tracks + t) * slots + j
-                ident = ids[a, t, j]
-                for f in range(len(values)):
-                    fields[f][b, columns[f]] = values[f][r, t, ident if by_ball[f] else 0]
 
 
 def fixed_ball_values(config, block: Block) -> dict:

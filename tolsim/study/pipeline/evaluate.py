@@ -144,8 +144,8 @@ def groove_error_fields(values: dict, shape, compact: bool = False) -> dict:
     sources = [name for names in GROOVE_ERROR_SOURCES.values() for name in names
                if not compact or any(other in values for other in names)]
     fields, columns = groove_error_buffers(sources, shape)
-    for name, (flat, i) in columns.items():  # filled with broadcasting: no per-source copies
-        flat.reshape(tuple(shape) + flat.shape[1:])[..., i] = values.get(name, 0.0)
+    for name, column in columns.items():  # filled with broadcasting: no per-source copies
+        column[...] = values.get(name, 0.0)
     return fields
 
 
@@ -167,19 +167,20 @@ def groove_error_buffers(sources, shape):
         The fields with one of the ``sources``, flattened over balls as those of
         :func:`groove_error_fields`; the columns of sources not in ``sources`` are 0.
     columns : dict
-        source -> (its field as (n, k) balls by columns, its column), not filled.
+        source -> its column of its field, a view of ``shape``, not filled.
     """
     n = int(np.prod(shape))
     fields, columns = {}, {}
     for field, names in GROOVE_ERROR_SOURCES.items():
         if not any(name in sources for name in names):
             continue
-        flat = np.empty((n, len(names)))
+        out = np.empty(tuple(shape) + (len(names),))
         for i, name in enumerate(names):
             if name in sources:
-                columns[name] = (flat, i)
+                columns[name] = out[..., i]
             else:
-                flat[:, i] = 0.0
+                out[..., i] = 0.0
+        flat = out.reshape(n, len(names))
         fields[field] = flat if len(names) > 1 else flat[:, 0]  # (n,): per ball
     return fields, columns
 
