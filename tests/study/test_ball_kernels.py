@@ -5,6 +5,7 @@ import numpy as np
 from numpy.testing import assert_array_equal
 
 from tolsim.physics.geometry import TABLE1
+from tolsim.physics.velocity.analytic import ANALYTIC_TILE, analytic_kernel
 from tolsim.physics.velocity.models import (
     BALL_REGIME_A,
     BALL_UNLOADED,
@@ -15,11 +16,13 @@ from tolsim.physics.velocity.models import (
 from tolsim.study.pipeline.ball_kernels import (
     ball_outcomes_kernel,
     contact_counts_kernel,
+    gather_analytic_kernel,
     gather_loaded_kernel,
     nan_to_num,
-    scatter_loaded_kernel,
+    scatter_loaded_balls_kernel,
 )
 from tolsim.study.pipeline.evaluate import (
+    analytic_arguments,
     loaded_contacts,
     round_off_force,
     settle_round_off_contacts,
@@ -87,9 +90,9 @@ def test_ball_outcomes_are_the_numpy_outcomes():
         assert_array_equal(_bits(eps), _bits(want_eps))
 
 
-def test_gather_and_scatter_are_boolean_indexing():
-    # source: x[loaded] and out[loaded] = values of NumPy (C order), with the force's
-    # non-finite values set to 0 and four_point all F > 0; tolerance: the bits
+def test_gather_is_boolean_indexing():
+    # source: x[loaded] of NumPy (C order), with the force's non-finite values set to 0 and
+    # four_point all F > 0; tolerance: the bits
     rng = np.random.default_rng(13)
     shape = (9, 2, 7)
     loaded = rng.random(shape) < 0.7
@@ -105,12 +108,6 @@ def test_gather_and_scatter_are_boolean_indexing():
     assert_array_equal(_bits(out[1]), _bits(want_force))
     assert_array_equal(out[2], (ball_converged & solved[:, None, None])[loaded])
     assert_array_equal(out[3], np.all(want_force > 0.0, axis=1))
-    values = rng.normal(size=n)
-    got = np.empty(shape)
-    scatter_loaded_kernel(loaded, values, np.nan, got)
-    want = np.full(shape, np.nan)
-    want[loaded] = values
-    assert_array_equal(_bits(got), _bits(want))
 
 
 def test_nan_to_num_is_numpy_nan_to_num():
@@ -122,3 +119,69 @@ def test_nan_to_num_is_numpy_nan_to_num():
     assert_array_equal(_bits(nan_to_num(x)), _bits(np.nan_to_num(x)))
     view = x[:, :, ::2]  # not contiguous: NumPy's own
     assert_array_equal(_bits(nan_to_num(view)), _bits(np.nan_to_num(view)))
+
+
+def test_gather_analytic_is_gather_then_counts_then_analytic():
+    # source: gather_loaded_kernel, contact_counts_kernel and analytic_kernel one after the
+    # other, the chain of the carriage's evaluation before the fused kernel; tolerance: the bits
+    # (epsilon's NaN included). Loaded forces of the size of the carriage's (about 100 N)
+    # beside every odd case of _forces, over several tiles.
+    rng = np.random.default_rng(15)
+    shape = (90, 2, 13)
+    loaded = rng.random(shape) < 0.8
+    dbeta = rng.normal(0.0, 2e-3, shape + (4,))
+    force = np.where(rng.random(shape + (4,)) < 0.8, rng.uniform(20.0, 200.0, shape + (4,)),
+                     _forces(rng, int(np.prod(shape))).reshape(shape + (4,)))
+    force[0, 0, 0] = [1e-9, 0.0, 1e-9, 2e-8]  # settled: round-off only
+    ball_converged = rng.random(shape) < 0.95
+    solved = rng.random(shape[0]) < 0.9
+    n = int(loaded.sum())
+    assert n > 3 * ANALYTIC_TILE
+    want = np.empty((n, 4)), np.empty((n, 4)), np.empty(n, bool), np.empty(n, bool)
+    gather_loaded_kernel(loaded, dbeta, force, ball_converged, solved, *want)
+    count, clipped = np.empty(n, np.int8), np.empty((n, 4))
+    limit = round_off_force(TABLE1)
+    settled = contact_counts_kernel(want[1], limit, count, clipped)
+    eps, valid = np.empty(n), np.empty(n, bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        analytic_kernel(want[0], clipped, *analytic_arguments(TABLE1), eps, np.empty(0),
+                        np.empty((0, 4)), valid)
+    got = np.empty((n, 4)), np.empty((n, 4)), np.empty(n, bool), np.empty(n, bool)
+    got_count, got_eps, got_valid = np.empty(n, np.int8), np.empty(n), np.empty(n, bool)
+    got_settled = gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit,
+                                         *analytic_arguments(TABLE1), *got, got_count,
+                                         got_eps, got_valid)
+    assert got_settled == settled > 0
+    for g, w in zip(got, want, strict=True):
+        assert_array_equal(_bits(g), _bits(w))
+    assert_array_equal(got_count, count)
+    assert valid.sum() > n // 4 and np.isnan(eps).any()
+    assert_array_equal(got_valid, valid)
+    assert_array_equal(_bits(got_eps), _bits(eps))
+
+
+def test_scatter_loaded_balls_is_three_scatters():
+    # source: out[loaded] = values of NumPy (C order) of epsilon (NaN elsewhere), of
+    # BallState.accounted or valid (True elsewhere) and of the unloaded balls (regime
+    # BALL_UNLOADED; False elsewhere), the carriage's evaluation before the fused kernel
+    # (which scattered the first two with scatter_loaded_kernel); tolerance: the bits
+    rng = np.random.default_rng(16)
+    shape = (11, 2, 9)
+    loaded = rng.random(shape) < 0.7
+    n = int(loaded.sum())
+    eps = np.where(rng.random(n) < 0.2, np.nan, rng.normal(size=n))
+    valid = rng.random(n) < 0.7
+    regime = rng.integers(0, 6, n).astype(np.int8)
+    unloaded = regime == BALL_UNLOADED
+    assert (unloaded & ~valid).any()
+    for pushes in (True, False):
+        want_eps, want_ok = np.full(shape, np.nan), np.ones(shape, bool)
+        want_eps[loaded] = eps
+        want_ok[loaded] = valid | unloaded if pushes else valid
+        want_unloaded = np.zeros(shape, bool)
+        want_unloaded[loaded] = unloaded
+        got = np.empty(shape), np.empty(shape, bool), np.empty(shape, bool)
+        scatter_loaded_balls_kernel(loaded, eps, valid, regime, BALL_UNLOADED, pushes, *got)
+        assert_array_equal(_bits(got[0]), _bits(want_eps))
+        assert_array_equal(got[1], want_ok)
+        assert_array_equal(got[2], want_unloaded)

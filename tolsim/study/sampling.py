@@ -454,7 +454,8 @@ def error_values(config, block: Block, rail_position=None, parallel=False):
     return {t.source: t.distribution.from_normal(z[t.source]) for t in config.tolerances}
 
 
-def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, fixed=None):
+def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, fixed=None,
+                       out=None):
     """Error source values of balls moving through a carriage, in SI (``along_track``).
 
     Each ball keeps its own ``ball`` draws (the initial ball j of a track those of the block,
@@ -477,11 +478,15 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
         :func:`fixed_ball_values` of the block, for a caller that reads the same block at
         every step: those sources are taken from it instead of being transformed again (the
         same values, bit for bit: the transforms are elementwise).
+    out : dict, optional
+        source -> ndarray (m, T, S) to write the values into (every source of the config;
+        views of the GrooveErrors fields,
+        :func:`tolsim.study.pipeline.evaluate.groove_error_buffers`).
 
     Returns
     -------
     dict
-        source -> ndarray (m, T, S) [m or rad].
+        source -> ndarray (m, T, S) [m or rad] (``out`` if given).
     """
     tracks, balls = config.n_tracks, config.train.balls
     rows = np.arange(block.size) if rows is None else np.asarray(rows)
@@ -503,12 +508,18 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
             z[t.source] = np.broadcast_to(per_track, shape)
     for group in config.correlations:
         _correlate(group, z)
-    out = {}
+    given = out is not None
+    out = out if given else {}
     for t in config.tolerances:
         if t.source not in fixed:
-            out[t.source] = t.distribution.from_normal(z[t.source])
+            value = t.distribution.from_normal(z[t.source])
+            if given:
+                out[t.source][...] = value
+            else:
+                out[t.source] = value
         else:  # by ball id, or the track's one value
-            out[t.source] = np.empty(shape)
+            if not given:
+                out[t.source] = np.empty(shape)
             _take_balls_kernel(fixed[t.source], rows, ids, t.scope == "ball", out[t.source])
     return out
 

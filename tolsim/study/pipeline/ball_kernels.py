@@ -270,32 +270,109 @@ def gather_loaded_kernel(loaded, dbeta, force, ball_converged, solved, out_dbeta
             for j in range(slots):
                 if not loaded[a, t, j]:
                     continue
-                four = True
-                for i in range(4):
-                    out_dbeta[k, i] = dbeta[a, t, j, i]
-                    f = force[a, t, j, i]
-                    f = f if np.isfinite(f) else 0.0
-                    out_force[k, i] = f
-                    four &= f > 0.0
-                out_converged[k] = ball_converged[a, t, j] and solved[a]
-                out_four_point[k] = four
+                _gather_ball(dbeta, force, ball_converged, solved, a, t, j, k, out_dbeta,
+                             out_force, out_converged, out_four_point)
                 k += 1
 
 
+@jit(inline="always")
+def _gather_ball(dbeta, force, ball_converged, solved, a, t, j, k, out_dbeta, out_force,
+                 out_converged, out_four_point):
+    """:func:`gather_loaded_kernel` of the ball in slot (a, t, j), the k-th loaded one."""
+    four = True
+    for i in range(4):
+        out_dbeta[k, i] = dbeta[a, t, j, i]
+        f = force[a, t, j, i]
+        f = f if np.isfinite(f) else 0.0
+        out_force[k, i] = f
+        four &= f > 0.0
+    out_converged[k] = ball_converged[a, t, j] and solved[a]
+    out_four_point[k] = four
+
+
+@pjit
+def gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit, nominal_angle,
+                           ball_radius, semi_major_coefficient, elliptic_e, k_f, max_ratio,
+                           max_angle, max_eps, out_dbeta, out_force, out_converged,
+                           out_four_point, out_count, out_eps, out_valid):
+    """:func:`gather_loaded_kernel`, :func:`contact_counts_kernel` and the ``analytic``
+    velocity model of the loaded balls of slot arrays, in one pass.
+
+    The arguments and outputs of :func:`gather_loaded_kernel`, then ``limit`` of
+    :func:`contact_counts_kernel` and its ``out_count`` (its clipped forces stay in a tile's
+    scratch), then those of :func:`tolsim.physics.velocity.analytic.analytic_kernel` from
+    ``nominal_angle`` to ``max_eps``, writing epsilon and its validity into ``out_eps``,
+    ``out_valid`` (n,). Per tile of rows with at most ``ANALYTIC_TILE`` slots (or one row):
+    the gather and the counts of each loaded ball (C order), then
+    :func:`tolsim.physics.velocity.analytic.analytic_tile` on their clipped forces (each
+    ball's numbers are its own, whatever the tile). The numbers of the three kernels one
+    after the other, bit for bit. Returns the number of settled balls.
+    """
+    m, tracks, slots = loaded.shape
+    per_row = tracks * slots
+    start = np.empty(m + 1, dtype=np.int64)  # each row's first loaded ball
+    start[0] = 0
+    for a in range(m):
+        c = 0
+        for t in range(tracks):
+            for j in range(slots):
+                c += loaded[a, t, j]
+        start[a + 1] = start[a] + c
+    rows = max(1, ANALYTIC_TILE // per_row)  # the rows of a tile: at most one tile of balls
+    tile = max(ANALYTIC_TILE, per_row)
+    settled = 0
+    for block in prange((m + rows - 1) // rows):
+        first, last = block * rows, min(m, block * rows + rows)
+        at = start[first]
+        size = start[last] - at
+        clipped = np.empty((tile, 4))
+        dbeta_t = np.empty((4, tile))
+        clipped_t = np.empty((4, tile))
+        force_t = out_force[at:at + size]
+        count_t = out_count[at:at + size]
+        i = 0
+        for a in range(first, last):
+            for t in range(tracks):
+                for j in range(slots):
+                    if not loaded[a, t, j]:
+                        continue
+                    b = at + i
+                    _gather_ball(dbeta, force, ball_converged, solved, a, t, j, b, out_dbeta,
+                                 out_force, out_converged, out_four_point)
+                    settled += _settle_ball(force_t, i, limit, count_t, clipped)
+                    for c in range(4):
+                        dbeta_t[c, i] = out_dbeta[b, c]
+                        clipped_t[c, i] = clipped[i, c]
+                    i += 1
+        analytic_tile(dbeta_t, clipped_t, size, nominal_angle, ball_radius,
+                      semi_major_coefficient, elliptic_e, k_f, max_ratio, max_angle, max_eps,
+                      out_eps, out_valid, at)
+    return settled
+
+
 @jit
-def scatter_loaded_kernel(loaded, values, fill, out):
-    """``out`` (m, T, S) = ``fill`` with ``values`` at the loaded slots, in C order (as
-    ``out[loaded] = values``)."""
+def scatter_loaded_balls_kernel(loaded, eps, valid, regime, regime_unloaded, pushes, out_eps,
+                                out_ok, out_unloaded):
+    """The loaded balls' outcomes in their slots (m, T, S), in C order (as ``out[loaded] =
+    values`` of each, in one pass): ``out_eps`` epsilon (NaN where not loaded),
+    ``out_unloaded`` regime == ``regime_unloaded`` (False where not loaded) and ``out_ok``
+    ``valid``, or unloaded too if ``pushes`` (an unloaded ball is accounted for, pushed
+    along; True where not loaded)."""
     m, tracks, slots = loaded.shape
     k = 0
     for a in range(m):
         for t in range(tracks):
             for j in range(slots):
                 if loaded[a, t, j]:
-                    out[a, t, j] = values[k]
+                    unloaded = regime[k] == regime_unloaded
+                    out_eps[a, t, j] = eps[k]
+                    out_ok[a, t, j] = valid[k] or (pushes and unloaded)
+                    out_unloaded[a, t, j] = unloaded
                     k += 1
                 else:
-                    out[a, t, j] = fill
+                    out_eps[a, t, j] = np.nan
+                    out_ok[a, t, j] = True
+                    out_unloaded[a, t, j] = False
 
 
 @jit(inline="always")

@@ -28,29 +28,28 @@ from tolsim.physics.carriage import (
     solve_carriage_batch,
 )
 from tolsim.physics.static import GrooveErrors
-from tolsim.physics.velocity.models import BALL_UNRESOLVED, MODEL_UNRESOLVED
-from tolsim.study.pipeline.ball_kernels import (
-    gather_loaded_kernel,
-    nan_to_num,
-    scatter_loaded_kernel,
-)
+from tolsim.physics.velocity.models import BALL_UNLOADED, BALL_UNRESOLVED, MODEL_UNRESOLVED
+from tolsim.study.pipeline.ball_kernels import nan_to_num, scatter_loaded_balls_kernel
 from tolsim.study.pipeline.carriage import CarriageState
 from tolsim.study.pipeline.carriage_track_kernels import (
-    advance_kernel,
+    advance_frame_kernel,
     carriage_motion_kernel,
     carry_slots_kernel,
     entering_by_kernel,
     entry_shift_kernel,
     first_contact_kernel,
+    initial_balls_kernel,
+    joined_kernel,
     newton_start_kernel,
     remember_kernel,
+    slot_inputs_kernel,
+    step_velocity_kernel,
 )
 from tolsim.study.pipeline.evaluate import (
     BallState,
-    StaticResult,
-    ball_velocities,
     concatenated_balls,
-    groove_error_fields,
+    groove_error_buffers,
+    loaded_ball_velocities,
     serial_if_small,
 )
 from tolsim.study.pipeline.propagation import (
@@ -156,20 +155,21 @@ class _Evaluation:
     def __call__(self, ball_z, ball_id, t, rows):
         """Evaluate the balls in slots (m_k, T, S) of assemblies ``rows`` at time t [s].
 
-        Returns (eps, ok, loaded, batch, state): epsilon (NaN unless loaded and resolved),
-        resolved (True where not loaded; an unloaded ball in the zone is accounted for, pushed
-        along, unless ``pushes_unloaded`` is False), loaded, the carriage batch and the
-        BallState of the loaded balls (flattened).
+        Returns (eps, ok, loaded, batch, state, unloaded): epsilon (NaN unless loaded and
+        resolved), resolved (True where not loaded; an unloaded ball in the zone is accounted
+        for, pushed along, unless ``pushes_unloaded`` is False), loaded, the carriage batch,
+        the BallState of the loaded balls (flattened) and the unloaded balls in slots.
         """
         config, carriage = self.config, self.config.carriage
         shape = ball_z.shape
-        occupied = ball_id >= 0
-        with np.errstate(invalid="ignore"):
-            loaded = occupied & (np.abs(ball_z) <= self.half_zone)
-        z = np.where(occupied, ball_z, 0.0)
-        values = moving_ball_values(config, self.block, ball_id,
-                                    z + config.motion.groove_velocity * t, rows, self.fixed)
-        fields = groove_error_fields(values, shape, compact=True)  # (absent fields: 0)
+        loaded, z, rail = np.empty(shape, dtype=bool), np.empty(shape), np.empty(shape)
+        slot_inputs_kernel(kernel_array(ball_z).reshape(-1),
+                           kernel_array(ball_id, np.int64).reshape(-1), self.half_zone,
+                           config.motion.groove_velocity * t, loaded.reshape(-1),
+                           z.reshape(-1), rail.reshape(-1))
+        # the values straight into the GrooveErrors fields (absent fields: 0)
+        fields, columns = groove_error_buffers({s.source for s in config.tolerances}, shape)
+        moving_ball_values(config, self.block, ball_id, rail, rows, self.fixed, columns)
         if carriage.end_relief_depth > 0:  # the carriage flanks TR, TL recede at the ends
             h = end_relief(z, config.train.loaded_zone_length, carriage.end_relief_depth,
                            carriage.end_relief_length)
@@ -183,18 +183,14 @@ class _Evaluation:
                                          start=self.newton_start(rows, t))
         solved = batch.status == STATUS_CONVERGED
         self.remember(rows, t, batch, solved)
-        n = int(np.count_nonzero(loaded))
-        static = StaticResult(np.empty((n, 4)), np.empty((n, 4)), np.empty(n, dtype=bool),
-                              np.empty(n, dtype=bool))
-        gather_loaded_kernel(loaded, batch.contact_angle_deviation, batch.normal_force,
-                             batch.ball_converged, solved, static.contact_angle_deviation,
-                             static.normal_force, static.converged, static.four_point)
-        state = ball_velocities(config, static, (n,))
-        eps, ok = np.empty(shape), np.empty(shape, dtype=bool)
-        scatter_loaded_kernel(loaded, state.velocity_deviation, np.nan, eps)
-        scatter_loaded_kernel(loaded, state.accounted if self.pushes_unloaded else state.valid,
-                              True, ok)
-        return eps, ok, loaded, batch, state
+        state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation,
+                                       batch.normal_force, batch.ball_converged, solved)
+        eps, ok, unloaded = np.empty(shape), np.empty(shape, dtype=bool), np.empty(
+            shape, dtype=bool)
+        scatter_loaded_balls_kernel(loaded, state.velocity_deviation, state.valid,
+                                    state.regime, BALL_UNLOADED, self.pushes_unloaded, eps, ok,
+                                    unloaded)
+        return eps, ok, loaded, batch, state, unloaded
 
 
     def newton_start(self, rows, t):
@@ -232,29 +228,19 @@ def _initial_state(config, ball_z, loaded, batch, state):
     and the CarriageState of the t = 0 solve."""
     m, tracks, slots = ball_z.shape
     n = config.train.balls
-    full = (m, tracks, slots)
-    eps = np.full(full, np.nan)
-    valid = np.zeros(full, dtype=bool)
-    converged = np.ones(full, dtype=bool)
-    lost = np.ones(full, dtype=bool)  # outside the zone: no contact with the grooves
-    dbeta = np.full(full + (4,), np.nan)
-    force = np.zeros(full + (4,))
-    model = np.full(full, MODEL_UNRESOLVED, dtype=state.model.dtype)
-    regime = np.full(full, BALL_UNRESOLVED, dtype=state.regime.dtype)  # as ``lost``
-    eps[loaded] = state.velocity_deviation
-    valid[loaded] = state.valid
-    converged[loaded] = state.converged
-    lost[loaded] = state.loss_of_contact
-    dbeta[loaded] = state.contact_angle_deviation
-    force[loaded] = state.normal_force
-    model[loaded] = state.model
-    regime[loaded] = state.regime
-
-    def first(x):
-        return np.ascontiguousarray(x[:, :, :n].reshape((m, tracks * n) + x.shape[3:]))
-
-    balls = BallState(first(eps), first(valid), first(converged), first(lost), first(dbeta),
-                      first(force), first(model), state.resolve_seconds, first(regime))
+    first = (m, tracks, n)
+    out = (np.empty(first), np.empty(first, dtype=bool), np.empty(first, dtype=bool),
+           np.empty(first, dtype=bool), np.empty(first + (4,)), np.empty(first + (4,)),
+           np.empty(first, dtype=state.model.dtype), np.empty(first, dtype=state.regime.dtype))
+    # outside the zone: lost (no contact with the grooves), its regime as ``lost``
+    initial_balls_kernel(loaded, *(kernel_array(x, x.dtype) for x in (
+        state.velocity_deviation, state.valid, state.converged, state.loss_of_contact,
+        state.contact_angle_deviation, state.normal_force, state.model, state.regime)),
+        MODEL_UNRESOLVED, BALL_UNRESOLVED, *out)
+    eps, valid, converged, lost, dbeta, force, model, regime = (
+        x.reshape((m, tracks * n) + x.shape[3:]) for x in out)
+    balls = BallState(eps, valid, converged, lost, dbeta, force, model, state.resolve_seconds,
+                      regime)
     stiffness = np.ascontiguousarray(np.diagonal(batch.stiffness, axis1=1, axis2=2))
     carriage = CarriageState(batch.displacement, stiffness, batch.status.astype(np.int8))
     return balls, carriage
@@ -411,22 +397,25 @@ class CarriageFrame(AlongTrackFrame):
         return CarriageBalls(eps, valid, loaded, None,
                              lambda: mid.balls.rows(index[loaded]), unloaded)
 
-    def _joined(self, state1, state2):
+    def _joined(self, state1, state2, take):
         """``state1`` with the balls that entered at the end of the previous step
-        (``fresh``) taken at this step's midpoint, so that they are in the step's trains
-        and checks as balls that were there at its start."""
-        take = None if self.fresh is None else self.fresh & state2.loaded
-        if take is None or not take.any():
+        (``fresh``), those loaded at this step's midpoint (``take``, None: none), taken there,
+        so that they are in the step's trains and checks as balls that were there at its
+        start (:func:`joined_kernel`)."""
+        if take is None:
             return state1
-        loaded = state1.loaded | take
-        n1 = int(np.count_nonzero(state1.loaded))
-        src = np.where(take.reshape(-1), np.cumsum(state2.loaded) - 1 + n1,
-                       np.cumsum(state1.loaded) - 1)[loaded.reshape(-1)]
-        return CarriageBalls(
-            np.where(take, state2.velocity_deviation, state1.velocity_deviation),
-            np.where(take, state2.valid, state1.valid), loaded, None,
-            lambda: concatenated_balls(state1.balls, state2.balls).rows(src),
-            np.where(take, state2.unloaded, state1.unloaded))
+        shape = take.shape
+        loaded, valid, unloaded = (np.empty(shape, dtype=bool) for _ in range(3))
+        eps, src = np.empty(shape), np.empty(take.size, dtype=np.int64)
+        flags = (kernel_array(x, np.bool_) for x in (take, state1.loaded, state2.loaded))
+        src = src[:joined_kernel(*flags, *(kernel_array(x) for x in (
+            state1.velocity_deviation, state2.velocity_deviation)), *(
+            kernel_array(x, np.bool_) for x in (state1.valid, state2.valid, state1.unloaded,
+                                                state2.unloaded)),
+            loaded, eps, valid, unloaded, src)]
+        return CarriageBalls(eps, valid, loaded, None,
+                             lambda: concatenated_balls(state1.balls, state2.balls).rows(src),
+                             unloaded)
 
     def predictor(self, state):
         unloaded = self.unloaded(state)
@@ -445,8 +434,12 @@ class CarriageFrame(AlongTrackFrame):
         # a ball outside the zone at the midpoint keeps epsilon_1
         unloaded = self.unloaded(state1, state2)
         if unloaded is None:
-            return np.where(state2.loaded, nan_to_num(state2.velocity_deviation),
-                            nan_to_num(state1.velocity_deviation))
+            out = np.empty(state2.loaded.shape)
+            step_velocity_kernel(kernel_array(state2.loaded, np.bool_).reshape(-1),
+                                 *(kernel_array(x).reshape(-1) for x in (
+                                     state2.velocity_deviation, state1.velocity_deviation)),
+                                 out.reshape(-1))
+            return out
         eps = np.where(state2.loaded, state2.velocity_deviation, state1.velocity_deviation)
         return nan_to_num(self.pushed(eps, unloaded, ~(state1.loaded | state2.loaded)))
 
@@ -469,10 +462,11 @@ class CarriageFrame(AlongTrackFrame):
         return pushed_along(gap, eps, unloaded, edge)
 
     def step(self, k, t, dt, position, new, state1, state2):
-        state1 = self._joined(state1, state2)
+        take = None if self.fresh is None else self.fresh & state2.loaded
+        take = take if take is not None and take.any() else None
+        state1 = self._joined(state1, state2, take)
         closed = None
-        if (self.draws_entries and self.fresh is not None
-                and (take := self.fresh & state2.loaded).any()):
+        if self.draws_entries and take is not None:
             closed = np.empty(position.shape[:2] + (max(self.slots - 1, 0),))
             entry_shift_kernel(position, new, take, nan_to_num(state2.velocity_deviation),
                                self.entry_time, self.entry_velocity, self.rows, t,
@@ -492,20 +486,19 @@ class CarriageFrame(AlongTrackFrame):
 
     def advance(self, step, new):
         # exits at the trailing end, entries at the leading end
+        # (written back to the frame; the entry's time and the ball ahead's epsilon from
+        # its travel: advance_frame_kernel)
         rows, z0, ids, ok = step.rows, step.position, step.ball_id, step.ball_ok
         step.previous_id = ids.copy()
         overflow = np.zeros(len(rows), dtype=bool)
-        sub_count, sub_entered = self.count[rows], self.entered[rows]
         events = [np.empty(z0.shape, np.int64), np.empty(z0.shape),
                   np.empty(z0.shape, np.int64), np.empty(z0.shape)]
-        advance_kernel(z0, new, ids, ok, sub_count, sub_entered, self.entering_gap[rows],
-                       self.half_zone, self.diameter, self.balls, step.t, step.dt, overflow,
-                       *events)
-        self.position[rows], self.ball_id[rows], self.ball_ok[rows] = new, ids, ok
-        self.count[rows], self.entered[rows] = sub_count, sub_entered
+        advance_frame_kernel(rows, z0, kernel_array(new), ids, ok, self.count, self.entered,
+                             self.entering_gap, self.half_zone, self.diameter, self.balls,
+                             step.t, step.dt, 0.5 * self.v * step.dt, overflow, *events,
+                             self.position, self.ball_id, self.ball_ok, self.entry_time,
+                             self.entry_velocity)
         step.overflow, step.events = overflow, events
-        self.entry_time[rows] = events[3]  # the ball ahead's epsilon from its travel:
-        self.entry_velocity[rows] = 1.0 - (z0 - new) / (0.5 * self.v * step.dt)
 
 
 class CarriageFirstContact(StepObserver):

@@ -34,66 +34,153 @@ def advance_kernel(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_
     :func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`, "Loaded zone,
     exit and entry".
     """
-    m, tracks, slots = z1.shape
-    capacity = entering_gap.shape[2]
+    m, tracks = z1.shape[:2]
     for a in range(m):
         for tr in range(tracks):
-            for j in range(slots):
-                exit_id[a, tr, j] = -1
-                exit_time[a, tr, j] = np.nan
-                entry_id[a, tr, j] = -1
-                entry_time[a, tr, j] = np.nan
-            c = count[a, tr]
-            keep = 0
-            lead0 = np.nan
-            for j in range(c):
-                if z1[a, tr, j] < -half_zone:
-                    exit_id[a, tr, j] = ball_id[a, tr, j]
-                    span = z0[a, tr, j] - z1[a, tr, j]
-                    frac = (z0[a, tr, j] + half_zone) / span if span > 0.0 else 0.0
-                    exit_time[a, tr, j] = t0 + min(max(frac, 0.0), 1.0) * dt
-                    continue
-                z0[a, tr, keep] = z0[a, tr, j]
-                z1[a, tr, keep] = z1[a, tr, j]
-                ball_id[a, tr, keep] = ball_id[a, tr, j]
-                ball_ok[a, tr, keep] = ball_ok[a, tr, j]
-                keep += 1
-            c = keep
-            if c == 0:
+            _advance_track(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_zone,
+                           diameter, balls, t0, dt, overflow, exit_id, exit_time, entry_id,
+                           entry_time, a, a, tr)
+
+
+@jit(inline="always")
+def _advance_track(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_zone,
+                   diameter, balls, t0, dt, overflow, exit_id, exit_time, entry_id,
+                   entry_time, a, r, tr):
+    """:func:`advance_kernel` of row ``a``, track ``tr``; ``count``, ``entered`` and
+    ``entering_gap`` at row ``r``."""
+    slots = z1.shape[2]
+    capacity = entering_gap.shape[2]
+    for j in range(slots):
+        exit_id[a, tr, j] = -1
+        exit_time[a, tr, j] = np.nan
+        entry_id[a, tr, j] = -1
+        entry_time[a, tr, j] = np.nan
+    c = count[r, tr]
+    keep = 0
+    lead0 = np.nan
+    for j in range(c):
+        if z1[a, tr, j] < -half_zone:
+            exit_id[a, tr, j] = ball_id[a, tr, j]
+            span = z0[a, tr, j] - z1[a, tr, j]
+            frac = (z0[a, tr, j] + half_zone) / span if span > 0.0 else 0.0
+            exit_time[a, tr, j] = t0 + min(max(frac, 0.0), 1.0) * dt
+            continue
+        z0[a, tr, keep] = z0[a, tr, j]
+        z1[a, tr, keep] = z1[a, tr, j]
+        ball_id[a, tr, keep] = ball_id[a, tr, j]
+        ball_ok[a, tr, keep] = ball_ok[a, tr, j]
+        keep += 1
+    c = keep
+    if c == 0:
+        overflow[a] = True
+    else:
+        lead0 = z0[a, tr, c - 1]
+        drift = lead0 - z1[a, tr, c - 1]  # the leading ball's travel in the step
+        while True:
+            k = entered[r, tr]
+            if k >= capacity:
                 overflow[a] = True
-            else:
-                lead0 = z0[a, tr, c - 1]
-                drift = lead0 - z1[a, tr, c - 1]  # the leading ball's travel in the step
-                while True:
-                    k = entered[a, tr]
-                    if k >= capacity:
-                        overflow[a] = True
-                        break
-                    znew = z1[a, tr, c - 1] + diameter + entering_gap[a, tr, k]
-                    if znew > half_zone:
-                        break
-                    if c >= slots:
-                        overflow[a] = True
-                        break
-                    # it enters at L/2 when there is room, then moves with the ball ahead
-                    frac = (half_zone - znew) / drift if drift > 0.0 else 1.0
-                    if frac > 1.0:  # room since before the step: enters at its start
-                        frac = 1.0
-                        znew = half_zone - max(drift, 0.0)
-                    z1[a, tr, c] = znew
-                    z0[a, tr, c] = znew + drift
-                    ball_id[a, tr, c] = balls + k
-                    ball_ok[a, tr, c] = True
-                    entry_id[a, tr, c] = balls + k
-                    entry_time[a, tr, c] = t0 + dt - frac * dt
-                    entered[a, tr] = k + 1
-                    c += 1
-            for j in range(c, slots):
-                z0[a, tr, j] = np.nan
-                z1[a, tr, j] = np.nan
-                ball_id[a, tr, j] = -1
-                ball_ok[a, tr, j] = True
-            count[a, tr] = c
+                break
+            znew = z1[a, tr, c - 1] + diameter + entering_gap[r, tr, k]
+            if znew > half_zone:
+                break
+            if c >= slots:
+                overflow[a] = True
+                break
+            # it enters at L/2 when there is room, then moves with the ball ahead
+            frac = (half_zone - znew) / drift if drift > 0.0 else 1.0
+            if frac > 1.0:  # room since before the step: enters at its start
+                frac = 1.0
+                znew = half_zone - max(drift, 0.0)
+            z1[a, tr, c] = znew
+            z0[a, tr, c] = znew + drift
+            ball_id[a, tr, c] = balls + k
+            ball_ok[a, tr, c] = True
+            entry_id[a, tr, c] = balls + k
+            entry_time[a, tr, c] = t0 + dt - frac * dt
+            entered[r, tr] = k + 1
+            c += 1
+    for j in range(c, slots):
+        z0[a, tr, j] = np.nan
+        z1[a, tr, j] = np.nan
+        ball_id[a, tr, j] = -1
+        ball_ok[a, tr, j] = True
+    count[r, tr] = c
+
+
+@jit
+def advance_frame_kernel(rows, z0, z1, ball_id, ball_ok, count, entered, entering_gap,
+                         half_zone, diameter, balls, t0, dt, scale, overflow, exit_id,
+                         exit_time, entry_id, entry_time, position, frame_id, frame_ok,
+                         frame_entry_time, frame_entry_velocity):
+    """:func:`advance_kernel` of the rows ``rows`` of a frame, written back to it, in one pass.
+
+    ``z0``, ``z1``, ``ball_id``, ``ball_ok``, ``overflow`` and the events (m_k, ...) as in
+    :func:`advance_kernel`; the frame's ``count``, ``entered``, ``entering_gap`` (size, ...)
+    indexed by assembly, and updated in place as there. Then per row a, r = ``rows[a]``:
+    ``position[r]`` = z1, ``frame_id[r]`` = ball_id, ``frame_ok[r]`` = ball_ok,
+    ``frame_entry_time[r]`` = entry_time and ``frame_entry_velocity[r]`` = 1 - (z0 - z1) /
+    ``scale`` (the epsilon of the slots' travel, ``scale`` = v dt / 2), as
+    :meth:`tolsim.study.pipeline.carriage_track.CarriageFrame.advance` did with NumPy.
+    """
+    m, tracks, slots = z1.shape
+    for a in range(m):
+        r = rows[a]
+        for tr in range(tracks):
+            _advance_track(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_zone,
+                           diameter, balls, t0, dt, overflow, exit_id, exit_time, entry_id,
+                           entry_time, a, r, tr)
+            for j in range(slots):
+                position[r, tr, j] = z1[a, tr, j]
+                frame_id[r, tr, j] = ball_id[a, tr, j]
+                frame_ok[r, tr, j] = ball_ok[a, tr, j]
+                frame_entry_time[r, tr, j] = entry_time[a, tr, j]
+                frame_entry_velocity[r, tr, j] = 1.0 - (z0[a, tr, j] - z1[a, tr, j]) / scale
+
+
+@jit
+def joined_kernel(take, loaded1, loaded2, eps1, eps2, valid1, valid2, unloaded1, unloaded2,
+                  out_loaded, out_eps, out_valid, out_unloaded, out_source):
+    """A step's start balls (m, T, S) with the balls ``take`` taken from its midpoint
+    (:meth:`tolsim.study.pipeline.carriage_track.CarriageFrame.step`): ``out_loaded`` =
+    loaded1 | take, epsilon, valid and unloaded those of the midpoint (2) where ``take``, else
+    of the start (1); ``out_source`` the index of each loaded ball's BallState in the start's
+    loaded balls followed by the midpoint's (both in C order). Returns their number. As
+    ``np.where`` of each and the index from ``np.cumsum`` of the loaded masks."""
+    m, tracks, slots = take.shape
+    n1 = 0
+    for a in range(m):
+        for t in range(tracks):
+            for j in range(slots):
+                n1 += loaded1[a, t, j]
+    k1 = k2 = n = 0
+    for a in range(m):
+        for t in range(tracks):
+            for j in range(slots):
+                k1 += loaded1[a, t, j]
+                k2 += loaded2[a, t, j]
+                if take[a, t, j]:
+                    out_eps[a, t, j] = eps2[a, t, j]
+                    out_valid[a, t, j] = valid2[a, t, j]
+                    out_unloaded[a, t, j] = unloaded2[a, t, j]
+                else:
+                    out_eps[a, t, j] = eps1[a, t, j]
+                    out_valid[a, t, j] = valid1[a, t, j]
+                    out_unloaded[a, t, j] = unloaded1[a, t, j]
+                out_loaded[a, t, j] = loaded1[a, t, j] or take[a, t, j]
+                if out_loaded[a, t, j]:
+                    out_source[n] = k2 - 1 + n1 if take[a, t, j] else k1 - 1
+                    n += 1
+    return n
+
+
+@jit
+def step_velocity_kernel(loaded2, eps2, eps1, out):
+    """``out`` = nan_to_num(eps2) where ``loaded2`` else nan_to_num(eps1) (flat arrays), as
+    ``np.where(loaded2, np.nan_to_num(eps2), np.nan_to_num(eps1))``: the balls' epsilon of a
+    step, a ball outside the zone at the midpoint keeping its epsilon_1."""
+    for i in range(out.shape[0]):
+        out[i] = nan_to_num_one(eps2[i]) if loaded2[i] else nan_to_num_one(eps1[i])
 
 
 @jit
@@ -122,7 +209,8 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
     held the same ball (``loaded``, epsilon, ``valid``, ``unloaded``) and ``out_index`` its
     loaded ball's index among the old loaded slots in C order (-1: not loaded); a ball that
     was in no old slot (it entered) or an empty slot is ``out_fresh`` (a ball id >= 0 only)
-    and takes not loaded, NaN, valid, not unloaded."""
+    and takes not loaded, NaN, valid, not unloaded. (The balls keep their order: each is
+    searched for from the old slot of the one before, then from the first.)"""
     rows, tracks, slots = new_id.shape
     first = np.empty(old_id.shape[:2], dtype=np.int64)  # each old track's first loaded index
     k = 0
@@ -135,6 +223,7 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
     for r in range(rows):
         a = old_row[r]
         for t in range(tracks):
+            p, k = 0, first[a, t]  # the old slot searched from, its first loaded index
             for j in range(slots):
                 ident = new_id[r, t, j]
                 out_loaded[r, t, j] = False
@@ -145,19 +234,24 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
                 out_index[r, t, j] = -1
                 if ident < 0:
                     continue
-                k = first[a, t]
-                for p in range(slots):
-                    if old_id[a, t, p] == ident:
-                        out_fresh[r, t, j] = False
-                        out_loaded[r, t, j] = old_loaded[a, t, p]
-                        out_eps[r, t, j] = old_eps[a, t, p]
-                        out_valid[r, t, j] = old_valid[a, t, p]
-                        out_unloaded[r, t, j] = old_unloaded[a, t, p]
-                        if old_loaded[a, t, p]:
-                            out_index[r, t, j] = k
+                found = False
+                for _ in range(2):  # from where the previous ball was found, then from 0
+                    while p < slots and old_id[a, t, p] != ident:
+                        k += old_loaded[a, t, p]
+                        p += 1
+                    if p < slots:
+                        found = True
                         break
-                    if old_loaded[a, t, p]:
-                        k += 1
+                    p, k = 0, first[a, t]
+                if not found:
+                    continue
+                out_fresh[r, t, j] = False
+                out_loaded[r, t, j] = old_loaded[a, t, p]
+                out_eps[r, t, j] = old_eps[a, t, p]
+                out_valid[r, t, j] = old_valid[a, t, p]
+                out_unloaded[r, t, j] = old_unloaded[a, t, p]
+                if old_loaded[a, t, p]:
+                    out_index[r, t, j] = k
 
 
 @jit
@@ -336,3 +430,61 @@ def entry_shift_kernel(position, free, take, eps, entry_time, entry_velocity, ro
                         tau = min(tau, ahead)
                     frac = -after / (before - after) if before > after else 1.0
                     out_closed[r, tr, j - 1] = t - min(frac, 1.0) * tau
+
+
+@jit
+def initial_balls_kernel(loaded, eps, valid, converged, lost, dbeta, force, model, regime,
+                         model_fill, regime_fill, out_eps, out_valid, out_converged, out_lost,
+                         out_dbeta, out_force, out_model, out_regime):
+    """The BallState arrays of the first n slots (m, T, n) from the loaded balls' (flat, C
+    order over ``loaded`` (m, T, S), S >= n): each value where loaded, else epsilon NaN, not
+    valid, converged, lost (no contact with the grooves), dbeta NaN, force 0, ``model_fill``,
+    ``regime_fill``. As ``np.full`` of each and ``x[loaded] = values``, then ``x[:, :, :n]``
+    (:func:`tolsim.study.pipeline.carriage_track.first_contact_carriage_track`'s t = 0 balls).
+    """
+    m, tracks, slots = loaded.shape
+    n = out_eps.shape[2]
+    k = 0
+    for a in range(m):
+        for t in range(tracks):
+            for j in range(slots):
+                if j >= n:
+                    k += loaded[a, t, j]
+                    continue
+                if loaded[a, t, j]:
+                    out_eps[a, t, j] = eps[k]
+                    out_valid[a, t, j] = valid[k]
+                    out_converged[a, t, j] = converged[k]
+                    out_lost[a, t, j] = lost[k]
+                    for c in range(4):
+                        out_dbeta[a, t, j, c] = dbeta[k, c]
+                        out_force[a, t, j, c] = force[k, c]
+                    out_model[a, t, j] = model[k]
+                    out_regime[a, t, j] = regime[k]
+                    k += 1
+                else:
+                    out_eps[a, t, j] = np.nan
+                    out_valid[a, t, j] = False
+                    out_converged[a, t, j] = True
+                    out_lost[a, t, j] = True
+                    for c in range(4):
+                        out_dbeta[a, t, j, c] = np.nan
+                        out_force[a, t, j, c] = 0.0
+                    out_model[a, t, j] = model_fill
+                    out_regime[a, t, j] = regime_fill
+
+
+@jit
+def slot_inputs_kernel(ball_z, ball_id, half_zone, shift, out_loaded, out_z, out_rail):
+    """The carriage solve's inputs of slots (flat arrays): ``out_loaded`` occupied (id >= 0)
+    and |z| <= ``half_zone`` (False for a NaN z), ``out_z`` z where occupied else 0 and
+    ``out_rail`` = out_z + ``shift`` (the rail position, shift = v t), as the NumPy
+    expressions of :class:`tolsim.study.pipeline.carriage_track.CarriageFrame`'s
+    evaluation."""
+    for i in range(ball_z.shape[0]):
+        occupied = ball_id[i] >= 0
+        z = ball_z[i]
+        out_loaded[i] = occupied and abs(z) <= half_zone
+        z = z if occupied else 0.0
+        out_z[i] = z
+        out_rail[i] = z + shift

@@ -77,6 +77,8 @@ from tolsim.physics.velocity.models import (
 from tolsim.study.pipeline.ball_kernels import (
     ball_outcomes_kernel,
     contact_counts_kernel,
+    gather_analytic_kernel,
+    gather_loaded_kernel,
     loads_at_kernel,
     paired_analytic_kernel,
     paired_balls_kernel,
@@ -139,18 +141,48 @@ def groove_error_fields(values: dict, shape, compact: bool = False) -> dict:
         ``arc_centre_offset_tangential`` (n, 4) [m], ``bottom_rotation``, ``top_rotation``
         (n,) [rad], ``bottom_offset``, ``top_offset`` (n, 2) [m], ``ball_oversize`` (n,) [m].
     """
-    n = int(np.prod(shape))
+    sources = [name for names in GROOVE_ERROR_SOURCES.values() for name in names
+               if not compact or any(other in values for other in names)]
+    fields, columns = groove_error_buffers(sources, shape)
+    for name, column in columns.items():  # filled with broadcasting: no per-source copies
+        column[...] = values.get(name, 0.0)
+    return fields
 
-    def group(names):
-        # filled column by column with broadcasting: no per-source copies, no stacking
+
+def groove_error_buffers(sources, shape):
+    """Empty :class:`tolsim.physics.static.GrooveErrors` fields of ``shape`` balls, to be
+    filled source by source (:func:`groove_error_fields` with ``compact``; a caller that
+    writes the values in place, :func:`tolsim.study.sampling.moving_ball_values`).
+
+    Parameters
+    ----------
+    sources : collection of str
+        The sources that have values (:data:`GROOVE_ERROR_SOURCES`).
+    shape : tuple
+        Shape of one per-ball array.
+
+    Returns
+    -------
+    fields : dict
+        The fields with one of the ``sources``, flattened over balls as those of
+        :func:`groove_error_fields`; the columns of sources not in ``sources`` are 0.
+    columns : dict
+        source -> its column of its field, a view of ``shape``, not filled.
+    """
+    n = int(np.prod(shape))
+    fields, columns = {}, {}
+    for field, names in GROOVE_ERROR_SOURCES.items():
+        if not any(name in sources for name in names):
+            continue
         out = np.empty(tuple(shape) + (len(names),))
         for i, name in enumerate(names):
-            out[..., i] = values.get(name, 0.0)
-        return out.reshape(n, len(names))
-
-    return {field: group(names) if len(names) > 1 else group(names)[:, 0]  # (n,): per ball
-            for field, names in GROOVE_ERROR_SOURCES.items()
-            if not compact or any(name in values for name in names)}
+            if name in sources:
+                columns[name] = out[..., i]
+            else:
+                out[..., i] = 0.0
+        flat = out.reshape(n, len(names))
+        fields[field] = flat if len(names) > 1 else flat[:, 0]  # (n,): per ball
+    return fields, columns
 
 
 # --------------------------------------------------------------------------------------------
@@ -267,7 +299,7 @@ def paired_balls(config, values: dict, shape, side_load=None, normal_load=None,
         if config.study.velocity_model == "analytic":
             eps, valid = np.empty(n), np.empty(n, dtype=np.bool_)
             with np.errstate(divide="ignore", invalid="ignore"):
-                settled = paired_analytic_kernel(*paired, *_analytic_arguments(bearing), dbeta,
+                settled = paired_analytic_kernel(*paired, *analytic_arguments(bearing), dbeta,
                                                  force, four_point, count, eps, valid)
             fast = (eps, valid)
         else:
@@ -359,7 +391,7 @@ def _eq24(dbeta, force, bearing, out_eps, out_valid):
                 out_eps, out_valid)
 
 
-def _analytic_arguments(bearing):
+def analytic_arguments(bearing):
     """The arguments of ``analytic_kernel`` from ``nominal_angle`` to ``max_eps``."""
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                          bearing.poisson_ratio)
@@ -370,7 +402,7 @@ def _analytic_arguments(bearing):
 
 def _analytic(dbeta, force, bearing, out_eps, out_valid):
     eps22, gamma = np.empty(0), np.empty((0, 4))  # not needed: skipped
-    analytic_kernel(dbeta, force, *_analytic_arguments(bearing), out_eps, eps22, gamma,
+    analytic_kernel(dbeta, force, *analytic_arguments(bearing), out_eps, eps22, gamma,
                     out_valid)
 
 
@@ -711,6 +743,45 @@ def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallSta
         lost.reshape(shape), dbeta.reshape(shape + (4,)), force.reshape(shape + (4,)),
         model.reshape(shape), resolve_seconds, regime.reshape(shape),
     )
+
+
+def loaded_ball_velocities(config, loaded, dbeta, force, ball_converged, solved) -> BallState:
+    """:func:`ball_velocities` of the loaded balls of slot arrays (a carriage solve).
+
+    Parameters
+    ----------
+    config : StudyConfig
+    loaded : ndarray of bool (m, T, S)
+    dbeta, force : ndarray (m, T, S, 4)
+        The solve's contact angle deviations [rad] and forces [N] (a non-finite force: 0).
+    ball_converged : ndarray of bool (m, T, S)
+    solved : ndarray of bool (m,)
+        The assembly's solve converged.
+
+    Returns
+    -------
+    BallState
+        The loaded balls, in C order (as ``x[loaded]``), flattened: their static state from
+        :func:`tolsim.study.pipeline.ball_kernels.gather_loaded_kernel`, then
+        :func:`ball_velocities`; with ``velocity_model = "analytic"`` the gather, the contact
+        counts and the fast model in one pass
+        (:func:`tolsim.study.pipeline.ball_kernels.gather_analytic_kernel`: the same numbers).
+    """
+    n = int(np.count_nonzero(loaded))
+    static = StaticResult(np.empty((n, 4)), np.empty((n, 4)), np.empty(n, dtype=bool),
+                          np.empty(n, dtype=bool))
+    outputs = (static.contact_angle_deviation, static.normal_force, static.converged,
+               static.four_point)
+    if config.study.velocity_model != "analytic":
+        gather_loaded_kernel(loaded, dbeta, force, ball_converged, solved, *outputs)
+        return ball_velocities(config, static, (n,))
+    count, eps, valid = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.bool_)
+    with serial_if_small(n), np.errstate(divide="ignore", invalid="ignore"):
+        settled = gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved,
+                                         round_off_force(config.bearing),
+                                         *analytic_arguments(config.bearing), *outputs,
+                                         count, eps, valid)
+    return ball_velocities(config, static, (n,), (count, None, settled, (eps, valid)))
 
 
 def loads_per_ball(config, shape):
