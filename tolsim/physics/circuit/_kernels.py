@@ -180,7 +180,7 @@ def _pushed_speeds(q, half_sum, length, pushed, closed, speed, n, out):
         a = b
 
 
-@jit
+@jit(inline="always")  # (inlined: the call passed two dozen arrays per iteration)
 def _solve_ring(q, half_sum, length, loaded_speed, coast, ring_stiffness, ring_loaded,
                 ring_push, ring_pushed, ring_closed, drag, n, label, speed, force, block_start,
                 block_weight, block_sum, block_unloaded, block_coast, block_coasting,
