@@ -258,6 +258,8 @@ class CircuitFrame(CarriageFrame):
         self.status = np.zeros(block.size, dtype=np.int64)
         self.model = CREEP_MODELS[ContactSettings().creep_model]
         self._rows = self._rows_circuits = None
+        self.midpoint_stiffness = None  # (the midpoint's balls, K of its loaded balls)
+        self.joined = None
         self._slots(np.arange(block.size))
 
     def gaps(self, rows=None) -> np.ndarray:
@@ -316,6 +318,30 @@ class CircuitFrame(CarriageFrame):
             out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
 
+    def _joined(self, state1, state2):
+        joined = super()._joined(state1, state2)
+        self.joined = (joined, state1)  # the step's start balls and the carried ones
+        return joined
+
+    def _start_stiffness(self, state1, state2, missing, stiff):
+        """:meth:`stiffness` of the step's start balls ``state1`` at the slots ``missing``,
+        ``stiff`` that of the midpoint balls ``state2``. A ball carried from the previous
+        step's midpoint (:meth:`CarriageFrame._carried`) has the K computed there, one that
+        entered and is taken at this midpoint (:meth:`CarriageFrame._joined`) this
+        midpoint's: K depends on each ball's own state alone, so both are the values
+        :meth:`stiffness` gives. Computed when the start is not the carried balls."""
+        carried, known, joined = self.carried, self.midpoint_stiffness, self.joined
+        if (carried is None or known is None or joined is None or joined[0] is not state1
+                or carried[0] is not joined[1] or known[0] is not carried[1]):
+            return self.stiffness(state1.balls, state1.loaded, missing)
+        out = np.full(missing.shape, np.nan)
+        fresh = (np.zeros(missing.shape, dtype=bool) if self.fresh is None
+                 else self.fresh & state2.loaded)  # taken at the midpoint (_joined)
+        kept = missing & ~fresh
+        out[kept] = known[1][carried[2][kept]]
+        out[missing & fresh] = stiff[missing & fresh]
+        return out
+
     def advance(self, step, new):
         # the circuits' step: the loaded balls at their epsilon and K of the step (the free
         # motion ``new`` is not used)
@@ -325,9 +351,11 @@ class CircuitFrame(CarriageFrame):
         eps = self.velocity(state1, state2)
         stiff = self.stiffness(state2.balls, state2.loaded)
         missing = ~np.isfinite(stiff) & state1.loaded  # K of the start where none at midpoint
+        midpoint = (state2, stiff[state2.loaded])  # (K of each loaded ball, for the next step)
         if missing.any():
-            stiff = np.where(missing, self.stiffness(state1.balls, state1.loaded, missing),
+            stiff = np.where(missing, self._start_stiffness(state1, state2, missing, stiff),
                              stiff)
+        self.midpoint_stiffness = midpoint
         finite = np.isfinite(stiff) & (stiff > 0)
         fallback = float(np.mean(stiff[finite])) if finite.any() else 1.0
         unresolved = ~(state1.valid & state2.valid)
