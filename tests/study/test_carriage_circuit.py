@@ -461,3 +461,37 @@ def test_an_entering_ball_takes_the_entry_ball_s_pushed_flag():
     pushed = np.array([[0, 0, 1, 0, 0, 0], [0, 0, 0, 0, 0, 1]], dtype=bool)
     entering_velocity(eps, k, loaded, pushed)
     assert_array_equal(pushed, [[1, 1, 1, 0, 0, 1], [0, 0, 0, 0, 0, 1]])
+
+
+
+class CountedStart(CircuitFrame):
+    """The frame, counting the computations of the start's K (:meth:`stiffness` at given
+    slots)."""
+
+    def stiffness(self, balls, loaded, where=None):
+        self.computed = getattr(self, "computed", 0) + (where is not None)
+        return super().stiffness(balls, loaded, where)
+
+
+class ComputedStart(CountedStart):
+    """The frame with the start's K always computed (the code before it reused the previous
+    midpoint's)."""
+
+    def _start_stiffness(self, state1, state2, missing, stiff):
+        return self.stiffness(state1.balls, state1.loaded, missing)
+
+
+def test_the_start_s_creep_stiffness_is_the_previous_midpoint_s():
+    # Reference: the same study with the start's K computed at every step; tolerance 0 (bit
+    # for bit): K depends on each ball's own state alone
+    c = config(samples=6, steps=30)
+    runs = []
+    for frame_type in (CountedStart, ComputedStart):
+        frame = frame_type(c, sample_block(c, 0))
+        record = Record(frame)
+        integrate(c, frame, [CircuitContact(frame), record])
+        runs.append((np.array(record.sigma), frame.ring_speed.copy(),
+                     getattr(frame, "computed", 0)))
+    assert_array_equal(runs[0][0], runs[1][0])
+    assert_array_equal(runs[0][1], runs[1][1])
+    assert runs[0][2] < runs[1][2]  # the reuse happened

@@ -16,6 +16,7 @@ from tolsim.study.pipeline.carriage_circuit import (
     slots_kernel,
 )
 from tolsim.study.pipeline.circuit_kernels import (
+    circuit_figures_kernel,
     circuit_gaps_kernel,
     ring_inputs_kernel,
     step_contacts_kernel,
@@ -253,3 +254,31 @@ def test_slots_match_the_numpy_chain():
         assert_array_equal(ids[i], np.where(want_ring >= 0, ring_id[want_ring], -1))
         want_ok = np.take_along_axis(ring_ok[line], np.maximum(want_ring, 0), axis=0)
         assert_array_equal(ok[i], np.where(want_ring >= 0, want_ok, True))
+
+
+@pytest.mark.parametrize("tracks", [1, 2, 3])
+def test_circuit_figures_match_the_numpy_chain(tracks):
+    # CircuitContact.moved at tolsim bb94a7b: where_count += hits summed over the tracks,
+    # column_max = np.maximum(column_max, max over the tracks), column_mean += max over the
+    # tracks x travel; NaN propagates (a NaN force, a NaN figure before)
+    rng = np.random.default_rng(tracks)
+    size, rows = 12, np.array([0, 2, 3, 7, 8, 11])
+    k = len(rows)
+    hits = rng.integers(0, 4, (k * tracks, CODES))
+    column = rng.uniform(0.0, 1.0, (k * tracks, 4))
+    column[rng.random(column.shape) < 0.2] = 0.0
+    column[3] = np.nan
+    where_count = rng.integers(0, 9, (size, CODES))
+    column_max = rng.uniform(0.0, 1.0, (size, 2))
+    column_max[rows[-1], 0] = np.nan
+    column_mean = rng.uniform(0.0, 1.0, (size, 2))
+    travel = 0.2 * 0.0125
+    want = [where_count.copy(), column_max.copy(), column_mean.copy()]
+    want[0][rows] += hits.reshape(k, tracks, -1).sum(axis=1)
+    c = column.reshape(k, tracks, 4)
+    want[1][rows] = np.maximum(want[1][rows], c[:, :, :2].max(axis=1))
+    want[2][rows] += c[:, :, 2:].max(axis=1) * travel
+    circuit_figures_kernel(rows, tracks, hits, column, travel, where_count, column_max,
+                           column_mean)
+    for a, b in zip((where_count, column_max, column_mean), want, strict=True):
+        assert_array_equal(a, b)

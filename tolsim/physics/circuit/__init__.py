@@ -45,6 +45,7 @@ from tolsim.physics.circuit._kernels import (
     WHERE_INSIDE,
     WHERE_RETURN,
     step_circuit_kernel,
+    wrap,
 )
 
 #: Names of the ``where`` codes of a contact event.
@@ -641,4 +642,5 @@ __all__ = [
     "run",
     "step",
     "step_circuit_kernel",
+    "wrap",
 ]

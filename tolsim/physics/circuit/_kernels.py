@@ -96,18 +96,21 @@ def _solve_blocks(free_speed, weight, loaded, pushed, closed, drag, cut, n, labe
                 resultant -= drag
             else:
                 resultant -= share
-            if m < last or cut < 0:
+            if cut < 0:  # closed ring: less the least prestress below
                 force[r] = resultant
                 if resultant < lowest:
                     lowest = resultant
+            elif m < last:
+                force[r] = resultant if resultant > 0.0 else 0.0
             else:
                 force[r] = 0.0
             r += 1
             if r == n:
                 r = 0
-    for r in range(n):
-        f = force[r] - lowest if cut < 0 else force[r]  # closed ring: least prestress
-        force[r] = f if f > 0.0 else 0.0
+    if cut < 0:
+        for r in range(n):
+            f = force[r] - lowest
+            force[r] = f if f > 0.0 else 0.0
     return jammed
 
 
@@ -120,17 +123,18 @@ def _gap(position, half_sum, length, n, r):
 
 
 @jit
-def _widest_open(q, half_sum, length, closed, n):
-    """The open ring pair with the widest gap (-1 when every pair is closed)."""
-    cut = -1
-    widest = -np.inf
-    for r in range(n):
-        if not closed[r]:
-            g = _gap(q, half_sum, length, n, r)
-            if g > widest:
-                widest = g
-                cut = r
-    return cut
+def wrap(x, length):
+    """``x % length`` for ``length`` > 0 (Python's float modulo, as Numba's ``%``), bit for
+    bit, without its call to ``fmod`` for x in (-L, 2 L): fmod is x there, or x - L, which
+    is exact (Sterbenz), and Python adds L to a negative remainder. Zeros, L, NaN and the
+    rest take ``%``."""
+    if 0.0 < x < length:
+        return x
+    if length < x < 2.0 * length:
+        return x - length
+    if -length < x < 0.0:
+        return x + length
+    return x % length
 
 
 @jit
@@ -176,28 +180,35 @@ def _pushed_speeds(q, half_sum, length, pushed, closed, speed, n, out):
         a = b
 
 
-@jit
-def _solve_ring(q, half_sum, length, loaded_speed, coast, stiffness, ball, ring_loaded,
-                pushed_in, ring_pushed, ring_closed, drag, n, label, speed, force, block_start,
+@jit(inline="always")  # (inlined: the call passed two dozen arrays per iteration)
+def _solve_ring(q, half_sum, length, loaded_speed, coast, ring_stiffness, ring_loaded,
+                ring_push, ring_pushed, ring_closed, drag, n, label, speed, force, block_start,
                 block_weight, block_sum, block_unloaded, block_coast, block_coasting,
                 block_speed, free_speed, weight):
     """The ring's speeds and forces for its closed pairs (eq. 4 of
-    :func:`tolsim.physics.circuit.step`), with the pushed balls' speeds of
-    :func:`_pushed_speeds` (solved again after them); returns (cut, jammed)."""
+    :func:`tolsim.physics.circuit.step`), cut at its widest open pair, with the pushed balls'
+    speeds of :func:`_pushed_speeds` (solved again after them); ``ring_stiffness`` and
+    ``ring_push`` are each ring ball's K and pushed flag. Returns (cut, jammed)."""
     any_pushed = False
+    cut = -1  # the open ring pair with the widest gap (-1: every pair closed)
+    widest = -np.inf
     for r in range(n):
-        ring_pushed[r] = ring_loaded[r] and pushed_in[ball[r]]
+        ring_pushed[r] = ring_loaded[r] and ring_push[r]
         if ring_pushed[r]:
             any_pushed = True
             free_speed[r] = coast[r]
             weight[r] = 0.0
         elif ring_loaded[r]:
             free_speed[r] = loaded_speed[r]
-            weight[r] = 2.0 * stiffness[ball[r]]
+            weight[r] = 2.0 * ring_stiffness[r]
         else:
             free_speed[r] = coast[r]
             weight[r] = 0.0
-    cut = _widest_open(q, half_sum, length, ring_closed, n)
+        if not ring_closed[r]:
+            g = _gap(q, half_sum, length, n, r)
+            if g > widest:
+                widest = g
+                cut = r
     jammed = _solve_blocks(free_speed, weight, ring_loaded, ring_pushed, ring_closed, drag,
                            cut, n, label, speed, force, block_start, block_weight, block_sum,
                            block_unloaded, block_coast, block_coasting, block_speed)
@@ -242,68 +253,65 @@ def _run_closed(r, ring_pushed, ring_closed, t_pair, limit, n):
 
 
 @jit
-def step_circuit_one(position, diameter, eps, stiffness, pushed, loaded, closed, length, zone,
-                     drag, travel, travel_start, speed_out, velocity_out, force_out,
-                     mean_force_out, column_out, event_pair, event_where, event_travel, work_f,
-                     work_i, work_b):
-    """One step of one circuit, in place (Notes of :func:`tolsim.physics.circuit.step`).
+def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, closed, length,
+                     zone, drag, travel, travel_start, speed_out, velocity_out, force_out,
+                     mean_force_out, column_out, event_pair, event_where, event_travel, q,
+                     half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
+                     block_weight, block_sum, coast, loc, block_speed, loaded_speed,
+                     block_coasting, block_unloaded, block_coast, ring_stiffness, ball, label,
+                     block_start, ring_loaded, ring_closed, ring_pushed, ring_push):
+    """One step of circuit ``c`` (row c of the (M, N) arrays of :func:`step_circuit_kernel`),
+    in place (Notes of :func:`tolsim.physics.circuit.step`).
 
     ``position``, ``diameter``, ``eps``, ``stiffness``, ``pushed`` (in the zone without a
-    groove contact: no epsilon or K of its own), ``loaded`` (ball order, N),
+    groove contact: no epsilon or K of its own), ``loaded`` (ball order),
     ``closed`` (ball pair k: balls k, k + 1 mod N) and ``speed_out`` (the balls' circuit
     speeds, read as the coasting speeds of unloaded balls when ``drag`` is 0) are the state,
-    updated in place; ``column_out`` (4,) gets the entry and exit column forces at the end of
-    the step and their step means. Returns (events, status). Work arrays: ``work_f`` (16, N)
-    float, ``work_i`` (3, N) int64, ``work_b`` (3, N) bool.
+    updated in place; ``column_out`` row c gets the entry and exit column forces at the end of
+    the step and their step means. Returns (events, status). The rest are work arrays (N,)
+    in ring order, the direction of flow: rows, never views, are passed (a view costs two
+    atomic reference counts, which threads working on one array contend for).
     """
-    n = position.shape[0]
-    capacity = event_pair.shape[0]
+    n = position.shape[1]
+    capacity = event_pair.shape[1]
     forward = travel >= 0.0
     total = abs(travel)
     entry = 0.0 if forward else -zone
-    q, half_sum, free_speed, weight, speed, force, mean_force = (
-        work_f[0], work_f[1], work_f[2], work_f[3], work_f[4], work_f[5], work_f[6])
-    t_pair, t_ball, block_weight, block_sum, coast, loc, block_speed, loaded_speed = (
-        work_f[7], work_f[8], work_f[9], work_f[10], work_f[11], work_f[12], work_f[13],
-        work_f[14])
-    block_coasting = work_f[15]
-    ball, label, block_start = work_i[0], work_i[1], work_i[2]
-    ring_loaded, ring_closed, ring_pushed = work_b[0], work_b[1], work_b[2]
+    span = length[c]
     # gather in the direction of flow: ring r = ball r (forward) or ball N - 1 - r; loc is
     # the travel from the entry (loaded balls in [0, L_z], unloaded ones in [L_z, L_c])
     for r in range(n):
         b = r if forward else n - 1 - r
-        ball[r] = b
-        q[r] = position[b] if forward else -position[b]
-        ring_loaded[r] = loaded[b]
-        coast[r] = speed_out[b]
-        mean_force[r] = 0.0
-        loaded_speed[r] = 0.5 * (1.0 - eps[b])
-        x = (q[r] - entry) % length
-        if ring_loaded[r]:
-            loc[r] = x - length if x > 0.5 * (zone + length) else x
-        else:
-            loc[r] = x + length if x < 0.5 * zone else x
-    for r in range(n):
         r1 = r + 1 if r + 1 < n else 0
-        b, b1 = ball[r], ball[r1]
-        half_sum[r] = 0.5 * (diameter[b] + diameter[b1])
-        ring_closed[r] = closed[b if forward else b1]
+        b1 = r1 if forward else n - 1 - r1
+        ball[r] = b
+        q[r] = position[c, b] if forward else -position[c, b]
+        ring_loaded[r] = loaded[c, b]
+        coast[r] = speed_out[c, b]
+        mean_force[r] = 0.0
+        loaded_speed[r] = 0.5 * (1.0 - eps[c, b])
+        ring_stiffness[r] = stiffness[c, b]
+        ring_push[r] = pushed[c, b]
+        x = wrap(q[r] - entry, span)
+        if ring_loaded[r]:
+            loc[r] = x - span if x > 0.5 * (zone + span) else x
+        else:
+            loc[r] = x + span if x < 0.5 * zone else x
+        half_sum[r] = 0.5 * (diameter[c, b] + diameter[c, b1])
+        ring_closed[r] = closed[c, b if forward else b1]
     events = 0
     status = 0
     remaining = total
     tie = TIE_TOLERANCE * total
-    column_out[2] = 0.0
-    column_out[3] = 0.0
+    entry_sum = 0.0  # the column forces times travel
+    exit_sum = 0.0
     changed = True  # the state changed since the last solve
     for _iteration in range(4 * n + 16):
-        # t_ball and t_pair hold the blocks' unloaded counts and coasting speeds during the
-        # solve (they are rewritten after it)
-        cut, jammed = _solve_ring(q, half_sum, length, loaded_speed, coast, stiffness, ball,
-                                  ring_loaded, pushed, ring_pushed, ring_closed, drag, n,
+        cut, jammed = _solve_ring(q, half_sum, span, loaded_speed, coast, ring_stiffness,
+                                  ring_loaded, ring_push, ring_pushed, ring_closed, drag, n,
                                   label, speed, force, block_start, block_weight, block_sum,
-                                  t_ball, t_pair, block_coasting, block_speed, free_speed,
-                                  weight)
+                                  block_unloaded, block_coast, block_coasting, block_speed,
+                                  free_speed, weight)
         if jammed:
             status |= STATUS_JAMMED
         best = remaining
@@ -316,100 +324,106 @@ def step_circuit_one(position, diameter, eps, stiffness, pushed, loaded, closed,
                 ring_closed[r] and speed[r1] - speed[r] <= SPEED_TOLERANCE)
             t_pair[r] = np.inf
             if not ring_closed[r] and speed[r] - speed[r1] > SPEED_TOLERANCE:
-                g = _gap(q, half_sum, length, n, r)
+                g = _gap(q, half_sum, span, n, r)
                 t = (g if g > 0.0 else 0.0) / (speed[r] - speed[r1])
                 t_pair[r] = t
                 if t < best:
                     best = t
             t_ball[r] = np.inf
             if speed[r] > 0.0:
-                d = (zone if ring_loaded[r] else length) - loc[r]
+                d = (zone if ring_loaded[r] else span) - loc[r]
                 t = (d if d > 0.0 else 0.0) / speed[r]
                 t_ball[r] = t
                 if t < best:
                     best = t
-        # advance to the event (or the end of the step)
+        # advance to the event (or the end of the step); the pairs that close there close
+        done = total - remaining
+        remaining -= best
+        limit = best + tie
+        closing = False
+        crossing = False
         for r in range(n):
             q[r] += speed[r] * best
             loc[r] += speed[r] * best
             mean_force[r] += force[r] * best
             r1 = r + 1 if r + 1 < n else 0
             if ring_loaded[r] != ring_loaded[r1]:
-                column_out[2 if ring_loaded[r1] else 3] += force[r] * best
-        done = total - remaining
-        remaining -= best
-        limit = best + tie
-        changed = False
-        for r in range(n):
-            if t_pair[r] <= limit:
-                changed = True
-                ring_closed[r] = True
-        for r in range(n):
-            if t_pair[r] <= limit:
-                # a pair with a pushed ball carries force once its run has closed: one event
-                # for the run, at its last pair, labelled by the balls at its ends
-                a, r1, record = _run_closed(r, ring_pushed, ring_closed, t_pair, limit, n)
-                if not record:
-                    continue
-                last = r1 - 1 if r1 > 0 else n - 1
-                if events < capacity:
-                    event_pair[events] = ball[last] if forward else ball[r1]
-                    if ring_loaded[a] and ring_loaded[r1]:
-                        event_where[events] = WHERE_INSIDE
-                    elif ring_loaded[r1]:
-                        event_where[events] = WHERE_ENTRY
-                    elif ring_loaded[a]:
-                        event_where[events] = WHERE_EXIT
-                    else:
-                        event_where[events] = WHERE_RETURN
-                    event_travel[events] = travel_start + (done + best if forward
-                                                           else -(done + best))
-                    events += 1
+                if ring_loaded[r1]:
+                    entry_sum += force[r] * best
                 else:
-                    status |= STATUS_EVENT_OVERFLOW
-        for r in range(n):
+                    exit_sum += force[r] * best
+            if t_pair[r] <= limit:
+                closing = True
+                ring_closed[r] = True
             if t_ball[r] <= limit:
-                changed = True
-                ring_loaded[r] = not ring_loaded[r]
-                if ring_loaded[r]:
-                    loc[r] -= length  # entered: the entry is loc = L_c = 0
+                crossing = True
+        changed = closing or crossing
+        if closing:
+            for r in range(n):
+                if t_pair[r] <= limit:
+                    # a pair with a pushed ball carries force once its run has closed: one
+                    # event for the run, at its last pair, labelled by the balls at its ends
+                    a, r1, record = _run_closed(r, ring_pushed, ring_closed, t_pair, limit, n)
+                    if not record:
+                        continue
+                    last = r1 - 1 if r1 > 0 else n - 1
+                    if events < capacity:
+                        event_pair[c, events] = ball[last] if forward else ball[r1]
+                        if ring_loaded[a] and ring_loaded[r1]:
+                            event_where[c, events] = WHERE_INSIDE
+                        elif ring_loaded[r1]:
+                            event_where[c, events] = WHERE_ENTRY
+                        elif ring_loaded[a]:
+                            event_where[c, events] = WHERE_EXIT
+                        else:
+                            event_where[c, events] = WHERE_RETURN
+                        event_travel[c, events] = travel_start + (done + best if forward
+                                                                  else -(done + best))
+                        events += 1
+                    else:
+                        status |= STATUS_EVENT_OVERFLOW
+        if crossing:
+            for r in range(n):
+                if t_ball[r] <= limit:
+                    ring_loaded[r] = not ring_loaded[r]
+                    if ring_loaded[r]:
+                        loc[r] -= span  # entered: the entry is loc = L_c = 0
         if remaining <= tie:
             break
     else:
         status |= STATUS_ITERATIONS
-    # scatter back in ball order, with the end-of-step speeds and forces (solved again only
-    # if the last advance ended with an event)
-    for r in range(n):
-        b = ball[r]
-        position[b] = q[r] if forward else -q[r]
-        loaded[b] = ring_loaded[r]
+    # the end-of-step speeds and forces (solved again only if the last advance ended with
+    # an event), scattered back in ball order
     if changed:
-        cut, jammed = _solve_ring(q, half_sum, length, loaded_speed, coast, stiffness, ball,
-                                  ring_loaded, pushed, ring_pushed, ring_closed, drag, n,
+        cut, jammed = _solve_ring(q, half_sum, span, loaded_speed, coast, ring_stiffness,
+                                  ring_loaded, ring_push, ring_pushed, ring_closed, drag, n,
                                   label, speed, force, block_start, block_weight, block_sum,
-                                  t_ball, t_pair, block_coasting, block_speed, free_speed,
-                                  weight)
+                                  block_unloaded, block_coast, block_coasting, block_speed,
+                                  free_speed, weight)
         if jammed:
             status |= STATUS_JAMMED
-    column_out[0] = 0.0
-    column_out[1] = 0.0
+    entry_force = 0.0
+    exit_force = 0.0
     for r in range(n):
         b = ball[r]
         r1 = r + 1 if r + 1 < n else 0
         pair = b if forward else ball[r1]
-        speed_out[b] = speed[r]
-        velocity_out[b] = 1.0 - 2.0 * speed[r] if ring_loaded[r] else np.nan
-        force_out[pair] = force[r]
-        mean_force_out[pair] = mean_force[r] / total if total > 0.0 else force[r]
-        closed[pair] = ring_closed[r]
+        position[c, b] = q[r] if forward else -q[r]
+        loaded[c, b] = ring_loaded[r]
+        speed_out[c, b] = speed[r]
+        velocity_out[c, b] = 1.0 - 2.0 * speed[r] if ring_loaded[r] else np.nan
+        force_out[c, pair] = force[r]
+        mean_force_out[c, pair] = mean_force[r] / total if total > 0.0 else force[r]
+        closed[c, pair] = ring_closed[r]
         if ring_loaded[r] != ring_loaded[r1]:
-            column_out[0 if ring_loaded[r1] else 1] = force[r]
-    if total > 0.0:
-        column_out[2] /= total
-        column_out[3] /= total
-    else:
-        column_out[2] = column_out[0]
-        column_out[3] = column_out[1]
+            if ring_loaded[r1]:
+                entry_force = force[r]
+            else:
+                exit_force = force[r]
+    column_out[c, 0] = entry_force
+    column_out[c, 1] = exit_force
+    column_out[c, 2] = entry_sum / total if total > 0.0 else entry_force
+    column_out[c, 3] = exit_sum / total if total > 0.0 else exit_force
     return events, status
 
 
@@ -425,14 +439,25 @@ def step_circuit_kernel(position, diameter, eps, stiffness, pushed, loaded, clos
     """
     m, n = position.shape
     for chunk in prange((m + CHUNK - 1) // CHUNK):
-        work_f = np.empty((16, n))
-        work_i = np.empty((3, n), dtype=np.int64)
-        work_b = np.empty((3, n), dtype=np.bool_)
+        # the work arrays of the chunk (N,), in the order of step_circuit_one's arguments
+        wf = np.empty((19, n))
+        wi = np.empty((3, n), dtype=np.int64)
+        wb = np.empty((4, n), dtype=np.bool_)
+        (q, half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
+         block_weight, block_sum, coast, loc, block_speed, loaded_speed, block_coasting,
+         block_unloaded, block_coast, ring_stiffness) = (
+            wf[0], wf[1], wf[2], wf[3], wf[4], wf[5], wf[6], wf[7], wf[8], wf[9], wf[10],
+            wf[11], wf[12], wf[13], wf[14], wf[15], wf[16], wf[17], wf[18])
+        ball, label, block_start = wi[0], wi[1], wi[2]
+        ring_loaded, ring_closed, ring_pushed, ring_push = wb[0], wb[1], wb[2], wb[3]
         for c in range(chunk * CHUNK, min(m, (chunk + 1) * CHUNK)):
             count, status = step_circuit_one(
-                position[c], diameter[c], eps[c], stiffness[c], pushed[c], loaded[c],
-                closed[c], length[c], zone, drag, travel, travel_start, speed_out[c],
-                velocity_out[c], force_out[c], mean_force_out[c], column_out[c],
-                event_pair[c], event_where[c], event_travel[c], work_f, work_i, work_b)
+                c, position, diameter, eps, stiffness, pushed, loaded, closed, length, zone,
+                drag, travel, travel_start, speed_out, velocity_out, force_out,
+                mean_force_out, column_out, event_pair, event_where, event_travel, q,
+                half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
+                block_weight, block_sum, coast, loc, block_speed, loaded_speed,
+                block_coasting, block_unloaded, block_coast, ring_stiffness, ball, label,
+                block_start, ring_loaded, ring_closed, ring_pushed, ring_push)
             event_count[c] = count
             status_out[c] = status

@@ -21,6 +21,7 @@ from tolsim.physics.circuit import (
     WHERE,
     circuit_length,
     step_circuit_kernel,
+    wrap,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.physics.velocity.creep_stiffness import creep_stiffness
@@ -28,6 +29,7 @@ from tolsim.study.pipeline.carriage_track import CarriageFrame
 from tolsim.study.pipeline.circuit_friction import CircuitTrains
 from tolsim.study.pipeline.circuit_kernels import (
     circuit_events_kernel,
+    circuit_figures_kernel,
     circuit_gaps_kernel,
     entering_fill_kernel,
     ring_inputs_kernel,
@@ -73,7 +75,7 @@ def slots_kernel(position, loaded, length, circuits, half_zone, ring_id, ring_ok
         count = 0
         for r in range(n):
             if loaded[line, r]:
-                x = position[line, r] % length[line]
+                x = wrap(position[line, r], length[line])  # (= %)
                 z = half_zone - x
                 if count >= slots:
                     count = -1
@@ -255,6 +257,9 @@ class CircuitFrame(CarriageFrame):
         self.slot_ring = np.full(self.ball_id.shape, -1, dtype=np.int64)
         self.status = np.zeros(block.size, dtype=np.int64)
         self.model = CREEP_MODELS[ContactSettings().creep_model]
+        self._rows = self._rows_circuits = None
+        self.midpoint_stiffness = None  # (the midpoint's balls, K of its loaded balls)
+        self.joined = None
         self._slots(np.arange(block.size))
 
     def gaps(self, rows=None) -> np.ndarray:
@@ -266,7 +271,13 @@ class CircuitFrame(CarriageFrame):
         return out
 
     def _circuits(self, rows):
-        return (np.asarray(rows)[:, None] * self.tracks + np.arange(self.tracks)).reshape(-1)
+        """The circuits (rows of the circuit arrays) of assemblies ``rows``; the last answer
+        again for the same ``rows`` object (a step's rows, read by the frame and observers)."""
+        if rows is not self._rows:
+            self._rows = rows
+            self._rows_circuits = (np.asarray(rows)[:, None] * self.tracks
+                                   + np.arange(self.tracks)).reshape(-1)
+        return self._rows_circuits
 
     def _slots(self, rows):
         """Re-read the slots of assemblies ``rows`` from their circuits."""
@@ -279,11 +290,12 @@ class CircuitFrame(CarriageFrame):
         count = np.empty(k * tracks, dtype=np.int64)
         slots_kernel(self.sigma, self.ring_loaded, self.length, circuits, self.half_zone,
                      self.ring_id, self.ring_ok, z, ids, ring, ok, count)
-        self.position[rows] = z.reshape(k, tracks, slots)
-        self.ball_id[rows] = ids.reshape(k, tracks, slots)
-        self.slot_ring[rows] = ring.reshape(k, tracks, slots)
-        self.count[rows] = np.maximum(count, 0).reshape(k, tracks)
-        self.ball_ok[rows] = ok.reshape(k, tracks, slots)
+        at = slice(None) if len(rows) == len(self.status) else rows  # (every row: in order)
+        self.position[at] = z.reshape(k, tracks, slots)
+        self.ball_id[at] = ids.reshape(k, tracks, slots)
+        self.slot_ring[at] = ring.reshape(k, tracks, slots)
+        self.count[at] = np.maximum(count, 0).reshape(k, tracks)
+        self.ball_ok[at] = ok.reshape(k, tracks, slots)
         overflow = (count < 0).reshape(k, tracks).any(axis=1)
         self.status[np.asarray(rows)[overflow]] |= STATUS_OVERFLOW_SLOTS
 
@@ -306,6 +318,30 @@ class CircuitFrame(CarriageFrame):
             out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
 
+    def _joined(self, state1, state2):
+        joined = super()._joined(state1, state2)
+        self.joined = (joined, state1)  # the step's start balls and the carried ones
+        return joined
+
+    def _start_stiffness(self, state1, state2, missing, stiff):
+        """:meth:`stiffness` of the step's start balls ``state1`` at the slots ``missing``,
+        ``stiff`` that of the midpoint balls ``state2``. A ball carried from the previous
+        step's midpoint (:meth:`CarriageFrame._carried`) has the K computed there, one that
+        entered and is taken at this midpoint (:meth:`CarriageFrame._joined`) this
+        midpoint's: K depends on each ball's own state alone, so both are the values
+        :meth:`stiffness` gives. Computed when the start is not the carried balls."""
+        carried, known, joined = self.carried, self.midpoint_stiffness, self.joined
+        if (carried is None or known is None or joined is None or joined[0] is not state1
+                or carried[0] is not joined[1] or known[0] is not carried[1]):
+            return self.stiffness(state1.balls, state1.loaded, missing)
+        out = np.full(missing.shape, np.nan)
+        fresh = (np.zeros(missing.shape, dtype=bool) if self.fresh is None
+                 else self.fresh & state2.loaded)  # taken at the midpoint (_joined)
+        kept = missing & ~fresh
+        out[kept] = known[1][carried[2][kept]]
+        out[missing & fresh] = stiff[missing & fresh]
+        return out
+
     def advance(self, step, new):
         # the circuits' step: the loaded balls at their epsilon and K of the step (the free
         # motion ``new`` is not used)
@@ -315,22 +351,26 @@ class CircuitFrame(CarriageFrame):
         eps = self.velocity(state1, state2)
         stiff = self.stiffness(state2.balls, state2.loaded)
         missing = ~np.isfinite(stiff) & state1.loaded  # K of the start where none at midpoint
+        midpoint = (state2, stiff[state2.loaded])  # (K of each loaded ball, for the next step)
         if missing.any():
-            stiff = np.where(missing, self.stiffness(state1.balls, state1.loaded, missing),
+            stiff = np.where(missing, self._start_stiffness(state1, state2, missing, stiff),
                              stiff)
+        self.midpoint_stiffness = midpoint
         finite = np.isfinite(stiff) & (stiff > 0)
         fallback = float(np.mean(stiff[finite])) if finite.any() else 1.0
         unresolved = ~(state1.valid & state2.valid)
         c, n = len(circuits), self.sigma.shape[1]
-        ring = self.slot_ring[rows].reshape(c, -1)
-        pushed = self.unloaded(state1, state2)  # no groove contact: pushed by the step
-        if pushed is None:
-            pushed = np.zeros(ring.shape, dtype=bool)
         # every assembly (as the circuit is followed over the stroke): the state in place,
         # else the rows' copies, written back after the step
         every = len(rows) == len(self.status)
         take = slice(None) if every else circuits
-        before = self.sigma[circuits], self.ring_loaded[circuits]  # copies
+        at = slice(None) if every else rows
+        ring = (self.slot_ring.copy() if every else self.slot_ring[rows]).reshape(c, -1)
+        pushed = self.unloaded(state1, state2)  # no groove contact: pushed by the step
+        if pushed is None:
+            pushed = np.zeros(ring.shape, dtype=bool)
+        before = ((self.sigma.copy(), self.ring_loaded.copy()) if every
+                  else (self.sigma[circuits], self.ring_loaded[circuits]))  # copies
         sigma, loaded = (self.sigma, self.ring_loaded) if every else (x.copy() for x in before)
         ok = self.ring_ok[take]
         ring_eps, ring_k = np.empty((c, n)), np.empty((c, n))
@@ -340,7 +380,8 @@ class CircuitFrame(CarriageFrame):
         ring_inputs_kernel(ring, eps.reshape(c, -1), stiff.reshape(c, -1), fallback,
                            pushed.reshape(c, -1), unresolved.reshape(c, -1), loaded, ok,
                            ring_eps, ring_k, ring_pushed)
-        self.ring_ok[take] = ok
+        if not every:
+            self.ring_ok[circuits] = ok
         closed, speed = self.ring_closed[take], self.ring_speed[take]
         velocity, force, mean_force = (np.empty((c, n)) for _ in range(3))
         column = np.empty((c, 4))
@@ -368,9 +409,9 @@ class CircuitFrame(CarriageFrame):
         bad = (self.status[rows] & (STATUS_JAMMED | STATUS_ITERATIONS
                                     | STATUS_OVERFLOW_SLOTS)) != 0
         step.overflow = bad
-        step.events = circuit_events(before[0], sigma, before[1], loaded, self.length[circuits],
+        step.events = circuit_events(before[0], sigma, before[1], loaded, self.length[take],
                                      self.zone, self.ring_id, step.previous_id,
-                                     self.slot_ring[rows], step.t, step.dt)
+                                     self.slot_ring[at], step.t, step.dt)
         step.circuit = {"ok": ok, "loaded": loaded, "closed": closed, "force": force,
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
@@ -437,7 +478,6 @@ class CircuitContact(StepObserver):
         step_contacts_kernel(circ["ok"], loaded, circ["closed"], circ["force"], circ["pair"],
                              circ["where"], circ["travel"], float(frame.v), float(t_end),
                              len(WHERE_NAMES), hits, t_all, ring_pair)
-        self.where_count[rows] += hits.reshape(k, tracks, -1).sum(axis=1)
         t_all = t_all.reshape(k, tracks)
         first_track = np.argmin(t_all, axis=1)
         t_first = t_all[np.arange(k), first_track]
@@ -448,9 +488,9 @@ class CircuitContact(StepObserver):
             self.time[rows[new]] = t_first[new]
             self.pair[rows[new]] = track * (self.balls - 1) + self._slot_index(
                 rows[new], track, (ring_pair[new * tracks + track] + 1) % loaded.shape[1])
-        column = circ["column"].reshape(k, tracks, 4)
-        self.column_max[rows] = np.maximum(self.column_max[rows], column[:, :, :2].max(axis=1))
-        self.column_mean[rows] += column[:, :, 2:].max(axis=1) * (frame.v * step.dt)
+        # the events by where, the column forces (circuit_figures_kernel)
+        circuit_figures_kernel(rows, tracks, hits, circ["column"], float(frame.v * step.dt),
+                               self.where_count, self.column_max, self.column_mean)
         self.travel = max(self.travel, frame.v * t_end)
         total = frame.gaps(rows).sum(axis=1).reshape(k, tracks)
         self.total_gap_end[rows] = total

@@ -341,7 +341,7 @@ class CarriageFrame(AlongTrackFrame):
         self.initial_state = self.initial_carriage = None
         self.resolve_seconds = 0.0
         self.rows = self.ids = None
-        self.midpoint = self.last = self.fresh = None
+        self.midpoint = self.last = self.fresh = self.carried = None
         # each slot's entry in the step before (its time, the ball ahead's epsilon)
         self.entry_time, self.entry_velocity = np.full(ball_z.shape, np.nan), np.zeros(
             ball_z.shape)
@@ -394,8 +394,12 @@ class CarriageFrame(AlongTrackFrame):
                            mid.unloaded, old_row, self.ids, loaded, eps, valid, unloaded,
                            fresh, index)
         self.fresh = fresh
-        return CarriageBalls(eps, valid, loaded, None,
-                             lambda: mid.balls.rows(index[loaded]), unloaded)
+        balls = CarriageBalls(eps, valid, loaded, None,
+                              lambda: mid.balls.rows(index[loaded]), unloaded)
+        # which of the midpoint's loaded balls each slot holds (for a frame that keeps
+        # per-ball values of the midpoint)
+        self.carried = (balls, mid, index)
+        return balls
 
     def _joined(self, state1, state2, take):
         """``state1`` with the balls that entered at the end of the previous step

@@ -1,14 +1,17 @@
 """Compiled glue of the carriage's ball circuits (:mod:`tolsim.study.pipeline.carriage_circuit`):
-the step's ring inputs, the exits and entries of a step, the contacts seen in a step, the gaps.
+the step's ring inputs, the exits and entries of a step, the contacts seen in a step, the gaps,
+the step's circuit figures.
 
 Each kernel does in one pass, element by element, what a chain of NumPy calls did: the same
-comparisons and the same values (a float ``%`` as ``np.mod``), so the results are
+comparisons and the same values (a float ``%`` as ``np.mod``, or
+:func:`tolsim.physics.circuit.wrap`, which is ``%``), so the results are
 bit-identical to those calls.
 """
 
 import numpy as np
 
 from tolsim._jit import jit
+from tolsim.physics.circuit import wrap
 
 
 @jit
@@ -84,7 +87,7 @@ def circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, length, zone, ring_i
             if not (leaving or entering):
                 continue
             boundary = zone if leaving else length[c]
-            crossing = boundary - sigma0[c, r] % length[c]
+            crossing = boundary - wrap(sigma0[c, r], length[c])
             span = sigma1[c, r] - sigma0[c, r]
             frac = crossing / span if span > 0 else 1.0
             when = t + min(max(frac, 0.0), 1.0) * dt
@@ -168,5 +171,41 @@ def step_contacts_kernel(ok, loaded, closed, force, pair, where, travel, v, t_en
         out_pair[c] = best if best >= 0 else first_pressed
 
 
-__all__ = ["circuit_events_kernel", "circuit_gaps_kernel", "entering_fill_kernel",
-           "ring_inputs_kernel", "step_contacts_kernel"]
+@jit
+def _np_max(a, b):
+    """NumPy's ``maximum`` of two floats (its loop: ``a`` when a >= b or a is NaN)."""
+    return a if (a >= b or np.isnan(a)) else b
+
+
+@jit
+def circuit_figures_kernel(rows, tracks, hits, column, travel, where_count, column_max,
+                           column_mean):
+    """A step's circuit figures of assemblies ``rows`` (k,) from their circuits (k x tracks,
+    track by track), as :meth:`tolsim.study.pipeline.carriage_circuit.CircuitContact.moved`
+    accumulates them: ``where_count`` (size, codes) += the events by where, ``hits``
+    (k x tracks, codes), summed over the tracks; ``column_max`` (size, 2) the larger of
+    itself and the largest over the tracks of the end-of-step column forces (``column``
+    (k x tracks, 4), columns 0 and 1); ``column_mean`` (size, 2) += the largest over the
+    tracks of the step means (columns 2 and 3) times ``travel``. The largest is NumPy's
+    ``max`` over the tracks and then ``np.maximum`` (NaN propagates)."""
+    codes = hits.shape[1]
+    for a in range(len(rows)):
+        row = rows[a]
+        base = a * tracks
+        for code in range(codes):
+            total = 0
+            for t in range(tracks):
+                total += hits[base + t, code]
+            where_count[row, code] += total
+        for e in range(2):
+            end = column[base, e]
+            mean = column[base, e + 2]
+            for t in range(1, tracks):
+                end = _np_max(end, column[base + t, e])
+                mean = _np_max(mean, column[base + t, e + 2])
+            column_max[row, e] = _np_max(column_max[row, e], end)
+            column_mean[row, e] += mean * travel
+
+
+__all__ = ["circuit_events_kernel", "circuit_figures_kernel", "circuit_gaps_kernel",
+           "entering_fill_kernel", "ring_inputs_kernel", "step_contacts_kernel"]
