@@ -318,8 +318,8 @@ class CircuitFrame(CarriageFrame):
             out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
 
-    def _joined(self, state1, state2):
-        joined = super()._joined(state1, state2)
+    def _joined(self, state1, state2, take):
+        joined = super()._joined(state1, state2, take)
         self.joined = (joined, state1)  # the step's start balls and the carried ones
         return joined
 
