@@ -49,7 +49,7 @@ def test_which_studies_integrate_blocks_together():
     assert evaluates_blocks_together(carriage)
     assert not evaluates_blocks_together(
         replace(free, study=replace(free.study, static_model="linearised")))
-    assert not evaluates_blocks_together(
+    assert evaluates_blocks_together(
         study("carriage_preload.toml", 8, 4, 2, "\n[carriage.circuit]\n"))
 
 
@@ -68,6 +68,20 @@ def test_carriage_with_contact_same_in_one_chunk_or_block_by_block():
     # configs/carriage_preload.toml along the track with [contact]: each assembly followed
     # over the whole stroke with its own warm starts; 3 blocks of 6 together and alone
     c = study("carriage_preload.toml", 18, 6, 8, "\n[contact]\n")
+    one = run_study(c, chunk_blocks=1)
+    three = run_study(c, chunk_blocks=3)
+    assert_same_statistics(one, three)
+    assert int(one.statistics.n_contact) > 0
+
+
+def test_circuit_same_in_one_chunk_or_block_by_block():
+    # configs/carriage_circuit.toml (30-ball circuits, drag) with [contact]: every circuit
+    # followed over the stroke, a ball without a creep stiffness at its own assembly's mean
+    # K; 3 blocks of 6 together and alone, every statistic bit for bit
+    c = load_config(ROOT / "configs" / "carriage_circuit.toml")
+    c = parse_config(c.text + "\n[contact]\n", "carriage_circuit.toml")
+    c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0, time_steps=8,
+                                 block_size=6)).with_overrides(samples=18)
     one = run_study(c, chunk_blocks=1)
     three = run_study(c, chunk_blocks=3)
     assert_same_statistics(one, three)

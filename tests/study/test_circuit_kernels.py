@@ -16,6 +16,7 @@ from tolsim.study.pipeline.carriage_circuit import (
     slots_kernel,
 )
 from tolsim.study.pipeline.circuit_kernels import (
+    assembly_stiffness_kernel,
     circuit_figures_kernel,
     circuit_gaps_kernel,
     ring_inputs_kernel,
@@ -62,12 +63,12 @@ def reference_ring_inputs(ring, eps, stiff, fallback, pushed, unresolved, loaded
     # CircuitFrame.advance at tolsim 1d166a1, from the slots to entering_velocity
     c = len(ring)
     finite = np.isfinite(stiff) & (stiff > 0)
-    ring_eps, ring_k = np.zeros((c, N)), np.full((c, N), fallback)
+    ring_eps, ring_k = np.zeros((c, N)), np.repeat(np.asarray(fallback)[:, None], N, axis=1)
     ring_pushed = np.zeros((c, N), dtype=bool)
     line, slot = np.nonzero(ring >= 0)
     target = ring[line, slot]
     ring_eps[line, target] = eps[line, slot]
-    ring_k[line, target] = np.where(finite, stiff, fallback)[line, slot]
+    ring_k[line, target] = np.where(finite, stiff, np.asarray(fallback)[:, None])[line, slot]
     ring_pushed[line, target] = pushed[line, slot]
     ok[line, target] &= ~unresolved[line, slot]
     reference_entering(ring_eps, ring_k, loaded, ring_pushed)
@@ -85,10 +86,12 @@ def test_ring_inputs_and_entering_fill_match_the_numpy_chain(seed):
     stiff[rng.random((c, SLOTS)) < 0.2] = np.nan
     pushed, unresolved = (rng.random((c, SLOTS)) < 0.3 for _ in range(2))
     ok = rng.random((c, N)) < 0.8
-    want = reference_ring_inputs(ring, eps, stiff, 2.5, pushed, unresolved, loaded, ok.copy())
+    fallback = rng.uniform(1.0, 3.0, size=c)  # each circuit's own
+    want = reference_ring_inputs(ring, eps, stiff, fallback, pushed, unresolved, loaded,
+                                 ok.copy())
     got = [np.empty((c, N)), np.empty((c, N)), np.empty((c, N), dtype=bool)]
     got_ok = ok.copy()
-    ring_inputs_kernel(ring, eps, stiff, 2.5, pushed, unresolved, loaded, got_ok, *got)
+    ring_inputs_kernel(ring, eps, stiff, fallback, pushed, unresolved, loaded, got_ok, *got)
     for a, b in zip([*got, got_ok], want, strict=True):
         assert_array_equal(a, b)
     # entering_velocity alone, with and without the pushed flags
@@ -282,3 +285,19 @@ def test_circuit_figures_match_the_numpy_chain(tracks):
                            column_mean)
     for a, b in zip((where_count, column_max, column_mean), want, strict=True):
         assert_array_equal(a, b)
+
+
+def test_a_ball_without_stiffness_takes_its_own_assemblys_mean():
+    # closed form: the mean of the finite, positive K of the assembly's slots over all its
+    # tracks (exact here: sums of small binary fractions), 1.0 for an assembly with none;
+    # tolerance 0. The value of one assembly does not change with the assemblies beside it.
+    nan = np.nan
+    stiff = np.array([[1.0, 2.0, nan], [3.0, -1.0, 0.0],  # assembly 0: (1 + 2 + 3) / 3
+                      [nan, nan, nan], [0.0, -2.0, nan],  # assembly 1: none -> 1.0
+                      [0.5, 0.25, 0.25], [nan, 1.0, nan]])  # assembly 2: 2 / 4
+    out = np.empty(6)
+    assembly_stiffness_kernel(stiff, 2, out)
+    assert_array_equal(out, [2.0, 2.0, 1.0, 1.0, 0.5, 0.5])
+    alone = np.empty(2)
+    assembly_stiffness_kernel(np.ascontiguousarray(stiff[4:]), 2, alone)
+    assert_array_equal(alone, out[4:])

@@ -623,8 +623,8 @@ def exactly_two_point(contact_angle_deviation, normal_force, bearing: Bearing = 
     Static equilibrium of a ball on two contacts makes them opposite and equal; the carriage
     solve leaves them equal to round-off (|dbeta_1 - dbeta_3| <= 1.1e-12 rad over 302 600
     two-point balls of ``configs/carriage_preload.toml`` at 0 and -5 um oversize along the
-    track, at 20 steps), far inside the tolerance; a ball outside it (a two-point ball out of balance) is
-    left to the full model.
+    track, at 20 steps), far inside the tolerance; a ball outside it (a two-point ball out of
+    balance) is left to the full model.
     """
     beta = bearing.nominal_contact_angle + np.asarray(contact_angle_deviation, dtype=float)
     loaded = np.asarray(normal_force) > 0.0

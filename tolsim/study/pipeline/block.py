@@ -59,15 +59,15 @@ def evaluates_blocks_together(config) -> bool:
     ``constant``: always. ``along_track``: when an assembly's integration does not depend on
     the other assemblies it is integrated with: every evaluation is per ball (free balls) or
     per assembly (the carriage solve), each warm start the assembly's own, so one integration
-    over a chunk's blocks costs the per-step overhead once instead of once per block. Not
-    with ``static_model = "linearised"`` (more distinct loads than it linearises about share
-    the batch's mean load) nor with ``[carriage.circuit]`` (a ball without a creep stiffness
-    takes the batch's mean, :class:`tolsim.study.pipeline.carriage_circuit.CircuitFrame`).
+    over a chunk's blocks costs the per-step overhead once instead of once per block (with
+    ``[carriage.circuit]`` too: a ball without a creep stiffness takes its own assembly's
+    mean, :class:`tolsim.study.pipeline.carriage_circuit.CircuitFrame`). Not with
+    ``static_model = "linearised"`` (more distinct loads than it linearises about share the
+    batch's mean load).
     """
     if config.study.propagation == "constant":
         return True
-    return (config.study.static_model != "linearised"
-            and (config.carriage is None or config.carriage.circuit is None))
+    return config.study.static_model != "linearised"
 
 
 @dataclass

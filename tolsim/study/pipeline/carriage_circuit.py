@@ -14,7 +14,7 @@ move by the circuit's step, not by the free motion and fresh entering balls) and
 
 import numpy as np
 
-from tolsim._jit import jit
+from tolsim._jit import jit, kernel_array
 from tolsim.physics.circuit import (
     STATUS_ITERATIONS,
     STATUS_JAMMED,
@@ -28,6 +28,7 @@ from tolsim.physics.velocity.creep_stiffness import creep_stiffness
 from tolsim.study.pipeline.carriage_track import CarriageFrame
 from tolsim.study.pipeline.circuit_friction import CircuitTrains
 from tolsim.study.pipeline.circuit_kernels import (
+    assembly_stiffness_kernel,
     circuit_events_kernel,
     circuit_figures_kernel,
     circuit_gaps_kernel,
@@ -356,10 +357,10 @@ class CircuitFrame(CarriageFrame):
             stiff = np.where(missing, self._start_stiffness(state1, state2, missing, stiff),
                              stiff)
         self.midpoint_stiffness = midpoint
-        finite = np.isfinite(stiff) & (stiff > 0)
-        fallback = float(np.mean(stiff[finite])) if finite.any() else 1.0
-        unresolved = ~(state1.valid & state2.valid)
         c, n = len(circuits), self.sigma.shape[1]
+        fallback = np.empty(c)  # each assembly's own mean K for a ball without one
+        assembly_stiffness_kernel(kernel_array(stiff).reshape(c, -1), self.tracks, fallback)
+        unresolved = ~(state1.valid & state2.valid)
         # every assembly (as the circuit is followed over the stroke): the state in place,
         # else the rows' copies, written back after the step
         every = len(rows) == len(self.status)
@@ -573,10 +574,12 @@ def first_contact_carriage_circuit(config, block, observers=(), *, friction=None
     (epsilon_1, the midpoint positions on the free motion, epsilon_2; a ball outside the zone
     at the midpoint keeps epsilon_1); then the circuits move by the step's carriage travel
     v dt with each loaded ball's epsilon of the step and its creep stiffness K (the analytic
-    model at its own contact state at the midpoint, as the trains after contact; the block's
-    mean K for a ball without one), by :func:`tolsim.physics.circuit.step_circuit_kernel`:
-    exact for constant epsilon and K in the step, contacts located at their exact travel,
-    balls crossing the zone's ends at their exact travel. A ball that enters the zone within
+    model at its own contact state at the midpoint, as the trains after contact; the mean K
+    of its assembly's loaded balls for a ball without one, so that an assembly's result does
+    not depend on the assemblies it is integrated with), by
+    :func:`tolsim.physics.circuit.step_circuit_kernel`: exact for constant epsilon and K in
+    the step, contacts located at their exact travel, balls crossing the zone's ends at their
+    exact travel. A ball that enters the zone within
     a step was not evaluated in it: it moves for the rest of the step with the epsilon and K
     of the ball ahead of it (:func:`entering_velocity`), a position error of at most
     |epsilon_k - epsilon_ahead| v dt / 2. An unresolved ball moves at epsilon = 0 (as without

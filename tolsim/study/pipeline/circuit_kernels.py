@@ -37,23 +37,47 @@ def entering_fill_kernel(loaded, eps, stiffness, pushed):
 
 
 @jit
+def assembly_stiffness_kernel(stiffness, tracks, out):
+    """Each circuit's stand-in creep stiffness K [N] for a ball without one: the mean of the
+    finite, positive K of its assembly's slots (every track), 1.0 where there is none.
+
+    ``stiffness`` (C, S) per circuit (assembly a holds circuits a T .. a T + T - 1,
+    ``tracks`` = T), ``out`` (C,). Summed slot by slot in the assembly's order, so an
+    assembly's value does not depend on the other assemblies it is stepped with.
+    """
+    circuits, slots = stiffness.shape
+    for a in range(circuits // tracks):
+        total = 0.0
+        count = 0
+        for c in range(a * tracks, (a + 1) * tracks):
+            for j in range(slots):
+                k = stiffness[c, j]
+                if np.isfinite(k) and k > 0:
+                    total += k
+                    count += 1
+        value = total / count if count > 0 else 1.0
+        for c in range(a * tracks, (a + 1) * tracks):
+            out[c] = value
+
+
+@jit
 def ring_inputs_kernel(slot_ring, eps, stiffness, fallback, pushed, unresolved, loaded,
                        ring_ok, out_eps, out_k, out_pushed):
     """The circuits' step inputs (C, N) in ring order from the slots (C, S) of
     :meth:`tolsim.study.pipeline.carriage_circuit.CircuitFrame.advance`.
 
     ``slot_ring`` the ring ball in each slot (-1: empty); ``eps``, ``stiffness`` [N] (NaN or
-    <= 0: ``fallback``), ``pushed`` and ``unresolved`` per slot. Writes each slot ball's
-    epsilon, K and pushed flag to ``out_eps`` (0 elsewhere), ``out_k`` (``fallback``
-    elsewhere) and ``out_pushed`` (False elsewhere), clears ``ring_ok`` (C, N) of unresolved
-    slot balls, then fills the unloaded balls from the entry ball
-    (:func:`entering_fill_kernel`)."""
+    <= 0: the circuit's ``fallback`` (C,), :func:`assembly_stiffness_kernel`), ``pushed``
+    and ``unresolved`` per slot. Writes each slot ball's epsilon, K and pushed flag to
+    ``out_eps`` (0 elsewhere), ``out_k`` (``fallback`` elsewhere) and ``out_pushed`` (False
+    elsewhere), clears ``ring_ok`` (C, N) of unresolved slot balls, then fills the unloaded
+    balls from the entry ball (:func:`entering_fill_kernel`)."""
     circuits, n = out_eps.shape
     slots = slot_ring.shape[1]
     for c in range(circuits):
         for r in range(n):
             out_eps[c, r] = 0.0
-            out_k[c, r] = fallback
+            out_k[c, r] = fallback[c]
             out_pushed[c, r] = False
         for j in range(slots):
             r = slot_ring[c, j]
@@ -61,7 +85,7 @@ def ring_inputs_kernel(slot_ring, eps, stiffness, fallback, pushed, unresolved, 
                 continue
             out_eps[c, r] = eps[c, j]
             k = stiffness[c, j]
-            out_k[c, r] = k if (np.isfinite(k) and k > 0) else fallback
+            out_k[c, r] = k if (np.isfinite(k) and k > 0) else fallback[c]
             out_pushed[c, r] = pushed[c, j]
             ring_ok[c, r] = ring_ok[c, r] and not unresolved[c, j]
     entering_fill_kernel(loaded, out_eps, out_k, out_pushed)
