@@ -137,6 +137,30 @@ def analytic_kernel(
 
 
 @jit(inline="always")
+def spin_particular(s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, a0, a1, a2, a3, d012,
+                    elliptic_e, ball_radius):
+    """The particular solution (u_0, u_1, u_2), u_3 = 0, of the force and moment rows of
+    Eqs. (17), (18) (ERRATA 8: sum u_i x_i + sum m_i y_i = 0) by Cramer's rule, ``d012`` the
+    determinant of their first three columns; the spin moments / (mu R) m_i = 3/8 F_i a_i
+    E(e) / R, signed with sgn(omega) = (+,-,-,+); local x axes BL (c,-s), BR (c,s), TR (-c,s).
+    """
+    x0, y0 = c0, -s0
+    x1, y1 = c1, s1
+    x2, y2 = -c2, s2
+    sc = 0.375 * elliptic_e / ball_radius
+    m0 = sc * f0 * a0
+    m1 = -sc * f1 * a1
+    m2 = -sc * f2 * a2
+    m3 = sc * f3 * a3
+    r2 = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
+    r3 = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
+    p0 = det3(0.0, 1.0, 1.0, r2, x1, x2, r3, y1, y2) / d012
+    p1 = det3(1.0, 0.0, 1.0, x0, r2, x2, y0, r3, y2) / d012
+    p2 = det3(1.0, 1.0, 0.0, x0, x1, r2, y0, y1, r3) / d012
+    return p0, p1, p2
+
+
+@jit(inline="always")
 def analytic_ball(d0, d1, d2, d3, s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, r0, r1, r2,
                   r3, half_tan, ball_radius, semi_major_coefficient, elliptic_e, k_f, max_ratio,
                   max_angle, max_eps):
@@ -163,25 +187,14 @@ def analytic_ball(d0, d1, d2, d3, s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3
     q1 = -k_f * ball_radius * f1 / a1
     q2 = k_f * ball_radius * f2 / a2
     q3 = k_f * ball_radius * f3 / a3
-    # spin moments / (mu R): m_i = 3/8 F_i a_i E(e) / R, signed with sgn(omega) = (+,-,-,+)
-    sc = 0.375 * elliptic_e / ball_radius
-    m0 = sc * f0 * a0
-    m1 = -sc * f1 * a1
-    m2 = -sc * f2 * a2
-    m3 = sc * f3 * a3
-    # Moment rows (ERRATA 8): sum u_i x_i + sum m_i y_i = 0
-    r2_ = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
-    r3_ = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
     # Null vector of rows (1,1,1,1), (x_i), (y_i): n_j = (-1)^j det(without column j)
     d012 = det3(1.0, 1.0, 1.0, x0, x1, x2, y0, y1, y2)
     n0 = det3(1.0, 1.0, 1.0, x1, x2, x3, y1, y2, y3)
     n1 = -det3(1.0, 1.0, 1.0, x0, x2, x3, y0, y2, y3)
     n2 = det3(1.0, 1.0, 1.0, x0, x1, x3, y0, y1, y3)
     n3 = -d012
-    # Particular solution with u_3 = 0 (Cramer); rhs (0, r2, r3)
-    p0 = det3(0.0, 1.0, 1.0, r2_, x1, x2, r3_, y1, y2) / d012
-    p1 = det3(1.0, 0.0, 1.0, x0, r2_, x2, y0, r3_, y2) / d012
-    p2 = det3(1.0, 1.0, 0.0, x0, x1, r2_, y0, y1, r3_) / d012
+    p0, p1, p2 = spin_particular(s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, a0, a1, a2,
+                                 a3, d012, elliptic_e, ball_radius)
     # Eq. (21): g_BL - g_BR - g_TR + g_TL = -(db_BL + db_TL - db_BR - db_TR)
     rhs = -(d0 + d3 - d1 - d2)
     w0, w1, w2, w3 = 1.0 / q0, -1.0 / q1, -1.0 / q2, 1.0 / q3
@@ -427,16 +440,8 @@ def _analytic_loaded_solve(
         x1, y1 = c1, s1
         x2, y2 = -c2, s2
         ok = min(min(f0, f1), min(f2, f3)) > 0.0
-        sc = 0.375 * elliptic_e / ball_radius
-        m0 = sc * f0 * a0
-        m1 = -sc * f1 * a1
-        m2 = -sc * f2 * a2
-        m3 = sc * f3 * a3
-        r2 = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
-        r3 = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
-        p0 = det3(0.0, 1.0, 1.0, r2, x1, x2, r3, y1, y2) / d012
-        p1 = det3(1.0, 0.0, 1.0, x0, r2, x2, y0, r3, y2) / d012
-        p2 = det3(1.0, 1.0, 0.0, x0, x1, r2, y0, y1, r3) / d012
+        p0, p1, p2 = spin_particular(s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, a0, a1,
+                                     a2, a3, d012, elliptic_e, ball_radius)
         rhs = -(dbeta[n, 0] + dbeta[n, 3] - dbeta[n, 1] - dbeta[n, 2])
         t = (rhs - (w0 * p0 + w1 * p1 + w2 * p2)) / wn
         g0 = (p0 + t * n0) / q0
