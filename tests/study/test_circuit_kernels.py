@@ -213,8 +213,9 @@ def test_step_contacts_match_the_numpy_chain(seed):
     travel[5, 0], where[5, 0], pair[5, 0], ok[5] = np.nan, 0, 3, True  # NaN propagates
     want = reference_contacts(ok, loaded, closed, force, pair, where, travel, 0.2, 0.05)
     got = (np.empty((c, CODES), dtype=np.int64), np.empty(c), np.empty(c, dtype=np.int64))
+    no_entry = np.full(ok.shape, np.nan)  # (no ball entered: the times of the chain)
     step_contacts_kernel(ok, loaded, closed, force, pair, where, travel, 0.2, 0.05, CODES,
-                         *got)
+                         no_entry, *got)
     for a, b in zip(got, want, strict=True):
         assert_array_equal(a, b)
 

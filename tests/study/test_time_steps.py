@@ -49,12 +49,12 @@ def test_the_assumption_says_whether_the_step_count_is_automatic():
 
 
 def test_automatic_steps_of_the_packaged_configs():
-    # n = max(8, ceil(c (s / 2) / l_min)), s = 100 mm, c = 4 (free balls, a circuit), 2 (a
-    # carriage without a circuit), 40 with [contact]; by hand: whatif_along_track: l_min =
+    # n = max(8, ceil(c (s / 2) / l_min)), s = 100 mm, c = 4 (free balls), 2 (a carriage,
+    # with or without a circuit), 40 with [contact]; by hand: whatif_along_track: l_min =
     # 10.05 mm, the spacing of its yaw-moment loads (D + the mean gap 50 um; its rail field
     # is 20 mm): 4 x 50 / 10.05 = 19.9 -> 20, with [contact] 199.0 -> 200; carriage_preload:
     # the ball pitch 10.05 mm, 2 x 50 / 10.05 = 9.95 -> 10, with [contact] 200;
-    # carriage_circuit: the pitch 4.8 mm, 4 x 50 / 4.8 = 41.7 -> 42.
+    # carriage_circuit: the pitch 4.8 mm, 2 x 50 / 4.8 = 20.8 -> 21.
     whatif = packaged("whatif_along_track")
     assert epsilon_lengths(whatif) == pytest.approx(
         {"rail field bottom_rotation": 0.02, "ball spacing": 0.01005}, rel=1e-12)
@@ -65,13 +65,13 @@ def test_automatic_steps_of_the_packaged_configs():
         {"rail field bottom_rotation": 0.1, "ball pitch": 0.01005}, rel=1e-12)
     assert time_steps(preload) == 10
     assert time_steps(packaged("carriage_preload", contact=True)) == 200
-    assert time_steps(packaged("carriage_circuit")) == 42
+    assert time_steps(packaged("carriage_circuit")) == 21
 
 
 def test_steps_follow_the_shortest_length_and_the_stroke():
-    # An end relief of 2 mm is the shortest length, with the factor 8 of a relief without a
-    # circuit (time_steps' Notes: 1 um / 15 mm on carriage_preload needs ~40 steps): 8 x 50 /
-    # 2 = 200 steps; a stroke of 400 mm with it 800; with a circuit the fine factor 40: 1000;
+    # An end relief of 2 mm is the shortest length, with the factor 8 of a relief (time_steps'
+    # Notes: 1 um / 15 mm on carriage_preload needs ~40 steps): 8 x 50 / 2 = 200 steps; a
+    # stroke of 400 mm with it 800; with a circuit the same factor: 200;
     # a 15 mm relief leaves the 10.05 mm pitch the shortest, 8 x 50 / 10.05 = 39.8 -> 40;
     # with nothing that changes epsilon along the track, the minimum.
     c = packaged("carriage_preload")
@@ -83,7 +83,7 @@ def test_steps_follow_the_shortest_length_and_the_stroke():
     longer = parse_config(text.replace("stroke_mm = 100.0", "stroke_mm = 400.0"), "long.toml")
     assert time_steps(longer) == 800
     circuit = parse_config(text + "\n[carriage.circuit]\n", "circuit.toml")
-    assert time_steps(circuit) == 1000
+    assert time_steps(circuit) == 200
     fifteen = parse_config(text.replace("end_relief_length_mm = 2.0",
                                         "end_relief_length_mm = 15.0"), "fifteen.toml")
     assert time_steps(fifteen) == 40

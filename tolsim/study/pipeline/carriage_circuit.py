@@ -25,7 +25,7 @@ from tolsim.physics.circuit import (
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.physics.velocity.creep_stiffness import creep_stiffness
-from tolsim.study.pipeline.carriage_track import CarriageFrame
+from tolsim.study.pipeline.carriage_track import CarriageBalls, CarriageFrame
 from tolsim.study.pipeline.circuit_friction import CircuitTrains
 from tolsim.study.pipeline.circuit_kernels import (
     assembly_stiffness_kernel,
@@ -33,6 +33,10 @@ from tolsim.study.pipeline.circuit_kernels import (
     circuit_figures_kernel,
     circuit_gaps_kernel,
     entering_fill_kernel,
+    entering_inputs_kernel,
+    late_entries_kernel,
+    late_entry_kernel,
+    midpoint_entering_kernel,
     ring_inputs_kernel,
     step_contacts_kernel,
 )
@@ -154,18 +158,22 @@ def entering_velocity(eps, stiffness, loaded, pushed=None):
     Notes
     -----
     The step of :func:`tolsim.physics.circuit.step_circuit_kernel` uses a ball's epsilon and K
-    only while it is loaded, so only a ball that enters within the step is affected: it was
-    outside the zone at the step's evaluations, so it has none of its own, and moves for the
+    only while it is loaded, so only a ball that enters within the step is affected. One that
+    entered by the midpoint then takes its own values of the midpoint's solve (Notes of
+    :func:`first_contact_carriage_circuit`, "Entry"); one that enters after it was outside the
+    zone at the step's evaluations, so it has none of its own, and moves for the
     rest of the step with those of the ball ahead of it (the zone's entry ball, the last to
     have entered), as the open carriage's entering ball
     (:func:`tolsim.study.pipeline.carriage_track_kernels.advance_kernel`). Its position error is at
-    most |epsilon_k - epsilon_ahead| v dt / 2, against |epsilon_k| v dt / 2 at epsilon = 0:
+    most |epsilon_k - epsilon_ahead| v dt / 4 (dt / 2 before the midpoint held the entering
+    balls), against |epsilon_k| v dt / 2 at epsilon = 0:
     neighbours at the zone's entry share the carriage's load there and their track's rail and
     carriage errors, so only the ball's own part of epsilon remains. (Measured with
     ``benchmarks/convergence_along_track.py`` on ``configs/carriage_circuit.toml``, 300
-    assemblies, seed 12, paired against the 800-step reference: at epsilon = 0 the entering
-    balls added 27 contacts and removed 1 at 25 steps, added 10 at 50 steps; with the ball
-    ahead's epsilon 2 and 3 at 25 steps, 1 and 2 at 50.)
+    assemblies, seed 12, paired against the 800-step reference, before the midpoint held the
+    entering balls: at epsilon = 0 the entering balls added 27 contacts and removed 1 at 25
+    steps, added 10 at 50 steps; with the ball ahead's epsilon 2 and 3 at 25 steps, 1 and 2 at
+    50.)
     """
     entering_fill_kernel(loaded, eps, stiffness,
                          np.zeros(loaded.shape, dtype=bool) if pushed is None else pushed)
@@ -261,6 +269,11 @@ class CircuitFrame(CarriageFrame):
         self._rows = self._rows_circuits = None
         self.midpoint_stiffness = None  # (the midpoint's balls, K of its loaded balls)
         self.joined = None
+        self.step_start = 0.0
+        self.entering = None  # the balls entered by the midpoint and their values (evaluate)
+        # travel [m] each ring ball moved after its entry with the entry ball's epsilon
+        # (late_eps) in the step before (late_entries_kernel)
+        self.late_travel, self.late_eps = np.zeros(shape), np.zeros(shape)
         self._slots(np.arange(block.size))
 
     def gaps(self, rows=None) -> np.ndarray:
@@ -318,6 +331,40 @@ class CircuitFrame(CarriageFrame):
                 k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
             out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
+
+    def start(self, k, t, position):
+        self.step_start = t
+        return super().start(k, t, position)
+
+    def evaluate(self, position, t):
+        """The midpoint's balls, solved with the ring balls that have entered the zone by
+        then (:func:`midpoint_entering_kernel`), which are then taken out of the returned
+        slots (they are not in the step's start slots) and keep their own epsilon and K
+        for the circuit's step (``entering``; :meth:`advance`): Notes of
+        :func:`first_contact_carriage_circuit`, "Entry"."""
+        self.midpoint, self.entering = position, None
+        rows = self.rows
+        z, ids = np.empty_like(position), np.empty_like(self.ids)
+        ring = np.empty(position.shape, dtype=np.int64)
+        entering = np.empty(position.shape, dtype=bool)
+        midpoint_entering_kernel(kernel_array(position), self.ids, self.slot_ring[rows],
+                                 self.count[rows], self._circuits(rows), self.sigma,
+                                 self.ring_loaded, self.ring_speed, self.length,
+                                 self.diameter_ring, float(self.half_zone),
+                                 float(self.v * (t - self.step_start)), self.ring_id, z, ids,
+                                 ring, entering)
+        if not entering.any():
+            z, ids = position, self.ids
+        balls = CarriageBalls(*self.evaluation(z, ids, t, rows))
+        self.resolve_seconds += balls.balls.resolve_seconds
+        if not entering.any():
+            return balls
+        take = entering & balls.loaded
+        if take.any():
+            self.entering = (take, ring, balls.velocity_deviation,
+                             self.stiffness(balls.balls, balls.loaded, take), balls.valid,
+                             balls.unloaded)
+        return balls.without(entering)
 
     def _joined(self, state1, state2, take):
         joined = super()._joined(state1, state2, take)
@@ -381,6 +428,17 @@ class CircuitFrame(CarriageFrame):
         ring_inputs_kernel(ring, eps.reshape(c, -1), stiff.reshape(c, -1), fallback,
                            pushed.reshape(c, -1), unresolved.reshape(c, -1), loaded, ok,
                            ring_eps, ring_k, ring_pushed)
+        own = np.zeros((c, n), dtype=bool)
+        if self.entering is not None:  # entered by the midpoint: their own values
+            shape = (c, -1)
+            entering_inputs_kernel(*(x.reshape(shape) for x in self.entering), fallback,
+                                   ring_eps, ring_k, ring_pushed, own)
+            self.entering = None
+        travel = self.v * step.dt
+        late_travel, late_eps = self.late_travel[take], self.late_eps[take]
+        # entered after the previous midpoint: its own epsilon makes up for the entry ball's
+        late_entry_kernel(late_travel, late_eps, loaded, ok, ring_pushed, ring_eps,
+                          float(travel))
         if not every:
             self.ring_ok[circuits] = ok
         closed, speed = self.ring_closed[take], self.ring_speed[take]
@@ -392,7 +450,6 @@ class CircuitFrame(CarriageFrame):
         where = np.full((c, capacity), -1, dtype=np.int8)
         when = np.full((c, capacity), np.nan)
         status = np.empty(c, dtype=np.int64)
-        travel = self.v * step.dt
         step_circuit_kernel(sigma, np.ascontiguousarray(self.diameter_ring[take]),
                             ring_eps, ring_k, ring_pushed, loaded, closed,
                             np.ascontiguousarray(self.length[take]), float(self.zone),
@@ -413,11 +470,28 @@ class CircuitFrame(CarriageFrame):
         step.events = circuit_events(before[0], sigma, before[1], loaded, self.length[take],
                                      self.zone, self.ring_id, step.previous_id,
                                      self.slot_ring[at], step.t, step.dt)
+        late_entries_kernel(step.events[3].reshape(c, -1), self.slot_ring[at].reshape(c, -1),
+                            own, ring_eps, ring_pushed, float(step.t + step.dt),
+                            float(self.v), late_travel, late_eps)
+        if not every:
+            self.late_travel[circuits], self.late_eps[circuits] = late_travel, late_eps
         step.circuit = {"ok": ok, "loaded": loaded, "closed": closed, "force": force,
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
                         "circuits": circuits, "pushed": ring_pushed, "slot_ring": ring,
-                        "status": status, "sigma_start": before[0]}
+                        "status": status, "sigma_start": before[0],
+                        "entry_time": ring_entry_time(step.events[3], self.slot_ring[at], n)}
+
+
+def ring_entry_time(entry_time, slot_ring, balls):
+    """Each ring ball's time of entry into the zone in the step (C, N) [s] (NaN: none), from
+    the slots' entry times and ring balls (k, tracks, slots) at the step's end."""
+    slots = entry_time.shape[-1]
+    entry_time, slot_ring = entry_time.reshape(-1, slots), slot_ring.reshape(-1, slots)
+    out = np.full((len(entry_time), balls), np.nan)
+    c, j = np.nonzero(np.isfinite(entry_time) & (slot_ring >= 0))
+    out[c, slot_ring[c, j]] = entry_time[c, j]
+    return out
 
 
 #: Status bit of an assembly whose loaded balls outnumbered the carriage's slots.
@@ -478,7 +552,7 @@ class CircuitContact(StepObserver):
         t_all, ring_pair = np.empty(k * tracks), np.empty(k * tracks, dtype=np.int64)
         step_contacts_kernel(circ["ok"], loaded, circ["closed"], circ["force"], circ["pair"],
                              circ["where"], circ["travel"], float(frame.v), float(t_end),
-                             len(WHERE_NAMES), hits, t_all, ring_pair)
+                             len(WHERE_NAMES), circ["entry_time"], hits, t_all, ring_pair)
         t_all = t_all.reshape(k, tracks)
         first_track = np.argmin(t_all, axis=1)
         t_first = t_all[np.arange(k), first_track]
@@ -579,15 +653,41 @@ def first_contact_carriage_circuit(config, block, observers=(), *, friction=None
     not depend on the assemblies it is integrated with), by
     :func:`tolsim.physics.circuit.step_circuit_kernel`: exact for constant epsilon and K in
     the step, contacts located at their exact travel, balls crossing the zone's ends at their
-    exact travel. A ball that enters the zone within
-    a step was not evaluated in it: it moves for the rest of the step with the epsilon and K
-    of the ball ahead of it (:func:`entering_velocity`), a position error of at most
-    |epsilon_k - epsilon_ahead| v dt / 2. An unresolved ball moves at epsilon = 0 (as without
-    the circuit) and makes its assembly invalid if it happens before the first contact. A ball
-    in the zone without a groove contact (unloaded, issue 25: under an end relief, an
-    undersized ball) is resolved: it has no epsilon or K of its own and the circuit's step
-    pushes it along between its neighbours (:func:`tolsim.physics.circuit.step`, "Pushed
-    balls"; the rule of :func:`tolsim.study.pipeline.propagation.pushed_along` on the ring),
+    exact travel.
+
+    **Entry.** The midpoint's carriage solve holds the ring balls that have entered the zone
+    by then (:meth:`CircuitFrame.evaluate`, :func:`tolsim.study.pipeline.circuit_kernels.
+    midpoint_entering_kernel`), as the open carriage's midpoint holds its entering draws: an
+    unloaded ball upstream of the entry ball is predicted at sigma + xi (v dt / 2), xi its
+    circuit speed at the end of the previous step (pushed by the column, coasting or at
+    rest), no nearer the entry than touching the ball ahead. So the balls in the zone are
+    solved with the load distribution of the balls that are there at the midpoint, and a
+    ball that entered by then moves from its entry (located exactly by the circuit's step)
+    at its own epsilon and K of that solve. A ball that enters in the second half of the
+    step was outside the zone at both evaluations: it moves for the rest of the step, a
+    travel lambda, with the epsilon and K of the ball ahead of it (:func:`entering_velocity`),
+    and makes up for it in the next step, which it crosses at epsilon + (lambda / s)
+    (epsilon - epsilon_ahead) (s the step's travel; :func:`tolsim.study.pipeline.
+    circuit_kernels.late_entry_kernel`), so that at the end of that step it is where its own
+    epsilon from its entry puts it, to O(lambda s) in the change of epsilon. A pair pushed into
+    the zone closed by the column touches (a contact of loaded balls) when its later ball
+    enters, at that ball's entry time (interpolated on its sigma in the step), not at the
+    end of the step. Before these rules (every entering ball with the ball ahead's values for
+    the rest of its step, the midpoint solved without it, a pushed-in pair at the step's end)
+    the circuit needed twice the steps (``benchmarks/convergence_along_track.py``, 600
+    assemblies against 800 steps; the mean change of the time to first contact over the
+    assemblies that touch in both, and the paired change): ``configs/carriage_circuit.toml``
+    2.4 ms (+4/-0) at 21 steps against 4.5 ms (+3/-5) at the former 42;
+    ``configs/carriage_preload.toml`` with a default circuit 1.8 ms (+0/-0) at 10 steps
+    against 1.0 ms (+2/-1) at the former 20 and 3.7 ms (+4/-1) at 10 (Notes of
+    :func:`tolsim.study.pipeline.propagation_rules.time_steps`).
+
+    An unresolved ball moves at epsilon = 0 (as without the circuit) and makes its assembly
+    invalid if it happens before the first contact. A ball in the zone without a groove
+    contact (unloaded, issue 25: under an end relief, an undersized ball) is resolved: it has
+    no epsilon or K of its own and the circuit's step pushes it along between its neighbours
+    (:func:`tolsim.physics.circuit.step`, "Pushed balls"; the rule of
+    :func:`tolsim.study.pipeline.propagation.pushed_along` on the ring),
     so its pairs carry force, and count as a contact, only when the gaps from one neighbour
     to the other have all closed.
 
@@ -595,7 +695,8 @@ def first_contact_carriage_circuit(config, block, observers=(), *, friction=None
     between two loaded balls that are resolved so far, either a gap between them closing inside
     the zone (an ``inside`` event of the circuit, at its exact travel), or a closed pair of loaded
     balls that carries force at the end of a step (balls pushed into the zone in contact by the
-    column; its time the end of the step, at most dt late). Contacts of unloaded balls (at the
+    column; its time the entry of its later ball in the step, "Entry", else the end of the
+    step, at most dt late). Contacts of unloaded balls (at the
     entry, the exit or in the return channel) carry no friction of loaded balls and are counted
     apart, by where they form (``where_count``); a run of pushed balls closes as one event,
     labelled by the balls at its ends. The pair index is that of the open model,

@@ -177,8 +177,11 @@ class CircuitTrains(StepObserver):
     pairs of the zone at the end of the step that hold a pair not pressed at its start. A
     ball that entered the zone within the step was not evaluated in it: it takes the
     coefficients of the ball ahead of it, as its epsilon and K in the step
-    (:func:`tolsim.study.pipeline.carriage_circuit.entering_velocity`). A ball that left
-    within it is not in the step's train (its share of the step: O(dt)). A train is
+    (:func:`tolsim.study.pipeline.carriage_circuit.entering_velocity`; one that entered by
+    the midpoint moves at its own epsilon and K of the midpoint's solve, Notes of
+    :func:`tolsim.study.pipeline.carriage_circuit.first_contact_carriage_circuit`, "Entry",
+    but takes those coefficients here too: at 40 steps per length its share is small). A
+    ball that left within it is not in the step's train (its share of the step: O(dt)). A train is
     unresolved from the step at which a ball of its zone is unresolved or has no usable
     coefficients, a ball slides (as the open carriage's), or its circuit's step failed.
 

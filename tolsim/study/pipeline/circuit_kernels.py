@@ -145,16 +145,23 @@ def circuit_gaps_kernel(sigma, diameter, length, circuits, out):
 
 @jit
 def step_contacts_kernel(ok, loaded, closed, force, pair, where, travel, v, t_end, codes,
-                         out_count, out_time, out_pair):
+                         entry_time, out_count, out_time, out_pair):
     """The contacts of a circuit step (:meth:`tolsim.study.pipeline.carriage_circuit.
     CircuitContact.moved`) on circuits (C, N) and their events (C, E).
 
     ``out_count`` (C, codes): the events by where they form; ``out_time`` (C,) [s]: the
-    earliest of an inside event of resolved balls (``where`` 0, at ``travel`` / ``v``) and the
-    end of the step ``t_end`` where a closed pair of loaded, resolved balls carries force
-    (``inf`` for neither; NaN propagates as in ``np.min``); ``out_pair`` (C,): the ring pair
-    of the circuit's first contact: its inside event at the least travel (the first of
-    equals, a NaN travel first), else its first pressed pair, else -1.
+    earliest of an inside event of resolved balls (``where`` 0, at ``travel`` / ``v``) and,
+    where a closed pair of loaded, resolved balls carries force at the end of the step, the
+    time its later ball entered the zone in the step (``entry_time`` (C, N) [s], NaN: it did
+    not enter in the step), else the end of the step ``t_end`` (``inf`` for neither; NaN
+    propagates as in ``np.min``); ``out_pair`` (C,): the ring pair of the circuit's first
+    contact: its inside event at the least travel (the first of equals, a NaN travel first),
+    else its first pressed pair, else -1.
+
+    A pair pushed into the zone closed by the column becomes a contact of loaded balls when
+    its second ball enters; the step's end is only an upper bound (dt late at most), and a
+    pair that was loaded at the start of the step and got its force within it keeps that
+    bound (its time is not located).
     """
     circuits, n = ok.shape
     events = pair.shape[1]
@@ -189,8 +196,13 @@ def step_contacts_kernel(ok, loaded, closed, force, pair, where, travel, v, t_en
                     and force[c, r] > 0.0):
                 if first_pressed < 0:
                     first_pressed = r
-                if not np.isnan(t_min) and t_end < t_min:
-                    t_min = t_end
+                te = t_end
+                e0, e1 = entry_time[c, r], entry_time[c, r1]
+                if np.isfinite(e0) or np.isfinite(e1):
+                    te = e0 if not np.isfinite(e1) else (e1 if not np.isfinite(e0)
+                                                         else max(e0, e1))
+                if not np.isnan(t_min) and te < t_min:
+                    t_min = te
         out_time[c] = t_min
         out_pair[c] = best if best >= 0 else first_pressed
 
@@ -233,3 +245,123 @@ def circuit_figures_kernel(rows, tracks, hits, column, travel, where_count, colu
 
 __all__ = ["circuit_events_kernel", "circuit_figures_kernel", "circuit_gaps_kernel",
            "entering_fill_kernel", "ring_inputs_kernel", "step_contacts_kernel"]
+
+
+@jit
+def midpoint_entering_kernel(z, ball_id, slot_ring, count, circuits, sigma, ring_loaded,
+                             ring_speed, length, diameter, half_zone, travel, ring_id, out_z,
+                             out_id, out_ring, out_entering):
+    """The circuits' slots (m_k, T, S) at the step's midpoint with the balls that have entered
+    by then (:meth:`tolsim.study.pipeline.carriage_circuit.CircuitFrame.evaluate`).
+
+    ``z``, ``ball_id``, ``slot_ring`` the slots (positions at the midpoint, ids and ring balls
+    of the step's start), ``count`` (m_k, T) the loaded balls there, ``circuits``
+    (m_k T,) the rows of the circuit arrays ``sigma``, ``ring_loaded``, ``ring_speed``
+    (xi, at the end of the previous step), ``diameter`` (C, N) and ``length`` (C,);
+    ``travel`` the carriage travel to the midpoint [m]. Copies the slots to ``out_z``,
+    ``out_id`` (``out_ring`` -1, ``out_entering`` False), then, upstream of the zone's
+    entry ball (the last slot), while the next unloaded ring ball's predicted position
+    sigma + xi travel passes L_c, it takes the next free slot at z = L_z / 2 - (sigma +
+    xi travel - L_c), or a diameter's sum behind the ball ahead if that is nearer the entry
+    (it cannot overlap the ball it pushes), as long as that is in the zone and slots remain.
+    """
+    m, tracks, slots = z.shape
+    n = sigma.shape[1]
+    for r in range(m):
+        for tr in range(tracks):
+            for j in range(slots):
+                out_z[r, tr, j] = z[r, tr, j]
+                out_id[r, tr, j] = ball_id[r, tr, j]
+                out_ring[r, tr, j] = -1
+                out_entering[r, tr, j] = False
+            c = count[r, tr]
+            if c <= 0 or travel <= 0.0:
+                continue
+            line = circuits[r * tracks + tr]
+            ahead = slot_ring[r, tr, c - 1]
+            z_ahead = out_z[r, tr, c - 1]
+            while c < slots:
+                b = ahead - 1 if ahead > 0 else n - 1
+                if ring_loaded[line, b]:
+                    break
+                x = wrap(sigma[line, b], length[line]) + ring_speed[line, b] * travel
+                if x < length[line]:
+                    break
+                znew = half_zone - (x - length[line])
+                bound = z_ahead + 0.5 * (diameter[line, b] + diameter[line, ahead])
+                if znew < bound:
+                    znew = bound
+                if znew > half_zone:
+                    break
+                out_z[r, tr, c], out_id[r, tr, c] = znew, ring_id[b]
+                out_ring[r, tr, c], out_entering[r, tr, c] = b, True
+                ahead, z_ahead = b, znew
+                c += 1
+
+
+@jit
+def entering_inputs_kernel(take, ring, eps, stiffness, valid, unloaded, fallback, out_eps,
+                           out_k, out_pushed, out_own):
+    """Give the balls that entered the zone by the step's midpoint (``take`` (C, S), their
+    ring balls ``ring``) their own epsilon, creep stiffness K [N] and pushed flag of the
+    midpoint's solve in the circuits' step inputs (C, N), in place, and mark them in
+    ``out_own`` (C, N); an unresolved one (``valid`` False, or a loaded one without a finite
+    epsilon) keeps the entry ball's values (:func:`entering_fill_kernel`), and a K that is
+    not finite and positive is the circuit's ``fallback``."""
+    circuits, slots = take.shape
+    for c in range(circuits):
+        for j in range(slots):
+            if not take[c, j]:
+                continue
+            r = ring[c, j]
+            if unloaded[c, j]:
+                out_pushed[c, r] = True
+                out_own[c, r] = True
+                continue
+            if not (valid[c, j] and np.isfinite(eps[c, j])):
+                continue
+            out_eps[c, r] = eps[c, j]
+            k = stiffness[c, j]
+            out_k[c, r] = k if (np.isfinite(k) and k > 0) else fallback[c]
+            out_pushed[c, r] = False
+            out_own[c, r] = True
+
+
+@jit
+def late_entry_kernel(late_travel, late_eps, loaded, ring_ok, pushed, eps, travel):
+    """Make up, in this step, for the travel a ball moved after its entry in the previous
+    step with the entry ball's epsilon instead of its own, in place (C, N): a ball with
+    ``late_travel`` lambda > 0 [m] of carriage travel at ``late_eps`` epsilon_a, loaded at the
+    step's start, resolved (``ring_ok``) and not ``pushed``, moves in this step of
+    ``travel`` s at epsilon + (lambda / s) (epsilon - epsilon_a), epsilon its own
+    (``eps``): over the two steps it then travels what it would have at its own epsilon from
+    its entry (to O(lambda s) in the change of epsilon). ``late_travel`` is cleared."""
+    circuits, n = eps.shape
+    for c in range(circuits):
+        for r in range(n):
+            lam = late_travel[c, r]
+            if lam <= 0.0:
+                continue
+            late_travel[c, r] = 0.0
+            if loaded[c, r] and ring_ok[c, r] and not pushed[c, r] and travel > 0.0:
+                eps[c, r] += lam / travel * (eps[c, r] - late_eps[c, r])
+
+
+@jit
+def late_entries_kernel(entry_time, slot_ring, own, eps, pushed, t_end, v, late_travel,
+                        late_eps):
+    """Record the balls that entered the zone in the step without values of their own
+    (:func:`late_entry_kernel`): for each slot (C, S) with an ``entry_time`` [s] (NaN:
+    none) whose ring ball (``slot_ring``, at the step's end) was not given its own values
+    (``own`` (C, N), :func:`entering_inputs_kernel`) and is not ``pushed``, the carriage
+    travel v (t_end - entry_time) [m] it moved with the entry ball's epsilon ``eps`` (C, N)
+    of the step."""
+    circuits, slots = entry_time.shape
+    for c in range(circuits):
+        for j in range(slots):
+            t = entry_time[c, j]
+            r = slot_ring[c, j]
+            if not np.isfinite(t) or r < 0 or own[c, r] or pushed[c, r]:
+                continue
+            late_travel[c, r] = v * (t_end - t)
+            late_eps[c, r] = eps[c, r]

@@ -34,17 +34,15 @@ def propagation_assumption(propagation: str, steps: int | None = None,
 
 
 #: Automatic ``study.time_steps``: steps per shortest length over which a ball's epsilon
-#: changes (:func:`time_steps`, which gives the measurements): free balls and a carriage
-#: with ``[carriage.circuit]``.
+#: changes (:func:`time_steps`, which gives the measurements): free balls.
 STEPS_PER_LENGTH = 4.0
-#: The same for a carriage without a circuit, whose entering balls are in the midpoint solve
-#: from their entry and move at their own epsilon from it (second order between events).
+#: The same for a carriage, with or without ``[carriage.circuit]``, whose entering balls are
+#: in the midpoint solve from their entry and move at their own epsilon from it.
 STEPS_PER_LENGTH_CARRIAGE = 2.0
-#: The same for a carriage without a circuit with an end relief (balls unload and reload
-#: within it, and most first contacts form there).
+#: The same for a carriage with an end relief (balls unload and reload within it, and most
+#: first contacts form there).
 STEPS_PER_LENGTH_RELIEF = 8.0
-#: The same with ``[contact]`` (the friction figures' extremes are taken over step means) or
-#: an end relief with a circuit (first order, and slow).
+#: The same with ``[contact]`` (the friction figures' extremes are taken over step means).
 STEPS_PER_LENGTH_CONTACT = 40.0
 #: The fewest automatic steps over the stroke.
 MIN_TIME_STEPS = 8
@@ -80,10 +78,10 @@ def time_steps(config) -> int:
     s it travels s / 2 in either frame, and its epsilon changes over the lengths l of
     :func:`epsilon_lengths`. The automatic step lets a ball travel 1 / c of the shortest of
     them: n = max(:data:`MIN_TIME_STEPS`, ceil(c (s / 2) / l_min)), with c =
-    :data:`STEPS_PER_LENGTH` (4) for free balls and a carriage with ``[carriage.circuit]``,
-    :data:`STEPS_PER_LENGTH_CARRIAGE` (2) for a carriage without one,
-    :data:`STEPS_PER_LENGTH_RELIEF` (8) for that carriage with an end relief, and
-    :data:`STEPS_PER_LENGTH_CONTACT` (40) with ``[contact]`` or an end relief with a circuit;
+    :data:`STEPS_PER_LENGTH` (4) for free balls, :data:`STEPS_PER_LENGTH_CARRIAGE` (2) for a
+    carriage (with or without ``[carriage.circuit]``), :data:`STEPS_PER_LENGTH_RELIEF` (8) for
+    a carriage with an end relief, and :data:`STEPS_PER_LENGTH_CONTACT` (40) with
+    ``[contact]``;
     :data:`MIN_TIME_STEPS` without any length (epsilon then changes only through the
     unloaded balls, the trains after contact, or not at all).
 
@@ -91,12 +89,12 @@ def time_steps(config) -> int:
     paired against a fine-step reference on the same assemblies, 600 assemblies, reference
     800 steps). P(contact) lay inside its own 95 % interval from 5 steps on everywhere.
     c = 4 gives 20 steps on ``configs/whatif_along_track.toml`` (the 10.05 mm ball spacing
-    of its yaw-moment loads; its rail field: 20 mm) and 42 on
-    ``configs/carriage_circuit.toml`` (4.8 mm pitch): the paired change against the
-    reference (assemblies that touch only at n / only in the reference) was +2/-5 and
-    +3/-5, the mean change of the time to first contact 8.1 and 4.5 ms of a 500 ms stroke
-    (27 and 12 ms at 10 steps, 0.43 and 3.5 ms at 40): second order for free balls, first
-    order for the circuit, whose balls enter at the step ends. A carriage without a circuit
+    of its yaw-moment loads; its rail field: 20 mm): the paired change against the
+    reference (assemblies that touch only at n / only in the reference) was +2/-5, the mean
+    change of the time to first contact 8.1 ms of a 500 ms stroke (27 ms at 10 steps, 0.43
+    ms at 40): second order. It gave 42 steps on ``configs/carriage_circuit.toml`` (4.8 mm
+    pitch; +3/-5, 4.5 ms; 12 and 3.5 ms at 10 and 40 steps) while a circuit's balls entered
+    at the step ends (first order). A carriage without a circuit
     solves its midpoint with the balls that have entered by then and moves an entering ball
     at its own epsilon from its entry (Notes of :func:`tolsim.study.pipeline.carriage_track.
     first_contact_carriage_track`, "Entry"), so its error falls at second order between the
@@ -104,7 +102,16 @@ def time_steps(config) -> int:
     was 37, 7.0, 2.9 and 0.86 ms at 5, 10, 20 and 40 steps (+18/-9, +5/-8, +1/-3, +0/-0),
     where entering balls solved from the next step and moving with the ball ahead gave
     18, 10 and 4.4 ms at 10, 20 and 40 steps (+18/-11, +9/-5, +2/-3): first order. Hence
-    c = 2 there (10 steps, more accurate than the former 20).
+    c = 2 there (10 steps, more accurate than the former 20). A circuit's midpoint holds
+    the ring balls that have entered by then too, and they move at their own epsilon from
+    their entry (Notes of :func:`tolsim.study.pipeline.carriage_circuit.
+    first_contact_carriage_circuit`, "Entry"); on ``configs/carriage_circuit.toml`` the mean
+    change was 27, 2.4, 2.35 and 1.6 ms at 10, 21, 42 and 84 steps (+16/-23, +4/-0, +3/-0,
+    +0/-1), where the entering balls taken with the ball ahead's epsilon, outside the
+    midpoint's solve, gave 12, 4.5 and 3.5 ms at 10, 42 and 40 steps (+10/-10, +3/-5,
+    +3/-4); on ``configs/carriage_preload.toml`` with a default circuit 1.8, 1.1 and 0.37 ms
+    at 10, 20 and 40 steps (+0/-0 each) against 3.7, 0.99 and 0.38 ms (+4/-1, +2/-1, +0/-1)
+    before. Hence c = 2 for a circuit too (21 and 10 steps, against 42 and 20 at c = 4).
 
     With ``[contact]`` the largest increase and the ripple are extremes of step-mean friction
     forces, which converge at first order from below: on the free balls (1 000 assemblies)
@@ -128,7 +135,12 @@ def time_steps(config) -> int:
     at 10, 20, 40, 80 and 400 steps; 20 steps lie outside the 400-step reference's interval
     [0.5374, 0.5814] and 40 inside it, hence c = 8 (40 steps). Entering balls solved from the
     next step and moving with the ball ahead needed 200 steps (0.4845, 0.5275, 0.5430, 0.5545
-    and 0.5560 at 20, 40, 80, 200 and 400), as a circuit with a relief still does (c = 40).
+    and 0.5560 at 20, 40, 80, 200 and 400), as a circuit with a relief did (c = 40) before
+    its midpoint held its entering balls. With them, that relief and a default circuit (600
+    assemblies, against 800 steps, P = 0.8700) gave 0.8650, 0.8650, 0.8700 and 0.8700 at
+    20, 40, 80 and 200 steps (+0/-3, +0/-3, +0/-0, +0/-0; mean change 0.86, 0.43, 0.06 and
+    0.03 ms), against 0.8683, 0.8667, 0.8700 and 0.8700 (+2/-3, +0/-2, 0, 0; 1.4, 0.50, 0.07
+    and 0.05 ms) before: c = 8 for a circuit too.
     """
     if config.study.time_steps is not None:
         return int(config.study.time_steps)
@@ -137,9 +149,9 @@ def time_steps(config) -> int:
         return MIN_TIME_STEPS
     carriage = config.carriage
     relief = carriage is not None and carriage.end_relief_depth > 0
-    if config.contact is not None or (relief and carriage.circuit is not None):
+    if config.contact is not None:
         per_length = STEPS_PER_LENGTH_CONTACT
-    elif carriage is not None and carriage.circuit is None:
+    elif carriage is not None:
         per_length = STEPS_PER_LENGTH_RELIEF if relief else STEPS_PER_LENGTH_CARRIAGE
     else:
         per_length = STEPS_PER_LENGTH
