@@ -112,6 +112,18 @@ def time_steps(config) -> int:
     +3/-4); on ``configs/carriage_preload.toml`` with a default circuit 1.8, 1.1 and 0.37 ms
     at 10, 20 and 40 steps (+0/-0 each) against 3.7, 0.99 and 0.38 ms (+4/-1, +2/-1, +0/-1)
     before. Hence c = 2 for a circuit too (21 and 10 steps, against 42 and 20 at c = 4).
+    Below two steps per pitch the midpoint's entering balls do harm: on
+    ``carriage_circuit.toml`` at 10 steps (a pitch per step) 27 ms (+16/-23) against 12 ms
+    (+10/-10) with the midpoint solved without them, since a ball predicted in by the
+    midpoint may enter only at the step's end and the others are then solved with it for
+    most of the step; at 21 steps they make 2.4 ms (+4/-0) of 13 ms (+8/-8). (The entering
+    balls' late entries made up in the next step and the pushed-in pairs timed at their
+    entry moved these figures by less than 0.02 ms. On ``carriage_preload.toml`` with a
+    circuit every entry of 100 assemblies fell in the first fifth of its step, 95 % of them
+    predicted by the midpoint: the balls start a pitch apart and a step is half a pitch, so
+    the entries keep their phase. On the gaps of a small carriage with the preload
+    alone they matter: 4.9e-7 m from a 320-step run at 10 steps with them, 4.9e-6 m
+    without (``tests/study/test_circuit_entry.py``).)
 
     With ``[contact]`` the largest increase and the ripple are extremes of step-mean friction
     forces, which converge at first order from below: on the free balls (1 000 assemblies)
