@@ -25,11 +25,15 @@ configs/carriage_preload.toml, which is ``constant`` as packaged), and through t
 
 ``--steps auto`` runs the automatic step count (``study.time_steps = "auto"``,
 :func:`tolsim.study.pipeline.propagation_rules.time_steps`), marked "a" in the table.
+``--circuit`` adds a default ``[carriage.circuit]`` to a carriage config without one, and
+``--relief DEPTH_UM LENGTH_MM`` sets the carriage's end relief (the variants the step rule's
+Notes quote: ``--configs carriage_preload --circuit --relief 1 15``).
 
 Run: ``python benchmarks/convergence_along_track.py [--configs whatif_along_track
 carriage_preload carriage_circuit] [--steps auto 25 50 100 200 400] [--reference 1600]
-[--samples N] [--seed S] [--contact]``. The defaults (800 assemblies) run in a few minutes on
-two idle cores; ``--samples`` sets the size.
+[--samples N] [--seed S] [--contact] [--circuit] [--relief DEPTH_UM LENGTH_MM]``. The
+defaults (800 assemblies) run in a few minutes on two idle cores; ``--samples`` sets the
+size.
 """
 
 import argparse
@@ -79,11 +83,34 @@ def with_study_keys(text: str, **keys) -> str:
     return text
 
 
-def study_config(path, time_steps, *, samples=None, seed=None, contact=False):
+def with_carriage_keys(text: str, **keys) -> str:
+    """The config ``text`` with ``[carriage]`` keys set: a line ``key = ...`` replaced where
+    the key is set, else added after the ``[carriage]`` header (ValueError without one)."""
+    for key, value in keys.items():
+        line = re.compile(rf"^{re.escape(key)}\s*=\s*[^#\n]*", flags=re.MULTILINE)
+        if line.search(text):
+            text = line.sub(f"{key} = {value} ", text, count=1)
+            continue
+        header = re.search(r"^\s*\[carriage\]\s*(#.*)?$", text, flags=re.MULTILINE)
+        if header is None:
+            raise ValueError(f"{key}: the config has no [carriage] table")
+        text = text[:header.end()] + f"\n{key} = {value}" + text[header.end():]
+    return text
+
+
+def study_config(path, time_steps, *, samples=None, seed=None, contact=False, circuit=False,
+                 relief=None):
     """The study of ``path`` along the track at ``time_steps`` (an int, or ``"auto"``: the
     automatic count) (and ``samples``, ``seed`` if given), spot checks and sensitivity off,
-    ``[contact]`` added if ``contact`` and the config has none."""
+    ``[contact]`` added if ``contact`` and the config has none, a default
+    ``[carriage.circuit]`` if ``circuit`` and it has none, and the carriage's end relief
+    ``relief`` = (depth [um], length [mm]) if given."""
     text = Path(path).read_text(encoding="utf-8")
+    if relief is not None:
+        text = with_carriage_keys(text, end_relief_depth_um=float(relief[0]),
+                                  end_relief_length_mm=float(relief[1]))
+    if circuit and not re.search(r"^\s*\[carriage\.circuit\]", text, flags=re.MULTILINE):
+        text = text.rstrip("\n") + "\n\n[carriage.circuit]\n"
     steps = "auto" if time_steps == "auto" else int(time_steps)
     keys = {"propagation": "along_track", "time_steps": steps, "spot_checks": 0,
             "sensitivity_samples": 0}
@@ -236,6 +263,10 @@ def main(argv=None):
     parser.add_argument("--contact", action="store_true",
                         help="add [contact] (friction figures) where the config has none and "
                              "allows it")
+    parser.add_argument("--circuit", action="store_true",
+                        help="add a default [carriage.circuit] to a carriage config without one")
+    parser.add_argument("--relief", nargs=2, type=float, metavar=("DEPTH_UM", "LENGTH_MM"),
+                        help="the carriage's end relief: depth [um] and length [mm]")
     args = parser.parse_args(argv)
     numbers = [h for h in args.steps if h != "auto"]
     if (numbers and min(numbers) < 1) or any(h >= args.reference for h in numbers):
@@ -244,16 +275,23 @@ def main(argv=None):
     print(f"load average {load:.2f} at the start")
     for name in args.configs:
         path = CONFIGS[name]
-        contact = args.contact and not has_circuit(path)
+        carriage = name != "whatif_along_track"
+        variant = {"circuit": args.circuit and carriage,
+                   "relief": args.relief if carriage else None}
+        contact = args.contact and not (has_circuit(path) or variant["circuit"])
+        name += "".join(
+            [" + default [carriage.circuit]" if variant["circuit"] else ""]
+            + ([f" + relief {args.relief[0]:g} um / {args.relief[1]:g} mm"]
+               if variant["relief"] else []))
         # warm-up: load or compile the kernels outside the timings
-        run_study(study_config(path, 2, samples=1, seed=args.seed, contact=contact))
+        run_study(study_config(path, 2, samples=1, seed=args.seed, contact=contact, **variant))
         rows = []
         reference = measure(study_config(path, args.reference, samples=args.samples,
-                                         seed=args.seed, contact=contact))
+                                         seed=args.seed, contact=contact, **variant))
         print(f"{name}: reference {args.reference} steps, P = {reference['p']:.4f} "
               f"({reference['seconds']:.0f} s)", flush=True)
-        configs = [study_config(path, h, samples=args.samples, seed=args.seed, contact=contact)
-                   for h in args.steps]
+        configs = [study_config(path, h, samples=args.samples, seed=args.seed, contact=contact,
+                                **variant) for h in args.steps]
         for config in sorted(configs, key=resolved_steps):  # the table so far after each
             rows.append(measure(config))
             print(_text(name, rows, reference, compare(rows, reference)), flush=True)

@@ -81,3 +81,25 @@ def test_the_circuit_study_reports_its_column_and_ends():
     assert out["column"]["entry"] >= 0 and out["column"]["exit"] >= 0
     fraction = out["zone_end_fraction"]
     assert np.isnan(fraction) or 0 <= fraction <= 1
+
+
+def test_the_circuit_and_relief_variants():
+    # --circuit adds a default [carriage.circuit], --relief 1 15 sets 1 um / 15 mm (SI after
+    # loading: 1e-6 m, 0.015 m); the automatic step of that carriage is the relief's c = 8:
+    # 8 x 50 / 10.05 = 39.8 -> 40 (its ball pitch the shortest length)
+    path = convergence.CONFIGS["carriage_preload"]
+    c = convergence.study_config(path, "auto", samples=4, circuit=True, relief=(1.0, 15.0))
+    assert c.carriage.circuit is not None
+    assert c.carriage.end_relief_depth == pytest.approx(1e-6, rel=1e-12)
+    assert c.carriage.end_relief_length == pytest.approx(0.015, rel=1e-12)
+    assert convergence.resolved_steps(c) == 40
+    plain = convergence.study_config(path, "auto", samples=4)
+    assert plain.carriage.circuit is None and plain.carriage.end_relief_depth == 0
+    # a key already set is replaced, one not set is added after the [carriage] header
+    text = "[carriage]\nend_relief_depth_um = 2.0   # note\n[carriage.load]\n"
+    out = convergence.with_carriage_keys(text, end_relief_depth_um=1.0,
+                                         end_relief_length_mm=7.0)
+    assert out.startswith("[carriage]\nend_relief_length_mm = 7.0\nend_relief_depth_um = 1.0 ")
+    assert out.count("end_relief_depth_um") == 1
+    with pytest.raises(ValueError, match="end_relief_depth_um"):
+        convergence.with_carriage_keys("[bearing]\n", end_relief_depth_um=1.0)

@@ -7,6 +7,7 @@ The faults are real: a worker process killed with SIGKILL mid-run, a client proc
 with SIGKILL after some checkpoints. The one-line errors need no cluster.
 """
 
+import logging
 import os
 import re
 import shlex
@@ -398,3 +399,17 @@ def test_a_second_local_cluster_takes_another_dashboard_port_quietly(client, rec
     finally:
         second.close()
         cluster.close()
+
+
+def test_a_worker_s_heartbeat_failure_at_close_is_not_shown():
+    # The record a LocalCluster's worker logs (with its traceback) when the client closed the
+    # cluster between two heartbeats (seen on Ctrl-C, test_ctrl_c_on_a_local_cluster): dropped
+    # by the workers' filter; any other record of the worker passes
+    quiet_heartbeat = tolsim_distributed.quiet_heartbeat
+
+    def record(message):
+        return logging.LogRecord("distributed.worker", logging.ERROR, __file__, 1, message,
+                                 None, None)
+
+    assert not quiet_heartbeat(record("Failed to communicate with scheduler during heartbeat."))
+    assert quiet_heartbeat(record("Worker stream died during communication"))

@@ -377,9 +377,24 @@ _one_task_at_a_time = threading.Lock()
 def dask_setup(worker):
     """Preload of the LocalCluster's workers: Ctrl-C in the terminal reaches the whole
     process group, and only the client is to act on it (save the checkpoint, close the
-    cluster), not the workers, each with a traceback of its own."""
+    cluster), not the workers, each with a traceback of its own; nor does a worker whose
+    heartbeat finds the scheduler already closed (:func:`quiet_heartbeat`)."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed.worker").addFilter(quiet_heartbeat)
+
+
+#: What a LocalCluster's worker logs, with a traceback, when its heartbeat finds the scheduler
+#: closed: on Ctrl-C the client closes the cluster while a worker may be between heartbeats.
+HEARTBEAT_FAILURE = "Failed to communicate with scheduler during heartbeat"
+
+
+def quiet_heartbeat(record) -> bool:
+    """Logging filter of a LocalCluster's workers: drop the heartbeat failure
+    (:data:`HEARTBEAT_FAILURE`), which at the cluster's close is expected; a scheduler lost
+    during a run reaches the client as a one-line :class:`SchedulerError` (its tasks are
+    lost), so nothing is hidden that the user would not see."""
+    return not record.getMessage().startswith(HEARTBEAT_FAILURE)
 
 
 def _run_task(config, chunks, spot_indices, save_samples, context):

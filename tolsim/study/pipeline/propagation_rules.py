@@ -102,19 +102,19 @@ def time_steps(config) -> int:
     was 37, 7.0, 2.9 and 0.86 ms at 5, 10, 20 and 40 steps (+18/-9, +5/-8, +1/-3, +0/-0),
     where entering balls solved from the next step and moving with the ball ahead gave
     18, 10 and 4.4 ms at 10, 20 and 40 steps (+18/-11, +9/-5, +2/-3): first order. Hence
-    c = 2 there (10 steps, more accurate than the former 20). A circuit's midpoint holds
-    the ring balls that have entered by then too, and they move at their own epsilon from
-    their entry (Notes of :func:`tolsim.study.pipeline.carriage_circuit.
+    c = 2 there (10 steps, more accurate than the former 20). A circuit's midpoint holds the
+    ring balls that have entered by then too, and they move at their own epsilon from their
+    entry (Notes of :func:`tolsim.study.pipeline.carriage_circuit.
     first_contact_carriage_circuit`, "Entry"); on ``configs/carriage_circuit.toml`` the mean
     change was 27, 2.4, 2.35 and 1.6 ms at 10, 21, 42 and 84 steps (+16/-23, +4/-0, +3/-0,
-    +0/-1), where the entering balls taken with the ball ahead's epsilon, outside the
-    midpoint's solve, gave 12, 4.5 and 3.5 ms at 10, 42 and 40 steps (+10/-10, +3/-5,
-    +3/-4); on ``configs/carriage_preload.toml`` with a default circuit 1.8, 1.1 and 0.37 ms
-    at 10, 20 and 40 steps (+0/-0 each) against 3.7, 0.99 and 0.38 ms (+4/-1, +2/-1, +0/-1)
-    before. Hence c = 2 for a circuit too (21 and 10 steps, against 42 and 20 at c = 4).
-    Below two steps per pitch the midpoint's entering balls do harm: on
-    ``carriage_circuit.toml`` at 10 steps (a pitch per step) 27 ms (+16/-23) against 12 ms
-    (+10/-10) with the midpoint solved without them, since a ball predicted in by the
+    +0/-1), where the entering balls taken with the ball ahead's epsilon, outside the midpoint's
+    solve, gave 12, 4.5 and 3.5 ms at 10, 42 and 40 steps (+10/-10, +3/-5, +3/-4); on
+    ``configs/carriage_preload.toml`` with a default circuit (``--configs carriage_preload
+    --circuit``) 1.8, 1.1 and 0.37 ms at 10, 20 and 40 steps (+0/-0 each) against 3.7, 0.99 and
+    0.38 ms (+4/-1, +2/-1, +0/-1) before. Hence c = 2 for a circuit too (21 and 10 steps,
+    against 42 and 20 at c = 4). Below two steps per pitch the midpoint's entering balls do
+    harm: on ``carriage_circuit.toml`` at 10 steps (a pitch per step) 27 ms (+16/-23) against 12
+    ms (+10/-10) with the midpoint solved without them, since a ball predicted in by the
     midpoint may enter only at the step's end and the others are then solved with it for
     most of the step; at 21 steps they make 2.4 ms (+4/-0) of 13 ms (+8/-8). (The entering
     balls' late entries made up in the next step and the pushed-in pairs timed at their
@@ -148,11 +148,11 @@ def time_steps(config) -> int:
     [0.5374, 0.5814] and 40 inside it, hence c = 8 (40 steps). Entering balls solved from the
     next step and moving with the ball ahead needed 200 steps (0.4845, 0.5275, 0.5430, 0.5545
     and 0.5560 at 20, 40, 80, 200 and 400), as a circuit with a relief did (c = 40) before
-    its midpoint held its entering balls. With them, that relief and a default circuit (600
-    assemblies, against 800 steps, P = 0.8700) gave 0.8650, 0.8650, 0.8700 and 0.8700 at
-    20, 40, 80 and 200 steps (+0/-3, +0/-3, +0/-0, +0/-0; mean change 0.86, 0.43, 0.06 and
-    0.03 ms), against 0.8683, 0.8667, 0.8700 and 0.8700 (+2/-3, +0/-2, 0, 0; 1.4, 0.50, 0.07
-    and 0.05 ms) before: c = 8 for a circuit too.
+    its midpoint held its entering balls. With them, that relief and a default circuit
+    (``--circuit --relief 1 15``, 600 assemblies, against 800 steps, P = 0.8700) gave 0.8650,
+    0.8650, 0.8700 and 0.8700 at 20, 40, 80 and 200 steps (+0/-3, +0/-3, +0/-0, +0/-0; mean
+    change 0.86, 0.43, 0.06 and 0.03 ms), against 0.8683, 0.8667, 0.8700 and 0.8700 (+2/-3,
+    +0/-2, 0, 0; 1.4, 0.50, 0.07 and 0.05 ms) before: c = 8 for a circuit too.
     """
     if config.study.time_steps is not None:
         return int(config.study.time_steps)
