@@ -212,3 +212,48 @@ def test_circuit_examples_are_the_recorded_steps():
     assert_array_equal(ex.friction_force, expected)
     assert np.isfinite(ex.friction_force).all()
     assert (np.nan_to_num(ex.contact_force) >= 0).all()
+
+
+def test_a_ball_entered_by_the_midpoint_has_its_own_coefficients(monkeypatch):
+    # Notes of CircuitTrains ("What is counted per step") and of
+    # first_contact_carriage_circuit ("Entry"): a ball that entered the zone by the step's
+    # midpoint is in that midpoint's solve, and its creep coefficients in the step's train are
+    # its own (finite), not the ball ahead's; each ball has its own flank offsets and size
+    # here (TOLERANCES), so its F_0 differs from the ball ahead's (tolerance 0: an exact copy
+    # would be the ball ahead's, as a ball entered after the midpoint takes).
+    import tolsim.study.pipeline.circuit_friction as cf
+
+    seen = []
+    kernel = cf.circuit_trains_kernel
+
+    def recording(loaded, ring_load, *args):
+        seen.append(ring_load.copy())
+        return kernel(loaded, ring_load, *args)
+
+    monkeypatch.setattr(cf, "circuit_trains_kernel", recording)
+    c = with_contact(config(samples=4, steps=10))
+    frame = CircuitFrame(c, sample_block(c, 0))
+    entering = []
+    advance = frame.advance
+
+    def advance_recording(step, new):
+        advance(step, new)
+        entering.append(step.circuit["entering"])
+
+    frame.advance = advance_recording
+    friction = TrackFriction(c)
+    integrate(c, frame, [CircuitContact(frame), CircuitTrains(frame, friction)])
+    used = np.append(cf._USED, cf._K)  # the columns a train reads (circuit_trains_kernel)
+    checked = 0
+    for load, step_entering in zip(seen, entering, strict=True):
+        if step_entering is None:
+            continue
+        take, ring, _ = step_entering
+        for line, slot in zip(*np.nonzero(take), strict=True):
+            r = ring[line, slot]
+            ahead = (r + 1) % load.shape[1]
+            own = load[line, r, used]
+            assert np.isfinite(own).all()
+            assert not np.array_equal(own, load[line, ahead, used])
+            checked += 1
+    assert checked > 0

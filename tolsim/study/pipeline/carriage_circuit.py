@@ -271,6 +271,7 @@ class CircuitFrame(CarriageFrame):
         self.joined = None
         self.step_start = 0.0
         self.entering = None  # the balls entered by the midpoint and their values (evaluate)
+        self.entering_balls = None  # their BallState (a function: made when first read)
         # travel [m] each ring ball moved after its entry with the entry ball's epsilon
         # (late_eps) in the step before (late_entries_kernel)
         self.late_travel, self.late_eps = np.zeros(shape), np.zeros(shape)
@@ -364,6 +365,8 @@ class CircuitFrame(CarriageFrame):
             self.entering = (take, ring, balls.velocity_deviation,
                              self.stiffness(balls.balls, balls.loaded, take), balls.valid,
                              balls.unloaded)
+            index = np.flatnonzero(take[balls.loaded])
+            self.entering_balls = lambda: balls.balls.rows(index)  # in ``take`` order
         return balls.without(entering)
 
     def _joined(self, state1, state2, take):
@@ -429,11 +432,14 @@ class CircuitFrame(CarriageFrame):
                            pushed.reshape(c, -1), unresolved.reshape(c, -1), loaded, ok,
                            ring_eps, ring_k, ring_pushed)
         own = np.zeros((c, n), dtype=bool)
+        entering = None  # (take, ring ball, BallState) of the balls entered by the midpoint
         if self.entering is not None:  # entered by the midpoint: their own values
             shape = (c, -1)
             entering_inputs_kernel(*(x.reshape(shape) for x in self.entering), fallback,
                                    ring_eps, ring_k, ring_pushed, own)
-            self.entering = None
+            entering = (self.entering[0].reshape(shape), self.entering[1].reshape(shape),
+                        self.entering_balls)
+            self.entering = self.entering_balls = None
         travel = self.v * step.dt
         late_travel, late_eps = self.late_travel[take], self.late_eps[take]
         # entered after the previous midpoint: its own epsilon makes up for the entry ball's
@@ -479,7 +485,7 @@ class CircuitFrame(CarriageFrame):
                         "mean_force": mean_force, "column": column, "count": count,
                         "pair": pair, "where": where, "travel": when,
                         "circuits": circuits, "pushed": ring_pushed, "slot_ring": ring,
-                        "status": status, "sigma_start": before[0],
+                        "status": status, "sigma_start": before[0], "entering": entering,
                         "entry_time": ring_entry_time(step.events[3], self.slot_ring[at], n)}
 
 

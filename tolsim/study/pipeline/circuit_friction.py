@@ -101,8 +101,8 @@ def circuit_trains_kernel(loaded, ring_load, ring_ok, mean_force, pressed_end, p
             for k in range(columns):
                 out_load[c, j, k] = ring_load[c, r, k]
             if not np.isfinite(ring_load[c, r, used[0]]) and j > 1 and ring_ok[c, r]:
-                # entered within the step: the coefficients of the ball ahead of it in the
-                # flow (the zone's entry ball before it), as its epsilon and K in the step
+                # entered after the step's midpoint: the coefficients of the ball ahead of
+                # it in the flow (the zone's entry ball before it), as its epsilon and K
                 for k in range(columns):
                     out_load[c, j, k] = out_load[c, j - 1, k]
             for k in range(3):
@@ -175,13 +175,12 @@ class CircuitTrains(StepObserver):
     two balls of the zone was pressed (closed with a force) at its start, else from its first
     ``inside`` contact event to its end, else not; ``clusters_formed``: the runs of pressed
     pairs of the zone at the end of the step that hold a pair not pressed at its start. A
-    ball that entered the zone within the step was not evaluated in it: it takes the
-    coefficients of the ball ahead of it, as its epsilon and K in the step
-    (:func:`tolsim.study.pipeline.carriage_circuit.entering_velocity`; one that entered by
-    the midpoint moves at its own epsilon and K of the midpoint's solve, Notes of
-    :func:`tolsim.study.pipeline.carriage_circuit.first_contact_carriage_circuit`, "Entry",
-    but takes those coefficients here too: at 40 steps per length its share is small). A
-    ball that left within it is not in the step's train (its share of the step: O(dt)). A train is
+    ball that entered the zone by the step's midpoint takes its own coefficients of the
+    midpoint's solve, as its epsilon and K (Notes of :func:`tolsim.study.pipeline.
+    carriage_circuit.first_contact_carriage_circuit`, "Entry"); one that entered after it was
+    not evaluated in the step and takes the coefficients of the ball ahead of it, as its
+    epsilon and K (:func:`tolsim.study.pipeline.carriage_circuit.entering_velocity`). A ball
+    that left within the step is not in its train (its share of the step: O(dt)). A train is
     unresolved from the step at which a ball of its zone is unresolved or has no usable
     coefficients, a ball slides (as the open carriage's), or its circuit's step failed.
 
@@ -222,6 +221,12 @@ class CircuitTrains(StepObserver):
         out = np.full((c, n, len(TRAIN_COLUMNS)), np.nan)
         line, slot = np.nonzero(ring >= 0)
         out[line, ring[line, slot]] = load[line, slot]
+        entering = circ.get("entering")
+        if entering is not None:  # entered by the midpoint: their own, from its solve
+            take, ring_e, balls = entering
+            own = friction.coefficients(balls(), take)
+            line, slot = np.nonzero(take)
+            out[line, ring_e[line, slot]] = own[line, slot]
         return out
 
     def moved(self, step):
