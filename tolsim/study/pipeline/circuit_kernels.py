@@ -1,11 +1,15 @@
 """Compiled glue of the carriage's ball circuits (:mod:`tolsim.study.pipeline.carriage_circuit`):
 the step's ring inputs, the exits and entries of a step, the contacts seen in a step, the gaps,
-the step's circuit figures.
+the step's circuit figures, and the balls that enter the zone by a step's midpoint or after it
+(Notes of :func:`tolsim.study.pipeline.carriage_circuit.first_contact_carriage_circuit`,
+"Entry").
 
-Each kernel does in one pass, element by element, what a chain of NumPy calls did: the same
-comparisons and the same values (a float ``%`` as ``np.mod``, or
-:func:`tolsim.physics.circuit.wrap`, which is ``%``), so the results are
-bit-identical to those calls.
+Each of the first kernels does in one pass, element by element, what a chain of NumPy calls
+did: the same comparisons and the same values (a float ``%`` as ``np.mod``, or
+:func:`tolsim.physics.circuit.wrap`, which is ``%``), so the results are bit-identical to
+those calls. The entry kernels (``midpoint_entering_kernel``, ``entering_inputs_kernel``,
+``late_entry_kernel``, ``late_entries_kernel``) have no NumPy twin; their tests work their
+values by hand (``tests/study/test_circuit_entry.py``).
 """
 
 import numpy as np
@@ -243,10 +247,6 @@ def circuit_figures_kernel(rows, tracks, hits, column, travel, where_count, colu
             column_mean[row, e] += mean * travel
 
 
-__all__ = ["circuit_events_kernel", "circuit_figures_kernel", "circuit_gaps_kernel",
-           "entering_fill_kernel", "ring_inputs_kernel", "step_contacts_kernel"]
-
-
 @jit
 def midpoint_entering_kernel(z, ball_id, slot_ring, count, circuits, sigma, ring_loaded,
                              ring_speed, length, diameter, half_zone, travel, ring_id, out_z,
@@ -365,3 +365,9 @@ def late_entries_kernel(entry_time, slot_ring, own, eps, pushed, t_end, v, late_
                 continue
             late_travel[c, r] = v * (t_end - t)
             late_eps[c, r] = eps[c, r]
+
+
+__all__ = ["circuit_events_kernel", "circuit_figures_kernel", "circuit_gaps_kernel",
+           "entering_fill_kernel", "entering_inputs_kernel", "late_entries_kernel",
+           "late_entry_kernel", "midpoint_entering_kernel", "ring_inputs_kernel",
+           "step_contacts_kernel"]
