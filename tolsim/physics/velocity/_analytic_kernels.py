@@ -555,16 +555,8 @@ def creep_coefficients_kernel(dbeta, force, force_cbrt, nominal_angle, ball_radi
         x1, y1 = c1, s1
         x2, y2 = -c2, s2
         x3, y3 = -c3, -s3
-        sc = 0.375 * elliptic_e / ball_radius
-        m0 = sc * f0 * a0
-        m1 = -sc * f1 * a1
-        m2 = -sc * f2 * a2
-        m3 = sc * f3 * a3
-        r2 = -(m0 * s0 - m1 * s1 - m2 * s2 + m3 * s3)
-        r3 = -(m0 * c0 + m1 * c1 - m2 * c2 - m3 * c3)
-        p0 = det3(0.0, 1.0, 1.0, r2, x1, x2, r3, y1, y2) / d012
-        p1 = det3(1.0, 0.0, 1.0, x0, r2, x2, y0, r3, y2) / d012
-        p2 = det3(1.0, 1.0, 0.0, x0, x1, r2, y0, y1, r3) / d012
+        p0, p1, p2 = spin_particular(s0, c0, s1, c1, s2, c2, s3, c3, f0, f1, f2, f3, a0, a1,
+                                     a2, a3, d012, elliptic_e, ball_radius)
         rhs = -(dbeta[n, 0] + dbeta[n, 3] - dbeta[n, 1] - dbeta[n, 2])
         t = (rhs - (w0 * p0 + w1 * p1 + w2 * p2)) / wn
         g1 = (p1 + t * n1) / q1
