@@ -57,9 +57,10 @@ def test_newton_start_and_remember_match_their_numpy_twins():
     rows = np.sort(rng.choice(size, 30, replace=False)).astype(np.int64)
     for t in (0.45, 0.5):
         got = np.empty((len(rows), 5))
-        newton_start_kernel(solution, solved_at, start, rows, t, got)
-        assert_array_equal(_bits(got), _bits(newton_start_twin(solution, solved_at, start,
-                                                                rows, t)))
+        for period in (0.0, 10.0):  # no pitch; a pitch longer than any time held
+            newton_start_kernel(solution, solved_at, start, rows, t, period, got)
+            assert_array_equal(_bits(got), _bits(newton_start_twin(solution, solved_at, start,
+                                                                    rows, t)))
     displacement = rng.normal(0.0, 1e-6, (len(rows), 5))
     solved = rng.uniform(size=len(rows)) < 0.7
     mine = [start.copy(), solution.copy(), solved_at.copy()]
@@ -68,6 +69,49 @@ def test_newton_start_and_remember_match_their_numpy_twins():
     remember_twin(rows, 0.45, displacement, solved, *twin)
     for a, b in zip(mine, twin, strict=True):
         assert_array_equal(_bits(a), _bits(b))
+
+
+def test_newton_start_one_pitch_back():
+    # Source: the rule of newton_start_kernel's docstring, values worked by hand; tolerance 0.
+    # Solves at 0, 0.5, 1.0, 1.5 s (latest last), period 1 s.
+    q = np.arange(4.0)[:, None, None] + np.zeros((4, 1, 5))
+    at = np.array([0.0, 0.5, 1.0, 1.5])[:, None]
+    start = np.full((1, 5), -1.0)
+    rows = np.array([0], dtype=np.int64)
+    got = np.empty((1, 5))
+
+    def start_at(t, period, solution=q, solved_at=at):
+        newton_start_kernel(solution, solved_at, start, rows, t, period, got)
+        return got[0, 0]
+
+    assert start_at(2.0, 1.0) == 2.0  # the solve at t - period = 1.0 exactly
+    assert start_at(2.1, 1.0) == 2.0  # nearest to 1.1, within period / 8
+    assert start_at(2.2, 1.0) == 3.0 + 0.7 / 0.5  # none within 0.125 of 1.2: the line
+    assert start_at(1.7, 1.0) == 3.0 + 0.2 / 0.5  # < period / 4 after the latest: the line
+    assert start_at(2.0, 0.0) == 3.0 + 0.5 / 0.5  # no pitch: the line
+    assert start_at(2.0, 1.6) == 1.0  # nearest to 0.4, within 0.2
+    assert start_at(2.0, 1.2) == 3.0 + 0.5 / 0.5  # none within 0.15 of 0.8: the line
+    bad = q.copy()
+    bad[:2] = np.nan
+    none = at.copy()
+    none[:3] = np.nan  # the latest alone: its start
+    assert start_at(2.0, 1.0, solution=bad, solved_at=none) == -1.0
+
+
+def test_remember_keeps_the_latest_solutions_in_order():
+    # Source: remember_kernel's docstring; tolerance 0. Three rows: two solved twice, one
+    # failing at the second solve (all its solutions dropped).
+    size, kept = 3, 3
+    solution, solved_at = np.full((kept, size, 5), np.nan), np.full((kept, size), np.nan)
+    start = np.zeros((size, 5))
+    rows = np.arange(size, dtype=np.int64)
+    for t, solved in ((0.1, [True] * 3), (0.2, [True, True, False])):
+        remember_kernel(rows, t, np.full((size, 5), 10 * t), np.array(solved), start,
+                        solution, solved_at)
+    assert_array_equal(solved_at[:, :2], [[np.nan] * 2, [0.1] * 2, [0.2] * 2])
+    assert_array_equal(solution[1:, :2, 0], [[1.0, 1.0], [2.0, 2.0]])
+    assert np.isnan(solution[:, 2]).all() and np.isnan(solved_at[:, 2]).all()
+    assert_array_equal(start[:, 0], [2.0, 2.0, 1.0])
 
 
 def first_contact_twin(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, dt, balls,

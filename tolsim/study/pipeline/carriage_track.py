@@ -63,6 +63,21 @@ from tolsim.study.pipeline.propagation import (
 )
 from tolsim.study.sampling import entering_capacity, fixed_ball_values, moving_ball_values
 
+#: Relative tolerance of the carriage's and every ball's balance in the solves along the track
+#: (``tol`` and ``ball_tol`` of :func:`tolsim.physics.carriage.solve_carriage_batch`, whose
+#: defaults are 1e-11 and 1e-12). The Newton converges quadratically, so it stops one step
+#: earlier in most solves (2.01 steps instead of 2.60 on ``configs/carriage_preload.toml``,
+#: :meth:`_Evaluation.newton_start`), and the solution moves by about the tolerance: measured
+#: on the same study's solves, the contact forces by at most 1.6e-8 of the assembly's largest
+#: and the contact angles by at most 4.8e-11 rad. That moves epsilon by about 1e-10, a gap by
+#: about 1e-12 m over the stroke: far below the step's own error (Notes of
+#: :func:`tolsim.study.pipeline.propagation_rules.time_steps`; ``tests/study/
+#: test_carriage_track.py`` bounds the change).
+TRACK_TOLERANCE = 1e-8
+#: Solutions of each assembly kept for the Newton's start: one pitch back at up to four solves
+#: per pitch (:meth:`_Evaluation.newton_start`).
+_REMEMBERED = 5
+
 
 def slot_capacity(config) -> int:
     """Ball slots per track: the most balls a track's loaded zone can hold.
@@ -146,9 +161,11 @@ class _Evaluation:
         except ValueError:
             q0 = np.zeros(5)
         self.start = np.tile(q0, (block.size, 1))
-        # the two latest solutions of each assembly and their times (extrapolated start)
-        self.solution = np.full((2, block.size, 5), np.nan)
-        self.solved_at = np.full((2, block.size), np.nan)
+        # the latest solutions of each assembly and their times (newton_start)
+        self.solution = np.full((_REMEMBERED, block.size, 5), np.nan)
+        self.solved_at = np.full((_REMEMBERED, block.size), np.nan)
+        # the time in which the balls move one pitch through the carriage (at v / 2) [s]
+        self.period = 2.0 * lay.ball_pitch / config.motion.groove_velocity
         self.fixed = fixed_ball_values(config, block)  # transformed once, read every step
         self.resolve_seconds = 0.0
 
@@ -180,7 +197,8 @@ class _Evaluation:
             batch = solve_carriage_batch(self.layout, carriage.load, config.bearing,
                                          oversize=carriage.preload_oversize,
                                          groove_errors=errors, ball_z=z, loaded=loaded,
-                                         start=self.newton_start(rows, t))
+                                         start=self.newton_start(rows, t),
+                                         tol=TRACK_TOLERANCE, ball_tol=TRACK_TOLERANCE)
         solved = batch.status == STATUS_CONVERGED
         self.remember(rows, t, batch, solved)
         state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation,
@@ -195,25 +213,33 @@ class _Evaluation:
 
     def newton_start(self, rows, t):
         """Where the carriage Newton of assemblies ``rows`` starts at time t [s]: the
-        assembly's own solution extrapolated linearly in time from its two latest ones, or
-        its latest alone (the nominal solution before its first).
+        assembly's own solution of one ball pitch earlier, when the solves are at least a
+        quarter pitch apart; else its solution extrapolated linearly in time from its two
+        latest ones, or its latest alone (the nominal solution before its first).
 
         Notes
         -----
-        The carriage moves smoothly between two evaluations (the midpoints, dt apart) except
-        when a ball enters or leaves the zone, so the line through the two latest solutions
-        starts the Newton O(dt^2) from the solution instead of O(dt). On
-        ``configs/carriage_preload.toml`` (256 assemblies, seed 12) that gave 2.74 joint Newton
-        steps on average instead of 3.0 at 20 steps, but nothing at its automatic 10 steps
-        (:func:`tolsim.study.pipeline.propagation_rules.time_steps`: 3.0 either way, half a
-        ball pitch apart: an entry between every two solves) nor at 200 steps (2.07 against
-        2.04, where the start is close either way).
-        The Newton's convergence test is the same, so the solution changes only within its
-        tolerance, and an assembly's start depends only on its own history (not on the
-        batch, chunking or threads).
+        The carriage moves smoothly between two solves except when a ball enters or leaves
+        the zone. A ball enters and one leaves every pitch of the balls' travel through the
+        carriage (``period`` = 2 pitch / v), so at the automatic two steps per pitch
+        (:func:`tolsim.study.pipeline.propagation_rules.time_steps`) an entry or exit falls
+        between every two solves and the line through them helps nothing (3.0 joint Newton
+        steps on average either way on ``configs/carriage_preload.toml``, session 12). One
+        pitch earlier the balls held the same places, each shifted by one ball: only the
+        rail errors under them and the sizes of the ball that entered and the one that left
+        differ. Started there (the solve nearest to t - period, within period / 8), the
+        Newton took 2.60 steps instead of 2.98 at the default tolerances and 2.01 instead of
+        2.79 at :data:`TRACK_TOLERANCE` (the same study, 1 024 assemblies, seed 12). With
+        solves closer than a quarter pitch (an end relief, ``[contact]``) the line is kept:
+        most pairs of solves have no entry between them, and measured in session 12 it gave
+        2.74 steps instead of 3.0 at 20 steps per stroke.
+        The Newton's convergence test is the same either way, so the solution changes only
+        within its tolerance, and an assembly's start depends only on its own history (not on
+        the batch, chunking or threads).
         """
         start = np.empty((len(rows), 5))
-        newton_start_kernel(self.solution, self.solved_at, self.start, rows, float(t), start)
+        newton_start_kernel(self.solution, self.solved_at, self.start, rows, float(t),
+                            self.period, start)
         return start
 
     def remember(self, rows, t, batch, solved):

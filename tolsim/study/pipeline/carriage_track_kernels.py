@@ -255,23 +255,40 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
 
 
 @jit
-def newton_start_kernel(solution, solved_at, start, rows, t, out):
+def newton_start_kernel(solution, solved_at, start, rows, t, period, out):
     """Where the carriage Newton of assemblies ``rows`` starts at time t [s]
-    (:meth:`tolsim.study.pipeline.carriage_track.CarriageFrame` Notes of ``newton_start``):
-    ``out[a]`` = q1 + w (q1 - q0), w = (t - t1) / (t1 - t0), from the assembly's two latest
-    solutions ``solution`` (2, size, 5) at ``solved_at`` (2, size) where w is finite and > 0
-    and q0 finite, else ``start[rows[a]]``."""
+    (:meth:`tolsim.study.pipeline.carriage_track._Evaluation.newton_start`).
+
+    ``solution`` (R, size, 5) and ``solved_at`` (R, size) hold each assembly's R latest
+    solutions, the latest in row R - 1 (NaN where there is none). If t is at least a
+    quarter of ``period`` (the time in which the balls move one pitch through the carriage)
+    after the latest solve, ``out[a]`` is the solution solved nearest to t - ``period``, if
+    one lies within an eighth of it; else q1 + w (q1 - q0), w = (t - t1) / (t1 - t0), from
+    the two latest solutions where w is finite and > 0 and q0 finite; else ``start[rows[a]]``.
+    ``period`` <= 0 (no pitch) leaves the line alone."""
+    last = solution.shape[0] - 1
     for a in range(rows.shape[0]):
         r = rows[a]
-        t0, t1 = solved_at[0, r], solved_at[1, r]
+        t0, t1 = solved_at[last - 1, r], solved_at[last, r]
+        best = -1
+        if period > 0.0 and t - t1 >= 0.25 * period:
+            off = 0.125 * period
+            for i in range(last + 1):
+                d = abs(solved_at[i, r] - (t - period))
+                if d <= off:  # (NaN: no solution there)
+                    best, off = i, d
+        if best >= 0:
+            for j in range(5):
+                out[a, j] = solution[best, r, j]
+            continue
         w = (t - t1) / (t1 - t0)
         line = np.isfinite(w) and w > 0.0
         for j in range(5):
-            line = line and np.isfinite(solution[0, r, j])
+            line = line and np.isfinite(solution[last - 1, r, j])
         for j in range(5):
             if line:
-                q1 = solution[1, r, j]
-                out[a, j] = q1 + w * (q1 - solution[0, r, j])
+                q1 = solution[last, r, j]
+                out[a, j] = q1 + w * (q1 - solution[last - 1, r, j])
             else:
                 out[a, j] = start[r, j]
 
@@ -279,23 +296,26 @@ def newton_start_kernel(solution, solved_at, start, rows, t, out):
 @jit
 def remember_kernel(rows, t, displacement, solved, start, solution, solved_at):
     """Keep the solutions ``displacement`` (m, 5) of assemblies ``rows`` solved at time t
-    [s], in place: where ``solved``, the start of the next Newton and the latest of the two
-    solutions (the previous latest becomes the older); elsewhere both solutions NaN."""
+    [s], in place: where ``solved``, the start of the next Newton and the latest of the R
+    solutions of ``solution`` (R, size, 5) at ``solved_at`` (R, size), the others moving one
+    row back (the oldest dropped); elsewhere all R solutions NaN."""
+    last = solution.shape[0] - 1
     for a in range(rows.shape[0]):
         r = rows[a]
         if solved[a]:
+            for i in range(last):
+                for j in range(5):
+                    solution[i, r, j] = solution[i + 1, r, j]
+                solved_at[i, r] = solved_at[i + 1, r]
             for j in range(5):
                 start[r, j] = displacement[a, j]
-                solution[0, r, j] = solution[1, r, j]
-                solution[1, r, j] = displacement[a, j]
-            solved_at[0, r] = solved_at[1, r]
-            solved_at[1, r] = t
+                solution[last, r, j] = displacement[a, j]
+            solved_at[last, r] = t
         else:
-            for j in range(5):
-                solution[0, r, j] = np.nan
-                solution[1, r, j] = np.nan
-            solved_at[0, r] = np.nan
-            solved_at[1, r] = np.nan
+            for i in range(last + 1):
+                for j in range(5):
+                    solution[i, r, j] = np.nan
+                solved_at[i, r] = np.nan
 
 
 @jit
