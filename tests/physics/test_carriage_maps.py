@@ -7,6 +7,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.physics.carriage import CarriageLayout
 from tolsim.physics.carriage._map_kernels import (
+    gram,
     largest_eigenvalue,
     moving_groove_maps,
     singular_pivot,
@@ -43,6 +44,21 @@ def test_moving_groove_maps_are_the_numpy_maps_bit_for_bit():
     moving_groove_maps(z, loaded, track, scale, length, *out)
     for got, want in zip(out, (a_s, zeta), strict=True):
         assert_array_equal(_bits(got), _bits(want))
+
+
+def test_gram_is_the_sum_of_the_balls_a_transpose_a():
+    # source: sum_b A_b^T A_b by NumPy (np.matmul of the stacked rows, as solve_carriage_batch
+    # formed it before the kernel did); tolerance 1e-15 of the largest entry (the sums run in
+    # another order); symmetric to the bit.
+    rng = np.random.default_rng(5)
+    maps = rng.normal(0.0, 1.0, (26, 2, 5))
+    maps[3] = 0.0  # a ball outside the zone
+    got = np.empty((5, 5))
+    gram(maps, got)
+    flat = maps.reshape(-1, 5)
+    want = flat.T @ flat
+    assert_allclose(got, want, rtol=0, atol=1e-15 * np.abs(want).max())
+    assert_array_equal(got, got.T)
 
 
 def _largest(mats, free):

@@ -17,7 +17,12 @@ from tolsim.physics.carriage._kernels import (
     scaled_error,
     schur_complement,
 )
-from tolsim.physics.carriage._map_kernels import singular_pivot, trace_bounds
+from tolsim.physics.carriage._map_kernels import (
+    assembly_groove_maps,
+    gram,
+    singular_pivot,
+    trace_bounds,
+)
 from tolsim.physics.static import (
     FLOOR_LENGTH,
     arc_centres,
@@ -515,7 +520,7 @@ def _unloaded_outputs(loaded, a, out_dbeta, out_force, out_side, out_normal, out
 
 @pjit
 def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric_maxs,
-                          loaded, load, start, e_n, e_t, rot_b, rot_t, off_b, off_t,
+                          ball_z, tracks, length, loaded, load, start, e_n, e_t, rot_b, rot_t, off_b, off_t,
                           oversize_error,
                           oversize, scale, beta0, dist, k, tol, max_iter, ball_tol,
                           ball_max_iter, out_dbeta, out_force, out_side, out_normal, out_count,
@@ -533,7 +538,12 @@ def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric
     holds cos phi, sin phi, x / L and y / L of each track and ``zetas`` (m or 1, n_balls)
     z_b / L (:func:`_track_assembly`); ``free`` the indices of the free DOFs, ``geometrics``
     (m or 1, 5, 5) sum_b A_b^T A_b and ``geometric_maxs`` (m or 1,) the largest eigenvalue of
-    its free block, or NaN: then computed only if a pivot needs it (:func:`singular_pivot`);
+    its free block, or NaN: then computed only if a pivot needs it (:func:`singular_pivot`).
+    Balls at their own z instead: ``ball_z`` (m, n_balls) [m] (else (0, n_balls)), whose
+    maps, z / L and sum_b A_b^T A_b the kernel forms per assembly (:func:`assembly_groove_maps`
+    with ``tracks`` (n_tracks, 6) and ``length`` L, :func:`gram`; the largest eigenvalue then
+    only if a pivot needs it); ``groove_maps``, ``zetas``, ``geometrics`` and
+    ``geometric_maxs`` are then not read;
     ``loaded`` (m or 1, n_balls) marks the balls in the loaded zone. A ball
     that is not loaded has zero rows in A and a radius of R_B - d/2 in the kernel (no flank
     touches it, so it carries and transmits nothing); its outputs are overwritten: no force,
@@ -553,6 +563,7 @@ def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric
     """
     nasm = out_status.shape[0]
     nball = groove_maps.shape[1]
+    moving = ball_z.shape[0] > 0
     s0, c0 = np.sin(beta0), np.cos(beta0)
     floor = k * FLOOR_LENGTH**1.5
     limit = LIFT_OFF * dist
@@ -580,18 +591,28 @@ def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric
         unit = np.empty((4, 2))
         approach = np.empty((nball, 4))
         amap = np.empty((10, nball))
+        own_map = np.empty((nball, 2, 5))
+        own_zeta = np.empty(nball)
+        own_geometric = np.empty((5, 5))
         for a in range(tile * _ASSEMBLY_TILE, min(nasm, (tile + 1) * _ASSEMBLY_TILE)):
             il = a if load.shape[0] > 1 else 0
             i_s = a if start.shape[0] > 1 else 0
-            ig = a if groove_maps.shape[0] > 1 else 0
             iz = a if loaded.shape[0] > 1 else 0
-            groove_map, zeta = groove_maps[ig], zetas[ig]
-            if ig > 0 or a == tile * _ASSEMBLY_TILE:  # A by rows
+            if moving:  # the balls' own maps (moving_groove_maps of this assembly)
+                assembly_groove_maps(ball_z[a], loaded[iz], tracks, scale, length, own_map,
+                                     own_zeta)
+                gram(own_map, own_geometric)
+                groove_map, zeta, geometric, geometric_max = (own_map, own_zeta,
+                                                              own_geometric, np.nan)
+            else:
+                ig = a if groove_maps.shape[0] > 1 else 0
+                groove_map, zeta = groove_maps[ig], zetas[ig]
+                geometric, geometric_max = geometrics[ig], geometric_maxs[ig]
+            if moving or groove_maps.shape[0] > 1 or a == tile * _ASSEMBLY_TILE:  # A by rows
                 for b in range(nball):
                     for c in range(2):
                         for j in range(5):
                             amap[5 * c + j, b] = groove_map[b, c, j]
-            geometric, geometric_max = geometrics[ig], geometric_maxs[ig]
             load_norm = 0.0
             for j in range(5):
                 q_ext[j] = load[il, j] * scale[j]

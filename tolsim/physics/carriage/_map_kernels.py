@@ -1,5 +1,5 @@
-"""Numba kernels of the batched carriage solve: the groove maps of balls at their own z, and
-the singular-tangent test against the largest eigenvalue of sum_b A_b^T A_b."""
+"""Numba kernels of the batched carriage solve: the groove maps of balls at their own z and
+their sum_b A_b^T A_b, and the singular-tangent test against its largest eigenvalue."""
 
 import numpy as np
 
@@ -19,35 +19,57 @@ def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_zetas):
     s x - c y and c x + s y [m]; ``scale`` (5,) the DOF scales, ``length`` [m] the layout's
     length scale. Writes ``out_maps`` (m, n_balls, 2, 5) the rows of A = E_t^T B(p) at each
     ball's z times ``scale`` (0 for a ball that is not loaded; ball b = t n + j) and
-    ``out_zetas`` (m, n_balls) z / ``length``. The same operations, element by element, as
-    :meth:`tolsim.physics.carriage.CarriageLayout.groove_map_at` times ``scale`` with
-    ``np.where`` on the unloaded balls.
+    ``out_zetas`` (m, n_balls) z / ``length``, assembly by assembly by
+    :func:`assembly_groove_maps` (which the batch kernel calls itself).
     """
     m, tracks, n = z.shape
-    # serial: it streams memory (about 4 us per assembly of configs/carriage_preload.toml
-    # either way), and a parallel launch waits for a second core on a busy machine
+    flat_z, flat_loaded = z.reshape((m, tracks * n)), loaded.reshape((m, tracks * n))
     for a in range(m):
-        maps = out_maps[a]
-        for t in range(tracks):
-            c, s, ms, mc, gx, gy = (track[t, 0], track[t, 1], track[t, 2], track[t, 3],
-                                    track[t, 4], track[t, 5])
-            for j in range(n):
-                b = t * n + j
-                zz = z[a, t, j]
-                out_zetas[a, b] = zz / length
-                for k in range(10):
-                    maps[b, k // 5, k % 5] = 0.0
-                if loaded[a, t, j]:
-                    maps[b, 0, 0] = c * scale[0]
-                    maps[b, 0, 1] = s * scale[1]
-                    maps[b, 0, 2] = (ms * zz) * scale[2]
-                    maps[b, 0, 3] = (c * zz) * scale[3]
-                    maps[b, 0, 4] = gx * scale[4]
-                    maps[b, 1, 0] = ms * scale[0]
-                    maps[b, 1, 1] = c * scale[1]
-                    maps[b, 1, 2] = (mc * zz) * scale[2]
-                    maps[b, 1, 3] = (ms * zz) * scale[3]
-                    maps[b, 1, 4] = gy * scale[4]
+        assembly_groove_maps(flat_z[a], flat_loaded[a], track, scale, length, out_maps[a],
+                             out_zetas[a])
+
+
+@jit(inline="always")
+def assembly_groove_maps(z, loaded, track, scale, length, maps, zetas):
+    """The scaled groove maps ``maps`` (n_balls, 2, 5) and ``zetas`` (n_balls,) of one
+    assembly's balls at ``z`` (n_balls,) [m], ``loaded`` (n_balls,), ball b = t n + j
+    (:func:`moving_groove_maps`). The same operations, element by element, as
+    :meth:`tolsim.physics.carriage.CarriageLayout.groove_map_at` times ``scale`` with
+    ``np.where`` on the unloaded balls."""
+    tracks = track.shape[0]
+    n = z.shape[0] // tracks
+    for t in range(tracks):
+        c, s, ms, mc, gx, gy = (track[t, 0], track[t, 1], track[t, 2], track[t, 3],
+                                track[t, 4], track[t, 5])
+        for j in range(n):
+            b = t * n + j
+            zz = z[b]
+            zetas[b] = zz / length
+            for k in range(10):
+                maps[b, k // 5, k % 5] = 0.0
+            if loaded[b]:
+                maps[b, 0, 0] = c * scale[0]
+                maps[b, 0, 1] = s * scale[1]
+                maps[b, 0, 2] = (ms * zz) * scale[2]
+                maps[b, 0, 3] = (c * zz) * scale[3]
+                maps[b, 0, 4] = gx * scale[4]
+                maps[b, 1, 0] = ms * scale[0]
+                maps[b, 1, 1] = c * scale[1]
+                maps[b, 1, 2] = (mc * zz) * scale[2]
+                maps[b, 1, 3] = (ms * zz) * scale[3]
+                maps[b, 1, 4] = gy * scale[4]
+
+
+@jit(inline="always")
+def gram(maps, out):
+    """``out`` (5, 5) = sum_b A_b^T A_b of the maps (n_balls, 2, 5), rows summed in order."""
+    for k in range(5):
+        for l in range(k, 5):
+            total = 0.0
+            for b in range(maps.shape[0]):
+                total += maps[b, 0, k] * maps[b, 0, l] + maps[b, 1, k] * maps[b, 1, l]
+            out[k, l] = total
+            out[l, k] = total
 
 
 @jit(inline="always")

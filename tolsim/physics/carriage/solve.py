@@ -11,7 +11,6 @@ from tolsim.physics.carriage._kernels import (
     carriage_balls_kernel,
     receding,
 )
-from tolsim.physics.carriage._map_kernels import moving_groove_maps
 from tolsim.physics.carriage.layout import (
     DOFS,
     CarriageBatch,
@@ -124,7 +123,7 @@ def _batch_inputs(layout, oversize, groove_errors, bearing):
 
 def _track_rows(layout):
     """(n_tracks, 6) c, s, -s, -c, s x - c y, c x + s y of each track (c, s: cos and sin of
-    its orientation) for :func:`moving_groove_maps`, as :meth:`CarriageLayout.groove_map_at`
+    its orientation) for ``assembly_groove_maps``, as :meth:`CarriageLayout.groove_map_at`
     forms them."""
     c, s = np.cos(layout.track_orientation), np.sin(layout.track_orientation)
     x, y = layout.track_x, layout.track_y
@@ -678,10 +677,14 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
 
     The locked DOFs are those of the layout's nominal balls, whatever ``ball_z`` and
     ``loaded``. Without ``ball_z`` and ``loaded`` the solve is exactly the one of the fixed
-    nominal balls (bit-identical); with them, the groove map A and sum_b A_b^T A_b are formed
-    per assembly (A compiled, :func:`tolsim.physics.carriage._map_kernels.moving_groove_maps`),
-    and the largest eigenvalue of the latter only where a tangent's pivot needs it (between
-    bounds from its trace: :func:`tolsim.physics.carriage._map_kernels.singular_pivot`).
+    nominal balls (bit-identical); with them, the kernel forms the groove map A and
+    sum_b A_b^T A_b of each assembly as it solves it (:func:`tolsim.physics.carriage.
+    _map_kernels.assembly_groove_maps`, the operations of :func:`tolsim.physics.carriage.
+    _map_kernels.moving_groove_maps`, and :func:`tolsim.physics.carriage._map_kernels.gram`:
+    no array of every assembly's maps is written; about 8 % of an along-track carriage
+    study), and the largest eigenvalue of the latter only where a tangent's pivot needs it
+    (between bounds from its trace: :func:`tolsim.physics.carriage._map_kernels.
+    singular_pivot`).
     """
     check_solver_options(tol, max_iter)
     check_solver_options(ball_tol, ball_max_iter)
@@ -693,6 +696,7 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
     scale = np.array([1.0, 1.0, 1.0 / length, 1.0 / length, 1.0 / length])
     locked, free = _carried(layout, load, q_ext * scale)
     free_index = np.flatnonzero(free).astype(np.int64)
+    own_z = np.empty((0, nball))  # (the balls' own z: the kernel forms their maps)
     if ball_z is None and loaded is None:  # the fixed nominal balls
         a_s = np.ascontiguousarray(layout.groove_map().reshape(nball, 2, 5) * scale)
         geometric = np.einsum("bik,bil->kl", a_s, a_s)
@@ -708,14 +712,10 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
             base = 0.0 if oversize is None else np.asarray(oversize, dtype=float)
             inputs, m = _batch_inputs(layout, np.broadcast_to(base, z.shape), groove_errors,
                                       bearing)
-        z = np.ascontiguousarray(np.broadcast_to(z, (m, t, n)))
+        own_z = np.ascontiguousarray(np.broadcast_to(z, (m, t, n))).reshape(m, nball)
         mask = np.ascontiguousarray(np.broadcast_to(mask, (m, t, n)))
-        a_s, zeta = np.empty((m, nball, 2, 5)), np.empty((m, nball))
-        moving_groove_maps(z, mask, _track_rows(layout), scale, length, a_s, zeta)
-        flat = a_s.reshape(-1, 2 * nball, 5)
-        geometric = np.matmul(flat.transpose(0, 2, 1), flat)
-        geometric_max = np.full(m, np.nan)  # bounds from the trace (singular_pivot)
-        maps = (a_s, zeta, geometric, geometric_max, mask.reshape(-1, nball))
+        maps = (np.empty((0, nball, 2, 5)), np.empty((0, nball)), np.empty((0, 5, 5)),
+                np.empty(0), mask.reshape(-1, nball))
 
     if start is not None:
         start = np.asarray(start, dtype=float)
@@ -754,7 +754,7 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
     groove_maps, zetas, geometrics, geometric_maxs, loaded_rows = maps
     loaded_rows = kernel_array(loaded_rows, np.bool_)
     carriage_batch_kernel(groove_maps, frame, zetas, free_index, geometrics,
-                          geometric_maxs, loaded_rows, q_ext[None, :], start, *inputs, scale,
+                          geometric_maxs, own_z, _track_rows(layout), length, loaded_rows, q_ext[None, :], start, *inputs, scale,
                           bearing.nominal_contact_angle,
                           bearing.groove_radius - bearing.ball_radius, hertz_k(bearing),
                           float(tol), int(max_iter), float(ball_tol), int(ball_max_iter),
