@@ -520,8 +520,8 @@ def _unloaded_outputs(loaded, a, out_dbeta, out_force, out_side, out_normal, out
 
 @pjit
 def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric_maxs,
-                          ball_z, tracks, length, loaded, load, start, e_n, e_t, rot_b, rot_t, off_b, off_t,
-                          oversize_error,
+                          ball_z, tracks, length, loaded, load, start, e_n, e_t, rot_b,
+                          rot_t, off_b, off_t, oversize_error,
                           oversize, scale, beta0, dist, k, tol, max_iter, ball_tol,
                           ball_max_iter, out_dbeta, out_force, out_side, out_normal, out_count,
                           out_ball_converged, out_displacement, out_stiffness, out_residual,

@@ -754,7 +754,8 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
     groove_maps, zetas, geometrics, geometric_maxs, loaded_rows = maps
     loaded_rows = kernel_array(loaded_rows, np.bool_)
     carriage_batch_kernel(groove_maps, frame, zetas, free_index, geometrics,
-                          geometric_maxs, own_z, _track_rows(layout), length, loaded_rows, q_ext[None, :], start, *inputs, scale,
+                          geometric_maxs, own_z, _track_rows(layout), length, loaded_rows,
+                          q_ext[None, :], start, *inputs, scale,
                           bearing.nominal_contact_angle,
                           bearing.groove_radius - bearing.ball_radius, hertz_k(bearing),
                           float(tol), int(max_iter), float(ball_tol), int(ball_max_iter),
