@@ -66,13 +66,13 @@ from tolsim.study.sampling import entering_capacity, fixed_ball_values, moving_b
 #: Relative tolerance of the carriage's and every ball's balance in the solves along the track
 #: (``tol`` and ``ball_tol`` of :func:`tolsim.physics.carriage.solve_carriage_batch`, whose
 #: defaults are 1e-11 and 1e-12). The Newton converges quadratically, so it stops one step
-#: earlier in most solves (2.01 steps instead of 2.60 on ``configs/carriage_preload.toml``,
+#: earlier in most solves (2.10 steps instead of 2.60 on ``configs/carriage_preload.toml``,
 #: :meth:`_Evaluation.newton_start`), and the solution moves by about the tolerance: measured
 #: on the same study's solves, the contact forces by at most 1.6e-8 of the assembly's largest
 #: and the contact angles by at most 4.8e-11 rad. That moves epsilon by about 1e-10, a gap by
 #: about 1e-12 m over the stroke: far below the step's own error (Notes of
 #: :func:`tolsim.study.pipeline.propagation_rules.time_steps`; ``tests/study/
-#: test_carriage_track.py`` bounds the change).
+#: test_carriage_along_track.py`` bounds the change).
 TRACK_TOLERANCE = 1e-8
 #: Solutions of each assembly kept for the Newton's start: one pitch back at up to four solves
 #: per pitch (:meth:`_Evaluation.newton_start`).
@@ -228,7 +228,7 @@ class _Evaluation:
         pitch earlier the balls held the same places, each shifted by one ball: only the
         rail errors under them and the sizes of the ball that entered and the one that left
         differ. Started there (the solve nearest to t - period, within period / 8), the
-        Newton took 2.60 steps instead of 2.98 at the default tolerances and 2.01 instead of
+        Newton took 2.60 steps instead of 2.98 at the default tolerances and 2.10 instead of
         2.79 at :data:`TRACK_TOLERANCE` (the same study, 1 024 assemblies, seed 12). With
         solves closer than a quarter pitch (an end relief, ``[contact]``) the line is kept:
         most pairs of solves have no entry between them, and measured in session 12 it gave
