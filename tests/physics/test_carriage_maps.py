@@ -7,9 +7,9 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.physics.carriage import CarriageLayout
 from tolsim.physics.carriage._map_kernels import (
+    assembly_groove_maps,
     gram,
     largest_eigenvalue,
-    moving_groove_maps,
     singular_pivot,
     trace_bounds,
 )
@@ -19,7 +19,7 @@ def _bits(x):
     return np.ascontiguousarray(x).view(np.uint64)
 
 
-def test_moving_groove_maps_are_the_numpy_maps_bit_for_bit():
+def test_assembly_groove_maps_are_the_numpy_maps_bit_for_bit():
     # source: the NumPy chain they replace in solve_carriage_batch (groove_map_at times the
     # DOF scales, np.where on the unloaded balls, z / L); tolerance: the
     # bits (same operations element by element), -0.0 included
@@ -41,7 +41,9 @@ def test_moving_groove_maps_are_the_numpy_maps_bit_for_bit():
     x, y = layout.track_x, layout.track_y
     track = np.stack([c, s, -s, -c, s * x - c * y, c * x + s * y], axis=1)
     out = np.empty((m, nball, 2, 5)), np.empty((m, nball))
-    moving_groove_maps(z, loaded, track, scale, length, *out)
+    for a in range(m):  # as the batch kernel calls it, one assembly at a time
+        assembly_groove_maps(z[a].reshape(-1), loaded[a].reshape(-1), track, scale, length,
+                             out[0][a], out[1][a])
     for got, want in zip(out, (a_s, zeta), strict=True):
         assert_array_equal(_bits(got), _bits(want))
 

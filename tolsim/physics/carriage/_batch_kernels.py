@@ -598,7 +598,7 @@ def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric
             il = a if load.shape[0] > 1 else 0
             i_s = a if start.shape[0] > 1 else 0
             iz = a if loaded.shape[0] > 1 else 0
-            if moving:  # the balls' own maps (moving_groove_maps of this assembly)
+            if moving:  # the balls' own maps, at their own z
                 assembly_groove_maps(ball_z[a], loaded[iz], tracks, scale, length, own_map,
                                      own_zeta)
                 gram(own_map, own_geometric)

@@ -9,31 +9,17 @@ from tolsim._jit import jit
 _JACOBI_SWEEPS = 30
 
 
-@jit
-def moving_groove_maps(z, loaded, track, scale, length, out_maps, out_zetas):
-    """Scaled groove maps of balls at their own axial positions, in the two layouts of
-    :func:`tolsim.physics.carriage._batch_kernels.carriage_batch_kernel`.
-
-    ``z`` (m, n_tracks, n) [m] and ``loaded`` (m, n_tracks, n) the balls, C-contiguous;
-    ``track`` (n_tracks, 6) per track c, s (cos and sin of its orientation), -s, -c,
-    s x - c y and c x + s y [m]; ``scale`` (5,) the DOF scales, ``length`` [m] the layout's
-    length scale. Writes ``out_maps`` (m, n_balls, 2, 5) the rows of A = E_t^T B(p) at each
-    ball's z times ``scale`` (0 for a ball that is not loaded; ball b = t n + j) and
-    ``out_zetas`` (m, n_balls) z / ``length``, assembly by assembly by
-    :func:`assembly_groove_maps` (which the batch kernel calls itself).
-    """
-    m, tracks, n = z.shape
-    flat_z, flat_loaded = z.reshape((m, tracks * n)), loaded.reshape((m, tracks * n))
-    for a in range(m):
-        assembly_groove_maps(flat_z[a], flat_loaded[a], track, scale, length, out_maps[a],
-                             out_zetas[a])
-
-
 @jit(inline="always")
 def assembly_groove_maps(z, loaded, track, scale, length, maps, zetas):
-    """The scaled groove maps ``maps`` (n_balls, 2, 5) and ``zetas`` (n_balls,) of one
-    assembly's balls at ``z`` (n_balls,) [m], ``loaded`` (n_balls,), ball b = t n + j
-    (:func:`moving_groove_maps`). The same operations, element by element, as
+    """Scaled groove maps of one assembly's balls at their own axial positions, for
+    :func:`tolsim.physics.carriage._batch_kernels.carriage_batch_kernel`.
+
+    ``z`` (n_balls,) [m] and ``loaded`` (n_balls,) the balls (ball b = t n + j); ``track``
+    (n_tracks, 6) per track c, s (cos and sin of its orientation), -s, -c, s x - c y and
+    c x + s y [m]; ``scale`` (5,) the DOF scales, ``length`` [m] the layout's length scale.
+    Writes ``maps`` (n_balls, 2, 5) the rows of A = E_t^T B(p) at each ball's z times
+    ``scale`` (0 for a ball that is not loaded) and ``zetas`` (n_balls,) z / ``length``. The
+    same operations, element by element, as
     :meth:`tolsim.physics.carriage.CarriageLayout.groove_map_at` times ``scale`` with
     ``np.where`` on the unloaded balls."""
     tracks = track.shape[0]

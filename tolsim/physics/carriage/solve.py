@@ -679,8 +679,7 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
     ``loaded``. Without ``ball_z`` and ``loaded`` the solve is exactly the one of the fixed
     nominal balls (bit-identical); with them, the kernel forms the groove map A and
     sum_b A_b^T A_b of each assembly as it solves it (:func:`tolsim.physics.carriage.
-    _map_kernels.assembly_groove_maps`, the operations of :func:`tolsim.physics.carriage.
-    _map_kernels.moving_groove_maps`, and :func:`tolsim.physics.carriage._map_kernels.gram`:
+    _map_kernels.assembly_groove_maps` and :func:`tolsim.physics.carriage._map_kernels.gram`:
     no array of every assembly's maps is written; about 8 % of an along-track carriage
     study), and the largest eigenvalue of the latter only where a tangent's pivot needs it
     (between bounds from its trace: :func:`tolsim.physics.carriage._map_kernels.
