@@ -331,29 +331,20 @@ def test_rare_event_result_file(rare_results, tmp_path):
     assert "contact_reliability_index" not in read_result(tmp_path / "subset.nc")
 
 
-@pytest.mark.slow  # the checker takes a few seconds
+@pytest.mark.slow  # the checker takes about a second (tests/io/cf_checker.py)
 def test_importance_result_file_passes_cf_checker(rare_results, tmp_path, capsys):
     # the design point along ``factor`` (without the sensitivity variables that usually make
     # that dimension) keeps the file CF-clean; tests/io/test_cf_compliance.py checks the subset
     # file of configs/rare_contact.toml
     pytest.importorskip("compliance_checker", reason="compliance-checker is not installed")
-    import json
-    import warnings
+    from cf_checker import check, load_checkers  # tests/io/cf_checker.py
 
-    from compliance_checker.runner import CheckSuite, ComplianceChecker
-
-    with warnings.catch_warnings():  # its deprecated ioos_sos checker warns on loading
-        warnings.simplefilter("ignore", DeprecationWarning)
-        CheckSuite.load_all_available_checkers()
-    path, report = tmp_path / "importance.nc", tmp_path / "report.json"
+    load_checkers()
+    path = tmp_path / "importance.nc"
     write_result(rare_results[1], path, history="test")
-    _, errors = ComplianceChecker.run_checker(str(path), ["cf:1.10"], verbose=0,
-                                              criteria="strict", output_filename=str(report),
-                                              output_format="json")
+    errors, failed = check(path, tmp_path)
     assert not errors, capsys.readouterr().err
-    out = json.loads(report.read_text())["cf:1.10"]
-    failed = [f"{r['name']}: {r['msgs']}" for key in ("high_priorities", "medium_priorities")
-              for r in out[key] if r["value"][0] < r["value"][1]]
+    failed = failed[3] + failed[2]
     assert failed == []
 
 
