@@ -11,6 +11,7 @@ The Numba kernels are in :mod:`tolsim.physics.velocity._regime_kernels`.
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize
@@ -187,9 +188,19 @@ def two_point_loaded(normal_force, push=0.0, neighbour_force_sum=0.0, bearing: B
 
 
 def _contact_points(contact_angle_deviation, normal_force, bearing, nodes):
-    """Quadrature points r [R_B], weights [N] and normals p of the four planar ellipses."""
-    beta = bearing.nominal_contact_angle + np.asarray(contact_angle_deviation, dtype=float)
-    force = np.asarray(normal_force, dtype=float)
+    """Quadrature points r [R_B], weights [N] and normals p of the four planar ellipses
+    (read-only arrays, kept for the latest balls: a minimisation asks for the same ball
+    thousands of times, and forming them was a third of its time)."""
+    dbeta = tuple(float(x) for x in np.asarray(contact_angle_deviation, dtype=float).ravel())
+    force = tuple(float(x) for x in np.asarray(normal_force, dtype=float).ravel())
+    return _contact_points_of(dbeta, force, bearing, tuple(int(n) for n in nodes))
+
+
+@lru_cache(maxsize=4)
+def _contact_points_of(dbeta, force, bearing, nodes):
+    """:func:`_contact_points` of hashable inputs."""
+    beta = bearing.nominal_contact_angle + np.asarray(dbeta, dtype=float)
+    force = np.asarray(force, dtype=float)
     hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                          bearing.poisson_ratio)
     n_rad, n_ang = nodes
@@ -214,8 +225,11 @@ def _contact_points(contact_angle_deviation, normal_force, bearing, nodes):
         weights.append(w.ravel())
         normals.append(np.broadcast_to(p, (xl.size, 3)))
         groove.append(np.full(xl.size, 0.0 if i < 2 else 1.0))
-    return (np.concatenate(points), np.concatenate(weights), np.concatenate(normals),
-            np.concatenate(groove))
+    out = (np.concatenate(points), np.concatenate(weights), np.concatenate(normals),
+           np.concatenate(groove))
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def dissipated_power(ball_velocity, angular_velocity, contact_angle_deviation, normal_force,
