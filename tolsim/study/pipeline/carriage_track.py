@@ -28,6 +28,7 @@ from tolsim.physics.carriage import (
     solve_carriage_batch,
 )
 from tolsim.physics.static import GrooveErrors
+from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.physics.velocity.models import BALL_UNLOADED, BALL_UNRESOLVED, MODEL_UNRESOLVED
 from tolsim.study.pipeline.ball_kernels import nan_to_num, scatter_loaded_balls_kernel
 from tolsim.study.pipeline.carriage import CarriageState
@@ -44,6 +45,7 @@ from tolsim.study.pipeline.carriage_track_kernels import (
     remember_kernel,
     slot_inputs_kernel,
     step_velocity_kernel,
+    window_points_kernel,
 )
 from tolsim.study.pipeline.evaluate import (
     BallState,
@@ -74,6 +76,8 @@ from tolsim.study.sampling import entering_capacity, fixed_ball_values, moving_b
 #: :func:`tolsim.study.pipeline.propagation_rules.time_steps`; ``tests/study/
 #: test_carriage_along_track.py`` bounds the change).
 TRACK_TOLERANCE = 1e-8
+#: The column of a ball's free-rolling carriage force F_0 (the baseline's) in its coefficients.
+_F0 = LOAD_COLUMNS.index("free_rolling_carriage_force")
 #: Solutions of each assembly kept for the Newton's start: one pitch back at up to four solves
 #: per pitch (:meth:`_Evaluation.newton_start`).
 _REMEMBERED = 5
@@ -169,21 +173,27 @@ class _Evaluation:
         self.fixed = fixed_ball_values(config, block)  # transformed once, read every step
         self.resolve_seconds = 0.0
 
-    def __call__(self, ball_z, ball_id, t, rows):
+    def __call__(self, ball_z, ball_id, t, rows, remember=True):
         """Evaluate the balls in slots (m_k, T, S) of assemblies ``rows`` at time t [s].
 
         Returns (eps, ok, loaded, batch, state, unloaded): epsilon (NaN unless loaded and
         resolved), resolved (True where not loaded; an unloaded ball in the zone is accounted
         for, pushed along, unless ``pushes_unloaded`` is False), loaded, the carriage batch,
         the BallState of the loaded balls (flattened) and the unloaded balls in slots.
+        ``remember`` False (a solve off the integration's steps: t (m_k,), one time per
+        row): the Newton starts from each assembly's latest solution, which it leaves as
+        it is, so the steps' solves do not change.
         """
         config, carriage = self.config, self.config.carriage
         shape = ball_z.shape
         loaded, z, rail = np.empty(shape, dtype=bool), np.empty(shape), np.empty(shape)
+        shift = config.motion.groove_velocity * np.asarray(t, dtype=float)
         slot_inputs_kernel(kernel_array(ball_z).reshape(-1),
                            kernel_array(ball_id, np.int64).reshape(-1), self.half_zone,
-                           config.motion.groove_velocity * t, loaded.reshape(-1),
+                           float(shift) if shift.ndim == 0 else 0.0, loaded.reshape(-1),
                            z.reshape(-1), rail.reshape(-1))
+        if shift.ndim:  # each row at its own time
+            rail += shift.reshape((-1,) + (1,) * (rail.ndim - 1))
         # the values straight into the GrooveErrors fields (absent fields: 0)
         fields, columns = groove_error_buffers({s.source for s in config.tolerances}, shape)
         moving_ball_values(config, self.block, ball_id, rail, rows, self.fixed, columns)
@@ -197,10 +207,12 @@ class _Evaluation:
             batch = solve_carriage_batch(self.layout, carriage.load, config.bearing,
                                          oversize=carriage.preload_oversize,
                                          groove_errors=errors, ball_z=z, loaded=loaded,
-                                         start=self.newton_start(rows, t),
+                                         start=(self.newton_start(rows, t) if remember
+                                                else self.start[rows]),
                                          tol=TRACK_TOLERANCE, ball_tol=TRACK_TOLERANCE)
         solved = batch.status == STATUS_CONVERGED
-        self.remember(rows, t, batch, solved)
+        if remember:
+            self.remember(rows, t, batch, solved)
         state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation,
                                        batch.normal_force, batch.ball_converged, solved)
         eps, ok, unloaded = np.empty(shape), np.empty(shape, dtype=bool), np.empty(
@@ -615,10 +627,51 @@ class CarriageTrains(StepObserver):
         free = free.reshape(trains)
         w2 = np.nan_to_num(friction.velocity(free, friction.coefficients(state2.balls, loaded2),
                                              loaded2, member))
-        return friction.advance(z0.reshape(trains),
-                                (z0 - dt * (1.0 - w2.reshape(z0.shape)) * 0.5 * v
-                                 ).reshape(trains), step.ball_id.reshape(trains)
-                                ).reshape(z0.shape)
+        extremes = friction.friction_high.copy(), friction.friction_low.copy()
+        end = friction.advance(z0.reshape(trains),
+                               (z0 - dt * (1.0 - w2.reshape(z0.shape)) * 0.5 * v
+                                ).reshape(trains), step.ball_id.reshape(trains)
+                               ).reshape(z0.shape)
+        self.windows(step, end, extremes)
+        return end
+
+    def windows(self, step, end, extremes):
+        """The ripple of a step in which a ball leaves or enters (Notes of
+        :class:`tolsim.study.pipeline.track_friction.TrackFriction`, "Windows"): the
+        extremes as they were before the step (``extremes``, the rows' friction maximum and
+        minimum), then each interval between those events solved at its own midpoint
+        (:func:`window_points_kernel`; the balls moving linearly from the step's start to
+        ``end``, those that have entered by then in the zone), without changing the steps'
+        solves: its baseline with the step's increase."""
+        frame, friction, rows = self.frame, self.friction, step.rows
+        points = np.empty((len(rows), 4 * self.tracks + 2))
+        count = np.empty(len(rows), dtype=np.int64)
+        z0, end = kernel_array(step.position), kernel_array(end)
+        window_points_kernel(rows, z0, end, frame.count, frame.entered, frame.entering_gap,
+                             self.half_zone, frame.diameter, float(step.t), float(step.dt),
+                             points, count)
+        track_rows = (rows[count > 0][:, None] * self.tracks + np.arange(self.tracks)
+                      ).reshape(-1)
+        friction.friction_high[track_rows] = extremes[0][track_rows]
+        friction.friction_low[track_rows] = extremes[1][track_rows]
+        for e in range(int(count.max(initial=0))):
+            sel = np.flatnonzero(count > e)
+            tau = points[sel, e]
+            frac = ((tau - step.t) / step.dt)[:, None, None]
+            at = z0[sel] + frac * (end[sel] - z0[sel])
+            ids, entering = step.ball_id[sel], np.empty(at.shape, dtype=bool)
+            z, slot_id = np.empty_like(at), np.empty_like(ids)
+            entering_by_kernel(at, ids, rows[sel], frame.count, frame.entered,
+                               frame.entering_gap, self.half_zone, frame.diameter, self.balls,
+                               z, slot_id, entering)
+            balls = CarriageBalls(*frame.evaluation(z, slot_id, tau, rows[sel],
+                                                    remember=False))
+            frame.resolve_seconds += balls.balls.resolve_seconds
+            loaded = balls.loaded.reshape(-1, self.slots)
+            f0 = friction.coefficients(balls.balls, loaded)[..., _F0]
+            baseline = np.where(loaded, f0, 0.0).sum(axis=1)
+            friction.window((rows[sel][:, None] * self.tracks + np.arange(self.tracks)
+                             ).reshape(-1), baseline)
 
     def moved(self, step):
         self.friction.carry(step.previous_id, step.ball_id)

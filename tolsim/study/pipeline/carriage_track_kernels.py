@@ -508,3 +508,72 @@ def slot_inputs_kernel(ball_z, ball_id, half_zone, shift, out_loaded, out_z, out
         z = z if occupied else 0.0
         out_z[i] = z
         out_rail[i] = z + shift
+
+
+@jit
+def window_points_kernel(rows, z0, z1, count, entered, entering_gap, half_zone, diameter, t,
+                         dt, out_point, out_count):
+    """The times at which a step's loaded zones are evaluated for the ripple (its windows).
+
+    The loaded zone of an assembly changes inside a step (t, t + dt) when a ball leaves at
+    the trailing end or one enters at the leading end, and the step's solve at its midpoint
+    sees only one of its zones (without a ball that enters before it: not yet in the
+    slots). Per row a (assembly ``rows[a]``), over its tracks, with the balls moving
+    linearly from ``z0`` to ``z1`` (m_k, T, S) [m] (slots in z order, the frame's ``count``
+    occupied, ``entered`` and ``entering_gap`` (size, T, capacity) as in
+    :func:`advance_kernel`): a ball leaves when it passes -``half_zone``, at frac = (z0 +
+    half_zone) / (z0 - z1) of the step (the exit time of :func:`advance_kernel`); the next
+    entering ball k enters when the leading ball reaches half_zone - D - g_k (then the one
+    after it, D + g_(k+1) further), as :func:`advance_kernel` enters it at the step's end.
+    Where the open step holds such events, they cut it into intervals and
+    ``out_point[a, :out_count[a]]`` are the midpoints of all of them (sorted; intervals of
+    zero length skipped); else ``out_count[a]`` is 0. A row with more intervals than
+    ``out_point`` has columns keeps the first ones.
+    """
+    m, tracks, slots = z0.shape
+    capacity = entering_gap.shape[2]
+    room = out_point.shape[1]
+    events = np.empty(2 * tracks * slots + 2)
+    for a in range(m):
+        r = rows[a]
+        n = 0
+        for tr in range(tracks):
+            c = count[r, tr]
+            for j in range(c):
+                s0, s1 = z0[a, tr, j], z1[a, tr, j]
+                if s0 >= -half_zone and s1 < -half_zone:  # (False for NaN)
+                    frac = (s0 + half_zone) / (s0 - s1)
+                    if 0.0 < frac < 1.0 and n < events.shape[0]:
+                        events[n] = frac
+                        n += 1
+            if c == 0:
+                continue
+            lead0, lead1 = z0[a, tr, c - 1], z1[a, tr, c - 1]
+            drift = lead0 - lead1
+            offset = 0.0
+            for k in range(entered[r, tr], capacity):
+                if not drift > 0.0:
+                    break
+                offset += diameter + entering_gap[r, tr, k]
+                frac = (lead0 + offset - half_zone) / drift
+                if not frac < 1.0:
+                    break
+                if frac > 0.0 and n < events.shape[0]:
+                    events[n] = frac
+                    n += 1
+        for i in range(1, n):  # insertion sort (a few events)
+            x = events[i]
+            j = i - 1
+            while j >= 0 and events[j] > x:
+                events[j + 1] = events[j]
+                j -= 1
+            events[j + 1] = x
+        k = 0
+        lower = 0.0
+        for i in range(n + 1 if n > 0 else 0):
+            upper = events[i] if i < n else 1.0
+            if upper > lower and k < room:
+                out_point[a, k] = t + 0.5 * (lower + upper) * dt
+                k += 1
+            lower = upper
+        out_count[a] = k

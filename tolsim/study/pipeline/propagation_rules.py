@@ -131,15 +131,12 @@ def time_steps(config) -> int:
     +-0.0007 N) interval, and 0.1734 N at 200 steps against 0.1739 N at 800, inside; hence
     c = 40 (200 steps there, the former fixed default). On the open carriage the mean
     increase is inside its interval from 10 steps and the largest from 40 (0.00056, 0.00062
-    and 0.00067 N at 10, 20 and 40 steps against 0.00074 N), but the ripple does not
-    converge: 0.148, 0.150, 0.152, 0.157 and 0.165 N at 10, 20, 40, 80 and 200 steps against
-    0.178 N at 800 (the reference outside each interval). Its extremes are set by the short
-    windows in which the zone holds one ball fewer or one more (between an exit and the next
-    entry), about one ball's F_0 (0.07-0.1 N) for as long as the gaps make the window last
-    (about 2 ms); a step sees a window only when its midpoint falls in it, so the extremes
-    grow as the steps shrink towards the windows' length. A convergent ripple needs
-    the carriage solved at the exit and entry events (not built; README, "Carriage and
-    preload").
+    and 0.00067 N at 10, 20 and 40 steps against 0.00074 N), and the ripple, its extremes
+    taken over every zone of the steps in which a ball leaves or enters (Notes of
+    :class:`tolsim.study.pipeline.track_friction.TrackFriction`, "Windows"), from 10 steps:
+    0.1503, 0.1496 and 0.1490 N at 10, 40 and 200 steps against 0.1489 N [0.1466, 0.1511]
+    at 800 (before the windows it did not converge: 0.148 N at 10 steps and 0.165 N at 200
+    against 0.178 N at 800).
 
     An end relief converges slowly: its balls unload near the zone's ends and load again, and
     most first contacts form there. ``configs/carriage_preload.toml`` with 1 um / 15 mm of

@@ -509,7 +509,8 @@ class TrackFriction:
       the contacts add; ``increase_max`` its maximum over the steps, ``increase_mean`` its time
       mean;
     * **ripple**: max_k F_track,k - min_k F_track,k, the ripple of the friction force itself
-      (with the variation of the baseline, e.g. balls passing through the load zone);
+      (with the variation of the baseline, e.g. balls passing through the load zone; with a
+      carriage over the windows below);
     * ``contact_force_max``: the largest Qbar_j; ``contact_fraction``: the time with a contact
       force (a step counts whole when a cluster pushes through it, else from its earliest
       closing, interpolated as the first contact is, to its end); ``clusters_formed``: clusters
@@ -554,6 +555,27 @@ class TrackFriction:
     passed through as by the first-contact propagation. K comes from each ball's own loaded
     state in the carriage solved at its position. Every assembly is followed over the whole
     stroke (without ``[contact]``: up to its first contact).
+
+    *Windows* (a carriage). The extremes of a carriage's friction are set by short windows
+    in which the zone holds a ball fewer (one has left at the trailing end, the next has not
+    yet entered) or one more, about one ball's F_0 (0.07-0.1 N) for about 2 ms. The
+    midpoint solve of a step sees only the zone of its midpoint, and its baseline does not
+    count a ball that entered before the midpoint (it joins the slots at the step's end): a
+    spurious low by about one F_0 wherever an entry falls in a step's first half, so the
+    ripple did not converge (0.148 N at 10 steps, 0.165 N at 200 against 0.178 N at 800 on
+    ``configs/carriage_preload.toml``, 600 assemblies, the reference outside each interval).
+    So in a step in which a ball leaves or enters, the extremes are taken instead from every
+    interval between those events (:meth:`window`), each solved at its own midpoint with the
+    balls that have entered by then
+    (:meth:`tolsim.study.pipeline.carriage_track.CarriageTrains.windows`, the events of
+    :func:`tolsim.study.pipeline.carriage_track_kernels.window_points_kernel`): its baseline
+    there with the step's increase. The ripple is then 0.1503 N at 10 steps and 0.1490 N at
+    200 against 0.1489 N [0.1466, 0.1511] at 800, inside at every step count
+    (``benchmarks/convergence_along_track.py --configs carriage_preload --contact``). The
+    steps' solves, the other figures and the first contacts do not change (those solves
+    leave the Newton starts alone). Left as it was: the time mean of the baseline still
+    counts the midpoint's zone without a ball that entered before it, a bias of about one
+    F_0 over a few steps in 200 (the mean baseline, not its extremes).
 
     *Cost.* Per step the creep coefficients of every loaded ball at the midpoint and, for the
     trains with a closed pair, at the start; two O(n) passes per train. The propagation's
@@ -666,6 +688,7 @@ class TrackFriction:
                             self.before, self.diameter, self.tolerance, self.half_step,
                             position, force, closed, formed, contact)
         baseline, increase = self.account(loaded, member, load, force, ok, contact, formed)
+        self.increase = increase  # the step's, for :meth:`window`
         self.closed = closed & self.alive[:, None]
         self.before = self.closed.copy()
         if self.record:
@@ -693,6 +716,20 @@ class TrackFriction:
                              self.force_high, self.contact_sum, self.formed_sum, self.rolling,
                              baseline, increase)
         return baseline, increase
+
+    def window(self, rows, baseline):
+        """Another loaded zone of the last step (a carriage: a ball left or entered in it):
+        the baseline of rows ``rows`` (R_k,) there [N] with the step's increase, into the
+        ripple's maximum and minimum. A row whose baseline is unknown there (a ball not
+        resolved) is no longer followed, as at a step (Notes, "Windows")."""
+        rows = np.asarray(rows)
+        alive = self.alive[rows]
+        total = np.asarray(baseline, dtype=float) + self.increase[rows]
+        known = alive & np.isfinite(total)
+        at, value = rows[known], total[known]
+        self.friction_high[at] = np.maximum(self.friction_high[at], value)
+        self.friction_low[at] = np.minimum(self.friction_low[at], value)
+        self.alive[rows[alive & ~np.isfinite(total)]] = False
 
     def carry(self, old_id, new_id):
         """Follow the pair flags to the balls' new slots (after exits and entries)."""
