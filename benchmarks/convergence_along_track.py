@@ -61,7 +61,7 @@ CONFIGS = {
 STEPS = (25, 50, 100, 200, 400)
 REFERENCE = 1600
 #: Friction figures compared (names of :data:`tolsim.study.statistics.friction.COLUMNS`).
-FRICTION_FIGURES = ("increase_max", "increase_mean", "ripple")
+FRICTION_FIGURES = ("baseline", "increase_max", "increase_mean", "ripple")
 #: z of the two-sided 95 % normal interval of a mean.
 Z95 = 1.959963984540054
 

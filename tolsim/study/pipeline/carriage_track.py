@@ -627,33 +627,36 @@ class CarriageTrains(StepObserver):
         free = free.reshape(trains)
         w2 = np.nan_to_num(friction.velocity(free, friction.coefficients(state2.balls, loaded2),
                                              loaded2, member))
-        extremes = friction.friction_high.copy(), friction.friction_low.copy()
+        before = (friction.friction_high.copy(), friction.friction_low.copy(),
+                  friction.baseline_sum.copy())
         end = friction.advance(z0.reshape(trains),
                                (z0 - dt * (1.0 - w2.reshape(z0.shape)) * 0.5 * v
                                 ).reshape(trains), step.ball_id.reshape(trains)
                                ).reshape(z0.shape)
-        self.windows(step, end, extremes)
+        self.windows(step, end, before)
         return end
 
-    def windows(self, step, end, extremes):
-        """The ripple of a step in which a ball leaves or enters (Notes of
-        :class:`tolsim.study.pipeline.track_friction.TrackFriction`, "Windows"): the
-        extremes as they were before the step (``extremes``, the rows' friction maximum and
-        minimum), then each interval between those events solved at its own midpoint
-        (:func:`window_points_kernel`; the balls moving linearly from the step's start to
-        ``end``, those that have entered by then in the zone), without changing the steps'
-        solves: its baseline with the step's increase."""
+    def windows(self, step, end, before):
+        """The friction of a step in which a ball leaves or enters (Notes of
+        :class:`tolsim.study.pipeline.track_friction.TrackFriction`, "Windows"): the rows'
+        extremes and baseline sum as they were before the step (``before``: friction
+        maximum, minimum, baseline sum), then each interval between those events solved at
+        its own midpoint (:func:`window_points_kernel`; the balls moving linearly from the
+        step's start to ``end``, those that have entered by then in the zone), without
+        changing the steps' solves: its baseline with the step's increase, and its baseline
+        over its share of the step."""
         frame, friction, rows = self.frame, self.friction, step.rows
-        points = np.empty((len(rows), 4 * self.tracks + 2))
+        points, share = np.empty((2, len(rows), 4 * self.tracks + 2))
         count = np.empty(len(rows), dtype=np.int64)
         z0, end = kernel_array(step.position), kernel_array(end)
         window_points_kernel(rows, z0, end, frame.count, frame.entered, frame.entering_gap,
                              self.half_zone, frame.diameter, float(step.t), float(step.dt),
-                             points, count)
+                             points, share, count)
         track_rows = (rows[count > 0][:, None] * self.tracks + np.arange(self.tracks)
                       ).reshape(-1)
-        friction.friction_high[track_rows] = extremes[0][track_rows]
-        friction.friction_low[track_rows] = extremes[1][track_rows]
+        for target, value in zip((friction.friction_high, friction.friction_low,
+                                  friction.baseline_sum), before, strict=True):
+            target[track_rows] = value[track_rows]
         for e in range(int(count.max(initial=0))):
             sel = np.flatnonzero(count > e)
             tau = points[sel, e]
@@ -671,7 +674,7 @@ class CarriageTrains(StepObserver):
             f0 = friction.coefficients(balls.balls, loaded)[..., _F0]
             baseline = np.where(loaded, f0, 0.0).sum(axis=1)
             friction.window((rows[sel][:, None] * self.tracks + np.arange(self.tracks)
-                             ).reshape(-1), baseline)
+                             ).reshape(-1), baseline, np.repeat(share[sel, e], self.tracks))
 
     def moved(self, step):
         self.friction.carry(step.previous_id, step.ball_id)

@@ -512,7 +512,7 @@ def slot_inputs_kernel(ball_z, ball_id, half_zone, shift, out_loaded, out_z, out
 
 @jit
 def window_points_kernel(rows, z0, z1, count, entered, entering_gap, half_zone, diameter, t,
-                         dt, out_point, out_count):
+                         dt, out_point, out_share, out_count):
     """The times at which a step's loaded zones are evaluated for the ripple (its windows).
 
     The loaded zone of an assembly changes inside a step (t, t + dt) when a ball leaves at
@@ -527,13 +527,14 @@ def window_points_kernel(rows, z0, z1, count, entered, entering_gap, half_zone, 
     after it, D + g_(k+1) further), as :func:`advance_kernel` enters it at the step's end.
     Where the open step holds such events, they cut it into intervals and
     ``out_point[a, :out_count[a]]`` are the midpoints of all of them (sorted; intervals of
-    zero length skipped); else ``out_count[a]`` is 0. A row with more intervals than
-    ``out_point`` has columns keeps the first ones.
+    zero length skipped) and ``out_share`` their lengths over dt (summing to 1); else
+    ``out_count[a]`` is 0. A row with more intervals than ``out_point`` has columns (more
+    than T S + T capacity - 1 events) has its last interval end at the step's end.
     """
     m, tracks, slots = z0.shape
     capacity = entering_gap.shape[2]
     room = out_point.shape[1]
-    events = np.empty(2 * tracks * slots + 2)
+    events = np.empty(tracks * (slots + capacity))
     for a in range(m):
         r = rows[a]
         n = 0
@@ -571,9 +572,12 @@ def window_points_kernel(rows, z0, z1, count, entered, entering_gap, half_zone, 
         k = 0
         lower = 0.0
         for i in range(n + 1 if n > 0 else 0):
-            upper = events[i] if i < n else 1.0
-            if upper > lower and k < room:
+            upper = events[i] if i < n and k < room - 1 else 1.0
+            if upper > lower:
                 out_point[a, k] = t + 0.5 * (lower + upper) * dt
+                out_share[a, k] = upper - lower
                 k += 1
             lower = upper
+            if upper == 1.0:
+                break
         out_count[a] = k

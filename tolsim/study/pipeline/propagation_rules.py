@@ -134,7 +134,7 @@ def time_steps(config) -> int:
     and 0.00067 N at 10, 20 and 40 steps against 0.00074 N), and the ripple, its extremes
     taken over every zone of the steps in which a ball leaves or enters (Notes of
     :class:`tolsim.study.pipeline.track_friction.TrackFriction`, "Windows"), from 10 steps:
-    0.1503, 0.1496 and 0.1490 N at 10, 40 and 200 steps against 0.1489 N [0.1466, 0.1511]
+    0.1490, 0.1488 and 0.1489 N at 10, 40 and 200 steps against 0.1489 N [0.1466, 0.1511]
     at 800 (before the windows it did not converge: 0.148 N at 10 steps and 0.165 N at 200
     against 0.178 N at 800).
 

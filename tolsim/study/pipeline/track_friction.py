@@ -504,7 +504,8 @@ class TrackFriction:
     (i over the loaded balls, j over the pairs of the train). The figures of a train:
 
     * **baseline**: the time mean of B_k over the stroke (it varies now: loads, rail errors,
-      which balls are in the zone);
+      which balls are in the zone; with a carriage, over the windows below in a step in
+      which a ball leaves or enters);
     * **increase**: I_k = F_track,k - B_k, the friction over the step's own baseline, i.e. what
       the contacts add; ``increase_max`` its maximum over the steps, ``increase_mean`` its time
       mean;
@@ -569,13 +570,14 @@ class TrackFriction:
     balls that have entered by then
     (:meth:`tolsim.study.pipeline.carriage_track.CarriageTrains.windows`, the events of
     :func:`tolsim.study.pipeline.carriage_track_kernels.window_points_kernel`): its baseline
-    there with the step's increase. The ripple is then 0.1503 N at 10 steps and 0.1490 N at
-    200 against 0.1489 N [0.1466, 0.1511] at 800, inside at every step count
+    there with the step's increase. The ripple is then 0.1490 N at 10 steps and 0.1489 N at
+    200 against 0.1489 N [0.1466, 0.1511] at 800, inside at every step count, and the
+    baseline 1.443 N at each
     (``benchmarks/convergence_along_track.py --configs carriage_preload --contact``). The
     steps' solves, the other figures and the first contacts do not change (those solves
-    leave the Newton starts alone). Left as it was: the time mean of the baseline still
-    counts the midpoint's zone without a ball that entered before it, a bias of about one
-    F_0 over a few steps in 200 (the mean baseline, not its extremes).
+    leave the Newton starts alone), except the baseline's time mean: in those steps it is
+    the mean of the intervals' baselines over their shares of the step, instead of the
+    midpoint's (which lacked a ball that entered before it).
 
     *Cost.* Per step the creep coefficients of every loaded ball at the midpoint and, for the
     trains with a closed pair, at the start; two O(n) passes per train. The propagation's
@@ -717,18 +719,21 @@ class TrackFriction:
                              baseline, increase)
         return baseline, increase
 
-    def window(self, rows, baseline):
-        """Another loaded zone of the last step (a carriage: a ball left or entered in it):
-        the baseline of rows ``rows`` (R_k,) there [N] with the step's increase, into the
-        ripple's maximum and minimum. A row whose baseline is unknown there (a ball not
-        resolved) is no longer followed, as at a step (Notes, "Windows")."""
+    def window(self, rows, baseline, share):
+        """A loaded zone of the last step (a carriage: a ball left or entered in it): the
+        baseline of rows ``rows`` (R_k,) there [N], with the step's increase into the
+        ripple's maximum and minimum, and over ``share`` (R_k,) of the step into the time
+        mean. A row whose baseline is unknown there (a ball not resolved) is no longer
+        followed, as at a step (Notes, "Windows")."""
         rows = np.asarray(rows)
         alive = self.alive[rows]
-        total = np.asarray(baseline, dtype=float) + self.increase[rows]
+        baseline = np.asarray(baseline, dtype=float)
+        total = baseline + self.increase[rows]
         known = alive & np.isfinite(total)
         at, value = rows[known], total[known]
         self.friction_high[at] = np.maximum(self.friction_high[at], value)
         self.friction_low[at] = np.minimum(self.friction_low[at], value)
+        self.baseline_sum[at] += baseline[known] * np.asarray(share)[known] * self.weight
         self.alive[rows[alive & ~np.isfinite(total)]] = False
 
     def carry(self, old_id, new_id):
