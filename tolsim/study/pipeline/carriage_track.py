@@ -644,7 +644,7 @@ class CarriageTrains(StepObserver):
         its own midpoint (:func:`window_points_kernel`; the balls moving linearly from the
         step's start to ``end``, those that have entered by then in the zone), without
         changing the steps' solves: its baseline with the step's increase, and its baseline
-        over its share of the step."""
+        over its share of the step (and, recorded, the step's friction over its intervals)."""
         frame, friction, rows = self.frame, self.friction, step.rows
         points, share = np.empty((2, len(rows), 4 * self.tracks + 2))
         count = np.empty(len(rows), dtype=np.int64)
@@ -657,6 +657,7 @@ class CarriageTrains(StepObserver):
         for target, value in zip((friction.friction_high, friction.friction_low,
                                   friction.baseline_sum), before, strict=True):
             target[track_rows] = value[track_rows]
+        mean = np.zeros(len(friction.alive))  # the step's baseline over its intervals
         for e in range(int(count.max(initial=0))):
             sel = np.flatnonzero(count > e)
             tau = points[sel, e]
@@ -673,8 +674,14 @@ class CarriageTrains(StepObserver):
             loaded = balls.loaded.reshape(-1, self.slots)
             f0 = friction.coefficients(balls.balls, loaded)[..., _F0]
             baseline = np.where(loaded, f0, 0.0).sum(axis=1)
-            friction.window((rows[sel][:, None] * self.tracks + np.arange(self.tracks)
-                             ).reshape(-1), baseline, np.repeat(share[sel, e], self.tracks))
+            trains = (rows[sel][:, None] * self.tracks + np.arange(self.tracks)).reshape(-1)
+            part = np.repeat(share[sel, e], self.tracks)
+            friction.window(trains, baseline, part)
+            mean[trains] += baseline * part
+        if friction.record and track_rows.size:  # the examples' friction of the step
+            friction.trace["friction"][-1][track_rows] = np.where(
+                friction.alive[track_rows], mean[track_rows] + friction.increase[track_rows],
+                np.nan)
 
     def moved(self, step):
         self.friction.carry(step.previous_id, step.ball_id)
