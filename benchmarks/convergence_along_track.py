@@ -129,12 +129,6 @@ def steps_argument(text: str):
     return "auto" if text == "auto" else int(text)
 
 
-def has_circuit(path) -> bool:
-    """The config has ``[carriage.circuit]`` (whose study takes no ``[contact]``)."""
-    text = Path(path).read_text(encoding="utf-8")
-    return re.search(r"^\s*\[carriage\.circuit\]", text, flags=re.MULTILINE) is not None
-
-
 def measure(config) -> dict:
     """Run the study and keep what the comparison needs."""
     samples = config.study.samples
@@ -278,7 +272,7 @@ def main(argv=None):
         carriage = name != "whatif_along_track"
         variant = {"circuit": args.circuit and carriage,
                    "relief": args.relief if carriage else None}
-        contact = args.contact and not (has_circuit(path) or variant["circuit"])
+        contact = args.contact
         name += "".join(
             [" + default [carriage.circuit]" if variant["circuit"] else ""]
             + ([f" + relief {args.relief[0]:g} um / {args.relief[1]:g} mm"]

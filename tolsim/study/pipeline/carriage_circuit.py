@@ -314,6 +314,20 @@ class CircuitFrame(CarriageFrame):
         overflow = (count < 0).reshape(k, tracks).any(axis=1)
         self.status[np.asarray(rows)[overflow]] |= STATUS_OVERFLOW_SLOTS
 
+    def slots_at(self, circuits, sigma):
+        """The balls in the zone of circuits ``circuits`` (K,) with their ring balls at
+        ``sigma`` (K, N) [m] as slots (K, S) in z order: z [m], study ids and the number
+        held (-1: more than the slots) (:func:`slots_kernel`)."""
+        k, slots = len(circuits), self.slots
+        length = self.length[circuits]
+        inside = np.mod(sigma, length[:, None]) < self.zone
+        z, ok = np.empty((k, slots)), np.empty((k, slots), dtype=bool)
+        ids, ring = (np.empty((k, slots), dtype=np.int64) for _ in range(2))
+        held = np.empty(k, dtype=np.int64)
+        slots_kernel(sigma, inside, length, np.arange(k), self.half_zone, self.ring_id,
+                     self.ring_ok[circuits], z, ids, ring, ok, held)
+        return z, ids, held
+
     def stiffness(self, balls, loaded, where=None):
         """Creep stiffness K [N] of the loaded slots (NaN elsewhere and where unresolved):
         the analytic model at each ball's own contact state (:data:`tolsim.study.pipeline.

@@ -533,7 +533,6 @@ def window_points_kernel(rows, z0, z1, count, entered, entering_gap, half_zone, 
     """
     m, tracks, slots = z0.shape
     capacity = entering_gap.shape[2]
-    room = out_point.shape[1]
     events = np.empty(tracks * (slots + capacity))
     for a in range(m):
         r = rows[a]
@@ -562,22 +561,47 @@ def window_points_kernel(rows, z0, z1, count, entered, entering_gap, half_zone, 
                 if frac > 0.0 and n < events.shape[0]:
                     events[n] = frac
                     n += 1
-        for i in range(1, n):  # insertion sort (a few events)
-            x = events[i]
-            j = i - 1
-            while j >= 0 and events[j] > x:
-                events[j + 1] = events[j]
-                j -= 1
-            events[j + 1] = x
-        k = 0
-        lower = 0.0
-        for i in range(n + 1 if n > 0 else 0):
-            upper = events[i] if i < n and k < room - 1 else 1.0
-            if upper > lower:
-                out_point[a, k] = t + 0.5 * (lower + upper) * dt
-                out_share[a, k] = upper - lower
-                k += 1
-            lower = upper
-            if upper == 1.0:
-                break
-        out_count[a] = k
+        out_count[a] = _interval_points(events, n, t, dt, out_point, out_share, a)
+
+
+@jit
+def _interval_points(events, n, t, dt, out_point, out_share, a):
+    """Row a of :func:`window_points_kernel`'s points and shares from the events' fractions
+    ``events[:n]`` of the step (sorted here, in place); returns their number (0 without
+    events)."""
+    for i in range(1, n):  # insertion sort (a few events)
+        x = events[i]
+        j = i - 1
+        while j >= 0 and events[j] > x:
+            events[j + 1] = events[j]
+            j -= 1
+        events[j + 1] = x
+    room = out_point.shape[1]
+    k = 0
+    lower = 0.0
+    for i in range(n + 1 if n > 0 else 0):
+        upper = events[i] if i < n and k < room - 1 else 1.0
+        if upper > lower:
+            out_point[a, k] = t + 0.5 * (lower + upper) * dt
+            out_share[a, k] = upper - lower
+            k += 1
+        lower = upper
+        if upper == 1.0:
+            break
+    return k
+
+
+@jit
+def interval_points_kernel(times, t, dt, out_point, out_share, out_count):
+    """:func:`window_points_kernel`'s points and shares for events given as times (m, K)
+    [s] (NaN: none; those outside the open step (t, t + dt) are ignored)."""
+    m, width = times.shape
+    events = np.empty(width)
+    for a in range(m):
+        n = 0
+        for i in range(width):
+            frac = (times[a, i] - t) / dt
+            if 0.0 < frac < 1.0:  # (False for NaN)
+                events[n] = frac
+                n += 1
+        out_count[a] = _interval_points(events, n, t, dt, out_point, out_share, a)

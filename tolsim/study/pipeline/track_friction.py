@@ -690,7 +690,6 @@ class TrackFriction:
                             self.before, self.diameter, self.tolerance, self.half_step,
                             position, force, closed, formed, contact)
         baseline, increase = self.account(loaded, member, load, force, ok, contact, formed)
-        self.increase = increase  # the step's, for :meth:`window`
         self.closed = closed & self.alive[:, None]
         self.before = self.closed.copy()
         if self.record:
@@ -717,6 +716,7 @@ class TrackFriction:
                              self.increase_high, self.friction_high, self.friction_low,
                              self.force_high, self.contact_sum, self.formed_sum, self.rolling,
                              baseline, increase)
+        self.increase = increase  # the step's, for :meth:`window`
         return baseline, increase
 
     def window(self, rows, baseline, share):
