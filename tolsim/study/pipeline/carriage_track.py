@@ -627,8 +627,7 @@ class CarriageTrains(StepObserver):
         free = free.reshape(trains)
         w2 = np.nan_to_num(friction.velocity(free, friction.coefficients(state2.balls, loaded2),
                                              loaded2, member))
-        before = (friction.friction_high.copy(), friction.friction_low.copy(),
-                  friction.baseline_sum.copy())
+        before = friction.figures_before()
         end = friction.advance(z0.reshape(trains),
                                (z0 - dt * (1.0 - w2.reshape(z0.shape)) * 0.5 * v
                                 ).reshape(trains), step.ball_id.reshape(trains)
@@ -652,12 +651,8 @@ class CarriageTrains(StepObserver):
         window_points_kernel(rows, z0, end, frame.count, frame.entered, frame.entering_gap,
                              self.half_zone, frame.diameter, float(step.t), float(step.dt),
                              points, share, count)
-        track_rows = (rows[count > 0][:, None] * self.tracks + np.arange(self.tracks)
-                      ).reshape(-1)
-        for target, value in zip((friction.friction_high, friction.friction_low,
-                                  friction.baseline_sum), before, strict=True):
-            target[track_rows] = value[track_rows]
-        mean = np.zeros(len(friction.alive))  # the step's baseline over its intervals
+        friction.reopen((rows[count > 0][:, None] * self.tracks + np.arange(self.tracks)
+                         ).reshape(-1), before)
         for e in range(int(count.max(initial=0))):
             sel = np.flatnonzero(count > e)
             tau = points[sel, e]
@@ -674,14 +669,9 @@ class CarriageTrains(StepObserver):
             loaded = balls.loaded.reshape(-1, self.slots)
             f0 = friction.coefficients(balls.balls, loaded)[..., _F0]
             baseline = np.where(loaded, f0, 0.0).sum(axis=1)
-            trains = (rows[sel][:, None] * self.tracks + np.arange(self.tracks)).reshape(-1)
-            part = np.repeat(share[sel, e], self.tracks)
-            friction.window(trains, baseline, part)
-            mean[trains] += baseline * part
-        if friction.record and track_rows.size:  # the examples' friction of the step
-            friction.trace["friction"][-1][track_rows] = np.where(
-                friction.alive[track_rows], mean[track_rows] + friction.increase[track_rows],
-                np.nan)
+            friction.window((rows[sel][:, None] * self.tracks + np.arange(self.tracks)
+                             ).reshape(-1), baseline, np.repeat(share[sel, e], self.tracks))
+        friction.close_windows()
 
     def moved(self, step):
         self.friction.carry(step.previous_id, step.ball_id)

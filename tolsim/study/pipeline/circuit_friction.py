@@ -292,8 +292,7 @@ class CircuitTrains(StepObserver):
             part = np.clip((t_end - first) / step.dt, 0.0, 1.0)
         contact = np.where(start, 1.0, np.where(np.isfinite(first), part, 0.0))
         friction = self.friction
-        before = (friction.friction_high.copy(), friction.friction_low.copy(),
-                  friction.baseline_sum.copy())
+        before = friction.figures_before()
         baseline, increase = friction.account(loaded, member, load, force, ok, contact, formed)
         if friction.record:
             self.record(circ, ring, force, baseline + increase)
@@ -324,11 +323,8 @@ class CircuitTrains(StepObserver):
         points, share = np.empty((2, k, times.shape[1] + 1))
         count = np.empty(k, dtype=np.int64)
         interval_points_kernel(times, float(step.t), float(step.dt), points, share, count)
-        track_rows = (rows[count > 0][:, None] * tracks + np.arange(tracks)).reshape(-1)
-        for target, value in zip((friction.friction_high, friction.friction_low,
-                                  friction.baseline_sum), before, strict=True):
-            target[track_rows] = value[track_rows]
-        mean = np.zeros(len(friction.alive))  # the step's baseline over its intervals
+        friction.reopen((rows[count > 0][:, None] * tracks + np.arange(tracks)).reshape(-1),
+                        before)
         for e in range(int(count.max(initial=0))):
             sel = np.flatnonzero(count > e)
             tau = points[sel, e]
@@ -344,13 +340,8 @@ class CircuitTrains(StepObserver):
             zone = balls.loaded.reshape(-1, slots)
             f0 = friction.coefficients(balls.balls, zone)[..., _F0]
             baseline = np.where(held < 0, np.nan, np.where(zone, f0, 0.0).sum(axis=1))
-            part = np.repeat(share[sel, e], tracks)
-            friction.window(circuits, baseline, part)
-            mean[circuits] += baseline * part
-        if friction.record and track_rows.size:  # the examples' friction of the step
-            friction.trace["friction"][-1][track_rows] = np.where(
-                friction.alive[track_rows], mean[track_rows] + friction.increase[track_rows],
-                np.nan)
+            friction.window(circuits, baseline, np.repeat(share[sel, e], tracks))
+        friction.close_windows()
 
     def record(self, circ, ring, force, friction):
         """The step into the trace of a recording TrackFriction (its ``record``), as the open

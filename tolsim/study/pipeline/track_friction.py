@@ -613,6 +613,7 @@ class TrackFriction:
         self.friction_high = np.full(rows, -np.inf)
         self.friction_low = np.full(rows, np.inf)
         self.force_high = np.zeros(rows)
+        self._window_rows, self._window_mean = np.empty(0, dtype=np.int64), np.zeros(rows)
         self.carriage_frame = carriage_frame
         self.trace = {k: [] for k in ("ids", "start", "end", "force", "friction")}
 
@@ -719,12 +720,26 @@ class TrackFriction:
         self.increase = increase  # the step's, for :meth:`window`
         return baseline, increase
 
+    def figures_before(self):
+        """The running extremes and baseline sum, copied before a step (for :meth:`reopen`)."""
+        return self.friction_high.copy(), self.friction_low.copy(), self.baseline_sum.copy()
+
+    def reopen(self, rows, before):
+        """Rows ``rows`` (R_k,) whose last step holds other loaded zones (a carriage: a ball
+        left or entered in it): their extremes and baseline sum back to ``before``
+        (:meth:`figures_before`), for :meth:`window` to give them each zone's instead of the
+        step's own (Notes, "Windows")."""
+        for target, value in zip((self.friction_high, self.friction_low, self.baseline_sum),
+                                 before, strict=True):
+            target[rows] = value[rows]
+        self._window_rows = rows
+        self._window_mean = np.zeros(len(self.alive))
+
     def window(self, rows, baseline, share):
-        """A loaded zone of the last step (a carriage: a ball left or entered in it): the
-        baseline of rows ``rows`` (R_k,) there [N], with the step's increase into the
-        ripple's maximum and minimum, and over ``share`` (R_k,) of the step into the time
-        mean. A row whose baseline is unknown there (a ball not resolved) is no longer
-        followed, as at a step (Notes, "Windows")."""
+        """A loaded zone of the last step, of rows reopened (:meth:`reopen`): its baseline
+        there [N] (R_k,), with the step's increase into the ripple's maximum and minimum,
+        and over ``share`` (R_k,) of the step into the time mean. A row whose baseline is
+        unknown there (a ball not resolved) is no longer followed, as at a step."""
         rows = np.asarray(rows)
         alive = self.alive[rows]
         baseline = np.asarray(baseline, dtype=float)
@@ -734,7 +749,17 @@ class TrackFriction:
         self.friction_high[at] = np.maximum(self.friction_high[at], value)
         self.friction_low[at] = np.minimum(self.friction_low[at], value)
         self.baseline_sum[at] += baseline[known] * np.asarray(share)[known] * self.weight
+        self._window_mean[rows] += baseline * share
         self.alive[rows[alive & ~np.isfinite(total)]] = False
+
+    def close_windows(self):
+        """After the last :meth:`window` of a step: a recording keeps the step's friction of
+        the reopened rows over its zones (their baselines over their shares, with the
+        increase), not the midpoint's."""
+        rows = self._window_rows
+        if self.record and len(rows):
+            self.trace["friction"][-1][rows] = np.where(
+                self.alive[rows], self._window_mean[rows] + self.increase[rows], np.nan)
 
     def carry(self, old_id, new_id):
         """Follow the pair flags to the balls' new slots (after exits and entries)."""
