@@ -859,7 +859,7 @@ def test_carriage_ripple_and_baseline_converge_with_their_windows():
     # yet in the slots): a spurious low by about one ball's F_0 wherever an entry fell in a
     # step's first half, and a bias of the baseline's time mean. With each such step's zones
     # solved at their own midpoints (CarriageTrains.windows) both converge: each assembly's
-    # ripple at 160 steps within 0.01 N of its ripple at 640 (measured at most 0.0024 N)
+    # ripple at 160 steps within 0.01 N of its ripple at 640 (measured at most 0.00024 N)
     # against 0.11 N without the windows, its baseline within 1e-4 N (measured 1.5e-6 N)
     # against 0.0038 N without (measured; the test fails there). The increase and the contact
     # forces are the steps' own, bit for bit.
