@@ -399,6 +399,18 @@ class CarriageFrame(AlongTrackFrame):
         self.resolve_seconds += balls.balls.resolve_seconds
         return balls if entering is None else balls.without(entering)
 
+    def zone_baseline(self, ball_z, ball_id, t, rows, friction):
+        """The baseline sum F_0 of each track's loaded zone (m_k T,) [N], the balls in slots
+        (m_k, T, S) of assemblies ``rows`` at times t (m_k,) [s], solved off the steps (their
+        Newton starts unchanged) with the coefficients of ``friction``
+        (:class:`tolsim.study.pipeline.track_friction.TrackFriction`; NaN where a ball is
+        not resolved): a window of the friction (Notes there, "Windows")."""
+        balls = CarriageBalls(*self.evaluation(ball_z, ball_id, t, rows, remember=False))
+        self.resolve_seconds += balls.balls.resolve_seconds
+        loaded = balls.loaded.reshape(-1, self.slots)
+        f0 = friction.coefficients(balls.balls, loaded)[..., _F0]
+        return np.where(loaded, f0, 0.0).sum(axis=1)
+
     def _entering(self, position):
         """The slots at ``position`` (the midpoint) with the balls that have entered by then
         (:func:`entering_by_kernel`), and those (None: none)."""
@@ -663,14 +675,10 @@ class CarriageTrains(StepObserver):
             entering_by_kernel(at, ids, rows[sel], frame.count, frame.entered,
                                frame.entering_gap, self.half_zone, frame.diameter, self.balls,
                                z, slot_id, entering)
-            balls = CarriageBalls(*frame.evaluation(z, slot_id, tau, rows[sel],
-                                                    remember=False))
-            frame.resolve_seconds += balls.balls.resolve_seconds
-            loaded = balls.loaded.reshape(-1, self.slots)
-            f0 = friction.coefficients(balls.balls, loaded)[..., _F0]
-            baseline = np.where(loaded, f0, 0.0).sum(axis=1)
             friction.window((rows[sel][:, None] * self.tracks + np.arange(self.tracks)
-                             ).reshape(-1), baseline, np.repeat(share[sel, e], self.tracks))
+                             ).reshape(-1), frame.zone_baseline(z, slot_id, tau, rows[sel],
+                                                                friction),
+                            np.repeat(share[sel, e], self.tracks))
         friction.close_windows()
 
     def moved(self, step):

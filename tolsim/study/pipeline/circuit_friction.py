@@ -14,7 +14,6 @@ from tolsim.physics.circuit import WHERE_INSIDE
 from tolsim.physics.trains.ball_minimum import RELEASE_INPUTS
 from tolsim.physics.trains.regimes import PUSHED_STIFFNESS, TRAIN_COLUMNS
 from tolsim.physics.velocity.models import BALL_UNLOADED
-from tolsim.study.pipeline.carriage_track import CarriageBalls
 from tolsim.study.pipeline.carriage_track_kernels import interval_points_kernel
 from tolsim.study.pipeline.propagation import StepObserver
 
@@ -26,7 +25,6 @@ _USED = np.array([_COL[name] for name in ("free_rolling_carriage_force",
                                            "carriage_force_per_neighbour_force")])
 _K = _COL["creep_stiffness"]
 _A = _COL["carriage_force_per_push"]
-_F0 = _COL["free_rolling_carriage_force"]
 
 
 def column_coefficients() -> np.ndarray:
@@ -333,14 +331,11 @@ class CircuitTrains(StepObserver):
             start = circ["sigma_start"][circuits]
             sigma = start + frac * (frame.sigma[circuits] - start)
             z, ids, held = frame.slots_at(circuits, sigma)
-            balls = CarriageBalls(*frame.evaluation(z.reshape(len(sel), tracks, slots),
-                                                    ids.reshape(len(sel), tracks, slots),
-                                                    tau, rows[sel], remember=False))
-            frame.resolve_seconds += balls.balls.resolve_seconds
-            zone = balls.loaded.reshape(-1, slots)
-            f0 = friction.coefficients(balls.balls, zone)[..., _F0]
-            baseline = np.where(held < 0, np.nan, np.where(zone, f0, 0.0).sum(axis=1))
-            friction.window(circuits, baseline, np.repeat(share[sel, e], tracks))
+            baseline = frame.zone_baseline(z.reshape(len(sel), tracks, slots),
+                                           ids.reshape(len(sel), tracks, slots), tau,
+                                           rows[sel], friction)
+            friction.window(circuits, np.where(held < 0, np.nan, baseline),
+                            np.repeat(share[sel, e], tracks))
         friction.close_windows()
 
     def record(self, circ, ring, force, friction):
