@@ -38,7 +38,7 @@ def kernel_arrays(state, eps, stiffness, capacity):
         force=np.empty((m, n)), mean_force=np.empty((m, n)), column=np.empty((m, 4)),
         count=np.empty(m, dtype=np.int64), pair=np.empty((m, capacity), dtype=np.int64),
         where=np.empty((m, capacity), dtype=np.int8), when=np.empty((m, capacity)),
-        status=np.empty(m, dtype=np.int64))
+        status=np.empty(m, dtype=np.int64), crossing=np.empty((m, n)))
 
 
 def run_kernel(a, zone, drag, ds, steps):
@@ -50,7 +50,7 @@ def run_kernel(a, zone, drag, ds, steps):
             a["closed"],
             a["length"], zone, drag, ds, i * ds, a["speed"], a["velocity"], a["force"],
             a["mean_force"], a["column"], a["count"], a["pair"], a["where"], a["when"],
-            a["status"])
+            a["status"], *circuit.window_arrays(len(a["status"]), 0), a["crossing"])
         events += int(a["count"].sum())
     return time.perf_counter() - start, events
 

@@ -262,6 +262,12 @@ class CircuitStep:
         Bits ``STATUS_EVENT_OVERFLOW`` (more than E events; the first E are kept),
         ``STATUS_JAMMED`` (the drag stopped loaded balls; not expected with real numbers),
         ``STATUS_ITERATIONS`` (the event loop did not finish; not expected).
+    crossing_travel : ndarray (M, N)
+        The carriage travel at which each ball last crossed an end of the loaded zone in the
+        step [m] (exact for constant epsilon and K; NaN: it did not cross).
+    windows : FrictionWindows or None
+        With ``pair_slopes``: the friction increase over the intervals between the step's
+        events.
     """
 
     state: CircuitState
@@ -278,6 +284,55 @@ class CircuitStep:
     event_where: np.ndarray
     event_travel: np.ndarray
     status: np.ndarray
+    crossing_travel: np.ndarray = None
+    windows: "FrictionWindows | None" = None
+
+
+@dataclass(frozen=True)
+class FrictionWindows:
+    """The friction increase of each circuit's track over the intervals between the events
+    of a step (M circuits, W windows; :func:`step` with ``pair_slopes``).
+
+    The step's forces are constant between events, so the increase sum_p k_p Q_p (over the
+    pairs with a ball in the loaded zone, the slopes k_p of ``pair_slopes``) is piecewise
+    constant: one window per interval of nonzero length holds its value, exact for constant
+    epsilon and K, where a step mean hides a short dip or peak (the column's push stopping
+    after an exit, Notes of :class:`tolsim.study.pipeline.circuit_friction.CircuitTrains`).
+
+    Attributes
+    ----------
+    low, high : ndarray (M, W)
+        Least and largest increase [N] in each window: its interval's value, or the extremes
+        of the intervals merged into the last window beyond the capacity W (NaN: a slope was
+        not finite).
+    peak : ndarray (M, W)
+        The largest force Q_p of those pairs [N].
+    start : ndarray (M, W)
+        The carriage travel at each window's start [m]; a window ends where the next one
+        starts, the last one at the end of the step.
+    count : ndarray of int (M,)
+        Windows of each circuit (its intervals of nonzero length, at most W).
+    """
+
+    low: np.ndarray
+    high: np.ndarray
+    peak: np.ndarray
+    start: np.ndarray
+    count: np.ndarray
+
+
+def window_arrays(m, n, pair_slopes=None, capacity=16):
+    """The kernel's friction-window arguments for M circuits of N balls: ``(slopes, low,
+    high, peak, end, count)``, empty (nothing tracked) without ``pair_slopes`` (3, M, N)."""
+    if pair_slopes is None:
+        empty = np.empty((0, 0))
+        return (np.empty((3, 0, 0)), empty, empty, empty, empty, np.empty(0, dtype=np.int64))
+    slopes = np.ascontiguousarray(pair_slopes, dtype=np.float64)
+    if slopes.shape != (3, m, n):
+        raise ValueError(f"pair_slopes {slopes.shape} must be (3, {m}, {n})")
+    shape = (m, int(capacity))
+    return (slopes, np.full(shape, np.inf), np.full(shape, -np.inf), np.zeros(shape),
+            np.full(shape, np.nan), np.zeros(m, dtype=np.int64))
 
 
 def _ball_arrays(state, velocity_deviation, creep_stiffness):
@@ -299,7 +354,8 @@ def _ball_arrays(state, velocity_deviation, creep_stiffness):
 
 
 def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, return_drag, *,
-         travel_start=0.0, event_capacity=None, pushed=None) -> CircuitStep:
+         travel_start=0.0, event_capacity=None, pushed=None, pair_slopes=None,
+         window_capacity=16) -> CircuitStep:
     """Move the balls of every circuit by one step of carriage travel (Notes).
 
     Parameters
@@ -321,6 +377,12 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
         Balls without a groove contact while they are in the loaded zone (issue 25: under an
         end relief, an undersized ball): no epsilon or K of their own, pushed along (Notes,
         "Pushed balls"); default none.
+    pair_slopes : array_like (3, M, N), optional
+        The carriage friction per newton of each ball-order pair p (balls p and p + 1 mod N)
+        while both balls are in the loaded zone, while ball p alone is, while ball p + 1
+        alone is [-]; with it the step returns its :class:`FrictionWindows`.
+    window_capacity : int
+        Windows per circuit with ``pair_slopes`` (intervals beyond it merge into the last).
 
     Returns
     -------
@@ -505,11 +567,16 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
     where = np.full((m, capacity), -1, dtype=np.int8)
     when = np.full((m, capacity), np.nan)
     status = np.empty(m, dtype=np.int64)
+    if int(window_capacity) < 1:
+        raise ValueError(f"window_capacity = {window_capacity!r} must be >= 1")
+    windows = window_arrays(m, n, pair_slopes, window_capacity)
+    crossing = np.empty((m, n))
     step_circuit_kernel(position, kernel_array(state.diameter), kernel_array(eps),
                         kernel_array(stiffness), flags, loaded, closed,
                         state.circuit_length, float(state.zone_length), float(return_drag),
                         float(travel), float(travel_start), speed, velocity, force,
-                        mean_force, column, count, pair, where, when, status)
+                        mean_force, column, count, pair, where, when, status, *windows,
+                        crossing)
     new = CircuitState(position=position, diameter=state.diameter, loaded=loaded,
                        closed=closed, speed=speed, circuit_length=state.circuit_length,
                        zone_length=state.zone_length)
@@ -518,7 +585,8 @@ def step(state: CircuitState, velocity_deviation, creep_stiffness, travel, retur
                        entry_force=column[:, 0], exit_force=column[:, 1],
                        entry_force_mean=column[:, 2], exit_force_mean=column[:, 3],
                        event_count=count, event_pair=pair, event_where=where,
-                       event_travel=when, status=status)
+                       event_travel=when, status=status, crossing_travel=crossing,
+                       windows=None if pair_slopes is None else FrictionWindows(*windows[1:]))
 
 
 @dataclass(frozen=True)
@@ -637,10 +705,12 @@ __all__ = [
     "CircuitRun",
     "CircuitState",
     "CircuitStep",
+    "FrictionWindows",
     "circuit_length",
     "circuit_state",
     "run",
     "step",
     "step_circuit_kernel",
+    "window_arrays",
     "wrap",
 ]

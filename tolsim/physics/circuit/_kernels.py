@@ -253,13 +253,56 @@ def _run_closed(r, ring_pushed, ring_closed, t_pair, limit, n):
 
 
 @jit
+def _open_window(c, w, start, window_low, window_high, window_peak, window_start):
+    window_low[c, w] = np.inf
+    window_high[c, w] = -np.inf
+    window_peak[c, w] = 0.0
+    window_start[c, w] = start
+
+
+@jit
+def _track_interval(c, w, forward, ring_loaded, ball, force, slopes, n, window_low,
+                    window_high, window_peak):
+    """An interval of constant forces into window ``w`` of circuit ``c``: the friction
+    increase sum_p k_p Q_p over the pairs with a ball in the loaded zone (k_p = ``slopes``
+    [0, c, p] with both balls p, p + 1 mod N of ball-order pair p loaded, [1] with ball p
+    alone, [2] with ball p + 1 alone) into its least and largest value, the largest such
+    Q_p into its peak. A NaN increase makes the window's extremes NaN (unknown)."""
+    increase = 0.0
+    peak = 0.0
+    for r in range(n):
+        r1 = r + 1 if r + 1 < n else 0
+        lower = ring_loaded[r] if forward else ring_loaded[r1]
+        upper = ring_loaded[r1] if forward else ring_loaded[r]
+        if not (lower or upper):
+            continue
+        p = ball[r] if forward else ball[r1]
+        k = slopes[0, c, p] if lower and upper else (slopes[1, c, p] if lower
+                                                     else slopes[2, c, p])
+        increase += k * force[r]
+        if force[r] > peak:
+            peak = force[r]
+    if increase != increase:
+        window_low[c, w] = np.nan
+        window_high[c, w] = np.nan
+    else:
+        if increase < window_low[c, w]:
+            window_low[c, w] = increase
+        if increase > window_high[c, w]:
+            window_high[c, w] = increase
+    if peak > window_peak[c, w]:
+        window_peak[c, w] = peak
+
+
+@jit
 def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, closed, length,
                      zone, drag, travel, travel_start, speed_out, velocity_out, force_out,
                      mean_force_out, column_out, event_pair, event_where, event_travel, q,
                      half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
                      block_weight, block_sum, coast, loc, block_speed, loaded_speed,
                      block_coasting, block_unloaded, block_coast, ring_stiffness, ball, label,
-                     block_start, ring_loaded, ring_closed, ring_pushed, ring_push):
+                     block_start, ring_loaded, ring_closed, ring_pushed, ring_push, slopes,
+                     window_low, window_high, window_peak, window_start, crossing_out):
     """One step of circuit ``c`` (row c of the (M, N) arrays of :func:`step_circuit_kernel`),
     in place (Notes of :func:`tolsim.physics.circuit.step`).
 
@@ -268,7 +311,12 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
     ``closed`` (ball pair k: balls k, k + 1 mod N) and ``speed_out`` (the balls' circuit
     speeds, read as the coasting speeds of unloaded balls when ``drag`` is 0) are the state,
     updated in place; ``column_out`` row c gets the entry and exit column forces at the end of
-    the step and their step means. Returns (events, status). The rest are work arrays (N,)
+    the step and their step means. With ``slopes`` (3, M, N) (else (3, 0, 0)) each interval
+    of nonzero length between the step's events goes to ``window_*`` row c, its friction
+    increase and its start (:func:`_track_interval`; the last window takes those beyond the
+    capacity). ``crossing_out`` row c gets the carriage travel at which each
+    ball last crossed an end of the zone in the step (NaN: none). Returns (events, status,
+    windows). The rest are work arrays (N,)
     in ring order, the direction of flow: rows, never views, are passed (a view costs two
     atomic reference counts, which threads working on one array contend for).
     """
@@ -299,6 +347,7 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
             loc[r] = x + span if x < 0.5 * zone else x
         half_sum[r] = 0.5 * (diameter[c, b] + diameter[c, b1])
         ring_closed[r] = closed[c, b if forward else b1]
+        crossing_out[c, b] = np.nan
     events = 0
     status = 0
     remaining = total
@@ -306,6 +355,12 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
     entry_sum = 0.0  # the column forces times travel
     exit_sum = 0.0
     changed = True  # the state changed since the last solve
+    track = slopes.shape[1] > 0
+    capacity_w = window_low.shape[1] if track else 0
+    w = 0  # the window: one per interval (the last takes any beyond the capacity)
+    filled = False
+    if track:
+        _open_window(c, 0, travel_start, window_low, window_high, window_peak, window_start)
     for _iteration in range(4 * n + 16):
         cut, jammed = _solve_ring(q, half_sum, span, loaded_speed, coast, ring_stiffness,
                                   ring_loaded, ring_push, ring_pushed, ring_closed, drag, n,
@@ -336,6 +391,15 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
                 t_ball[r] = t
                 if t < best:
                     best = t
+        if track and best > 0.0:  # the interval up to the event, at these forces
+            if filled and w + 1 < capacity_w:
+                w += 1
+                done = total - remaining
+                _open_window(c, w, travel_start + (done if forward else -done), window_low,
+                             window_high, window_peak, window_start)
+            _track_interval(c, w, forward, ring_loaded, ball, force, slopes, n, window_low,
+                            window_high, window_peak)
+            filled = True
         # advance to the event (or the end of the step); the pairs that close there close
         done = total - remaining
         remaining -= best
@@ -388,6 +452,8 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
                     ring_loaded[r] = not ring_loaded[r]
                     if ring_loaded[r]:
                         loc[r] -= span  # entered: the entry is loc = L_c = 0
+                    crossing_out[c, ball[r]] = travel_start + (done + best if forward
+                                                               else -(done + best))
         if remaining <= tie:
             break
     else:
@@ -424,18 +490,20 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
     column_out[c, 1] = exit_force
     column_out[c, 2] = entry_sum / total if total > 0.0 else entry_force
     column_out[c, 3] = exit_sum / total if total > 0.0 else exit_force
-    return events, status
+    return events, status, w + 1 if track else 0
 
 
 @pjit
 def step_circuit_kernel(position, diameter, eps, stiffness, pushed, loaded, closed, length,
                         zone, drag, travel, travel_start, speed_out, velocity_out, force_out,
                         mean_force_out, column_out, event_count, event_pair, event_where,
-                        event_travel, status_out):
+                        event_travel, status_out, slopes, window_low, window_high,
+                        window_peak, window_start, window_count, crossing_out):
     """:func:`step_circuit_one` over M circuits (rows), in parallel chunks; unchecked.
 
     State (M, N) in place; ``pushed`` (M, N) bool; ``length`` (M,); ``column_out`` (M, 4);
-    events (M, capacity).
+    events (M, capacity); ``slopes`` (3, M, N) or (3, 0, 0), the windows (M, W) and their
+    count (M,) (written with ``slopes`` only); ``crossing_out`` (M, N).
     """
     m, n = position.shape
     for chunk in prange((m + CHUNK - 1) // CHUNK):
@@ -451,13 +519,16 @@ def step_circuit_kernel(position, diameter, eps, stiffness, pushed, loaded, clos
         ball, label, block_start = wi[0], wi[1], wi[2]
         ring_loaded, ring_closed, ring_pushed, ring_push = wb[0], wb[1], wb[2], wb[3]
         for c in range(chunk * CHUNK, min(m, (chunk + 1) * CHUNK)):
-            count, status = step_circuit_one(
+            count, status, windows = step_circuit_one(
                 c, position, diameter, eps, stiffness, pushed, loaded, closed, length, zone,
                 drag, travel, travel_start, speed_out, velocity_out, force_out,
                 mean_force_out, column_out, event_pair, event_where, event_travel, q,
                 half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
                 block_weight, block_sum, coast, loc, block_speed, loaded_speed,
                 block_coasting, block_unloaded, block_coast, ring_stiffness, ball, label,
-                block_start, ring_loaded, ring_closed, ring_pushed, ring_push)
+                block_start, ring_loaded, ring_closed, ring_pushed, ring_push, slopes,
+                window_low, window_high, window_peak, window_start, crossing_out)
             event_count[c] = count
             status_out[c] = status
+            if windows:
+                window_count[c] = windows

@@ -19,8 +19,10 @@ from tolsim.physics.circuit import (
     STATUS_ITERATIONS,
     STATUS_JAMMED,
     WHERE,
+    FrictionWindows,
     circuit_length,
     step_circuit_kernel,
+    window_arrays,
     wrap,
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
@@ -180,7 +182,7 @@ def entering_velocity(eps, stiffness, loaded, pushed=None):
 
 
 def circuit_events(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id, previous_id,
-                   slot_ring, t, dt):
+                   slot_ring, t, dt, crossing=None, v=None):
     """The exits and entries of a step of circuits, as the open carriage's
     (:func:`tolsim.study.pipeline.carriage_track_kernels.advance_kernel`, for a
     :class:`tolsim.study.pipeline.carriage_track.TrackTrace`).
@@ -204,6 +206,11 @@ def circuit_events(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id, prev
         The ring ball in each slot at the end of the step (-1: empty).
     t, dt : float
         Start and length of the step [s].
+    crossing : ndarray (C, N), optional
+        The travel at which each ball crossed an end of the zone in the step [m]
+        (:class:`tolsim.physics.circuit.CircuitStep`, ``crossing_travel``; NaN: none).
+    v : float
+        The carriage's speed [m/s], with ``crossing``.
 
     Returns
     -------
@@ -213,17 +220,25 @@ def circuit_events(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id, prev
 
     Notes
     -----
-    A ball leaves when its sigma mod L_c passes L_z, enters when it passes L_c (= 0); the
-    time is interpolated linearly on the ball's sigma within the step, as the open
-    carriage's (exact while the ball's speed is constant in the step).
+    A ball leaves when its sigma mod L_c passes L_z, enters when it passes L_c (= 0). With
+    ``crossing`` the time is the circuit step's own, travel / v (exact for constant epsilon
+    and K). Without it the time is interpolated linearly on the ball's sigma within the
+    step, as the open carriage's, which is exact only while the ball's speed is constant in
+    the step: a ball's speed changes where it crosses (a leaving ball slows to the column's
+    speed, often 0 against the drag), so on ``configs/carriage_preload.toml`` with a default
+    circuit the interpolation put exits at the step's end that the step had 0.17 ms into
+    it (at 1 600 steps), and the friction window after them was lost.
     """
     shape = previous_id.shape
     slots = shape[-1]
     exit_id, entry_id = (np.empty(shape, dtype=np.int64) for _ in range(2))
     exit_time, entry_time = np.empty(shape), np.empty(shape)
+    exact = np.empty((0, 0)) if crossing is None else np.ascontiguousarray(crossing,
+                                                                           dtype=float)
     circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, np.asarray(length, dtype=float),
                           float(zone), ring_id, previous_id.reshape(-1, slots),
-                          slot_ring.reshape(-1, slots), float(t), float(dt),
+                          slot_ring.reshape(-1, slots), float(t), float(dt), exact,
+                          float(1.0 if v is None else v),
                           exit_id.reshape(-1, slots), exit_time.reshape(-1, slots),
                           entry_id.reshape(-1, slots), entry_time.reshape(-1, slots))
     return [exit_id, exit_time, entry_id, entry_time]
@@ -314,13 +329,25 @@ class CircuitFrame(CarriageFrame):
         overflow = (count < 0).reshape(k, tracks).any(axis=1)
         self.status[np.asarray(rows)[overflow]] |= STATUS_OVERFLOW_SLOTS
 
-    def slots_at(self, circuits, sigma):
+    def slots_at(self, circuits, sigma, inside=None):
         """The balls in the zone of circuits ``circuits`` (K,) with their ring balls at
         ``sigma`` (K, N) [m] as slots (K, S) in z order: z [m], study ids and the number
-        held (-1: more than the slots) (:func:`slots_kernel`)."""
+        held (-1: more than the slots) (:func:`slots_kernel`). ``inside`` (K, N): the balls
+        in the zone, where known otherwise than from ``sigma`` (an interpolated sigma lags a
+        ball that crossed an end and changed speed there); one inside that ``sigma`` puts
+        outside is taken at the nearer end of the zone."""
         k, slots = len(circuits), self.slots
         length = self.length[circuits]
-        inside = np.mod(sigma, length[:, None]) < self.zone
+        x = np.mod(sigma, length[:, None])
+        if inside is None:
+            inside = x < self.zone
+        else:
+            late = inside & (x >= self.zone)
+            if late.any():
+                lap = (length[:, None] - x) < (x - self.zone)  # nearer the entry (L_c = 0)
+                end = np.where(lap, length[:, None] + 1e-12 * self.zone,
+                               (1.0 - 1e-12) * self.zone)
+                sigma = np.where(late, sigma - x + end, sigma)
         z, ok = np.empty((k, slots)), np.empty((k, slots), dtype=bool)
         ids, ring = (np.empty((k, slots), dtype=np.int64) for _ in range(2))
         held = np.empty(k, dtype=np.int64)
@@ -470,12 +497,14 @@ class CircuitFrame(CarriageFrame):
         where = np.full((c, capacity), -1, dtype=np.int8)
         when = np.full((c, capacity), np.nan)
         status = np.empty(c, dtype=np.int64)
+        windows = window_arrays(c, n, step.pair_slopes)
+        crossing = np.empty((c, n))
         step_circuit_kernel(sigma, np.ascontiguousarray(self.diameter_ring[take]),
                             ring_eps, ring_k, ring_pushed, loaded, closed,
                             np.ascontiguousarray(self.length[take]), float(self.zone),
                             float(self.drag), float(travel), float(self.v * step.t), speed,
                             velocity, force, mean_force, column, count, pair, where, when,
-                            status)
+                            status, *windows, crossing)
         if not every:
             self.sigma[circuits], self.ring_loaded[circuits] = sigma, loaded
             self.ring_closed[circuits], self.ring_speed[circuits] = closed, speed
@@ -489,7 +518,8 @@ class CircuitFrame(CarriageFrame):
         step.overflow = bad
         step.events = circuit_events(before[0], sigma, before[1], loaded, self.length[take],
                                      self.zone, self.ring_id, step.previous_id,
-                                     self.slot_ring[at], step.t, step.dt)
+                                     self.slot_ring[at], step.t, step.dt, crossing,
+                                     self.v)
         late_entries_kernel(step.events[3].reshape(c, -1), self.slot_ring[at].reshape(c, -1),
                             own, ring_eps, ring_pushed, float(step.t + step.dt),
                             float(self.v), late_travel, late_eps)
@@ -500,7 +530,10 @@ class CircuitFrame(CarriageFrame):
                         "pair": pair, "where": where, "travel": when,
                         "circuits": circuits, "pushed": ring_pushed, "slot_ring": ring,
                         "status": status, "sigma_start": before[0], "entering": entering,
-                        "entry_time": ring_entry_time(step.events[3], self.slot_ring[at], n)}
+                        "entry_time": ring_entry_time(step.events[3], self.slot_ring[at], n),
+                        "loaded_start": before[1], "crossing": crossing,
+                        "windows": (None if step.pair_slopes is None
+                                    else FrictionWindows(*windows[1:]))}
 
 
 def ring_entry_time(entry_time, slot_ring, balls):

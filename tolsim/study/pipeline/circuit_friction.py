@@ -12,7 +12,7 @@ import numpy as np
 from tolsim._jit import jit
 from tolsim.physics.circuit import WHERE_INSIDE
 from tolsim.physics.trains.ball_minimum import RELEASE_INPUTS
-from tolsim.physics.trains.regimes import PUSHED_STIFFNESS, TRAIN_COLUMNS
+from tolsim.physics.trains.regimes import PUSHED_STIFFNESS, TRAIN_COLUMNS, pair_braking
 from tolsim.physics.velocity.models import BALL_UNLOADED
 from tolsim.study.pipeline.carriage_track_kernels import interval_points_kernel
 from tolsim.study.pipeline.propagation import StepObserver
@@ -44,6 +44,64 @@ def column_coefficients() -> np.ndarray:
     row[_COL["free_rolling_velocity_deviation"]] = np.nan
     row[_COL["regime"]] = BALL_UNLOADED
     return row
+
+
+@jit
+def nearest_coefficients_kernel(ring_load, f0, out):
+    """``ring_load`` (C, N, columns) with each ball whose F_0 (column ``f0``) is NaN given
+    the coefficients of the nearest ball around the ring that has them (the one ahead in
+    ball order on a tie; all NaN when none has), into ``out``: a ball that entered the
+    zone after the step's midpoint takes the entry ball's ahead of it (as
+    :func:`circuit_trains_kernel` does), one that left before it the trailing ball's behind
+    it."""
+    circuits, n, columns = ring_load.shape
+    for c in range(circuits):
+        for b in range(n):
+            source = -1
+            for d in range(n // 2 + 1):
+                ahead = b + d if b + d < n else b + d - n
+                behind = b - d if b - d >= 0 else b - d + n
+                if np.isfinite(ring_load[c, ahead, f0]):
+                    source = ahead
+                    break
+                if np.isfinite(ring_load[c, behind, f0]):
+                    source = behind
+                    break
+            for k in range(columns):
+                out[c, b, k] = ring_load[c, source, k] if source >= 0 else np.nan
+
+
+def pair_slopes(ring_load, column_row, ball_friction):
+    """The carriage friction per newton of each ball-order pair p (balls p and p + 1 mod N
+    of a circuit), (3, C, N) [-], for the friction windows of
+    :func:`tolsim.physics.circuit.step` (``pair_slopes``): with both balls in the loaded
+    zone, with ball p alone (the pair at the zone's exit, ball p + 1 in the column) and
+    with ball p + 1 alone (at the entry). Each is k_j = (a_{j+1} - a_j) + B_j of
+    :func:`tolsim.study.pipeline.friction_kernels.step_friction_kernel` on the pair as two
+    slots of a row of :func:`circuit_trains_kernel` (slot j ball p + 1, slot j + 1 ball p,
+    the column's coefficients for a ball out of the zone). ``ring_load`` (C, N, columns) the
+    balls' coefficients (NaN for a ball without them: :func:`nearest_coefficients_kernel`),
+    ``column_row`` :func:`column_coefficients`."""
+    load = np.empty_like(ring_load)
+    nearest_coefficients_kernel(np.ascontiguousarray(ring_load), _USED[0], load)
+    ahead = np.roll(load, -1, axis=1)  # ball p + 1
+    column = np.broadcast_to(column_row, load.shape)
+    out = np.empty((3,) + load.shape[:2])
+    for k, (upper, lower) in enumerate(((ahead, load), (column, load), (ahead, column))):
+        braking = pair_braking(np.stack([upper, lower], axis=2), ball_friction)[..., 0]
+        out[k] = lower[..., _A] - upper[..., _A] + braking
+    return out
+
+
+def window_extremes(windows):
+    """The least and largest friction increase and the largest pair force over all the
+    windows of each circuit's step (:class:`tolsim.physics.circuit.FrictionWindows`), (C,)
+    each [N]: inf, -inf where no interval had nonzero length, NaN where one is unknown."""
+    valid = np.arange(windows.low.shape[1]) < windows.count[:, None]
+    low = np.where(valid, windows.low, np.inf).min(axis=1)
+    high = np.where(valid, windows.high, -np.inf).max(axis=1)
+    peak = np.where(valid, windows.peak, 0.0).max(axis=1)
+    return low, high, peak
 
 
 @jit
@@ -202,20 +260,35 @@ class CircuitTrains(StepObserver):
     and 0.1686 N at 10, 21, 84, 417 and 800 steps against 0.1726 N [0.1710, 0.1743] at
     1 600: still rising, at first order from below (4.7 % low at the automatic step,
     outside the interval). With ``configs/carriage_preload.toml`` and a default circuit it
-    does not converge at all: 0.149, 0.184, 0.271 and 0.307 N at 40, 200 (automatic), 800
-    and 1 600 steps (without the windows 0.143, 0.239 and 0.332 N at 40, 200 and 800; the
-    baseline within its interval from 10 steps, the largest increase from 200). What the
-    steps miss is the minimum: the column's push at an end of the zone (0.36 N at the exit
-    there, most of the increase) stops for a short time after a ball leaves, until the
-    next one closes onto the column, and a step's mean force hides such a dip unless the
-    step is shorter than it (64 assemblies at 200 and 800 steps: the friction maximum
-    1.652 and 1.653 N on average, the minimum 1.474 and 1.383 N, the least step mean of the
-    column's force at the exit 0.10 and 0.014 N). The windows do not reach it (the
-    increase is the step's mean).
-    **A circuit's ripple is a lower bound** that can be far below the ripple of the
-    model's instantaneous friction force; the report says so. Resolving it needs the
-    circuit's step to give each step's least and largest friction force between its events
-    (not built).
+    did not converge at all: 0.149, 0.184, 0.271 and 0.307 N at 40, 200 (automatic), 800
+    and 1 600 steps. What the steps missed is the minimum: the column's push at an end of
+    the zone (0.36 N at the exit there, most of the increase) stops for a short time after
+    a ball leaves, until the next one closes onto the column, and a step's mean force
+    hides such a dip unless the step is shorter than it.
+
+    **Intervals.** So the circuit's step reports its friction between its events
+    (:class:`tolsim.physics.circuit.FrictionWindows`, asked for by :meth:`observe` with
+    each pair's slope k_j, :func:`pair_slopes`): its forces are constant between events,
+    so the increase sum k_j Q_j of each interval is exact for constant epsilon and K. A
+    step's extremes take the least and largest of its intervals with the step's baseline
+    (:meth:`TrackFriction.extremes <tolsim.study.pipeline.track_friction.TrackFriction.
+    extremes>`), and each window between exits and entries those of the intervals that
+    overlap it (:meth:`window_increase`) with its own baseline. Two more things had to be
+    exact for that: the times of exits and entries are the step's own
+    (:func:`tolsim.study.pipeline.carriage_circuit.circuit_events` with the step's
+    ``crossing_travel``; linear interpolation put an exit that slowed to the column's speed
+    at the step's end), and a window's zone holds the balls by those crossings, not by
+    their interpolated positions (:meth:`tolsim.study.pipeline.carriage_circuit.
+    CircuitFrame.slots_at`, ``inside``). The ripple is then 0.3095, 0.3098, 0.3096 and
+    0.3099 N at 10, 40, 200 and 800 steps against 0.3100 N at 1 600 (16 assemblies of
+    ``configs/carriage_preload.toml`` with a default circuit; every train within 0.006 N
+    of its value at 1 600, 0.002 N from 200 steps), and 0.1730 N and 0.1719 N at 10 and
+    417 (automatic) steps against 0.1720 N [0.1677, 0.1762] at 800 on
+    ``configs/carriage_circuit.toml`` (64 assemblies). What remains is epsilon's change
+    within a step. The largest increase and the largest contact force take the
+    intervals' too; the time means, the sliding check and the recorded examples keep the
+    step means. A step with more than 16 intervals in one circuit merges the rest into its
+    last (their extremes over a longer time: wider, never narrower).
 
     **Not modelled.** The circuit's step moves the balls with K alone: the ball-ball braking
     c of the open trains' cluster rule (kappa instead of K, |c K| < 1) is left out of the
@@ -241,20 +314,18 @@ class CircuitTrains(StepObserver):
     def following(self):
         return True  # every assembly over the whole stroke
 
-    def _ring_coefficients(self, step, circ):
+    def _ring_coefficients(self, state2, ring, entering):
         """(C, N, len(TRAIN_COLUMNS)) coefficients of the ring balls at the step's midpoint
         (NaN for the others: a ball in the zone at the end of the step was in it at the
-        midpoint, or entered after it)."""
+        midpoint, or entered after it). ``ring`` (C, S) the ring ball of each slot at the
+        step's start, ``entering`` the balls entered by the midpoint (the frame's, None)."""
         friction, slots = self.friction, self.frame.slots
-        state2 = step.state2
         trains = (-1, slots)
         load = friction.coefficients(state2.balls, state2.loaded.reshape(trains))
-        ring = circ["slot_ring"]
         c, n = ring.shape[0], self.frame.sigma.shape[1]
         out = np.full((c, n, len(TRAIN_COLUMNS)), np.nan)
         line, slot = np.nonzero(ring >= 0)
         out[line, ring[line, slot]] = load[line, slot]
-        entering = circ.get("entering")
         if entering is not None:  # entered by the midpoint: their own, from its solve
             take, ring_e, balls = entering
             own = friction.coefficients(balls(), take)
@@ -262,11 +333,25 @@ class CircuitTrains(StepObserver):
             out[line, ring_e[line, slot]] = own[line, slot]
         return out
 
+    def observe(self, step):
+        """Before the circuit's step: the ring balls' coefficients at the midpoint, and the
+        pairs' slopes for the step's friction windows (``step.pair_slopes``)."""
+        frame = self.frame
+        c = len(step.rows) * frame.tracks
+        entering = None
+        if frame.entering is not None:
+            entering = (frame.entering[0].reshape(c, -1), frame.entering[1].reshape(c, -1),
+                        frame.entering_balls)
+        self.ring_load = self._ring_coefficients(step.state2, frame.slot_ring.reshape(c, -1),
+                                                 entering)
+        step.pair_slopes = pair_slopes(self.ring_load, self.column_row,
+                                       frame.config.contact.ball_friction_coefficient)
+
     def moved(self, step):
         frame, circ = self.frame, step.circuit
         if len(step.rows) != frame.block.size:
             raise ValueError("CircuitTrains needs every assembly in every step")
-        ring_load = self._ring_coefficients(step, circ)
+        ring_load, self.ring_load = self.ring_load, None
         pressed = circ["closed"] & (circ["force"] > 0.0)
         c, width = len(circ["circuits"]), self.width
         loaded, member = np.empty((c, width), bool), np.empty((c, width), bool)
@@ -292,6 +377,8 @@ class CircuitTrains(StepObserver):
         friction = self.friction
         before = friction.figures_before()
         baseline, increase = friction.account(loaded, member, load, force, ok, contact, formed)
+        if circ["windows"] is not None:
+            friction.extremes(baseline, *window_extremes(circ["windows"]))
         if friction.record:
             self.record(circ, ring, force, baseline + increase)
         self.windows(step, circ, before)
@@ -330,13 +417,39 @@ class CircuitTrains(StepObserver):
             frac = np.repeat((tau - step.t) / step.dt, tracks)[:, None]
             start = circ["sigma_start"][circuits]
             sigma = start + frac * (frame.sigma[circuits] - start)
-            z, ids, held = frame.slots_at(circuits, sigma)
+            with np.errstate(invalid="ignore"):  # the zone's balls from the exact crossings
+                crossed = circ["crossing"][circuits] / frame.v < np.repeat(tau, tracks)[:, None]
+            z, ids, held = frame.slots_at(circuits, sigma,
+                                          circ["loaded_start"][circuits] ^ crossed)
             baseline = frame.zone_baseline(z.reshape(len(sel), tracks, slots),
                                            ids.reshape(len(sel), tracks, slots), tau,
                                            rows[sel], friction)
+            half = 0.5 * share[sel, e] * step.dt
+            low = high = None
+            if circ["windows"] is not None:
+                low, high = self.window_increase(circ["windows"], circuits, tau - half,
+                                                 tau + half, step.t + step.dt)
             friction.window(circuits, np.where(held < 0, np.nan, baseline),
-                            np.repeat(share[sel, e], tracks))
+                            np.repeat(share[sel, e], tracks), low, high)
         friction.close_windows()
+
+    def window_increase(self, windows, circuits, first, last, step_end):
+        """The least and largest increase (K,) [N] of circuits ``circuits`` (K,) over the
+        circuit step's windows (:class:`tolsim.physics.circuit.FrictionWindows`) that
+        overlap the times [``first``, ``last``] (K / tracks,) [s] by more than rounding
+        (inf and -inf where none does); ``step_end`` [s] the end of the step."""
+        tracks, v = self.frame.tracks, self.frame.v
+        a, b = np.repeat(first, tracks)[:, None], np.repeat(last, tracks)[:, None]
+        count = windows.count[circuits]
+        width = windows.start.shape[1]
+        valid = np.arange(width) < count[:, None]
+        begin = np.where(valid, windows.start[circuits] / v, np.inf)
+        finish = np.full_like(begin, step_end)
+        finish[:, :-1] = np.where(valid[:, 1:], begin[:, 1:], step_end)
+        tie = 1e-9 * (step_end - np.min(first, initial=step_end))
+        overlap = valid & (begin < b - tie) & (finish > a + tie)
+        return (np.where(overlap, windows.low[circuits], np.inf).min(axis=1),
+                np.where(overlap, windows.high[circuits], -np.inf).max(axis=1))
 
     def record(self, circ, ring, force, friction):
         """The step into the trace of a recording TrackFriction (its ``record``), as the open

@@ -97,10 +97,12 @@ def ring_inputs_kernel(slot_ring, eps, stiffness, fallback, pushed, unresolved, 
 
 @jit
 def circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id,
-                          previous_id, slot_ring, t, dt, exit_id, exit_time, entry_id,
-                          entry_time):
+                          previous_id, slot_ring, t, dt, crossed, v, exit_id, exit_time,
+                          entry_id, entry_time):
     """Kernel of :func:`tolsim.study.pipeline.carriage_circuit.circuit_events` on circuits
-    (C, N) and their slots (C, S); fills the four outputs (C, S)."""
+    (C, N) and their slots (C, S); fills the four outputs (C, S). ``crossed`` (C, N) the
+    step's crossing travel of each ball (NaN: interpolate), or (0, 0)."""
+    exact = crossed.shape[0] > 0
     circuits, n = sigma0.shape
     slots = previous_id.shape[1]
     for c in range(circuits):
@@ -119,6 +121,8 @@ def circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, length, zone, ring_i
             span = sigma1[c, r] - sigma0[c, r]
             frac = crossing / span if span > 0 else 1.0
             when = t + min(max(frac, 0.0), 1.0) * dt
+            if exact and np.isfinite(crossed[c, r]):
+                when = min(max(crossed[c, r] / v, t), t + dt)
             if leaving:  # the slot it left
                 for j in range(slots):
                     if previous_id[c, j] == ring_id[r]:

@@ -389,7 +389,9 @@ class Step:
     the last axis), those of pairs with an unloaded ball the gaps that carry force
     (:func:`force_gaps`); ``ball_ok``: resolved at every evaluation so far; ``state1``, ``state2``:
     the balls of the predictor (the frame's :meth:`AlongTrackFrame.start`: the previous
-    midpoint's, at t = 0 those at the start) and at the midpoint.
+    midpoint's, at t = 0 those at the start) and at the midpoint. ``pair_slopes``: what an
+    observer asks of a circuit frame's step (:meth:`StepObserver.observe`; the friction
+    slopes of :func:`tolsim.physics.circuit.step`), None by default.
     """
 
     index: int
@@ -402,6 +404,7 @@ class Step:
     ball_ok: np.ndarray
     state1: object
     state2: object
+    pair_slopes: object = None
 
 
 class StepObserver:

@@ -735,22 +735,41 @@ class TrackFriction:
         self._window_rows = rows
         self._window_mean = np.zeros(len(self.alive))
 
-    def window(self, rows, baseline, share):
+    def window(self, rows, baseline, share, low=None, high=None):
         """A loaded zone of the last step, of rows reopened (:meth:`reopen`): its baseline
         there [N] (R_k,), with the step's increase into the ripple's maximum and minimum,
-        and over ``share`` (R_k,) of the step into the time mean. A row whose baseline is
-        unknown there (a ball not resolved) is no longer followed, as at a step."""
+        and over ``share`` (R_k,) of the step into the time mean. ``low``, ``high`` (R_k,):
+        the least and largest increase in that zone, where known (finite), instead of the
+        step's (a circuit's windows, :meth:`extremes`). A row whose baseline is unknown
+        there (a ball not resolved) is no longer followed, as at a step."""
         rows = np.asarray(rows)
         alive = self.alive[rows]
         baseline = np.asarray(baseline, dtype=float)
-        total = baseline + self.increase[rows]
+        increase = self.increase[rows]
+        total = baseline + increase
         known = alive & np.isfinite(total)
-        at, value = rows[known], total[known]
-        self.friction_high[at] = np.maximum(self.friction_high[at], value)
-        self.friction_low[at] = np.minimum(self.friction_low[at], value)
+        at = rows[known]
+        top, bottom = (total if x is None else
+                       baseline + np.where(np.isfinite(x), x, increase) for x in (high, low))
+        self.friction_high[at] = np.maximum(self.friction_high[at], top[known])
+        self.friction_low[at] = np.minimum(self.friction_low[at], bottom[known])
         self.baseline_sum[at] += baseline[known] * np.asarray(share)[known] * self.weight
         self._window_mean[rows] += baseline * share
         self.alive[rows[alive & ~np.isfinite(total)]] = False
+
+    def extremes(self, baseline, low, high, peak):
+        """The last step's least and largest increase and largest pair force (R,) [N]
+        between its events, where known (finite), into the rows' extremes with the step's
+        ``baseline`` (R,) [N] (:meth:`account`'s; NaN: not followed): a step's forces are
+        its means, which hide a dip or a peak shorter than the step (a circuit's step gives
+        them: :func:`tolsim.physics.circuit.step`, ``pair_slopes``)."""
+        known = self.alive & np.isfinite(baseline)
+        for target, value, pick in ((self.friction_high, baseline + high, np.maximum),
+                                    (self.friction_low, baseline + low, np.minimum),
+                                    (self.increase_high, high, np.maximum),
+                                    (self.force_high, peak, np.maximum)):
+            at = known & np.isfinite(value)
+            target[at] = pick(target[at], value[at])
 
     def close_windows(self):
         """After the last :meth:`window` of a step: a recording keeps the step's friction of
