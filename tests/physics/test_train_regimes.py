@@ -288,6 +288,36 @@ def test_braking_between_a_four_point_and_a_two_point_ball():
     assert_allclose(parallel / mu_bb, 0.5 / np.cos(beta0) + 0.5, rtol=1e-12)  # 1.207
 
 
+def test_a_pair_across_two_batches_brakes_as_within_one():
+    # The pair of test_braking_between_a_four_point_and_a_two_point_ball, its balls' columns
+    # from two calls (a circuit's midpoint balls and its entering ones): with ``rates`` the
+    # all-A call gives its balls' rolling rates, regimes and braking vectors, so the pair's
+    # B is the one-call value to the bit; without, they are NaN and so is B (the train was
+    # lost; tests/study/test_circuit_friction.py shows it in a study).
+    mu_bb = 0.1
+    beta0 = TABLE1.nominal_contact_angle
+    load = np.full((2, len(LOAD_COLUMNS)), np.nan)
+    load[0, LOAD_COLUMNS.index("creep_stiffness")] = 700.0
+    load[0, LOAD_COLUMNS.index("carriage_force_per_neighbour_force")] = \
+        mu_bb / (2 * np.cos(beta0))
+    dbeta = np.zeros((2, 4))
+    normal = np.array([[141.4] * 4, [141.4, 0.0, 141.4, 0.0]])
+    kinds = [BALL_REGIME_A, BALL_TWO_POINT]
+    one = regime_creep_coefficients(load, kinds, dbeta, normal, TABLE1, ball_friction=mu_bb)
+    two = regime_creep_coefficients(load[1:], kinds[1:], dbeta[1:], normal[1:], TABLE1,
+                                    ball_friction=mu_bb)
+
+    def first(rates):
+        return regime_creep_coefficients(load[:1], kinds[:1], dbeta[:1], normal[:1], TABLE1,
+                                         ball_friction=mu_bb, rates=rates)
+
+    joined = np.concatenate([first(True), two])
+    assert_array_equal(joined, one)
+    assert_array_equal(pair_braking(joined, mu_bb), pair_braking(one, mu_bb))
+    assert_array_equal(first(False)[:, :len(LOAD_COLUMNS)], load[:1])
+    assert np.isnan(pair_braking(np.concatenate([first(False), two]), mu_bb)).all()
+
+
 def test_pair_braking_of_soft_pairs_is_bit_for_bit(rng):
     # Soft pairs keep b_j + b_{j+1} exactly; a pushed ball's pairs have no braking (Notes).
     coefficients = rng.normal(size=(4, 5, len(TRAIN_COLUMNS)))

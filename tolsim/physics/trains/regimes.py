@@ -103,7 +103,7 @@ def two_point_rolling_rate(contact_angle_deviation, normal_force, bearing: Beari
 
 def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
                               bearing: Bearing = TABLE1, *, ball_friction=0.1,
-                              lazy_release=False):
+                              lazy_release=False, rates=False):
     """The train columns of balls from their regimes: anchors, soft balls, pushed balls.
 
     Parameters
@@ -121,12 +121,19 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
         Leave the release pushes of the balls on a stick line pending (NaN, with their
         inputs) for :func:`settle_release_pushes`, which computes them only for the balls a
         push reaches; else compute them here (the same numbers, bit for bit).
+    rates : bool
+        Give the rolling rates, regimes and braking vectors of the balls in regime A even
+        when the batch holds no other (else left NaN there, their only use being a pair
+        with a ball that is not in regime A): for balls that a train joins to balls of
+        another batch (a circuit's entering balls), where :func:`pair_braking` would be
+        NaN at such a pair.
 
     Returns
     -------
     ndarray, shape (n, len(TRAIN_COLUMNS))
         ``load`` unchanged for every ball in regime A (bit for bit), the columns of the Notes
-        for the others, and the rolling rates and regimes when the batch holds any.
+        for the others, and the rolling rates and regimes when the batch holds any (or
+        ``rates``).
 
     Notes
     -----
@@ -205,7 +212,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     stick = regime == BALL_REGIME_B
     three = regime == BALL_THREE_POINT
     pushed = regime == BALL_UNLOADED
-    if not (two.any() or stick.any() or three.any() or pushed.any()):
+    if not (rates or two.any() or stick.any() or three.any() or pushed.any()):
         return out
     dbeta = np.asarray(contact_angle_deviation, dtype=np.float64).reshape(n, 4)
     force = np.asarray(normal_force, dtype=np.float64).reshape(n, 4)

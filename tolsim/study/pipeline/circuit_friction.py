@@ -13,7 +13,12 @@ from tolsim._jit import jit
 from tolsim.physics.circuit import WHERE_INSIDE
 from tolsim.physics.trains.ball_minimum import RELEASE_INPUTS
 from tolsim.physics.trains.regimes import PUSHED_STIFFNESS, TRAIN_COLUMNS, pair_braking
-from tolsim.physics.velocity.models import BALL_UNLOADED
+from tolsim.physics.velocity.models import (
+    BALL_REGIME_B,
+    BALL_THREE_POINT,
+    BALL_TWO_POINT,
+    BALL_UNLOADED,
+)
 from tolsim.study.pipeline.carriage_track_kernels import interval_points_kernel
 from tolsim.study.pipeline.propagation import StepObserver
 
@@ -25,6 +30,8 @@ _USED = np.array([_COL[name] for name in ("free_rolling_carriage_force",
                                            "carriage_force_per_neighbour_force")])
 _K = _COL["creep_stiffness"]
 _A = _COL["carriage_force_per_push"]
+#: The regimes whose pairs brake along the pair's rotation (pair_braking's "other").
+_NOT_A = (BALL_REGIME_B, BALL_TWO_POINT, BALL_THREE_POINT)
 
 
 def column_coefficients() -> np.ndarray:
@@ -321,14 +328,21 @@ class CircuitTrains(StepObserver):
         step's start, ``entering`` the balls entered by the midpoint (the frame's, None)."""
         friction, slots = self.friction, self.frame.slots
         trains = (-1, slots)
-        load = friction.coefficients(state2.balls, state2.loaded.reshape(trains))
         c, n = ring.shape[0], self.frame.sigma.shape[1]
+        own = None
+        if entering is not None:  # entered by the midpoint: their own, from its solve
+            take, ring_e, balls = entering
+            own = friction.coefficients(balls(), take, rates=True)
+        # a pair across the two batches needs both balls' rolling rates where one is not in
+        # regime A (pair_braking): the midpoint's then too (the entering ones always have
+        # them, being few)
+        code = None if own is None else own[..., _COL["regime"]]
+        rates = code is not None and bool(np.isin(code, _NOT_A).any())
+        load = friction.coefficients(state2.balls, state2.loaded.reshape(trains), rates=rates)
         out = np.full((c, n, len(TRAIN_COLUMNS)), np.nan)
         line, slot = np.nonzero(ring >= 0)
         out[line, ring[line, slot]] = load[line, slot]
-        if entering is not None:  # entered by the midpoint: their own, from its solve
-            take, ring_e, balls = entering
-            own = friction.coefficients(balls(), take)
+        if own is not None:
             line, slot = np.nonzero(take)
             out[line, ring_e[line, slot]] = own[line, slot]
         return out

@@ -188,7 +188,9 @@ def step_friction_kernel(loaded, member, load, braking, force, ok, contact, form
     ``formed`` (R,) the clusters formed in it, ``weight`` dt / T. Updates, for the rows still
     ``alive``: the running time means (baseline, increase, contact fraction), maxima and
     minima, the clusters, and the largest increase before an onset (``rolling``); a row that
-    is not ``ok`` or in which a ball slides (capacities at zero neighbour force, as
+    is not ``ok``, whose baseline or increase is not finite (a coefficient not usable:
+    never silently left out of the figures), or in which a ball slides (capacities at zero
+    neighbour force, as
     :func:`stroke_friction_kernel`) is no longer alive from this step on (``onset`` set
     for the latter, as :func:`stroke_friction_kernel`'s). Writes the step's baseline and
     increase [N] (NaN when not alive).
@@ -214,6 +216,9 @@ def step_friction_kernel(loaded, member, load, braking, force, ok, contact, form
                 increase += k * force[r, j]
                 if force[r, j] > high:
                     high = force[r, j]
+        if not (np.isfinite(base) and np.isfinite(increase)):  # a coefficient not usable
+            alive[r] = False
+            continue
         cause = ROLLING
         for i in range(slots):
             if not member[r, i]:

@@ -108,7 +108,7 @@ def _creep_full(dbeta, force, bearing, ball_friction):
 CREEP_MODELS = {"analytic": _creep_analytic, "full": _creep_full}
 
 
-def ball_creep_coefficients(config, state) -> np.ndarray:
+def ball_creep_coefficients(config, state, rates=False) -> np.ndarray:
     """Creep coefficients of every ball from its own loaded contact state.
 
     Parameters
@@ -117,6 +117,9 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
         With ``contact`` settings.
     state : tolsim.study.pipeline.evaluate.BallState
         Balls of shape (m, tracks * balls).
+    rates : bool
+        The rolling rates of balls in regime A also when ``state`` holds no other
+        (:func:`tolsim.physics.trains.regimes.regime_creep_coefficients`).
 
     Returns
     -------
@@ -156,7 +159,8 @@ def ball_creep_coefficients(config, state) -> np.ndarray:
     mu_bb = config.contact.ball_friction_coefficient
     load = CREEP_MODELS[config.contact.creep_model](dbeta, force, config.bearing, mu_bb)
     load = regime_creep_coefficients(load, np.asarray(state.regime).reshape(-1), dbeta, force,
-                                     config.bearing, ball_friction=mu_bb, lazy_release=True)
+                                     config.bearing, ball_friction=mu_bb, lazy_release=True,
+                                     rates=rates)
     unresolved = ~np.asarray(state.accounted).reshape(-1)
     if unresolved.any():
         load[unresolved] = np.nan
@@ -625,10 +629,11 @@ class TrackFriction:
         """Rows (a boolean mask) that can no longer be followed (unresolved from now on)."""
         self.alive &= ~np.asarray(rows, dtype=bool)
 
-    def coefficients(self, state, mask, rows=None) -> np.ndarray:
+    def coefficients(self, state, mask, rows=None, rates=False) -> np.ndarray:
         """(R, S, len(TRAIN_COLUMNS)) creep coefficients of the balls ``mask`` (R, S), NaN
         elsewhere. ``state``: the BallState of those balls (of shape ``mask.shape``, or
-        flattened in ``mask`` order); only the rows ``rows`` (R,) when given."""
+        flattened in ``mask`` order); only the rows ``rows`` (R,) when given; ``rates``: as
+        :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`'s."""
         mask = np.asarray(mask, dtype=bool)
         load = np.full(mask.shape + (len(TRAIN_COLUMNS),), np.nan)
         select = mask if rows is None else mask & np.asarray(rows)[:, None]
@@ -639,7 +644,7 @@ class TrackFriction:
                 sub = state
             else:
                 sub = _flat_balls(state, np.flatnonzero(flat_select))
-            load[select] = ball_creep_coefficients(self.config, sub)
+            load[select] = ball_creep_coefficients(self.config, sub, rates)
         return load
 
     def _clusters(self, eps, load, loaded, member):
