@@ -259,6 +259,17 @@ def test_rolling_rates_of_the_nominal_and_the_two_point_ball():
     assert_allclose(other, [[0.5 * np.cos(beta0), 0.5 * np.sin(beta0)]], atol=1e-12)
 
 
+def _four_and_two_point(mu_bb):
+    """A nominal four-point ball in regime A (K = 700 N, b = mu_bb / (2 cos beta_0)) and an
+    exactly two-point ball: (load, regimes, dbeta, normal)."""
+    load = np.full((2, len(LOAD_COLUMNS)), np.nan)
+    load[0, LOAD_COLUMNS.index("creep_stiffness")] = 700.0
+    load[0, LOAD_COLUMNS.index("carriage_force_per_neighbour_force")] = \
+        mu_bb / (2 * np.cos(TABLE1.nominal_contact_angle))
+    normal = np.array([[141.4] * 4, [141.4, 0.0, 141.4, 0.0]])
+    return load, [BALL_REGIME_A, BALL_TWO_POINT], np.zeros((2, 4)), normal
+
+
 def test_braking_between_a_four_point_and_a_two_point_ball():
     # Issue 25: |Omega + Omega'| R = 1.118 v, not the 1.207 v of parallel axes. Derivation:
     # (0.7071 + 0.3536, -0.3536) has norm sqrt(1.125 + 0.125) = sqrt(1.25) = 1.1180. The
@@ -267,14 +278,9 @@ def test_braking_between_a_four_point_and_a_two_point_ball():
     # with b_4 = mu_bb / (2 cos beta_0) (tolsim.physics.velocity.ball_loads Notes); 1e-12.
     mu_bb = 0.1
     beta0 = TABLE1.nominal_contact_angle
-    load = np.full((2, len(LOAD_COLUMNS)), np.nan)
-    load[0, LOAD_COLUMNS.index("creep_stiffness")] = 700.0
-    load[0, LOAD_COLUMNS.index("carriage_force_per_neighbour_force")] = \
-        mu_bb / (2 * np.cos(beta0))
-    dbeta = np.zeros((2, 4))
-    normal = np.array([[141.4] * 4, [141.4, 0.0, 141.4, 0.0]])
-    coefficients = regime_creep_coefficients(load, [BALL_REGIME_A, BALL_TWO_POINT], dbeta,
-                                             normal, TABLE1, ball_friction=mu_bb)
+    load, kinds, dbeta, normal = _four_and_two_point(mu_bb)
+    coefficients = regime_creep_coefficients(load, kinds, dbeta, normal, TABLE1,
+                                             ball_friction=mu_bb)
     b = pair_braking(coefficients, mu_bb)
     assert_allclose(b, [mu_bb * np.sqrt(1.25)], rtol=1e-12)
     assert_allclose(np.sqrt(1.25), 1.118, atol=5e-4)
@@ -295,14 +301,7 @@ def test_a_pair_across_two_batches_brakes_as_within_one():
     # B is the one-call value to the bit; without, they are NaN and so is B (the train was
     # lost; tests/study/test_circuit_friction.py shows it in a study).
     mu_bb = 0.1
-    beta0 = TABLE1.nominal_contact_angle
-    load = np.full((2, len(LOAD_COLUMNS)), np.nan)
-    load[0, LOAD_COLUMNS.index("creep_stiffness")] = 700.0
-    load[0, LOAD_COLUMNS.index("carriage_force_per_neighbour_force")] = \
-        mu_bb / (2 * np.cos(beta0))
-    dbeta = np.zeros((2, 4))
-    normal = np.array([[141.4] * 4, [141.4, 0.0, 141.4, 0.0]])
-    kinds = [BALL_REGIME_A, BALL_TWO_POINT]
+    load, kinds, dbeta, normal = _four_and_two_point(mu_bb)
     one = regime_creep_coefficients(load, kinds, dbeta, normal, TABLE1, ball_friction=mu_bb)
     two = regime_creep_coefficients(load[1:], kinds[1:], dbeta[1:], normal[1:], TABLE1,
                                     ball_friction=mu_bb)
