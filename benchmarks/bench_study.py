@@ -45,8 +45,9 @@ circuit is that of the config without it: a circuit needs along_track). Each lin
 balls/s of the along_track study, of the constant one, and their ratio (the cost per ball of
 along_track over that of constant). The along_track studies follow an assembly until its
 first contact (the circuit: over the whole stroke). Then ``configs/friction_yaw.toml`` and
-``configs/carriage_preload.toml`` along the track with ``[contact]`` against the same without
-it (the automatic step count is finer with ``[contact]``: the steps are printed). Sizes are
+``configs/carriage_preload.toml`` (also with a default circuit) along the track with
+``[contact]`` against the same without it (the automatic step count is finer with
+``[contact]``, except with a circuit: the steps are printed). Sizes are
 assemblies (default 2000), times a factor per study so that every timed run lasts a second
 or more (a run of 0.2-0.3 s moved by +-15 % from one reading to the next): the free balls
 run 100 times more (200 000 assemblies, 1.2e6 balls), the carriage 10 times and the
@@ -82,13 +83,16 @@ def study(balls_total, static_model="solved", config=CONFIG, along_track=None):
     """The benchmark's study (``static_model`` "config": the config's own); ``along_track``:
     None (as the config), "contact" / "free" for
     along_track propagation with or without [contact], "circuit" along_track with a default
-    ``[carriage.circuit]``, "constant" constant propagation."""
+    ``[carriage.circuit]`` ("circuit_contact": and [contact]), "constant" constant
+    propagation."""
     from tolsim.io.config import load_config, parse_config
 
     c = load_config(config)
-    if along_track == "contact" and c.contact is None:
+    contact = along_track in ("contact", "circuit_contact")
+    if contact and c.contact is None:
         c = parse_config(c.text + "\n[contact]\n", str(config))
-    if along_track == "circuit" and c.carriage.circuit is None:  # (needs along_track to parse)
+    if (along_track in ("circuit", "circuit_contact")
+            and c.carriage.circuit is None):  # (needs along_track to parse)
         text = c.text.replace("[study]\n", '[study]\npropagation = "along_track"\n', 1)
         c = parse_config(text + "\n[carriage.circuit]\n", str(config))
     c = replace(c, study=replace(c.study, spot_checks=0, sensitivity_samples=0,
@@ -97,7 +101,7 @@ def study(balls_total, static_model="solved", config=CONFIG, along_track=None):
     if along_track is not None:
         propagation = "constant" if along_track == "constant" else "along_track"
         c = replace(c, study=replace(c.study, propagation=propagation),
-                    contact=c.contact if along_track == "contact" else None)
+                    contact=c.contact if contact else None)
     return c.with_overrides(samples=max(1, int(balls_total) // c.balls))
 
 
@@ -355,16 +359,18 @@ def along_track(sizes, constant_factor=None):
                       f"{alone:.1f}x the whole constant study per assembly")
     print(f"tolsim along_track study after contact, with and without [contact]; one worker, "
           f"{os.cpu_count()} cores")
-    for config in (FRICTION_CONFIG, carriage):
+    for config, plain, with_contact, name in (
+            (FRICTION_CONFIG, "free", "contact", ""), (carriage, "free", "contact", ""),
+            (carriage, "circuit", "circuit_contact", " with [carriage.circuit]")):
         balls = _balls_per_assembly(config)
         for size in sizes:
-            free = measure(size * balls, config=config, along_track="free",
+            free = measure(size * balls, config=config, along_track=plain,
                            static_model="config")
-            contact = measure(size * balls, config=config, along_track="contact",
+            contact = measure(size * balls, config=config, along_track=with_contact,
                               static_model="config")
-            for label, r, kind in (("without [contact]", free, "free"),
-                                   ("with [contact]   ", contact, "contact")):
-                print(f"  {config.name}: {r['balls']:.2e} balls {label} "
+            for label, r, kind in (("without [contact]", free, plain),
+                                   ("with [contact]   ", contact, with_contact)):
+                print(f"  {config.name}{name}: {r['balls']:.2e} balls {label} "
                       f"({_steps(config, kind):>3} steps): {r['seconds']:7.2f} s "
                       f" {r['balls'] / r['seconds']:9.0f} balls/s  peak RSS "
                       f"{max(r['peak_mib'], r['child_peak_mib']):.0f} MiB")
