@@ -306,7 +306,10 @@ def follow_trains(config, initial_gap, state):
     stroke_friction_kernel(result.segment_start, result.segment_contact_force, result.valid,
                            load, pairs, horizon, baseline, mean, high, low, onset, rolling)
     stopped = result.valid & (onset != ROLLING)
-    track_ok = result.valid & ~stopped & np.isfinite(baseline)
+    # (a train whose increase is not finite, a coefficient not usable, is unresolved: never
+    # a resolved train with NaN figures)
+    track_ok = (result.valid & ~stopped & np.isfinite(baseline) & np.isfinite(mean)
+                & np.isfinite(high) & np.isfinite(low))
     figures = _worst_tracks(config, m, track_ok=track_ok, baseline=baseline, increase_max=high,
                             increase_mean=mean, ripple=high - low,
                             contact_force_max=result.contact_force_max,
