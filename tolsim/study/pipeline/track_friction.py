@@ -547,8 +547,8 @@ class TrackFriction:
     *First contact.* It is located on the free motion of each step, as without ``[contact]``:
     up to the first contact the balls are free and the trajectories are the same to the last
     bit, so P(contact) and the time to contact do not change when ``[contact]`` is added at the
-    same ``study.time_steps`` (the automatic count is finer with ``[contact]``, except with a
-    circuit: :func:`tolsim.study.pipeline.propagation_rules.time_steps`). (With
+    same ``study.time_steps`` (the automatic count is finer with ``[contact]``,
+    :func:`tolsim.study.pipeline.propagation_rules.time_steps`). (With
     free balls the train's validity also counts the evaluations after its first contact,
     which are now those of the trajectory with trains: an assembly whose ball is unresolved
     only on one of the two after contact is valid in one run and not in the other. Its contact
