@@ -47,7 +47,7 @@ along_track over that of constant). The along_track studies follow an assembly u
 first contact (the circuit: over the whole stroke). Then ``configs/friction_yaw.toml`` and
 ``configs/carriage_preload.toml`` (also with a default circuit) along the track with
 ``[contact]`` against the same without it (the automatic step count is finer with
-``[contact]``: the steps are printed). Sizes are
+``[contact]``, except with a circuit: the steps are printed). Sizes are
 assemblies (default 2000), times a factor per study so that every timed run lasts a second
 or more (a run of 0.2-0.3 s moved by +-15 % from one reading to the next): the free balls
 run 100 times more (200 000 assemblies, 1.2e6 balls), the carriage 10 times and the

@@ -391,3 +391,45 @@ def test_no_train_is_lost_to_a_pair_across_two_batches(monkeypatch):
     lost = TrackFriction(c)
     first_contact_carriage_circuit(c, sample_block(c, 0), friction=lost)
     assert not lost.alive.all()
+
+
+def _dragging_study(samples, steps):
+    """configs/carriage_preload.toml along the track with a circuit whose return drag is
+    1 N per ball (a column push that makes the end balls slide) and [contact]."""
+    import warnings
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "configs" / "carriage_preload.toml"
+            ).read_text()
+    text = text.replace("samples = 2000", f'samples = {samples}\npropagation = "along_track"\n'
+                                          f"time_steps = {steps}")
+    with warnings.catch_warnings():  # 1 N is outside the plausible drag (on purpose)
+        warnings.simplefilter("ignore", ConfigWarning)
+        return parse_config(text + "\n[carriage.circuit]\nreturn_drag_N = 1.0\n\n[contact]\n",
+                            "drag.toml")
+
+
+def _sliding(steps, intervals=True):
+    c = _dragging_study(24, steps)
+    friction = TrackFriction(c)
+    original = CircuitTrains.interval_slides
+    if not intervals:
+        CircuitTrains.interval_slides = lambda self, step, circ: None
+    try:
+        first_contact_carriage_circuit(c, sample_block(c, 0), friction=friction)
+    finally:
+        CircuitTrains.interval_slides = original
+    return np.flatnonzero(friction.onset != 0)
+
+
+def test_the_sliding_check_reads_each_interval():
+    # The column's push against a return drag of 1 N per ball exceeds the end balls'
+    # capacities for part of a step. On each interval's forces (CircuitTrains.
+    # interval_slides) the same trains slide at 10 steps as at 80 (measured: all 48 trains
+    # of the 24 assemblies; 200 of 200 assemblies at 10, 40 and 200 steps); on the steps'
+    # mean forces alone far fewer at 10 (measured 1 of 48; 12 of 200 assemblies against 197
+    # at 200 steps; the test fails there).
+    coarse, fine = _sliding(10), _sliding(80)
+    assert len(fine) >= 24
+    assert_array_equal(coarse, fine)
+    assert len(_sliding(10, intervals=False)) < len(fine) // 2

@@ -50,13 +50,13 @@ def test_the_assumption_says_whether_the_step_count_is_automatic():
 
 def test_automatic_steps_of_the_packaged_configs():
     # n = max(8, ceil(c (s / 2) / l_min)), s = 100 mm, c = 4 (free balls), 2 (a carriage,
-    # with or without a circuit), 40 with [contact] (also with a circuit: its sliding check
-    # takes the step's mean forces); by hand: whatif_along_track: l_min =
+    # with or without a circuit), 40 with [contact] (but a circuit's own c: its step gives
+    # the friction and the sliding check between its events); by hand: whatif_along_track:
+    # l_min =
     # 10.05 mm, the spacing of its yaw-moment loads (D + the mean gap 50 um; its rail field
     # is 20 mm): 4 x 50 / 10.05 = 19.9 -> 20, with [contact] 199.0 -> 200; carriage_preload:
     # the ball pitch 10.05 mm, 2 x 50 / 10.05 = 9.95 -> 10, with [contact] 200;
-    # carriage_circuit: the pitch 4.8 mm, 2 x 50 / 4.8 = 20.8 -> 21, with [contact] 416.7
-    # -> 417.
+    # carriage_circuit: the pitch 4.8 mm, 2 x 50 / 4.8 = 20.8 -> 21, with [contact] too.
     whatif = packaged("whatif_along_track")
     assert epsilon_lengths(whatif) == pytest.approx(
         {"rail field bottom_rotation": 0.02, "ball spacing": 0.01005}, rel=1e-12)
@@ -68,7 +68,7 @@ def test_automatic_steps_of_the_packaged_configs():
     assert time_steps(preload) == 10
     assert time_steps(packaged("carriage_preload", contact=True)) == 200
     assert time_steps(packaged("carriage_circuit")) == 21
-    assert time_steps(packaged("carriage_circuit", contact=True)) == 417
+    assert time_steps(packaged("carriage_circuit", contact=True)) == 21
 
 
 def test_steps_follow_the_shortest_length_and_the_stroke():

@@ -310,6 +310,9 @@ class FrictionWindows:
     start : ndarray (M, W)
         The carriage travel at each window's start [m]; a window ends where the next one
         starts, the last one at the end of the step.
+    force : ndarray (M, W, N)
+        Each ball-order pair's Q_p in the window [N] (NaN at pair 0 where intervals were
+        merged into it).
     count : ndarray of int (M,)
         Windows of each circuit (its intervals of nonzero length, at most W).
     """
@@ -318,21 +321,24 @@ class FrictionWindows:
     high: np.ndarray
     peak: np.ndarray
     start: np.ndarray
+    force: np.ndarray
     count: np.ndarray
 
 
 def window_arrays(m, n, pair_slopes=None, capacity=16):
     """The kernel's friction-window arguments for M circuits of N balls: ``(slopes, low,
-    high, peak, end, count)``, empty (nothing tracked) without ``pair_slopes`` (3, M, N)."""
+    high, peak, start, force, count)``, empty (nothing tracked) without ``pair_slopes``
+    (3, M, N)."""
     if pair_slopes is None:
         empty = np.empty((0, 0))
-        return (np.empty((3, 0, 0)), empty, empty, empty, empty, np.empty(0, dtype=np.int64))
+        return (np.empty((3, 0, 0)), empty, empty, empty, empty, np.empty((0, 0, 0)),
+                np.empty(0, dtype=np.int64))
     slopes = np.ascontiguousarray(pair_slopes, dtype=np.float64)
     if slopes.shape != (3, m, n):
         raise ValueError(f"pair_slopes {slopes.shape} must be (3, {m}, {n})")
     shape = (m, int(capacity))
     return (slopes, np.full(shape, np.inf), np.full(shape, -np.inf), np.zeros(shape),
-            np.full(shape, np.nan), np.zeros(m, dtype=np.int64))
+            np.full(shape, np.nan), np.full(shape + (n,), np.nan), np.zeros(m, dtype=np.int64))
 
 
 def _ball_arrays(state, velocity_deviation, creep_stiffness):

@@ -262,16 +262,19 @@ def _open_window(c, w, start, window_low, window_high, window_peak, window_start
 
 @jit
 def _track_interval(c, w, forward, ring_loaded, ball, force, slopes, n, window_low,
-                    window_high, window_peak):
+                    window_high, window_peak, window_force, record):
     """An interval of constant forces into window ``w`` of circuit ``c``: the friction
     increase sum_p k_p Q_p over the pairs with a ball in the loaded zone (k_p = ``slopes``
     [0, c, p] with both balls p, p + 1 mod N of ball-order pair p loaded, [1] with ball p
     alone, [2] with ball p + 1 alone) into its least and largest value, the largest such
-    Q_p into its peak. A NaN increase makes the window's extremes NaN (unknown)."""
+    Q_p into its peak. A NaN increase makes the window's extremes NaN (unknown). With
+    ``record`` (the window's first interval) every pair's Q_p goes to ``window_force``."""
     increase = 0.0
     peak = 0.0
     for r in range(n):
         r1 = r + 1 if r + 1 < n else 0
+        if record:
+            window_force[c, w, ball[r] if forward else ball[r1]] = force[r]
         lower = ring_loaded[r] if forward else ring_loaded[r1]
         upper = ring_loaded[r1] if forward else ring_loaded[r]
         if not (lower or upper):
@@ -302,7 +305,8 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
                      block_weight, block_sum, coast, loc, block_speed, loaded_speed,
                      block_coasting, block_unloaded, block_coast, ring_stiffness, ball, label,
                      block_start, ring_loaded, ring_closed, ring_pushed, ring_push, slopes,
-                     window_low, window_high, window_peak, window_start, crossing_out):
+                     window_low, window_high, window_peak, window_start, window_force,
+                     crossing_out):
     """One step of circuit ``c`` (row c of the (M, N) arrays of :func:`step_circuit_kernel`),
     in place (Notes of :func:`tolsim.physics.circuit.step`).
 
@@ -313,10 +317,10 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
     updated in place; ``column_out`` row c gets the entry and exit column forces at the end of
     the step and their step means. With ``slopes`` (3, M, N) (else (3, 0, 0)) each interval
     of nonzero length between the step's events goes to ``window_*`` row c, its friction
-    increase and its start (:func:`_track_interval`; the last window takes those beyond the
-    capacity). ``crossing_out`` row c gets the carriage travel at which each
-    ball last crossed an end of the zone in the step (NaN: none). Returns (events, status,
-    windows). The rest are work arrays (N,)
+    increase, its start and its pair forces (:func:`_track_interval`; the last window takes
+    those beyond the capacity, its forces then NaN). ``crossing_out`` row c gets the
+    carriage travel at which each ball last crossed an end of the zone in the step (NaN:
+    none). Returns (events, status, windows). The rest are work arrays (N,)
     in ring order, the direction of flow: rows, never views, are passed (a view costs two
     atomic reference counts, which threads working on one array contend for).
     """
@@ -392,13 +396,17 @@ def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, clos
                 if t < best:
                     best = t
         if track and best > 0.0:  # the interval up to the event, at these forces
+            fresh = not filled
             if filled and w + 1 < capacity_w:
                 w += 1
+                fresh = True
                 done = total - remaining
                 _open_window(c, w, travel_start + (done if forward else -done), window_low,
                              window_high, window_peak, window_start)
+            elif filled:  # merged into the last window: its forces are no one interval's
+                window_force[c, w, 0] = np.nan
             _track_interval(c, w, forward, ring_loaded, ball, force, slopes, n, window_low,
-                            window_high, window_peak)
+                            window_high, window_peak, window_force, fresh)
             filled = True
         # advance to the event (or the end of the step); the pairs that close there close
         done = total - remaining
@@ -498,12 +506,14 @@ def step_circuit_kernel(position, diameter, eps, stiffness, pushed, loaded, clos
                         zone, drag, travel, travel_start, speed_out, velocity_out, force_out,
                         mean_force_out, column_out, event_count, event_pair, event_where,
                         event_travel, status_out, slopes, window_low, window_high,
-                        window_peak, window_start, window_count, crossing_out):
+                        window_peak, window_start, window_force, window_count,
+                        crossing_out):
     """:func:`step_circuit_one` over M circuits (rows), in parallel chunks; unchecked.
 
     State (M, N) in place; ``pushed`` (M, N) bool; ``length`` (M,); ``column_out`` (M, 4);
-    events (M, capacity); ``slopes`` (3, M, N) or (3, 0, 0), the windows (M, W) and their
-    count (M,) (written with ``slopes`` only); ``crossing_out`` (M, N).
+    events (M, capacity); ``slopes`` (3, M, N) or (3, 0, 0), the windows (M, W), their pair
+    forces (M, W, N) and their count (M,) (written with ``slopes`` only); ``crossing_out``
+    (M, N).
     """
     m, n = position.shape
     for chunk in prange((m + CHUNK - 1) // CHUNK):
@@ -527,7 +537,8 @@ def step_circuit_kernel(position, diameter, eps, stiffness, pushed, loaded, clos
                 block_weight, block_sum, coast, loc, block_speed, loaded_speed,
                 block_coasting, block_unloaded, block_coast, ring_stiffness, ball, label,
                 block_start, ring_loaded, ring_closed, ring_pushed, ring_push, slopes,
-                window_low, window_high, window_peak, window_start, crossing_out)
+                window_low, window_high, window_peak, window_start, window_force,
+                crossing_out)
             event_count[c] = count
             status_out[c] = status
             if windows:

@@ -497,7 +497,7 @@ class CircuitFrame(CarriageFrame):
         where = np.full((c, capacity), -1, dtype=np.int8)
         when = np.full((c, capacity), np.nan)
         status = np.empty(c, dtype=np.int64)
-        windows = window_arrays(c, n, step.pair_slopes)
+        windows = window_arrays(c, n, step.pair_slopes, capacity=64)
         crossing = np.empty((c, n))
         step_circuit_kernel(sigma, np.ascontiguousarray(self.diameter_ring[take]),
                             ring_eps, ring_k, ring_pushed, loaded, closed,

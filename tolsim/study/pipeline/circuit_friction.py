@@ -12,7 +12,12 @@ import numpy as np
 from tolsim._jit import jit
 from tolsim.physics.circuit import WHERE_INSIDE
 from tolsim.physics.trains.ball_minimum import RELEASE_INPUTS
-from tolsim.physics.trains.regimes import PUSHED_STIFFNESS, TRAIN_COLUMNS, pair_braking
+from tolsim.physics.trains.regimes import (
+    PUSHED_STIFFNESS,
+    TRAIN_COLUMNS,
+    pair_braking,
+    settle_release_pushes,
+)
 from tolsim.physics.velocity.models import (
     BALL_REGIME_B,
     BALL_THREE_POINT,
@@ -20,6 +25,7 @@ from tolsim.physics.velocity.models import (
     BALL_UNLOADED,
 )
 from tolsim.study.pipeline.carriage_track_kernels import interval_points_kernel
+from tolsim.study.pipeline.friction_kernels import ROLLING, SLIDING, slides
 from tolsim.study.pipeline.propagation import StepObserver
 
 _COL = {name: k for k, name in enumerate(TRAIN_COLUMNS)}
@@ -78,6 +84,72 @@ def nearest_coefficients_kernel(ring_load, f0, out):
                 out[c, b, k] = ring_load[c, source, k] if source >= 0 else np.nan
 
 
+def nearest_coefficients(ring_load):
+    """:func:`nearest_coefficients_kernel` of ``ring_load`` (C, N, columns), a new array."""
+    load = np.empty_like(ring_load)
+    nearest_coefficients_kernel(np.ascontiguousarray(ring_load), _USED[0], load)
+    return load
+
+
+@jit
+def _in_zone(c, w, b, start, crossing, loaded_start, sign, tie):
+    """Ball b of circuit c in the loaded zone in window w: as at the step's start unless it
+    crossed an end by the window's start (``sign`` the direction of travel)."""
+    inside = loaded_start[c, b]
+    if np.isfinite(crossing[c, b]) and (crossing[c, b] - start[c, w]) * sign <= tie:
+        inside = not inside
+    return inside
+
+
+@jit
+def interval_pushed_kernel(force, count, start, crossing, loaded_start, sign, tie, alive,
+                           out):
+    """The balls (C, N) pushed (back - front != 0) in some window of the circuit step's
+    (:class:`tolsim.physics.circuit.FrictionWindows`) while in the zone: those whose
+    release pushes :func:`interval_slides_kernel` needs."""
+    circuits, width, n = force.shape
+    for c in range(circuits):
+        for b in range(n):
+            out[c, b] = False
+        if not alive[c]:
+            continue
+        for w in range(count[c]):
+            for b in range(n):
+                if _in_zone(c, w, b, start, crossing, loaded_start, sign, tie):
+                    push = force[c, w, b] - force[c, w, b - 1 if b > 0 else n - 1]
+                    if push != 0.0 and push == push:
+                        out[c, b] = True
+
+
+@jit
+def interval_slides_kernel(force, count, start, crossing, loaded_start, sign, tie, load,
+                           alive, out_code):
+    """Whether a zone ball of each circuit (C,) stops rolling in some window of the step
+    (:func:`tolsim.study.pipeline.friction_kernels.slides` at that window's forces: back
+    Q_b, front Q_{b-1}, as the rows of :func:`circuit_trains_kernel` have them):
+    ``SLIDING`` (first), ``RELEASED``, ``ROLLING``, or -1 where a window's forces are not
+    known (intervals merged beyond its capacity). ``load`` (C, N, columns) the balls'
+    coefficients (:func:`nearest_coefficients`), release pushes settled."""
+    circuits, width, n = force.shape
+    for c in range(circuits):
+        out_code[c] = ROLLING
+        if not alive[c]:
+            continue
+        for w in range(count[c]):
+            if force[c, w, 0] != force[c, w, 0]:
+                out_code[c] = -1
+                break
+            for b in range(n):
+                if not _in_zone(c, w, b, start, crossing, loaded_start, sign, tie):
+                    continue
+                code = slides(force[c, w, b], force[c, w, b - 1 if b > 0 else n - 1],
+                              load[c, b])
+                if code != ROLLING and out_code[c] != SLIDING:
+                    out_code[c] = code
+            if out_code[c] == SLIDING:
+                break
+
+
 def pair_slopes(ring_load, column_row, ball_friction):
     """The carriage friction per newton of each ball-order pair p (balls p and p + 1 mod N
     of a circuit), (3, C, N) [-], for the friction windows of
@@ -89,8 +161,7 @@ def pair_slopes(ring_load, column_row, ball_friction):
     the column's coefficients for a ball out of the zone). ``ring_load`` (C, N, columns) the
     balls' coefficients (NaN for a ball without them: :func:`nearest_coefficients_kernel`),
     ``column_row`` :func:`column_coefficients`."""
-    load = np.empty_like(ring_load)
-    nearest_coefficients_kernel(np.ascontiguousarray(ring_load), _USED[0], load)
+    load = nearest_coefficients(ring_load)
     ahead = np.roll(load, -1, axis=1)  # ball p + 1
     column = np.broadcast_to(column_row, load.shape)
     out = np.empty((3,) + load.shape[:2])
@@ -358,7 +429,8 @@ class CircuitTrains(StepObserver):
                         frame.entering_balls)
         self.ring_load = self._ring_coefficients(step.state2, frame.slot_ring.reshape(c, -1),
                                                  entering)
-        step.pair_slopes = pair_slopes(self.ring_load, self.column_row,
+        self.ring_filled = nearest_coefficients(self.ring_load)
+        step.pair_slopes = pair_slopes(self.ring_filled, self.column_row,
                                        frame.config.contact.ball_friction_coefficient)
 
     def moved(self, step):
@@ -393,6 +465,7 @@ class CircuitTrains(StepObserver):
         baseline, increase = friction.account(loaded, member, load, force, ok, contact, formed)
         if circ["windows"] is not None:
             friction.extremes(baseline, *window_extremes(circ["windows"]))
+            self.interval_slides(step, circ)
         if friction.record:
             self.record(circ, ring, force, baseline + increase)
         self.windows(step, circ, before)
@@ -446,6 +519,24 @@ class CircuitTrains(StepObserver):
             friction.window(circuits, np.where(held < 0, np.nan, baseline),
                             np.repeat(share[sel, e], tracks), low, high)
         friction.close_windows()
+
+    def interval_slides(self, step, circ):
+        """The sliding check of each interval of the step (:func:`interval_slides_kernel`):
+        a train whose ball slides or is released at an interval's forces is no longer
+        followed from this step on, as at a step's mean forces (which hide a push shorter
+        than the step); one whose interval forces are not known (merged) is unresolved."""
+        windows, friction, frame = circ["windows"], self.friction, self.frame
+        sign = 1.0 if frame.v * step.dt >= 0.0 else -1.0
+        tie = 1e-12 * abs(frame.v * step.dt)
+        args = (windows.force, windows.count, windows.start, circ["crossing"],
+                circ["loaded_start"], sign, tie)
+        need = np.empty(circ["crossing"].shape, dtype=bool)
+        interval_pushed_kernel(*args, friction.alive, need)
+        load = self.ring_filled
+        settle_release_pushes(load, need, frame.config.bearing)
+        code = np.empty(len(need), dtype=np.int8)
+        interval_slides_kernel(*args, load, friction.alive, code)
+        friction.halt(code != ROLLING, np.maximum(code, ROLLING))
 
     def window_increase(self, windows, circuits, first, last, step_end):
         """The least and largest increase (K,) [N] of circuits ``circuits`` (K,) over the

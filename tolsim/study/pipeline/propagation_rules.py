@@ -42,8 +42,8 @@ STEPS_PER_LENGTH_CARRIAGE = 2.0
 #: The same for a carriage with an end relief (balls unload and reload within it, and most
 #: first contacts form there).
 STEPS_PER_LENGTH_RELIEF = 8.0
-#: The same with ``[contact]`` (the friction figures' extremes are taken over step means,
-#: and so is the sliding check, also with ``[carriage.circuit]``).
+#: The same with ``[contact]`` (the friction figures' extremes are taken over step means),
+#: except with ``[carriage.circuit]``, whose step gives them between its events.
 STEPS_PER_LENGTH_CONTACT = 40.0
 #: The fewest automatic steps over the stroke.
 MIN_TIME_STEPS = 8
@@ -82,7 +82,7 @@ def time_steps(config) -> int:
     :data:`STEPS_PER_LENGTH` (4) for free balls, :data:`STEPS_PER_LENGTH_CARRIAGE` (2) for a
     carriage (with or without ``[carriage.circuit]``), :data:`STEPS_PER_LENGTH_RELIEF` (8) for
     a carriage with an end relief, and :data:`STEPS_PER_LENGTH_CONTACT` (40) with
-    ``[contact]``;
+    ``[contact]`` unless the carriage has a circuit (which keeps its own c);
     :data:`MIN_TIME_STEPS` without any length (epsilon then changes only through the
     unloaded balls, the trains after contact, or not at all).
 
@@ -140,22 +140,24 @@ def time_steps(config) -> int:
     against 0.178 N at 800).
 
     A circuit's step gives its friction between its events (Notes of
-    :class:`tolsim.study.pipeline.circuit_friction.CircuitTrains`, "Intervals"), so its
-    friction figures would allow its own c (2, or 8 with a relief) with ``[contact]``.
-    Paired against 800 steps (300 assemblies): ``configs/carriage_circuit.toml`` at 21 steps
-    (c = 2) had every friction figure inside its interval (baseline 1.147 N, largest
-    increase 0.02716 against 0.02711 N, mean increase 0.02393 against 0.02394 N, ripple
-    0.1742 against 0.1744 N) and P = 0.610 against 0.600 (+3/-0), at 10 steps the increases
-    outside (0.02692 and 0.02387 N); ``configs/carriage_preload.toml`` with a default
-    circuit at 10 steps (c = 2) every figure inside (ripple 0.3198 against 0.3198 N, largest
-    increase 0.2070 against 0.2072 N) and P +0/-0; with 1 um / 15 mm of end relief too
-    (``--relief 1 15``) at 40 steps (c = 8) every figure inside (ripple 0.2491 against
-    0.2500 N, largest increase 0.2035 against 0.2044 N [0.2026, 0.2045]) and P 0.870 against
-    0.877 (+0/-2). But its sliding check still reads the step's mean forces, which hide a
-    push that exceeds a capacity for part of a step: with a return drag of 1 N per ball (200
-    assemblies) 12 trains slid at 10 steps against 197 at 200 (1.5 N: 133 against 200; 0.3
-    N: none at either). So c = 40 stays until the sliding check takes each interval's
-    forces.
+    :class:`tolsim.study.pipeline.circuit_friction.CircuitTrains`, "Intervals"), and its
+    sliding check takes each interval's forces
+    (:meth:`~tolsim.study.pipeline.circuit_friction.CircuitTrains.interval_slides`), so with
+    ``[contact]`` it keeps its own c (2, or 8 with a relief). Paired against 800 steps (300
+    assemblies): ``configs/carriage_circuit.toml`` at 21 steps (c = 2) had every friction
+    figure inside its interval (baseline 1.147 N, largest increase 0.02716 against 0.02711
+    N, mean increase 0.02393 against 0.02394 N, ripple 0.1742 against 0.1744 N) and P =
+    0.610 against 0.600 (+3/-0), at 10 steps the increases outside (0.02692 and 0.02387 N);
+    ``configs/carriage_preload.toml`` with a default circuit at 10 steps (c = 2) every
+    figure inside (ripple 0.3198 against 0.3198 N, largest increase 0.2070 against 0.2072 N)
+    and P +0/-0; with 1 um / 15 mm of end relief too (``--relief 1 15``) at 40 steps (c = 8)
+    every figure inside (ripple 0.2491 against 0.2500 N, largest increase 0.2035 against
+    0.2044 N [0.2026, 0.2045]) and P 0.870 against 0.877 (+0/-2). They took c = 40 before
+    (417, 200 and 200 steps). The sliding check on the steps' mean forces alone missed
+    pushes shorter than a step: with a return drag of 1 N per ball (200 assemblies) 12
+    trains slid at 10 steps against 197 at 200; on the intervals' forces 200 at 10, 40 and
+    200 steps (0.5 N: 92 at 10 steps against 89 at 200, where 13 more were unresolved by a
+    step with more than 16 intervals, since raised to 64).
 
     An end relief converges slowly: its balls unload near the zone's ends and load again, and
     most first contacts form there. ``configs/carriage_preload.toml`` with 1 um / 15 mm of
@@ -177,7 +179,7 @@ def time_steps(config) -> int:
         return MIN_TIME_STEPS
     carriage = config.carriage
     relief = carriage is not None and carriage.end_relief_depth > 0
-    if config.contact is not None:
+    if config.contact is not None and (carriage is None or carriage.circuit is None):
         per_length = STEPS_PER_LENGTH_CONTACT
     elif carriage is not None:
         per_length = STEPS_PER_LENGTH_RELIEF if relief else STEPS_PER_LENGTH_CARRIAGE

@@ -547,8 +547,8 @@ class TrackFriction:
     *First contact.* It is located on the free motion of each step, as without ``[contact]``:
     up to the first contact the balls are free and the trajectories are the same to the last
     bit, so P(contact) and the time to contact do not change when ``[contact]`` is added at the
-    same ``study.time_steps`` (the automatic count is finer with ``[contact]``,
-    :func:`tolsim.study.pipeline.propagation_rules.time_steps`). (With
+    same ``study.time_steps`` (the automatic count is finer with ``[contact]``, except with a
+    circuit: :func:`tolsim.study.pipeline.propagation_rules.time_steps`). (With
     free balls the train's validity also counts the evaluations after its first contact,
     which are now those of the trajectory with trains: an assembly whose ball is unresolved
     only on one of the two after contact is valid in one run and not in the other. Its contact
@@ -631,6 +631,15 @@ class TrackFriction:
     def stop(self, rows):
         """Rows (a boolean mask) that can no longer be followed (unresolved from now on)."""
         self.alive &= ~np.asarray(rows, dtype=bool)
+
+    def halt(self, rows, onset):
+        """Rows (a boolean mask) of followed trains in which a ball stopped rolling on its K
+        inside the last step (``onset`` (R,): SLIDING or RELEASED, else 0 for a row whose
+        forces there are not known): unresolved from now on, as at a step's sliding check
+        (:func:`tolsim.study.pipeline.friction_kernels.step_friction_kernel`)."""
+        rows = np.asarray(rows, dtype=bool) & self.alive
+        self.onset[rows] = np.asarray(onset)[rows]
+        self.alive &= ~rows
 
     def coefficients(self, state, mask, rows=None, rates=False) -> np.ndarray:
         """(R, S, len(TRAIN_COLUMNS)) creep coefficients of the balls ``mask`` (R, S), NaN
