@@ -273,13 +273,13 @@ def _track_interval(c, w, forward, ring_loaded, ball, force, slopes, n, window_l
     peak = 0.0
     for r in range(n):
         r1 = r + 1 if r + 1 < n else 0
+        p = ball[r] if forward else ball[r1]
         if record:
-            window_force[c, w, ball[r] if forward else ball[r1]] = force[r]
+            window_force[c, w, p] = force[r]
         lower = ring_loaded[r] if forward else ring_loaded[r1]
         upper = ring_loaded[r1] if forward else ring_loaded[r]
         if not (lower or upper):
             continue
-        p = ball[r] if forward else ball[r1]
         k = slopes[0, c, p] if lower and upper else (slopes[1, c, p] if lower
                                                      else slopes[2, c, p])
         increase += k * force[r]

@@ -150,7 +150,7 @@ def interval_slides_kernel(force, count, start, crossing, loaded_start, sign, ti
                 break
 
 
-def pair_slopes(ring_load, column_row, ball_friction):
+def pair_slopes(load, column_row, ball_friction):
     """The carriage friction per newton of each ball-order pair p (balls p and p + 1 mod N
     of a circuit), (3, C, N) [-], for the friction windows of
     :func:`tolsim.physics.circuit.step` (``pair_slopes``): with both balls in the loaded
@@ -158,10 +158,9 @@ def pair_slopes(ring_load, column_row, ball_friction):
     with ball p + 1 alone (at the entry). Each is k_j = (a_{j+1} - a_j) + B_j of
     :func:`tolsim.study.pipeline.friction_kernels.step_friction_kernel` on the pair as two
     slots of a row of :func:`circuit_trains_kernel` (slot j ball p + 1, slot j + 1 ball p,
-    the column's coefficients for a ball out of the zone). ``ring_load`` (C, N, columns) the
-    balls' coefficients (NaN for a ball without them: :func:`nearest_coefficients_kernel`),
-    ``column_row`` :func:`column_coefficients`."""
-    load = nearest_coefficients(ring_load)
+    the column's coefficients for a ball out of the zone). ``load`` (C, N, columns) the
+    balls' coefficients, a ball without its own given its nearest ball's
+    (:func:`nearest_coefficients`), ``column_row`` :func:`column_coefficients`."""
     ahead = np.roll(load, -1, axis=1)  # ball p + 1
     column = np.broadcast_to(column_row, load.shape)
     out = np.empty((3,) + load.shape[:2])
