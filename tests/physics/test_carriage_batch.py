@@ -252,3 +252,64 @@ def test_force_and_moment_balance_of_every_converged_assembly(case):
         assert np.abs(independent_balance(layout, load, batch, a) / units)[free].max() \
             <= 1e-9 * scale
         assert np.abs(batch.residual[a] / units)[free].max() <= 1e-9 * scale
+
+
+@pytest.mark.parametrize("beta0_deg", [45.0, 37.0])
+def test_ball_start_is_the_equal_stiffness_balance(beta0_deg):
+    """The joint Newton's ball start (``_ball_start``) is the least-squares balance of the
+    four flanks at equal stiffness, sum_i n_i (n_i . (P - T_i)) = 0 with T_i = D_i - h n_i
+    (derived in its docstring), so a tangential arc-centre offset (along t_i, which moves no
+    approach to first order) leaves it where it is; the mean of the T_i (the former start)
+    moves by a quarter of it. Tolerance: round-off of numbers of order 1e-4 m."""
+    from tolsim.physics.carriage._batch_kernels import _L_DC, _L_ROWS, _ball_start
+
+    b0 = np.radians(beta0_deg)
+    s0, c0 = np.sin(b0), np.cos(b0)
+    sx = np.array([-1.0, 1.0, 1.0, -1.0])  # BL, BR, TR, TL (GrooveErrors Notes)
+    sy = np.array([-1.0, -1.0, 1.0, 1.0])
+    n = np.stack([sx * s0, sy * c0], axis=1)
+    t = np.stack([sx * c0, -sy * s0], axis=1)
+    rng = np.random.default_rng(3)
+    w = np.zeros((_L_ROWS, 4))
+    d = rng.normal(scale=1e-4, size=(4, 4, 2))  # D_i of 4 balls [m]
+    w[_L_DC:_L_DC + 8] = d.reshape(4, 8).T
+    h = 1e-6
+    for b in range(4):
+        touching = d[b] - h * n
+        expected = np.linalg.lstsq(n, np.einsum("ij,ij->i", n, touching), rcond=None)[0]
+        assert_allclose(_ball_start(w, b, s0, c0), expected, rtol=0, atol=1e-18)
+    shifted = w.copy()
+    offsets = rng.normal(scale=3e-6, size=(4, 4))  # tangential offsets of each flank [m]
+    shifted[_L_DC:_L_DC + 8] += (offsets[:, :, None] * t[None]).reshape(4, 8).T
+    for b in range(4):
+        assert_allclose(_ball_start(shifted, b, s0, c0), _ball_start(w, b, s0, c0), rtol=0,
+                        atol=1e-18)
+        mean_shift = np.abs((offsets[b][:, None] * t).mean(axis=0)).max()
+        assert mean_shift > 1e-7  # the mean of the T_i would have moved
+
+
+def test_a_loose_ball_within_the_tolerance_of_no_force_has_none():
+    """``_settle_loose``: a loose ball (no diagonal pair BL-TR, BR-TL carries force) has its
+    only balance at no force, so forces within the solve's tolerance ``limit`` of zero are
+    its error and are reported as none; a ball with a loaded diagonal pair, or a loose one
+    beyond the limit (not converged), keeps its forces. (Without it a loose ball at the
+    along-track tolerance was a one-point contact, unresolved: tests/study/
+    test_carriage_circuit.py, test_unloaded_balls_in_the_zone_are_pushed_not_unresolved.)"""
+    from tolsim.physics.carriage._batch_kernels import _settle_loose
+
+    limit = 1.2e-7  # [N]: 1e-8 of a 12 N reference ball force
+    force = np.array([[[1.5e-7 * 0.5, 0.0, 0.0, 0.0],  # one flank: loose, within
+                       [0.0, 2e-8, 0.0, 3e-8],  # BR and TL: a diagonal pair, kept
+                       [1e-8, 2e-8, 0.0, 0.0],  # two rail flanks: loose, within
+                       [0.0, 0.0, 5e-7, 0.0],  # loose beyond the limit: kept
+                       [0.0, 0.0, 0.0, 0.0]]])  # no force
+    side, normal = np.full((1, 5), 7.0), np.full((1, 5), 9.0)
+    count = np.array([[1, 2, 2, 1, 0]], dtype=np.int8)
+    out = force.copy()
+    _settle_loose(0, limit, out, side, normal, count)
+    settled = [0, 2]
+    assert_array_equal(out[0, settled], 0.0)
+    assert_array_equal(count[0], [0, 2, 0, 1, 0])
+    assert_array_equal(side[0], [0.0, 7.0, 0.0, 7.0, 7.0])
+    assert_array_equal(normal[0], [0.0, 9.0, 0.0, 9.0, 9.0])
+    assert_array_equal(out[0, [1, 3, 4]], force[0, [1, 3, 4]])

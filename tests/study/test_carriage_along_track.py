@@ -811,6 +811,30 @@ def test_fixed_ball_values_give_the_same_values_bit_for_bit():
         assert_array_equal(got[source], v, err_msg=source)
 
 
+
+def test_moving_ball_values_of_some_sources_are_those_of_all():
+    # ``sources=``: only those sources, and every source of a correlation group holding one
+    # (the group is transformed whole), with the values of the call for all sources, bit for
+    # bit (the circuit's filling reads ball_oversize alone). Without the group rule the
+    # correlated TR would not be its correlated value.
+    group = ('[[correlation]]\nsources = ["arc_centre_offset_tangential_TR", '
+             '"arc_centre_offset_tangential_TL"]\ncoefficient = 0.8\n')
+    c = config(tolerances=ALL_KINDS + group, gap='{ distribution = "uniform", low_um = 0.0, '
+               'high_um = 60.0 }', samples=16)
+    block = sample_block(c, 0)
+    rng = np.random.default_rng(5)
+    slots = slot_capacity(c)
+    ids = rng.integers(-1, c.train.balls + entering_capacity(c), size=(16, 2, slots))
+    pos = rng.uniform(-0.05, 0.05, size=(16, 2, slots))
+    every = moving_ball_values(c, block, ids, pos)
+    some = moving_ball_values(c, block, ids, pos, sources=("ball_oversize",))
+    assert list(some) == ["ball_oversize"]
+    assert_array_equal(some["ball_oversize"], every["ball_oversize"])
+    tied = moving_ball_values(c, block, ids, pos, sources=("arc_centre_offset_tangential_TL",))
+    assert set(tied) == {"arc_centre_offset_tangential_TR", "arc_centre_offset_tangential_TL"}
+    for source, v in tied.items():
+        assert_array_equal(v, every[source], err_msg=source)
+
 def advance_twin(z0, z1, ids, ok, count, entered, gap, half, d, balls, t0, dt):
     """Plain-Python twin of advance_kernel
     (Notes of tolsim.study.pipeline.carriage_track.first_contact_carriage_track):

@@ -455,7 +455,7 @@ def error_values(config, block: Block, rail_position=None, parallel=False):
 
 
 def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, fixed=None,
-                       out=None):
+                       out=None, sources=None):
     """Error source values of balls moving through a carriage, in SI (``along_track``).
 
     Each ball keeps its own ``ball`` draws (the initial ball j of a track those of the block,
@@ -482,6 +482,9 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
         source -> ndarray (m, T, S) to write the values into (every source of the config;
         views of the GrooveErrors fields,
         :func:`tolsim.study.pipeline.evaluate.groove_error_buffers`).
+    sources : iterable of str, optional
+        Only these sources (default all), and those correlated with them (a correlation
+        group is transformed whole): the same values, for a caller that needs a few.
 
     Returns
     -------
@@ -493,9 +496,10 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
     shape = np.shape(ball_id)
     ids = np.maximum(ball_id, 0)
     fixed = {} if fixed is None else fixed
+    wanted = _with_groups(config, sources)
     z = {}
     for t in config.tolerances:
-        if t.source in fixed:
+        if t.source in fixed or t.source not in wanted:
             continue
         if t.source in block.fields:
             z[t.source] = _field_at(block.fields[t.source], rows, rail_position)
@@ -507,10 +511,13 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
             per_track = block.normals[t.source][rows].reshape(len(rows), tracks, -1)[:, :, :1]
             z[t.source] = np.broadcast_to(per_track, shape)
     for group in config.correlations:
-        _correlate(group, z)
+        if group.sources[0] in wanted:  # (a group is wanted whole or not at all)
+            _correlate(group, z)
     given = out is not None
     out = out if given else {}
     for t in config.tolerances:
+        if t.source not in wanted:
+            continue
         if t.source not in fixed:
             value = t.distribution.from_normal(z[t.source])
             if given:
@@ -522,6 +529,19 @@ def moving_ball_values(config, block: Block, ball_id, rail_position, rows=None, 
                 out[t.source] = np.empty(shape)
             _take_balls_kernel(fixed[t.source], rows, ids, t.scope == "ball", out[t.source])
     return out
+
+
+def _with_groups(config, sources) -> set:
+    """The config's sources among ``sources`` (None: all) and every source of a correlation
+    group that holds one of them."""
+    every = {t.source for t in config.tolerances}
+    if sources is None:
+        return every
+    wanted = set(sources) & every
+    for group in config.correlations:
+        if wanted & set(group.sources):
+            wanted |= set(group.sources)
+    return wanted
 
 
 @jit

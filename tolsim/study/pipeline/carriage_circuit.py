@@ -107,10 +107,12 @@ def slots_kernel(position, loaded, length, circuits, half_zone, ring_id, ring_ok
             out_ok[c, j] = True if out_ring[c, j] < 0 else ring_ok[line, out_ring[c, j]]
 
 
-def initial_circuits(config, block):
+def initial_circuits(config, block, fixed=None):
     """Positions (M, N), diameters (M, N) and lengths (M,) of the block's circuits at t = 0
     (M = assemblies x tracks, N = ``carriage.circuit.balls``), in ring order (Notes of
-    :func:`first_contact_carriage_circuit`, "Filling")."""
+    :func:`first_contact_carriage_circuit`, "Filling"); ``fixed``: the block's
+    :func:`tolsim.study.sampling.fixed_ball_values`, if made (the same sizes, read instead of
+    transformed again)."""
     circuit = config.carriage.circuit
     m, tracks, n, nb = block.size, config.n_tracks, config.train.balls, circuit.balls
     count = m * tracks
@@ -119,7 +121,8 @@ def initial_circuits(config, block):
     diameter = np.full((count, nb), nominal)
     if "ball_oversize" in {t.source for t in config.tolerances if t.scope == "ball"}:
         values = moving_ball_values(config, block, np.ascontiguousarray(ids),
-                                    np.zeros((m, tracks, nb)))
+                                    np.zeros((m, tracks, nb)), fixed=fixed,
+                                    sources=("ball_oversize",))
         diameter += values["ball_oversize"].reshape(count, nb)
     # the zone's gaps in ring order (the train's gaps reversed), and those outside it
     zone = block.initial_gap.reshape(count, n - 1)[:, ::-1]
@@ -269,7 +272,8 @@ class CircuitFrame(CarriageFrame):
         self.drag = circuit.return_drag
         self.zone = config.train.loaded_zone_length
         self.ring_id = circuit_ball_ids(self.balls, circuit.balls)
-        self.sigma, self.diameter_ring, self.length = initial_circuits(config, block)
+        self.sigma, self.diameter_ring, self.length = initial_circuits(
+            config, block, self.evaluation.fixed)
         self.slack = self.length - self.diameter_ring.sum(axis=1)
         shape = self.sigma.shape
         self.ring_loaded = np.mod(self.sigma, self.length[:, None]) < self.zone
