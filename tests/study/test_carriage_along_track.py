@@ -787,23 +787,34 @@ def test_moving_ball_values_at_the_start_are_the_study_values():
                            np.broadcast_to(v, (16, 2 * n)), err_msg=source)
 
 
+def correlated_study():
+    """The study of every source kind with TR and TL correlated (16 assemblies) and its first
+    block."""
+    group = ('[[correlation]]\nsources = ["arc_centre_offset_tangential_TR", '
+             '"arc_centre_offset_tangential_TL"]\ncoefficient = 0.8\n')
+    c = config(tolerances=ALL_KINDS + group, gap='{ distribution = "uniform", low_um = 0.0, '
+               'high_um = 60.0 }', samples=16)
+    return c, sample_block(c, 0)
+
+
+def random_slots(c, seed, rows):
+    """Random ball ids (initial, entering and empty slots) and rail positions (rows, 2, S)."""
+    rng = np.random.default_rng(seed)
+    slots = slot_capacity(c)
+    ids = rng.integers(-1, c.train.balls + entering_capacity(c), size=(rows, 2, slots))
+    return ids, rng.uniform(-0.05, 0.05, size=(rows, 2, slots))
+
+
 def test_fixed_ball_values_give_the_same_values_bit_for_bit():
     # The carriage frame transforms the sources that do not move with the balls once per block
     # (fixed_ball_values) and reads them at every step: the values of moving_ball_values
     # without them, bit for bit, for initial and entering balls, empty slots and a subset of
     # the rows (the transforms are elementwise; correlated sources are left to it).
-    group = ('[[correlation]]\nsources = ["arc_centre_offset_tangential_TR", '
-             '"arc_centre_offset_tangential_TL"]\ncoefficient = 0.8\n')
-    c = config(tolerances=ALL_KINDS + group, gap='{ distribution = "uniform", low_um = 0.0, '
-               'high_um = 60.0 }', samples=16)
-    block = sample_block(c, 0)
+    c, block = correlated_study()
     fixed = fixed_ball_values(c, block)
     assert set(fixed) == {"ball_oversize", "top_rotation", "arc_centre_offset_tangential_BL"}
-    rng = np.random.default_rng(3)
     rows = np.array([1, 4, 5, 11, 15])
-    slots = slot_capacity(c)
-    ids = rng.integers(-1, c.train.balls + entering_capacity(c), size=(len(rows), 2, slots))
-    pos = rng.uniform(-0.05, 0.05, size=(len(rows), 2, slots))
+    ids, pos = random_slots(c, 3, len(rows))
     ref = moving_ball_values(c, block, ids, pos, rows)
     got = moving_ball_values(c, block, ids, pos, rows, fixed)
     assert list(got) == list(ref)
@@ -811,21 +822,13 @@ def test_fixed_ball_values_give_the_same_values_bit_for_bit():
         assert_array_equal(got[source], v, err_msg=source)
 
 
-
 def test_moving_ball_values_of_some_sources_are_those_of_all():
     # ``sources=``: only those sources, and every source of a correlation group holding one
     # (the group is transformed whole), with the values of the call for all sources, bit for
     # bit (the circuit's filling reads ball_oversize alone). Without the group rule the
     # correlated TR would not be its correlated value.
-    group = ('[[correlation]]\nsources = ["arc_centre_offset_tangential_TR", '
-             '"arc_centre_offset_tangential_TL"]\ncoefficient = 0.8\n')
-    c = config(tolerances=ALL_KINDS + group, gap='{ distribution = "uniform", low_um = 0.0, '
-               'high_um = 60.0 }', samples=16)
-    block = sample_block(c, 0)
-    rng = np.random.default_rng(5)
-    slots = slot_capacity(c)
-    ids = rng.integers(-1, c.train.balls + entering_capacity(c), size=(16, 2, slots))
-    pos = rng.uniform(-0.05, 0.05, size=(16, 2, slots))
+    c, block = correlated_study()
+    ids, pos = random_slots(c, 5, 16)
     every = moving_ball_values(c, block, ids, pos)
     some = moving_ball_values(c, block, ids, pos, sources=("ball_oversize",))
     assert list(some) == ["ball_oversize"]
