@@ -290,26 +290,53 @@ def test_ball_start_is_the_equal_stiffness_balance(beta0_deg):
 
 def test_a_loose_ball_within_the_tolerance_of_no_force_has_none():
     """``_settle_loose``: a loose ball (no diagonal pair BL-TR, BR-TL carries force) has its
-    only balance at no force, so forces within the solve's tolerance ``limit`` of zero are
-    its error and are reported as none; a ball with a loaded diagonal pair, or a loose one
-    beyond the limit (not converged), keeps its forces. (Without it a loose ball at the
-    along-track tolerance was a one-point contact, unresolved: tests/study/
-    test_carriage_circuit.py, test_unloaded_balls_in_the_zone_are_pushed_not_unresolved.)"""
+    only balance at no force, so a loose ball whose imbalance max(|r_x|, |r_y|), r = sum_i
+    F_i u_i, passes the Newton's test (<= ``limit``) has forces that are the solve's error,
+    reported as none; a ball with a loaded diagonal pair, or a loose one beyond the limit
+    (not converged), keeps its forces. (Without it a loose ball at the along-track tolerance
+    was a one-point contact, unresolved: tests/study/test_carriage_circuit.py,
+    test_unloaded_balls_in_the_zone_are_pushed_not_unresolved.) The u_i are unit vectors at
+    contact angle deviations dbeta_i from n_i (here 45 deg and 30 deg), and dbeta_i is
+    obtained from u_i as ``ball_outputs`` does (arctan2), so the test checks the kernel's
+    rebuilt r against r itself, to round-off."""
     from tolsim.physics.carriage._batch_kernels import _settle_loose
 
     limit = 1.2e-7  # [N]: 1e-8 of a 12 N reference ball force
-    force = np.array([[[1.5e-7 * 0.5, 0.0, 0.0, 0.0],  # one flank: loose, within
-                       [0.0, 2e-8, 0.0, 3e-8],  # BR and TL: a diagonal pair, kept
-                       [1e-8, 2e-8, 0.0, 0.0],  # two rail flanks: loose, within
-                       [0.0, 0.0, 5e-7, 0.0],  # loose beyond the limit: kept
-                       [0.0, 0.0, 0.0, 0.0]]])  # no force
-    side, normal = np.full((1, 5), 7.0), np.full((1, 5), 9.0)
-    count = np.array([[1, 2, 2, 1, 0]], dtype=np.int8)
-    out = force.copy()
-    _settle_loose(0, limit, out, side, normal, count)
-    settled = [0, 2]
-    assert_array_equal(out[0, settled], 0.0)
-    assert_array_equal(count[0], [0, 2, 0, 1, 0])
-    assert_array_equal(side[0], [0.0, 7.0, 0.0, 7.0, 7.0])
-    assert_array_equal(normal[0], [0.0, 9.0, 0.0, 9.0, 9.0])
-    assert_array_equal(out[0, [1, 3, 4]], force[0, [1, 3, 4]])
+    for angle in (45.0, 30.0):
+        s0, c0 = np.sin(np.radians(angle)), np.cos(np.radians(angle))
+        n = np.array([[-s0, -c0], [s0, -c0], [s0, c0], [-s0, c0]])  # BL, BR, TR, TL
+        sxy = np.array([1.0, -1.0, 1.0, -1.0])
+        rng = np.random.default_rng(3)
+        dbeta = rng.uniform(-0.05, 0.05, (1, 6, 4))
+        rot = np.stack([np.cos(dbeta[0]), -np.sin(dbeta[0])], axis=-1)  # (6, 4, 2)
+        u = np.empty((6, 4, 2))
+        for i in range(4):  # u_i: n_i turned by a small random angle ...
+            c, sn = rot[:, i, 0], rot[:, i, 1]
+            u[:, i, 0] = c * n[i, 0] - sn * n[i, 1]
+            u[:, i, 1] = sn * n[i, 0] + c * n[i, 1]
+        # ... and dbeta_i read back from u_i as ball_outputs does (its sign convention)
+        dbeta[0] = np.arctan2(sxy * (n[:, 1] * u[..., 0] - n[:, 0] * u[..., 1]),
+                              n[:, 0] * u[..., 0] + n[:, 1] * u[..., 1])
+
+        def imbalance(f, b):
+            return np.abs((f[:, None] * u[b]).sum(axis=0)).max()
+
+        one = np.array([0.0, 0.0, 0.0, 1.0])
+        pair = np.array([1.0, 1.0, 0.0, 0.0])  # two rail flanks
+        force = np.zeros((1, 6, 4))
+        force[0, 0] = one * 0.999 * limit / imbalance(one, 0)  # loose, within
+        force[0, 1] = np.array([0.0, 2e-8, 0.0, 3e-8])  # BR and TL: a diagonal pair, kept
+        force[0, 2] = pair * 0.999 * limit / imbalance(pair, 2)  # loose, within
+        force[0, 3] = one * 1.001 * limit / imbalance(one, 3)  # loose, just beyond: kept
+        force[0, 4] = pair * 1.001 * limit / imbalance(pair, 4)  # the same
+        assert force[0, 0, 3] > 1.05 * limit  # a bound on the forces alone would keep it
+        side, normal = np.full((1, 6), 7.0), np.full((1, 6), 9.0)
+        count = np.array([[1, 2, 2, 1, 2, 0]], dtype=np.int8)
+        out = force.copy()
+        _settle_loose(0, limit, s0, c0, out, dbeta, side, normal, count)
+        settled = [0, 2]
+        assert_array_equal(out[0, settled], 0.0)
+        assert_array_equal(count[0], [0, 2, 0, 1, 2, 0])
+        assert_array_equal(side[0], [0.0, 7.0, 0.0, 7.0, 7.0, 7.0])
+        assert_array_equal(normal[0], [0.0, 9.0, 0.0, 9.0, 9.0, 9.0])
+        assert_array_equal(out[0, [1, 3, 4, 5]], force[0, [1, 3, 4, 5]])

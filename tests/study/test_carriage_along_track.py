@@ -447,16 +447,16 @@ def test_the_carriage_is_solved_once_per_step():
     assert_allclose(t1[hit], t2[hit], rtol=0, atol=1e-3)
 
 
-@pytest.mark.parametrize("tolerance, bound", [(None, 1e-6), (1e-4, None)])
+@pytest.mark.parametrize("tolerance, bound", [(None, 1e-4), (1e-2, None)])
 def test_the_track_tolerance_moves_the_first_contacts_far_less_than_the_step(
         monkeypatch, tolerance, bound):
-    # The solves along the track stop at TRACK_TOLERANCE (1e-8) instead of the solver's
+    # The solves along the track stop at TRACK_TOLERANCE (1e-4) instead of the solver's
     # defaults (1e-11 for the carriage, 1e-12 for each ball; carriage_track's Notes). On
-    # configs/carriage_preload.toml (2 x 2 048 assemblies, seed 12, measured) the same
-    # assemblies touched at the same pairs, first-contact times within 2.8e-10 s, initial
-    # epsilon within 5.8e-12; with a circuit within 3.8e-9 s. Here one block of 256 against
-    # the defaults, bound 1e-6 s: the step's own error there is some 7 ms (time_steps'
-    # Notes). The test can fail: at 1e-4 the times move by more than the bound.
+    # configs/carriage_preload.toml (2 x 4 096 assemblies, seed 12, measured against 1e-8)
+    # the same assemblies touched at the same pairs, first-contact times within 3.3e-5 s,
+    # initial epsilon within 2.6e-7. Here one block of 256 against the defaults, bound 1e-4 s:
+    # the step's own error there is some 7 ms (time_steps' Notes). The test can fail: at 1e-2
+    # the times move by more than the bound.
     import tolsim.study.pipeline.carriage_track as track
 
     c = load_config(ROOT / "configs" / "carriage_preload.toml").with_overrides(samples=256)
@@ -476,7 +476,7 @@ def test_the_track_tolerance_moves_the_first_contacts_far_less_than_the_step(
     assert 20 < hit.sum() < 200  # contacts are exercised
     change = np.abs(t1[hit] - t2[hit]).max()
     if bound is None:
-        assert change > 1e-6
+        assert change > 1e-4
     else:
         assert_array_equal(np.isfinite(t1), hit)
         assert_array_equal(p1, p2)
@@ -581,8 +581,9 @@ def test_along_track_agrees_with_constant_propagation_before_any_ball_moves_on()
     # and none leaves or enters (the train fills the zone with about 5 mm to spare at each
     # end). Then epsilon is constant along the track and the contact time is the constant
     # propagation's closed form with the t = 0 epsilon (tolsim.study.pipeline.propagation, mode a).
-    # Measured agreement 5.9e-7 relative (the small changes of epsilon as the train moves
-    # under the carriage's yaw and pitch from the balls' own errors); tolerance 5e-6. With the
+    # Measured agreement 7.2e-7 relative (the small changes of epsilon as the train moves
+    # under the carriage's yaw and pitch from the balls' own errors; 5.9e-7 with the solves
+    # at 1e-8 instead of TRACK_TOLERANCE, 1e-4); tolerance 5e-6. With the
     # drift of a ball of the wrong sign, -(1 + epsilon) v / 2, the other pairs would close.
     c = config(stroke=8.0, gap='{ distribution = "uniform", low_um = 0.0, high_um = 40.0 }',
                tolerances=TOP_FLANKS, samples=48, steps=40)
@@ -608,7 +609,8 @@ def test_an_unloaded_ball_in_the_zone_is_pushed_along_as_in_constant_propagation
     # by more than the preload (2 um preload, -3 um: 1 um of clearance, so no loaded
     # contact): it is unloaded, pushed along between its loaded neighbours, and the first
     # contact that carries force is the constant propagation's with its pushed epsilon
-    # (pushed_velocity_deviation, first_contact_tracks); tolerance 5e-6 relative, as above.
+    # (pushed_velocity_deviation, first_contact_tracks). Measured agreement 7.0e-6 relative:
+    # the solves' TRACK_TOLERANCE (1e-4; 2.8e-7 with the solves at 1e-8); tolerance 2e-5.
     # Before, every assembly with an unloaded ball in its zone was unresolved (valid False).
     sizes = '[tolerances.ball_oversize]\ndistribution = "normal"\nstd_um = 1.0\nscope = "ball"\n'
     c = config(stroke=8.0, gap='{ distribution = "uniform", low_um = 0.0, high_um = 40.0 }',
@@ -631,7 +633,7 @@ def test_an_unloaded_ball_in_the_zone_is_pushed_along_as_in_constant_propagation
     hit = np.isfinite(t_ref)
     assert 5 <= hit.sum() <= len(hit) - 5  # both outcomes exercised
     assert_array_equal(np.isfinite(time), hit)
-    assert_allclose(time[hit], t_ref[hit], rtol=5e-6)
+    assert_allclose(time[hit], t_ref[hit], rtol=2e-5)
     # the pair: the same contact (a run's pairs close together, named by either)
     run = {1: 1, 2: 1, 5 + 2: 5 + 2, 5 + 3: 5 + 2}
     same = [run.get(a, a) == run.get(b, b) for a, b in zip(pair[hit], pair_ref[hit],
