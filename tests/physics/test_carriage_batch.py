@@ -318,7 +318,7 @@ def test_a_loose_ball_within_the_tolerance_of_no_force_has_none():
         dbeta[0] = np.arctan2(sxy * (n[:, 1] * u[..., 0] - n[:, 0] * u[..., 1]),
                               n[:, 0] * u[..., 0] + n[:, 1] * u[..., 1])
 
-        def imbalance(f, b):
+        def imbalance(f, b, u=u):
             return np.abs((f[:, None] * u[b]).sum(axis=0)).max()
 
         one = np.array([0.0, 0.0, 0.0, 1.0])
