@@ -544,13 +544,13 @@ def _with_groups(config, sources) -> set:
     return wanted
 
 
-@jit
+@pjit
 def _take_balls_kernel(values, rows, ids, by_ball, out):
     """``out[a, t, j]`` = ``values[rows[a], t, ids[a, t, j]]`` (``by_ball``) or
     ``values[rows[a], t, 0]`` (as ``np.take_along_axis`` of ``values[rows]``, or its
-    broadcast)."""
+    broadcast); the rows on Numba's threads."""
     m, tracks, slots = out.shape
-    for a in range(m):
+    for a in prange(m):
         r = rows[a]
         for t in range(tracks):
             for j in range(slots):
@@ -584,7 +584,7 @@ def _field_at(rail_field: RailField, rows, position):
     index = (np.asarray(rows)[:, None] * tracks + np.arange(tracks)).reshape(-1)
     pos = np.ascontiguousarray(position, dtype=np.float64)
     out = np.empty(pos.shape)
-    _field_at_kernel(np.ascontiguousarray(rail_field.values, dtype=np.float64), index,
+    _field_at_parallel(np.ascontiguousarray(rail_field.values, dtype=np.float64), index,
                      float(rail_field.origin), float(rail_field.spacing),
                      pos.reshape(len(index), -1), out.reshape(len(index), -1))
     return out

@@ -8,8 +8,9 @@ Each kernel does in one pass, element by element, what a chain of NumPy calls di
 comparisons and the same values, so the results are bit-identical to those calls."""
 
 import numpy as np
+from numba import prange
 
-from tolsim._jit import jit
+from tolsim._jit import jit, pjit
 from tolsim.study.pipeline.ball_kernels import nan_to_num_one
 
 
@@ -108,7 +109,7 @@ def _advance_track(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_
     count[r, tr] = c
 
 
-@jit
+@pjit
 def advance_frame_kernel(rows, z0, z1, ball_id, ball_ok, count, entered, entering_gap,
                          half_zone, diameter, balls, t0, dt, scale, overflow, exit_id,
                          exit_time, entry_id, entry_time, position, frame_id, frame_ok,
@@ -121,10 +122,11 @@ def advance_frame_kernel(rows, z0, z1, ball_id, ball_ok, count, entered, enterin
     ``position[r]`` = z1, ``frame_id[r]`` = ball_id, ``frame_ok[r]`` = ball_ok,
     ``frame_entry_time[r]`` = entry_time and ``frame_entry_velocity[r]`` = 1 - (z0 - z1) /
     ``scale`` (the epsilon of the slots' travel, ``scale`` = v dt / 2), as
-    :meth:`tolsim.study.pipeline.carriage_track.CarriageFrame.advance` did with NumPy.
+    :meth:`tolsim.study.pipeline.carriage_track.CarriageFrame.advance` did with NumPy. The
+    rows run on Numba's threads: each writes only its own entries (``rows`` are distinct).
     """
     m, tracks, slots = z1.shape
-    for a in range(m):
+    for a in prange(m):
         r = rows[a]
         for tr in range(tracks):
             _advance_track(z0, z1, ball_id, ball_ok, count, entered, entering_gap, half_zone,
@@ -201,7 +203,7 @@ def carry_pairs_kernel(old_id, old_flag, new_id, out_flag):
                     break
 
 
-@jit
+@pjit
 def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old_row, new_id,
                        out_loaded, out_eps, out_valid, out_unloaded, out_fresh, out_index):
     """The balls of slot arrays (m, T, S) carried to new slots by their ids: new slot j of
@@ -210,7 +212,8 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
     loaded ball's index among the old loaded slots in C order (-1: not loaded); a ball that
     was in no old slot (it entered) or an empty slot is ``out_fresh`` (a ball id >= 0 only)
     and takes not loaded, NaN, valid, not unloaded. (The balls keep their order: each is
-    searched for from the old slot of the one before, then from the first.)"""
+    searched for from the old slot of the one before, then from the first.) The new rows run
+    on Numba's threads, each writing only its own entries."""
     rows, tracks, slots = new_id.shape
     first = np.empty(old_id.shape[:2], dtype=np.int64)  # each old track's first loaded index
     k = 0
@@ -220,10 +223,10 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
             for p in range(slots):
                 if old_loaded[a, t, p]:
                     k += 1
-    for r in range(rows):
+    for r in prange(rows):
         a = old_row[r]
         for t in range(tracks):
-            p, k = 0, first[a, t]  # the old slot searched from, its first loaded index
+            p, kk = 0, first[a, t]  # the old slot searched from, its first loaded index
             for j in range(slots):
                 ident = new_id[r, t, j]
                 out_loaded[r, t, j] = False
@@ -237,12 +240,12 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
                 found = False
                 for _ in range(2):  # from where the previous ball was found, then from 0
                     while p < slots and old_id[a, t, p] != ident:
-                        k += old_loaded[a, t, p]
+                        kk += old_loaded[a, t, p]
                         p += 1
                     if p < slots:
                         found = True
                         break
-                    p, k = 0, first[a, t]
+                    p, kk = 0, first[a, t]
                 if not found:
                     continue
                 out_fresh[r, t, j] = False
@@ -251,7 +254,7 @@ def carry_slots_kernel(old_id, old_loaded, old_eps, old_valid, old_unloaded, old
                 out_valid[r, t, j] = old_valid[a, t, p]
                 out_unloaded[r, t, j] = old_unloaded[a, t, p]
                 if old_loaded[a, t, p]:
-                    out_index[r, t, j] = k
+                    out_index[r, t, j] = kk
 
 
 @jit
