@@ -187,12 +187,22 @@ def readme_table(text: str) -> dict:
     return table
 
 
-def _stamp(text: str) -> str:
-    """The first line of the README table's stamp (a full ``--write`` run's), without what
-    earlier ``--only`` runs added."""
+#: What an ``--only`` run adds to the stamp: its scripts, its date and the rest of its clause.
+_ONLY_CLAUSE = re.compile(r" Rows of (.+?) re-measured on (\S+) (\(.*?\)\.)")
+
+
+def _stamp(text: str, only=()) -> str:
+    """The README table's stamp line: a full ``--write`` run's, with the clauses of earlier
+    ``--only`` runs, less the scripts in ``only`` (re-measured now; a clause left without
+    scripts goes)."""
     block = text[text.index(BEGIN) + len(BEGIN):text.index(END)]
     line = next(x for x in block.splitlines() if x.startswith("Measured with"))
-    return line.split(" Rows of ")[0]
+    head = line.split(" Rows of ")[0]
+    for scripts, date, rest in _ONLY_CLAUSE.findall(line):
+        kept = [x for x in scripts.split(", ") if x not in set(only)]
+        if kept:
+            head += f" Rows of {', '.join(kept)} re-measured on {date} {rest}"
+    return head
 
 
 def render(values: dict, stamp: str) -> str:
@@ -279,7 +289,7 @@ def main(argv=None):
                  f"average {load:.1f} at the start). `--check` re-runs every benchmark and "
                  "compares.")
         if args.only:  # say which rows this run measured; the others keep their stamp's
-            previous = _stamp(text)
+            previous = _stamp(text, args.only)
             stamp = (f"{previous} Rows of {', '.join(sorted(set(args.only)))} re-measured "
                      f"on {time.strftime('%Y-%m-%d')} (`--only`, load average {load:.1f} at "
                      "the start).")

@@ -84,6 +84,22 @@ def test_the_table_has_every_row_with_its_benchmark_and_interval():
         assert f"`python benchmarks/{' '.join(row.command)}`" in line
 
 
+def test_an_only_run_keeps_the_other_scripts_re_measured_before():
+    # the stamp of a --write --only run names every script re-measured since the full run,
+    # each with its own date: the scripts run now in a new clause, the others kept
+    timings = timings_module()
+    head = "Measured with `python benchmarks/readme_timings.py --write` on 2026-11-26 (x)."
+    line = (f"{head} Rows of bench_a.py, bench_b.py re-measured on 2026-11-27 (`--only`, "
+            "load average 1.0 at the start).")
+    text = f"{timings.BEGIN}\n\n{line}\n\n{timings.END}"
+    assert timings._stamp(text) == line
+    assert timings._stamp(text, ["bench_b.py"]) == (
+        f"{head} Rows of bench_a.py re-measured on 2026-11-27 (`--only`, load average 1.0 "
+        "at the start).")
+    assert timings._stamp(text, ["bench_a.py", "bench_b.py"]) == head
+    assert timings._stamp(f"{timings.BEGIN}\n{head}\n{timings.END}", ["bench_a.py"]) == head
+
+
 def test_the_rows_read_the_benchmarks_output():
     # a CI-sized run of the two cheapest benchmarks: every row they feed finds its line (a
     # benchmark whose output changed fails here, not only in --check on the idle machine)
