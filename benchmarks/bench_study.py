@@ -44,7 +44,11 @@ model: ``whatif_along_track`` the paired one) at its automatic step count
 circuit is that of the config without it: a circuit needs along_track). Each line gives
 balls/s of the along_track study, of the constant one, and their ratio (the cost per ball of
 along_track over that of constant). The along_track studies follow an assembly until its
-first contact (the circuit: over the whole stroke). Then ``configs/friction_yaw.toml`` and
+first contact (the circuit: over the whole stroke). For a carriage two lines more split the
+along_track study's time: its carriage solves (one per step and assembly, counted) and its
+evaluations (the errors at the balls, the solve and epsilon), each against the whole constant
+study per assembly; the second is the ratio that would remain if the integrator's own work
+(slots, exits and entries, gaps, contacts) cost nothing. Then ``configs/friction_yaw.toml`` and
 ``configs/carriage_preload.toml`` (also with a default circuit) along the track with
 ``[contact]`` against the same without it (the automatic step count is finer with
 ``[contact]``, except with a circuit: the steps are printed). Sizes are
@@ -158,11 +162,16 @@ def numpy_pipeline(config):
 def _count_carriage_solves():
     """Count the carriage solves of this process: every batched solve calls the compiled
     kernel through the name in :mod:`tolsim.physics.carriage.solve`, wrapped here to add the
-    assemblies it solves and its wall time to the returned dict."""
+    assemblies it solves and its wall time to the returned dict; and time the along-track
+    evaluations, each a call of ``tolsim.study.pipeline.carriage_track._Evaluation`` (the
+    errors at the balls, the carriage solve and epsilon of the balls of some assemblies at one
+    time, with or without a circuit), into ``evaluation_seconds``."""
     from tolsim.physics.carriage import solve
+    from tolsim.study.pipeline import carriage_track
 
-    tally = {"solve_assemblies": 0, "solve_seconds": 0.0}
+    tally = {"solve_assemblies": 0, "solve_seconds": 0.0, "evaluation_seconds": 0.0}
     kernel = solve.carriage_batch_kernel
+    evaluation = carriage_track._Evaluation.__call__
 
     def counted(*args):
         start = time.perf_counter()
@@ -170,7 +179,15 @@ def _count_carriage_solves():
         tally["solve_seconds"] += time.perf_counter() - start
         tally["solve_assemblies"] += len(args[-3])  # out_status: one per assembly
 
+    def timed(self, *args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return evaluation(self, *args, **kwargs)
+        finally:
+            tally["evaluation_seconds"] += time.perf_counter() - start
+
     solve.carriage_batch_kernel = counted
+    carriage_track._Evaluation.__call__ = timed
     return tally
 
 
@@ -357,6 +374,12 @@ def along_track(sizes, constant_factor=None):
                 print(f"    carriage solves per assembly {_solves(along)} along_track, "
                       f"{_solves(const)} constant; the along_track solves alone cost "
                       f"{alone:.1f}x the whole constant study per assembly")
+                evaluations = (along["evaluation_seconds"] / along["assemblies"]) / (
+                    const["seconds"] / const["assemblies"])
+                print(f"    its evaluations alone (the errors at the balls, the solve and "
+                      f"epsilon; {along['evaluation_seconds'] / along['seconds']:.0%} of the "
+                      f"run) cost {evaluations:.1f}x the whole constant study per assembly: "
+                      "the ratio if the integrator's own work cost nothing")
     print(f"tolsim along_track study after contact, with and without [contact]; one worker, "
           f"{os.cpu_count()} cores")
     for config, plain, with_contact, name in (

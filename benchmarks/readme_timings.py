@@ -158,6 +158,11 @@ ROWS = (
         "constant study, per assembly", ALONG_STUDY,
         _ALONG.format(r"carriage_preload\.toml", "carriage")
         + r".*\n\s+carriage solves per assembly.*?solves alone cost ([\d.]+)x", "×", 1),
+    Row("along_carriage_evaluations",
+        "carriage: its evaluations alone (errors at the balls, carriage solve, epsilon; one per "
+        "step and assembly) against the whole constant study, per assembly", ALONG_STUDY,
+        _ALONG.format(r"carriage_preload\.toml", "carriage")
+        + r".*\n.*\n\s+its evaluations alone.*? cost ([\d.]+)x", "×", 1),
     Row("cold", "default study on a cold kernel cache against a warm one (CPU)", COLD,
         r"cold / warm: \S+ \(wall\), ([\d.]+) \(CPU\)", "×", 1),
     Row("warmed", "the same after `tolsim warmup` (wall)", COLD,
