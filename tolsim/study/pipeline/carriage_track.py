@@ -249,10 +249,10 @@ class _Evaluation:
         rail errors under them and the sizes of the ball that entered and the one that left
         differ. Started there (the solve nearest to t - period, within period / 8), the
         Newton took 2.60 steps instead of 2.98 at the default tolerances and 2.10 instead of
-        2.79 at 1e-8 (:data:`TRACK_TOLERANCE` then; the same study, 1 024 assemblies, seed 12). With
-        solves closer than a quarter pitch (an end relief, ``[contact]``) the line is kept:
-        most pairs of solves have no entry between them, and measured in session 12 it gave
-        2.74 steps instead of 3.0 at 20 steps per stroke.
+        2.79 at 1e-8 (:data:`TRACK_TOLERANCE` then; the same study, 1 024 assemblies, seed
+        12). With solves closer than a quarter pitch (an end relief, ``[contact]``) the line
+        is kept: most pairs of solves have no entry between them, and measured in session 12
+        it gave 2.74 steps instead of 3.0 at 20 steps per stroke.
         The Newton's convergence test is the same either way, so the solution changes only
         within its tolerance, and an assembly's start depends only on its own history (not on
         the batch, chunking or threads).
