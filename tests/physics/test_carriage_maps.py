@@ -7,8 +7,10 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.physics.carriage import CarriageLayout
 from tolsim.physics.carriage._map_kernels import (
-    assembly_groove_maps,
-    gram,
+    assembly_groove_rows,
+    formed_pivot,
+    gram_diagonal,
+    gram_of_rows,
     largest_eigenvalue,
     singular_pivot,
     trace_bounds,
@@ -19,7 +21,7 @@ def _bits(x):
     return np.ascontiguousarray(x).view(np.uint64)
 
 
-def test_assembly_groove_maps_are_the_numpy_maps_bit_for_bit():
+def test_assembly_groove_rows_are_the_numpy_maps_bit_for_bit():
     # source: the NumPy chain they replace in solve_carriage_batch (groove_map_at times the
     # DOF scales, np.where on the unloaded balls, z / L); tolerance: the
     # bits (same operations element by element), -0.0 included
@@ -40,11 +42,12 @@ def test_assembly_groove_maps_are_the_numpy_maps_bit_for_bit():
     c, s = np.cos(layout.track_orientation), np.sin(layout.track_orientation)
     x, y = layout.track_x, layout.track_y
     track = np.stack([c, s, -s, -c, s * x - c * y, c * x + s * y], axis=1)
-    out = np.empty((m, nball, 2, 5)), np.empty((m, nball))
+    out = np.empty((m, 10, nball)), np.empty((m, nball))
     for a in range(m):  # as the batch kernel calls it, one assembly at a time
-        assembly_groove_maps(z[a].reshape(-1), loaded[a].reshape(-1), track, scale, length,
+        assembly_groove_rows(z[a].reshape(-1), loaded[a].reshape(-1), track, scale, length,
                              out[0][a], out[1][a])
-    for got, want in zip(out, (a_s, zeta), strict=True):
+    rows = a_s.reshape(m, nball, 10).transpose(0, 2, 1)  # row 5 c + j: A[:, c, j]
+    for got, want in zip(out, (rows, zeta), strict=True):
         assert_array_equal(_bits(got), _bits(want))
 
 
@@ -55,12 +58,18 @@ def test_gram_is_the_sum_of_the_balls_a_transpose_a():
     rng = np.random.default_rng(5)
     maps = rng.normal(0.0, 1.0, (26, 2, 5))
     maps[3] = 0.0  # a ball outside the zone
+    rows = np.ascontiguousarray(maps.reshape(26, 10).T)  # row 5 c + j: A[:, c, j]
     got = np.empty((5, 5))
-    gram(maps, got)
+    gram_of_rows(rows, got)
     flat = maps.reshape(-1, 5)
     want = flat.T @ flat
     assert_allclose(got, want, rtol=0, atol=1e-15 * np.abs(want).max())
     assert_array_equal(got, got.T)
+    # its diagonal alone: the same sums to the bit, the rest NaN (not formed)
+    diagonal = np.empty((5, 5))
+    gram_diagonal(rows, diagonal)
+    assert_array_equal(_bits(np.diag(diagonal)), _bits(np.diag(got)))
+    assert np.isnan(diagonal[~np.eye(5, dtype=bool)]).all()
 
 
 def _largest(mats, free):
@@ -106,3 +115,34 @@ def test_singular_pivot_is_the_eigenvalue_test():
                 not pivot > exact)
             computed += not np.isnan(threshold[2])
     assert computed > 0  # the window between the bounds was met
+
+
+def test_formed_pivot_forms_the_gram_only_when_the_eigenvalue_is_needed():
+    # source: singular_pivot on the whole sum_b A_b^T A_b (test above); tolerance: the same
+    # answer for every pivot, the matrix formed (bit for bit that of gram_of_rows) exactly
+    # for the pivots between the trace bounds and left with its diagonal alone elsewhere
+    rng = np.random.default_rng(8)
+    # row 5 c + j: A[:, c, j]; the rotations' columns small, as scaled maps of a carriage
+    rows = rng.normal(size=(10, 24)) * np.tile([1.0, 1.0, 0.01, 0.01, 0.01], 2)[:, None]
+    full = np.empty((5, 5))
+    gram_of_rows(rows, full)
+    free, k_ref, work = np.arange(5), 3.7e7, np.empty((5, 5))
+    exact = 1e-10 * k_ref * np.linalg.eigvalsh(full)[-1]
+    formed = 0
+    for pivot in np.concatenate([exact * np.geomspace(1e-4, 1e4, 41), [np.nan, 0.0]]):
+        if abs(pivot / exact - 1.0) <= 1e-12:
+            continue
+        geometric, threshold, ref = np.empty((5, 5)), np.empty(3), np.empty(3)
+        gram_diagonal(rows, geometric)
+        trace_bounds(geometric, free, k_ref, threshold)
+        trace_bounds(full, free, k_ref, ref)
+        assert_array_equal(_bits(threshold[:2]), _bits(ref[:2]))
+        between = threshold[0] < pivot <= threshold[1]
+        assert formed_pivot(pivot, threshold, geometric, rows, free, k_ref, work) == (
+            singular_pivot(pivot, ref, full, free, k_ref, work)) == (not pivot > exact)
+        if between:
+            assert_array_equal(_bits(geometric), _bits(full))
+            formed += 1
+        else:
+            assert np.isnan(geometric[0, 1])
+    assert formed > 0  # the window between the bounds was met

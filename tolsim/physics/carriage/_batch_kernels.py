@@ -18,9 +18,10 @@ from tolsim.physics.carriage._kernels import (
     schur_complement,
 )
 from tolsim.physics.carriage._map_kernels import (
-    assembly_groove_maps,
-    gram,
-    singular_pivot,
+    assembly_groove_rows,
+    formed_pivot,
+    gram_diagonal,
+    gram_of_rows,
     trace_bounds,
 )
 from tolsim.physics.static import (
@@ -483,8 +484,8 @@ def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, max_iter,
         if it >= max_iter:
             return -1
         it += 1
-        if singular_pivot(cholesky(tangent[0], free, low), singular, geometric, free, k_ref,
-                          eig_work):
+        if formed_pivot(cholesky(tangent[0], free, low), singular, geometric, amap, free, k_ref,
+                        eig_work):
             return -1
         cholesky_solve(low, free, reduced, step)
         move = 0.0
@@ -629,10 +630,12 @@ def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric
     (m or 1, 5, 5) sum_b A_b^T A_b and ``geometric_maxs`` (m or 1,) the largest eigenvalue of
     its free block, or NaN: then computed only if a pivot needs it (:func:`singular_pivot`).
     Balls at their own z instead: ``ball_z`` (m, n_balls) [m] (else (0, n_balls)), whose
-    maps, z / L and sum_b A_b^T A_b the kernel forms per assembly (:func:`assembly_groove_maps`
-    with ``tracks`` (n_tracks, 6) and ``length`` L, :func:`gram`; the largest eigenvalue then
-    only if a pivot needs it); ``groove_maps``, ``zetas``, ``geometrics`` and
-    ``geometric_maxs`` are then not read;
+    maps (by rows, into the scratch ``amap``) and z / L the kernel forms per assembly
+    (:func:`assembly_groove_rows` with ``tracks`` (n_tracks, 6) and ``length`` L), and of
+    sum_b A_b^T A_b the diagonal (:func:`gram_diagonal`, for the trace bounds), the whole of it
+    only if a pivot needs its largest eigenvalue (:func:`formed_pivot`) or the nested Newton
+    takes over; ``groove_maps``, ``zetas``, ``geometrics`` and ``geometric_maxs`` are then not
+    read;
     ``loaded`` (m or 1, n_balls) marks the balls in the loaded zone. A ball
     that is not loaded has zero rows in A and a radius of R_B - d/2 in the kernel (no flank
     touches it, so it carries and transmits nothing); its outputs are overwritten: no force,
@@ -687,18 +690,19 @@ def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric
             il = a if load.shape[0] > 1 else 0
             i_s = a if start.shape[0] > 1 else 0
             iz = a if loaded.shape[0] > 1 else 0
-            if moving:  # the balls' own maps, at their own z
-                assembly_groove_maps(ball_z[a], loaded[iz], tracks, scale, length, own_map,
+            if moving:  # the balls' own maps (by rows), at their own z; of sum_b A_b^T A_b
+                # its diagonal, the rest when needed (formed_pivot, the nested fallback)
+                assembly_groove_rows(ball_z[a], loaded[iz], tracks, scale, length, amap,
                                      own_zeta)
-                gram(own_map, own_geometric)
+                gram_diagonal(amap, own_geometric)
                 groove_map, zeta, geometric, geometric_max = (own_map, own_zeta,
                                                               own_geometric, np.nan)
             else:
                 ig = a if groove_maps.shape[0] > 1 else 0
                 groove_map, zeta = groove_maps[ig], zetas[ig]
                 geometric, geometric_max = geometrics[ig], geometric_maxs[ig]
-            if moving or groove_maps.shape[0] > 1 or a == tile * _ASSEMBLY_TILE:  # A by rows
-                for b in range(nball):
+            if not moving and (groove_maps.shape[0] > 1 or a == tile * _ASSEMBLY_TILE):
+                for b in range(nball):  # A by rows
                     for c in range(2):
                         for j in range(5):
                             amap[5 * c + j, b] = groove_map[b, c, j]
@@ -759,6 +763,13 @@ def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric
             else:
                 for j in range(5):
                     q[j] = start[i_s, j]
+                if moving:  # the maps by balls and the whole sum_b A_b^T A_b
+                    for b in range(nball):
+                        for c in range(2):
+                            for j in range(5):
+                                own_map[b, c, j] = amap[5 * c + j, b]
+                    if np.isnan(own_geometric[0, 1]):
+                        gram_of_rows(amap, own_geometric)
                 for b in range(nball):
                     arc_centres(a * nball + b, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0,
                                 dist, base[b])

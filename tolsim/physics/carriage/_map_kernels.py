@@ -1,5 +1,6 @@
 """Numba kernels of the batched carriage solve: the groove maps of balls at their own z and
-their sum_b A_b^T A_b, and the singular-tangent test against its largest eigenvalue."""
+their sum_b A_b^T A_b (its diagonal first, the rest when needed), and the singular-tangent
+test against its largest eigenvalue."""
 
 import numpy as np
 
@@ -10,18 +11,18 @@ _JACOBI_SWEEPS = 30
 
 
 @jit(inline="always")
-def assembly_groove_maps(z, loaded, track, scale, length, maps, zetas):
-    """Scaled groove maps of one assembly's balls at their own axial positions, for
+def assembly_groove_rows(z, loaded, track, scale, length, rows, zetas):
+    """Scaled groove maps of one assembly's balls at their own axial positions, by rows, for
     :func:`tolsim.physics.carriage._batch_kernels.carriage_batch_kernel`.
 
     ``z`` (n_balls,) [m] and ``loaded`` (n_balls,) the balls (ball b = t n + j); ``track``
     (n_tracks, 6) per track c, s (cos and sin of its orientation), -s, -c, s x - c y and
     c x + s y [m]; ``scale`` (5,) the DOF scales, ``length`` [m] the layout's length scale.
-    Writes ``maps`` (n_balls, 2, 5) the rows of A = E_t^T B(p) at each ball's z times
-    ``scale`` (0 for a ball that is not loaded) and ``zetas`` (n_balls,) z / ``length``. The
-    same operations, element by element, as
-    :meth:`tolsim.physics.carriage.CarriageLayout.groove_map_at` times ``scale`` with
-    ``np.where`` on the unloaded balls."""
+    Writes ``rows`` (10, n_balls), row 5 c + j holding A[:, c, j] (the layout of the joint
+    Newton's ``amap``), the rows of A = E_t^T B(p) at each ball's z times ``scale`` (0 for a
+    ball that is not loaded), and ``zetas`` (n_balls,) z / ``length``. The same operations,
+    element by element, as :meth:`tolsim.physics.carriage.CarriageLayout.groove_map_at` times
+    ``scale`` with ``np.where`` on the unloaded balls."""
     tracks = track.shape[0]
     n = z.shape[0] // tracks
     for t in range(tracks):
@@ -32,30 +33,44 @@ def assembly_groove_maps(z, loaded, track, scale, length, maps, zetas):
             zz = z[b]
             zetas[b] = zz / length
             for k in range(10):
-                maps[b, k // 5, k % 5] = 0.0
+                rows[k, b] = 0.0
             if loaded[b]:
-                maps[b, 0, 0] = c * scale[0]
-                maps[b, 0, 1] = s * scale[1]
-                maps[b, 0, 2] = (ms * zz) * scale[2]
-                maps[b, 0, 3] = (c * zz) * scale[3]
-                maps[b, 0, 4] = gx * scale[4]
-                maps[b, 1, 0] = ms * scale[0]
-                maps[b, 1, 1] = c * scale[1]
-                maps[b, 1, 2] = (mc * zz) * scale[2]
-                maps[b, 1, 3] = (ms * zz) * scale[3]
-                maps[b, 1, 4] = gy * scale[4]
+                rows[0, b] = c * scale[0]
+                rows[1, b] = s * scale[1]
+                rows[2, b] = (ms * zz) * scale[2]
+                rows[3, b] = (c * zz) * scale[3]
+                rows[4, b] = gx * scale[4]
+                rows[5, b] = ms * scale[0]
+                rows[6, b] = c * scale[1]
+                rows[7, b] = (mc * zz) * scale[2]
+                rows[8, b] = (ms * zz) * scale[3]
+                rows[9, b] = gy * scale[4]
 
 
 @jit(inline="always")
-def gram(maps, out):
-    """``out`` (5, 5) = sum_b A_b^T A_b of the maps (n_balls, 2, 5), rows summed in order."""
+def gram_of_rows(rows, out):
+    """``out`` (5, 5) = sum_b A_b^T A_b of maps given by rows (10, n_balls), the balls summed
+    in order."""
     for k in range(5):
         for l in range(k, 5):
             total = 0.0
-            for b in range(maps.shape[0]):
-                total += maps[b, 0, k] * maps[b, 0, l] + maps[b, 1, k] * maps[b, 1, l]
+            for b in range(rows.shape[1]):
+                total += rows[k, b] * rows[l, b] + rows[5 + k, b] * rows[5 + l, b]
             out[k, l] = total
             out[l, k] = total
+
+
+@jit(inline="always")
+def gram_diagonal(rows, out):
+    """The diagonal of :func:`gram_of_rows` (the same sums), all that :func:`trace_bounds`
+    reads; the other entries NaN, marking ``out`` as not formed (:func:`formed_pivot`)."""
+    for k in range(5):
+        total = 0.0
+        for b in range(rows.shape[1]):
+            total += rows[k, b] * rows[k, b] + rows[5 + k, b] * rows[5 + k, b]
+        for l in range(5):
+            out[k, l] = np.nan
+        out[k, k] = total
 
 
 @jit(inline="always")
@@ -157,3 +172,15 @@ def singular_pivot(pmin, threshold, geometric, free, k_ref, work):
     if np.isnan(threshold[2]):
         threshold[2] = 1e-10 * k_ref * largest_eigenvalue(geometric, free, work)
     return not pmin > threshold[2]
+
+
+@jit(inline="always")
+def formed_pivot(pmin, threshold, geometric, rows, free, k_ref, work):
+    """:func:`singular_pivot` for a ``geometric`` that may hold only its diagonal
+    (:func:`gram_diagonal`: NaN elsewhere): formed from ``rows`` by :func:`gram_of_rows`,
+    in place, when the test needs its largest eigenvalue (a pivot between the trace
+    bounds), so the answer is that of the formed matrix."""
+    if (np.isnan(geometric[0, 1]) and np.isnan(threshold[2]) and pmin > threshold[0]
+            and not pmin > threshold[1]):
+        gram_of_rows(rows, geometric)
+    return singular_pivot(pmin, threshold, geometric, free, k_ref, work)

@@ -123,7 +123,7 @@ def _batch_inputs(layout, oversize, groove_errors, bearing):
 
 def _track_rows(layout):
     """(n_tracks, 6) c, s, -s, -c, s x - c y, c x + s y of each track (c, s: cos and sin of
-    its orientation) for ``assembly_groove_maps``, as :meth:`CarriageLayout.groove_map_at`
+    its orientation) for ``assembly_groove_rows``, as :meth:`CarriageLayout.groove_map_at`
     forms them."""
     c, s = np.cos(layout.track_orientation), np.sin(layout.track_orientation)
     x, y = layout.track_x, layout.track_y
@@ -677,13 +677,14 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
 
     The locked DOFs are those of the layout's nominal balls, whatever ``ball_z`` and
     ``loaded``. Without ``ball_z`` and ``loaded`` the solve is exactly the one of the fixed
-    nominal balls (bit-identical); with them, the kernel forms the groove map A and
-    sum_b A_b^T A_b of each assembly as it solves it (:func:`tolsim.physics.carriage.
-    _map_kernels.assembly_groove_maps` and :func:`tolsim.physics.carriage._map_kernels.gram`:
-    no array of every assembly's maps is written; about 8 % of an along-track carriage
-    study), and the largest eigenvalue of the latter only where a tangent's pivot needs it
-    (between bounds from its trace: :func:`tolsim.physics.carriage._map_kernels.
-    singular_pivot`).
+    nominal balls (bit-identical); with them, the kernel forms the groove map A of each
+    assembly as it solves it (:func:`tolsim.physics.carriage._map_kernels.
+    assembly_groove_rows`: no array of every assembly's maps is written) and of
+    sum_b A_b^T A_b only the diagonal, which the trace bounds read
+    (:func:`tolsim.physics.carriage._map_kernels.gram_diagonal`); the whole of it, and its
+    largest eigenvalue, only where a tangent's pivot lies between those bounds
+    (:func:`tolsim.physics.carriage._map_kernels.formed_pivot`) or the nested Newton takes
+    over (it regularises with it).
     """
     check_solver_options(tol, max_iter)
     check_solver_options(ball_tol, ball_max_iter)

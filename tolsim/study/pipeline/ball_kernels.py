@@ -290,6 +290,22 @@ def _gather_ball(dbeta, force, ball_converged, solved, a, t, j, k, out_dbeta, ou
     out_four_point[k] = four
 
 
+@jit(inline="always")
+def row_starts(loaded):
+    """The index of each row's first loaded ball among the loaded balls of ``loaded`` (m, T,
+    S) in C order, and their number: (m + 1,)."""
+    m, tracks, slots = loaded.shape
+    start = np.empty(m + 1, dtype=np.int64)
+    start[0] = 0
+    for a in range(m):
+        c = 0
+        for t in range(tracks):
+            for j in range(slots):
+                c += loaded[a, t, j]
+        start[a + 1] = start[a] + c
+    return start
+
+
 @pjit
 def gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit, nominal_angle,
                            ball_radius, semi_major_coefficient, elliptic_e, k_f, max_ratio,
@@ -310,14 +326,7 @@ def gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit, 
     """
     m, tracks, slots = loaded.shape
     per_row = tracks * slots
-    start = np.empty(m + 1, dtype=np.int64)  # each row's first loaded ball
-    start[0] = 0
-    for a in range(m):
-        c = 0
-        for t in range(tracks):
-            for j in range(slots):
-                c += loaded[a, t, j]
-        start[a + 1] = start[a] + c
+    start = row_starts(loaded)
     rows = max(1, ANALYTIC_TILE // per_row)  # the rows of a tile: at most one tile of balls
     tile = max(ANALYTIC_TILE, per_row)
     settled = 0
@@ -350,17 +359,19 @@ def gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved, limit, 
     return settled
 
 
-@jit
+@pjit
 def scatter_loaded_balls_kernel(loaded, eps, valid, regime, regime_unloaded, pushes, out_eps,
                                 out_ok, out_unloaded):
     """The loaded balls' outcomes in their slots (m, T, S), in C order (as ``out[loaded] =
     values`` of each, in one pass): ``out_eps`` epsilon (NaN where not loaded),
     ``out_unloaded`` regime == ``regime_unloaded`` (False where not loaded) and ``out_ok``
     ``valid``, or unloaded too if ``pushes`` (an unloaded ball is accounted for, pushed
-    along; True where not loaded)."""
+    along; True where not loaded). The rows run on Numba's threads, each from its first
+    loaded ball (:func:`row_starts`)."""
     m, tracks, slots = loaded.shape
-    k = 0
-    for a in range(m):
+    start = row_starts(loaded)
+    for a in prange(m):
+        k = start[a]
         for t in range(tracks):
             for j in range(slots):
                 if loaded[a, t, j]:

@@ -5,7 +5,11 @@ flags carried to new slots by their ids, each assembly's Newton start and the st
 contacts.
 
 Each kernel does in one pass, element by element, what a chain of NumPy calls did: the same
-comparisons and the same values, so the results are bit-identical to those calls."""
+comparisons and the same values, so the results are bit-identical to those calls. The
+``pjit`` kernels run their rows (assemblies) on Numba's threads; each row writes only its own
+entries (``rows`` are distinct assemblies), so the results do not depend on the thread count
+either. (The kernels over flat arrays, and those that do little per row, stay serial: on two
+cores their threads cost more than they saved.)"""
 
 import numpy as np
 from numba import prange
@@ -321,7 +325,7 @@ def remember_kernel(rows, t, displacement, solved, start, solution, solved_at):
                 solved_at[i, r] = np.nan
 
 
-@jit
+@pjit
 def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, dt, balls,
                          time, pair, valid, searching, closed):
     """The first contacts of a step (:class:`tolsim.study.pipeline.carriage_track.
@@ -338,7 +342,7 @@ def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, 
     (:func:`entry_shift_kernel`; NaN elsewhere) counts as closing then.
     """
     m, tracks, pairs = gap0.shape
-    for a in range(m):
+    for a in prange(m):
         r = rows[a]
         searching[a] = not np.isfinite(time[r])
         if not searching[a]:
@@ -382,7 +386,7 @@ def carriage_motion_kernel(position, w, h, v, out):
         out[i] = position[i] - h * (1.0 - nan_to_num_one(w[i])) * 0.5 * v
 
 
-@jit
+@pjit
 def entering_by_kernel(z, ball_id, rows, count, entered, entering_gap, half_zone, diameter,
                        balls, out_z, out_id, out_entering):
     """The slots (m_k, T, S) at positions ``z`` with the balls that have entered by then.
@@ -396,7 +400,7 @@ def entering_by_kernel(z, ball_id, rows, count, entered, entering_gap, half_zone
     """
     m, tracks, slots = z.shape
     capacity = entering_gap.shape[2]
-    for r in range(m):
+    for r in prange(m):
         a = rows[r]
         for tr in range(tracks):
             for j in range(slots):
@@ -413,7 +417,7 @@ def entering_by_kernel(z, ball_id, rows, count, entered, entering_gap, half_zone
                 k += 1
 
 
-@jit
+@pjit
 def entry_shift_kernel(position, free, take, eps, entry_time, entry_velocity, rows, t,
                        diameter, half_v, out_closed):
     """An entering ball's own motion from its entry, in place (rows m_k, T, S).
@@ -429,7 +433,7 @@ def entry_shift_kernel(position, free, take, eps, entry_time, entry_velocity, ro
     (t - tau, t] at which it closed (linear in between; tau the later entry's); NaN elsewhere.
     """
     m, tracks, slots = position.shape
-    for r in range(m):
+    for r in prange(m):
         a = rows[r]
         for tr in range(tracks):
             for j in range(slots - 1):
