@@ -163,6 +163,11 @@ ROWS = (
         "step and assembly) against the whole constant study, per assembly", ALONG_STUDY,
         _ALONG.format(r"carriage_preload\.toml", "carriage")
         + r".*\n.*\n\s+its evaluations alone.*? cost ([\d.]+)x", "×", 1),
+    Row("along_circuit_evaluations",
+        "the same with a default `[carriage.circuit]` (the ratio if its ring steps and the "
+        "rest of the integrator cost nothing)", ALONG_STUDY,
+        _ALONG.format(r"carriage_preload\.toml", r"carriage with \[carriage\.circuit\]")
+        + r".*\n.*\n\s+its evaluations alone.*? cost ([\d.]+)x", "×", 1),
     Row("cold", "default study on a cold kernel cache against a warm one (CPU)", COLD,
         r"cold / warm: \S+ \(wall\), ([\d.]+) \(CPU\)", "×", 1),
     Row("warmed", "the same after `tolsim warmup` (wall)", COLD,
