@@ -495,3 +495,18 @@ def test_the_start_s_creep_stiffness_is_the_previous_midpoint_s():
     assert_array_equal(runs[0][0], runs[1][0])
     assert_array_equal(runs[0][1], runs[1][1])
     assert runs[0][2] < runs[1][2]  # the reuse happened
+
+
+def test_a_circuit_study_does_not_depend_on_the_thread_count(other_thread_count):
+    # The circuits' kernels run their rows on Numba's threads, each row writing only its own
+    # entries (circuit_kernels module docstring): on one thread every output of the study is
+    # bit-identical to the ambient thread count's (16 circuits, so both threads get rows).
+    c = config(samples=8, drag=0.05)
+    ambient = first_contact_carriage_circuit(c, sample_block(c, 0))
+    serial = other_thread_count(first_contact_carriage_circuit, c, sample_block(c, 0))
+    assert np.isfinite(ambient[0]).sum() >= 1  # contacts happen
+    for k in range(3):
+        assert_array_equal(serial[k], ambient[k])
+    assert_array_equal(serial[4].velocity_deviation, ambient[4].velocity_deviation)
+    for name in ("where_count", "column_max", "column_mean", "total_gap_end", "slack_error"):
+        assert_array_equal(getattr(serial[-1], name), getattr(ambient[-1], name), err_msg=name)

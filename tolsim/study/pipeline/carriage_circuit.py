@@ -13,8 +13,9 @@ move by the circuit's step, not by the free motion and fresh entering balls) and
 """
 
 import numpy as np
+from numba import prange
 
-from tolsim._jit import jit, kernel_array
+from tolsim._jit import kernel_array, pjit
 from tolsim.physics.circuit import (
     STATUS_ITERATIONS,
     STATUS_JAMMED,
@@ -68,16 +69,17 @@ def circuit_ball_ids(balls: int, circuit_balls: int) -> np.ndarray:
     return np.where(ring < balls, balls - 1 - ring, ring)
 
 
-@jit
+@pjit
 def slots_kernel(position, loaded, length, circuits, half_zone, ring_id, ring_ok, out_z,
                  out_id, out_ring, out_ok, out_count):
     """The loaded balls of the circuits ``circuits`` (K,) of (C, N) arrays as carriage slots
     (K, S) in z order (trailing first): z = L_z / 2 - (sigma mod L_c), the study id, the ring
     index and ``ring_ok`` of each (NaN, -1, -1, True past ``out_count``); ``out_count`` is set
-    to -1 where a circuit has more loaded balls than slots."""
+    to -1 where a circuit has more loaded balls than slots. The circuits run on Numba's
+    threads, each writing only its own row."""
     n = position.shape[1]
     slots = out_z.shape[1]
-    for c in range(len(circuits)):
+    for c in prange(len(circuits)):
         line = circuits[c]
         count = 0
         for r in range(n):

@@ -9,12 +9,15 @@ did: the same comparisons and the same values (a float ``%`` as ``np.mod``, or
 :func:`tolsim.physics.circuit.wrap`, which is ``%``), so the results are bit-identical to
 those calls. The entry kernels (``midpoint_entering_kernel``, ``entering_inputs_kernel``,
 ``late_entry_kernel``, ``late_entries_kernel``) have no NumPy twin; their tests work their
-values by hand (``tests/study/test_circuit_entry.py``).
+values by hand (``tests/study/test_circuit_entry.py``). The ``pjit`` kernels run their
+circuits (or slot rows) on Numba's threads, each writing only its own row, so the results do
+not depend on the thread count.
 """
 
 import numpy as np
+from numba import prange
 
-from tolsim._jit import jit
+from tolsim._jit import jit, pjit
 from tolsim.physics.circuit import wrap
 
 
@@ -64,7 +67,7 @@ def assembly_stiffness_kernel(stiffness, tracks, out):
             out[c] = value
 
 
-@jit
+@pjit
 def ring_inputs_kernel(slot_ring, eps, stiffness, fallback, pushed, unresolved, loaded,
                        ring_ok, out_eps, out_k, out_pushed):
     """The circuits' step inputs (C, N) in ring order from the slots (C, S) of
@@ -78,7 +81,7 @@ def ring_inputs_kernel(slot_ring, eps, stiffness, fallback, pushed, unresolved, 
     balls from the entry ball (:func:`entering_fill_kernel`)."""
     circuits, n = out_eps.shape
     slots = slot_ring.shape[1]
-    for c in range(circuits):
+    for c in prange(circuits):
         for r in range(n):
             out_eps[c, r] = 0.0
             out_k[c, r] = fallback[c]
@@ -95,7 +98,7 @@ def ring_inputs_kernel(slot_ring, eps, stiffness, fallback, pushed, unresolved, 
     entering_fill_kernel(loaded, out_eps, out_k, out_pushed)
 
 
-@jit
+@pjit
 def circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, length, zone, ring_id,
                           previous_id, slot_ring, t, dt, crossed, v, exit_id, exit_time,
                           entry_id, entry_time):
@@ -105,7 +108,7 @@ def circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, length, zone, ring_i
     exact = crossed.shape[0] > 0
     circuits, n = sigma0.shape
     slots = previous_id.shape[1]
-    for c in range(circuits):
+    for c in prange(circuits):
         for j in range(slots):
             exit_id[c, j] = -1
             entry_id[c, j] = -1
@@ -137,13 +140,13 @@ def circuit_events_kernel(sigma0, sigma1, loaded0, loaded1, length, zone, ring_i
                         break
 
 
-@jit
+@pjit
 def circuit_gaps_kernel(sigma, diameter, length, circuits, out):
     """Gaps (K, N) of the circuits ``circuits`` (K,) of (C, N) arrays [m], ring order (gap c
     between balls c and c + 1; the last one across L_c), as
     :meth:`tolsim.study.pipeline.carriage_circuit.CircuitFrame.gaps`."""
     n = sigma.shape[1]
-    for i in range(len(circuits)):
+    for i in prange(len(circuits)):
         c = circuits[i]
         for r in range(n):
             r1 = r + 1 if r + 1 < n else 0
@@ -151,7 +154,7 @@ def circuit_gaps_kernel(sigma, diameter, length, circuits, out):
             out[i, r] = ahead - sigma[c, r] - 0.5 * (diameter[c, r] + diameter[c, r1])
 
 
-@jit
+@pjit
 def step_contacts_kernel(ok, loaded, closed, force, pair, where, travel, v, t_end, codes,
                          entry_time, out_count, out_time, out_pair):
     """The contacts of a circuit step (:meth:`tolsim.study.pipeline.carriage_circuit.
@@ -173,7 +176,7 @@ def step_contacts_kernel(ok, loaded, closed, force, pair, where, travel, v, t_en
     """
     circuits, n = ok.shape
     events = pair.shape[1]
-    for c in range(circuits):
+    for c in prange(circuits):
         for code in range(codes):
             out_count[c, code] = 0
         t_min = np.inf
@@ -251,7 +254,7 @@ def circuit_figures_kernel(rows, tracks, hits, column, travel, where_count, colu
             column_mean[row, e] += mean * travel
 
 
-@jit
+@pjit
 def midpoint_entering_kernel(z, ball_id, slot_ring, count, circuits, sigma, ring_loaded,
                              ring_speed, length, diameter, half_zone, travel, ring_id, out_z,
                              out_id, out_ring, out_entering):
@@ -271,7 +274,7 @@ def midpoint_entering_kernel(z, ball_id, slot_ring, count, circuits, sigma, ring
     """
     m, tracks, slots = z.shape
     n = sigma.shape[1]
-    for r in range(m):
+    for r in prange(m):
         for tr in range(tracks):
             for j in range(slots):
                 out_z[r, tr, j] = z[r, tr, j]
