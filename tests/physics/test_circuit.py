@@ -235,6 +235,56 @@ def test_conservation_order_identity_and_size():
     assert not record.status.any()
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_invariants_hold_at_the_edges_of_the_design_space(seed):
+    # Notes, "Gaps and conservation", on random circuits far from the shipped configs: 3 to 40
+    # balls, a zone of 1 to N - 1 of them, slack from 0 to 5 cm in gaps from even to nearly
+    # all in one, drag from 0 to 5 N per ball, up to half the balls pushed, |eps| up to a few
+    # per cent, K from 50 to 900 N, steps from 1e-5 to 0.03 m, forward and reversed. At every
+    # step: sum g_k = slack to 1e-12 m, g_k >= -1e-12 m (order kept, no overlap), every ball
+    # moves with the flow (not against it by more than rounding), every force finite and
+    # >= 0, and the event loop finishes within its capacity. A loaded ball cannot be jammed
+    # (STATUS_JAMMED) while N f < 2 K_min xi_min, the least push one loaded ball gives a
+    # resting column (eq. 5: xi = (sum 2 K xi_free - U f) / sum 2 K > 0): checked where so.
+    rng = np.random.default_rng(np.random.SeedSequence([24, seed]))
+    checked = jam_free = 0
+    for _ in range(12):
+        m, n = 16, int(rng.integers(3, 41))
+        zone = int(rng.integers(1, n)) * D * rng.uniform(1.0, 1.02)
+        slack = float(rng.choice([0.0, 1e-6, 1e-4, 1e-3, 1e-2, 0.05]))
+        diameter = D + rng.uniform(-2e-6, 2e-6, (m, n))
+        gap = rng.dirichlet(np.full(n, rng.choice([0.1, 0.5, 2.0])), m) * slack
+        state = circuit.circuit_state(diameter, gap, zone,
+                                      first_position=rng.uniform(-0.2, 0.2, m),
+                                      speed=rng.uniform(0.0, 0.6, (m, n)))
+        drag = float(rng.choice([0.0, 0.02, 0.3, 5.0]))
+        pushed = rng.random((m, n)) < rng.choice([0.0, 0.1, 0.5])
+        sign = rng.choice([1.0, -1.0])
+        slack_of = state.slack
+        for i in range(int(rng.integers(3, 12))):
+            eps = rng.normal(0.0, rng.choice([1e-5, 1e-3, 1e-2]), (m, n))
+            stiffness = rng.uniform(50.0, 900.0, (m, n))
+            travel = sign * rng.choice([1e-5, 1e-3, 5e-3, 0.03])
+            got = circuit.step(state, eps, stiffness, travel, drag, travel_start=i * travel,
+                               event_capacity=4 * n, pushed=pushed)
+            gaps = got.state.gap()
+            assert_allclose(gaps.sum(axis=1), slack_of, rtol=0, atol=1e-12)
+            assert gaps.min() >= -1e-12
+            assert (sign * (got.state.position - state.position)).min() >= -1e-12
+            for force in (got.contact_force, got.mean_contact_force, got.entry_force,
+                          got.exit_force, got.entry_force_mean, got.exit_force_mean):
+                assert np.isfinite(force).all() and force.min() >= 0.0
+            assert not (got.status & (circuit.STATUS_ITERATIONS
+                                      | circuit.STATUS_EVENT_OVERFLOW)).any()
+            slowest = 0.5 * (1.0 - np.abs(eps).max())
+            if n * drag < 2.0 * stiffness.min() * slowest:
+                assert not (got.status & circuit.STATUS_JAMMED).any()
+                jam_free += 1
+            state = got.state
+            checked += 1
+    assert checked >= 36 and jam_free >= 1  # the bound is exercised
+
+
 @pytest.mark.parametrize("drag", [0.0, 0.01])
 def test_step_size_independent(drag):
     # Notes, "The step": with constant epsilon and K the step is event-exact, so 7 steps
