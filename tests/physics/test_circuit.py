@@ -241,11 +241,12 @@ def test_invariants_hold_at_the_edges_of_the_design_space(seed):
     # balls, a zone of 1 to N - 1 of them, slack from 0 to 5 cm in gaps from even to nearly
     # all in one, drag from 0 to 5 N per ball, up to half the balls pushed, |eps| up to a few
     # per cent, K from 50 to 900 N, steps from 1e-5 to 0.03 m, forward and reversed. At every
-    # step: sum g_k = slack to 1e-12 m, g_k >= -1e-12 m (order kept, no overlap), every ball
-    # moves with the flow (not against it by more than rounding), every force finite and
-    # >= 0, and the event loop finishes within its capacity. A loaded ball cannot be jammed
-    # (STATUS_JAMMED) while N f < 2 K_min xi_min, the least push one loaded ball gives a
-    # resting column (eq. 5: xi = (sum 2 K xi_free - U f) / sum 2 K > 0): checked where so.
+    # step: sum g_k = slack to 1e-12 m (issue 24's tolerance), g_k >= -1e-12 m (no
+    # overlap), each ball moves with the flow (not against it by more than rounding), every
+    # force finite and >= 0, and the event loop finishes within its capacity. A loaded ball
+    # cannot be jammed (STATUS_JAMMED) while N f < 2 K_min xi_min, the least push one loaded
+    # ball gives a resting column (eq. 5: xi = (sum 2 K xi_free - U f) / sum 2 K > 0):
+    # checked where so.
     rng = np.random.default_rng(np.random.SeedSequence([24, seed]))
     checked = jam_free = 0
     for _ in range(12):
