@@ -123,6 +123,21 @@ def test_console_script_process(tmp_path):
     assert bad.stderr.count("\n") == 1 and "none.toml" in bad.stderr
 
 
+def test_a_reader_that_leaves_early_gets_no_traceback(tmp_path):
+    # `tolsim run ... | head -1`: the pipe closes before the summary is printed; the file is
+    # written, and the process ends quietly with the shell's SIGPIPE status, 128 + 13.
+    out = tmp_path / "m.nc"
+    env = dict(os.environ, PYTHONWARNINGS="ignore")
+    proc = subprocess.Popen([sys.executable, "-m", "tolsim", "run",
+                             str(CONFIGS / "paper_mitigated.toml"), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    proc.stdout.close()  # the reader is gone before the first line
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == 141, err
+    assert "Traceback" not in err and "Error" not in err, err
+    assert out.exists()
+
+
 # --- issue 17: output checked first, what a long run says, precision target -------------------
 def _no_sampling(monkeypatch):
     """Make any study fail: the checks below must come before the work."""
@@ -447,3 +462,40 @@ def test_a_pulling_load_held_by_the_upper_flanks_is_not_lift_off(tmp_path, capsy
     assert main(["run", str(cfg), "-o", str(tmp_path / "out.nc")]) == 0
     out = capsys.readouterr().out
     assert "unresolved 0 (" in out and "balls by regime: 2-point 7,200" in out
+
+
+def test_summary_bounds_the_quantiles_outside_the_histogram(tmp_path, capsys):
+    # A quantile of epsilon beyond the histogram's range is unknown (NaN in the file): the
+    # summary gives the bound the histogram does give and names the key that widens it. At
+    # std 2 deg, epsilon spreads over about +-2 % (the paper's 0.754 % at 2 deg, rho -0.6),
+    # far beyond a +-0.5 % range.
+    cfg = tmp_path / "wide.toml"
+    cfg.write_text(MINIMAL.replace("std_deg = 0.5", "std_deg = 2.0")
+                   + "velocity_deviation_range_percent = [-0.5, 0.5]\n")
+    assert main(["run", str(cfg), "-o", str(tmp_path / "w.nc")]) == 0
+    out = capsys.readouterr().out
+    ds = read_result(tmp_path / "w.nc")
+    q = ds.velocity_deviation_quantile.sel(quantile=[0.01, 0.99]).values
+    assert np.all(np.isnan(q))
+    assert "1-99 % < -0.500 % .. > +0.500 %" in out
+    under, over = int(ds.velocity_deviation_underflow), int(ds.velocity_deviation_overflow)
+    assert (f"{under + over} of 200 valid balls ({under} below, {over} above) outside the "
+            "epsilon histogram's range -0.5 .. +0.5 %") in out
+    assert "widen study.velocity_deviation_range_percent" in out
+    assert "nan" not in out.split("P(contact")[0]
+
+
+def test_a_train_of_one_ball_has_a_summary_and_a_report(tmp_path, capsys):
+    # One ball: epsilon only, no pair, so no gap closure in the linear stack-up (its critical
+    # pair is -1); the summary and the report say so instead of failing on the file.
+    cfg = tmp_path / "one.toml"
+    cfg.write_text(MINIMAL.replace("balls = 2", "balls = 1").replace(
+        "side_force_ratio = [-0.6, 0.6]", "side_force_ratio = [0.6]"))
+    out = tmp_path / "one.nc"
+    assert main(["run", str(cfg), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert int(read_result(out).critical_pair) == -1
+    assert "no gap closure (a train of one ball has no pair)" in text
+    assert main(["report", str(out), "-o", str(tmp_path / "rep")]) == 0
+    html = (tmp_path / "rep" / "report.html").read_text()
+    assert "a train of one ball has no pair" in html

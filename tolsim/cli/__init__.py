@@ -12,6 +12,7 @@ start in a fraction of a second.
 import argparse
 import contextlib
 import importlib
+import os
 import sys
 import warnings
 
@@ -167,6 +168,10 @@ def main(argv=None):
     except KeyboardInterrupt:
         print(f"{command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `tolsim run ... | head`: the reader left; the file is written
+        # (the summary is printed after it). Silence the flush at exit, as SIGPIPE would.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":

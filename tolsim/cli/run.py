@@ -191,6 +191,39 @@ def _pct(x):
     return f"{100 * x:+.3f} %"
 
 
+def _histogram_range(ds):
+    """The lower and upper edge of the epsilon histogram [-]."""
+    bounds = ds["velocity_deviation_bin_bounds"]
+    return float(bounds[0, 0]), float(bounds[-1, 1])
+
+
+def _quantile_text(ds, value, side) -> str:
+    """A quantile of epsilon; one outside the histogram's range (NaN in the file) as the bound
+    the histogram gives, e.g. "< -2.000 %" (side 0: lower tail, 1: upper tail)."""
+    if math.isfinite(value):
+        return _pct(value)
+    tail = int(ds["velocity_deviation_overflow" if side else "velocity_deviation_underflow"])
+    if tail:
+        return ("> " if side else "< ") + _pct(_histogram_range(ds)[side])
+    return _pct(value)
+
+
+def _outside_histogram_line(ds) -> str:
+    """Why a quantile of epsilon is missing: valid balls beyond the histogram's range."""
+    under = int(ds["velocity_deviation_underflow"])
+    over = int(ds["velocity_deviation_overflow"])
+    if not under + over:
+        return ""
+    lo, hi = _histogram_range(ds)
+    valid = under + over + int(ds["velocity_deviation_histogram"].sum())
+    return (f"  {under + over} of {valid} valid balls ({under} below, {over} above) outside "
+            f"the epsilon histogram's range {100 * lo:+.3g} .. {100 * hi:+.3g} %: the quantiles "
+            "there are not known (NaN in the file); widen "
+            "study.velocity_deviation_range_percent to cover "
+            f"{_pct(float(ds.velocity_deviation_min))} .. "
+            f"{_pct(float(ds.velocity_deviation_max))}")
+
+
 def _estimated(ds, name) -> bool:
     """Whether a rare-event estimator (not the plain run) made the probability ``name``."""
     return name in ds and ds[name].attrs.get("estimator", "monte_carlo") != "monte_carlo"
@@ -286,6 +319,26 @@ def _friction_text(ds) -> list:
     return lines
 
 
+def _stackup_line(ds) -> str:
+    """The linear stack-up's line: the critical ball and pair, or why there is none (a
+    one-ball train has no pair; -1 marks a ball or pair without a finite value)."""
+    b, pr = int(ds.critical_ball), int(ds.critical_pair)
+    if b >= 0:
+        ball = (f"epsilon of ball {b} RSS {100 * float(ds.velocity_deviation_rss[b]):.3f} % "
+                f"(Monte Carlo std {100 * float(ds.velocity_deviation_std_by_ball[b]):.3f} %), "
+                f"worst case +-{100 * float(ds.velocity_deviation_worst_case[b]):.3f} %")
+    else:
+        ball = "epsilon: no ball with a finite RSS (a perturbed ball unresolved)"
+    if pr >= 0:
+        pair = (f"gap closure of pair {pr} RSS {1e6 * float(ds.gap_closure_rss[pr]):.3g} um, "
+                f"worst case +-{1e6 * float(ds.gap_closure_worst_case[pr]):.3g} um")
+    elif ds.sizes.get("pair", 0) == 0:
+        pair = "no gap closure (a train of one ball has no pair)"
+    else:
+        pair = "gap closure: no pair with a finite RSS (a perturbed ball unresolved)"
+    return f"linear stack-up: {ball}; {pair}"
+
+
 def summary(ds, output, elapsed) -> str:
     """Short plain-text summary of a result Dataset."""
     a = ds.attrs
@@ -306,10 +359,13 @@ def summary(ds, output, elapsed) -> str:
         f"propagation, {a['sampling']} sampling, seed {a['seed']})",
         f"epsilon: mean {_pct(float(ds.velocity_deviation_mean))}, "
         f"std {100 * float(ds.velocity_deviation_std):.3f} %, "
-        f"1-99 % {_pct(at(q, 0.01))} .. {_pct(at(q, 0.99))}, "
+        f"1-99 % {_quantile_text(ds, at(q, 0.01), 0)} .. {_quantile_text(ds, at(q, 0.99), 1)}, "
         f"range {_pct(float(ds.velocity_deviation_min))} .. "
         f"{_pct(float(ds.velocity_deviation_max))}",
     ]
+    outside = _outside_histogram_line(ds)
+    if outside:
+        lines.append(outside)
     contact = (f"P(contact within {float(ds.horizon):.4g} s, stroke "
                f"{1e3 * float(ds.horizon * ds.groove_velocity):.4g} mm)")
     rare = _estimated(ds, "contact_probability")
@@ -395,14 +451,7 @@ def summary(ds, output, elapsed) -> str:
             line += f", Cpk {float(ds.velocity_deviation_cpk):.3f}"
         lines.append(line)
     if "critical_ball" in ds:
-        b, pr = int(ds.critical_ball), int(ds.critical_pair)
-        lines.append(
-            f"linear stack-up: epsilon of ball {b} RSS "
-            f"{100 * float(ds.velocity_deviation_rss[b]):.3f} % (Monte Carlo std "
-            f"{100 * float(ds.velocity_deviation_std_by_ball[b]):.3f} %), "
-            f"worst case +-{100 * float(ds.velocity_deviation_worst_case[b]):.3f} %; gap "
-            f"closure of pair {pr} RSS {1e6 * float(ds.gap_closure_rss[pr]):.3g} um, worst case "
-            f"+-{1e6 * float(ds.gap_closure_worst_case[pr]):.3g} um")
+        lines.append(_stackup_line(ds))
     if "sensitivity_total" in ds.variables and ds.sizes.get("factor", 0):
         for var, what in (("sensitivity_total", "epsilon"),
                           ("sensitivity_contact_total", "contact"),

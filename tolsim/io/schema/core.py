@@ -76,7 +76,9 @@ CORE_VARIABLES = {
     "velocity_deviation_std": V((), "1", "standard deviation of epsilon over valid balls"),
     "velocity_deviation_min": V((), "1", "smallest epsilon of a valid ball"),
     "velocity_deviation_max": V((), "1", "largest epsilon of a valid ball"),
-    "velocity_deviation_quantile": V(_Q, "1", "quantile of epsilon (from the histogram)"),
+    "velocity_deviation_quantile": V(_Q, "1", "quantile of epsilon (from the histogram; NaN "
+                                     "where it lies below or above the histogram's range, "
+                                     "velocity_deviation_underflow and _overflow)"),
     "velocity_deviation_histogram": V(("velocity_deviation_bin",), "1",
                                       "number of valid balls per epsilon bin", "i"),
     "velocity_deviation_underflow": V((), "1", "valid balls below the histogram range", "i"),

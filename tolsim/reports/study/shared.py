@@ -176,16 +176,24 @@ def stackup_table(ds) -> ReportTable | None:
     def at(name, k):
         return float(np.asarray(ds[name])[k])
 
-    rows = (
-        (f"ε of ball {b} (largest RSS)", pct(at("velocity_deviation_nominal", b)),
-         f"±{100 * at('velocity_deviation_worst_case', b):.3f} %",
-         f"{100 * at('velocity_deviation_rss', b):.3f} %",
-         f"{100 * at('velocity_deviation_std_by_ball', b):.3f} %"),
-        (f"gap closure of pair {pr} over the stroke",
-         f"{1e6 * at('gap_closure_nominal', pr):.3g} µm",
-         f"±{1e6 * at('gap_closure_worst_case', pr):.3g} µm",
-         f"{1e6 * at('gap_closure_rss', pr):.3g} µm", "–"),
-    )
+    # -1: no ball or pair with a finite value (a perturbed ball unresolved), or no pair at all
+    # (a train of one ball); the row says which instead of indexing with -1
+    unresolved = "– (a perturbed ball unresolved)"
+    ball = ((f"ε of ball {b} (largest RSS)", pct(at("velocity_deviation_nominal", b)),
+             f"±{100 * at('velocity_deviation_worst_case', b):.3f} %",
+             f"{100 * at('velocity_deviation_rss', b):.3f} %",
+             f"{100 * at('velocity_deviation_std_by_ball', b):.3f} %") if b >= 0 else
+            ("ε (largest RSS)", unresolved, "–", "–", "–"))
+    if pr >= 0:
+        pair = (f"gap closure of pair {pr} over the stroke",
+                f"{1e6 * at('gap_closure_nominal', pr):.3g} µm",
+                f"±{1e6 * at('gap_closure_worst_case', pr):.3g} µm",
+                f"{1e6 * at('gap_closure_rss', pr):.3g} µm", "–")
+    else:
+        pair = ("gap closure over the stroke",
+                "– (a train of one ball has no pair)" if ds.sizes.get("pair", 0) == 0
+                else unresolved, "–", "–", "–")
+    rows = (ball, pair)
     return ReportTable(STACKUP_HEADING,
                        ("quantity", "nominal", "worst case (± over the tolerance bands)",
                         "RSS (1σ)", "Monte Carlo std"),
