@@ -190,7 +190,8 @@ def test_run_refuses_an_along_track_carriage_with_one_ball(capsys, tmp_path):
     # one line naming the key, exit 2, nothing written
     text = CONFIG.read_text().replace("[study]\n", '[study]\npropagation = "along_track"\n')
     text = text.replace("balls_per_track = 12", "balls_per_track = 1").replace(
-        "balls = 12", "balls = 1")
+        "balls = 12", "balls = 1").replace(  # (a pitch moment is refused before: see below)
+        "pitch_moment_N_m = 2.0", "pitch_moment_N_m = 0.0")
     path = tmp_path / "along.toml"
     path.write_text(text)
     err = one_line_error(capsys, ["run", str(path), "-o", str(tmp_path / "x.nc")])
@@ -352,13 +353,36 @@ def test_single_track_locks_roll(capsys, tmp_path):
 
 
 @pytest.mark.parametrize("load, words", [
-    ("roll_moment_N_m = 5.0", "cannot carry the load"),  # one straight track has no roll
+    # one straight track has no roll stiffness: the config names the load key and its line
+    ("roll_moment_N_m = 5.0", "carriage.load.roll_moment_N_m = 5.0 acts along a motion the "
+                              "balls cannot resist (roll) with carriage.balls_per_track = 3"),
     ("vertical_N = -300.0", "lifts off"),  # pulled off a single track without preload
 ])
 def test_loads_that_cannot_be_carried_one_line_exit_2(load, words, capsys, tmp_path):
     path = write(tmp_path, SINGLE_TRACK.format(load=load))
     err = one_line_error(capsys, ["carriage", str(path)])
-    assert err.startswith(f"tolsim carriage: error: {path}: ") and words in err
+    assert err.startswith(f"tolsim carriage: error: {path}:") and words in err
+
+
+def test_one_ball_per_track_under_a_pitch_moment_names_its_keys(capsys, tmp_path):
+    # Two rows of one ball each cannot resist pitch or yaw: a pitch moment is refused when the
+    # config is read, at the load's line, with the layout's keys (tolsim run refuses it too).
+    text = CONFIG.read_text(encoding="utf-8")
+    for old, new in (("balls_per_track = 12 ", "balls_per_track = 1 "),
+                     ("balls = 12\n", "balls = 1\n"),
+                     ("[study]\n", "[study]\npropagation = \"constant\"\n")):
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    path = tmp_path / "one.toml"
+    path.write_text(text, encoding="utf-8")
+    line = 1 + text[:text.index("pitch_moment_N_m = 2.0")].count("\n")
+    for command in ("carriage", "run"):
+        err = one_line_error(capsys, [command, str(path)])
+        assert err.startswith(f"tolsim {command}: error: {path}:{line}: "
+                              "carriage.load.pitch_moment_N_m = 2.0 acts along a motion the "
+                              "balls cannot resist (pitch, yaw) with "
+                              "carriage.balls_per_track = 1 and 2 carriage.track rows"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one.toml"]
 
 
 def test_clearance_settles_every_ball_two_point(capsys, tmp_path):

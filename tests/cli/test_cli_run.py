@@ -499,3 +499,27 @@ def test_a_train_of_one_ball_has_a_summary_and_a_report(tmp_path, capsys):
     assert main(["report", str(out), "-o", str(tmp_path / "rep")]) == 0
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "a train of one ball has no pair" in html
+
+
+def test_a_carriage_with_clearance_and_no_load_says_it_has_no_epsilon(tmp_path, capsys):
+    # 5 um of clearance and no load: no ball carries a load, so no ball has an epsilon of its
+    # own (every one is counted unloaded). The summary and the report say so instead of
+    # printing NaN for epsilon's statistics and for rho = N_x / N_y = 0 / 0.
+    cfg = _variant(tmp_path, "carriage_preload.toml",
+                   [("preload_oversize_um = 2.0 ", "preload_oversize_um = -5.0 "),
+                    ("vertical_N = 300.0 ", "vertical_N = 0.0 "),
+                    ("pitch_moment_N_m = 2.0 ", "pitch_moment_N_m = 0.0 "),
+                    ("samples = 2000", "samples = 20")])
+    out = tmp_path / "free.nc"
+    assert main(["run", str(cfg), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    ds = read_result(out)
+    assert int(ds.n_balls_valid) == 0 and int(ds.n_balls_unloaded) == int(ds.n_balls) == 480
+    assert ("epsilon: no ball with an epsilon: all 480 balls unloaded (no loaded contact: no "
+            "velocity of their own)") in text
+    nan = re.compile(r"(?<![A-Za-z])nan(?![A-Za-z])", re.IGNORECASE)  # not "Provenance"
+    assert not nan.search(text)
+    assert main(["report", str(out), "-o", str(tmp_path / "rep")]) == 0
+    html = re.sub(r"data:[^\"']*", "", (tmp_path / "rep" / "report.html").read_text())
+    assert "no ball with an ε: every ball unloaded" in html  # (figures' base64 removed)
+    assert not nan.search(html), nan.search(html)

@@ -191,6 +191,23 @@ def _pct(x):
     return f"{100 * x:+.3f} %"
 
 
+def _epsilon_line(ds, q01, q99) -> str:
+    """Mean, std, 1-99 % quantiles and range of epsilon; or why there is none: a study whose
+    balls are all unloaded (a carriage with clearance and no load) has no epsilon to give."""
+    if int(ds.n_balls_valid) == 0:
+        n_unloaded = int(ds.n_balls_unloaded) if "n_balls_unloaded" in ds else 0
+        why = (f"all {n_unloaded:,} balls unloaded (no loaded contact: no velocity of "
+               "their own)" if n_unloaded == int(ds.n_balls)
+               else f"{n_unloaded:,} of {int(ds.n_balls):,} balls unloaded, the others "
+               "unresolved (below)")
+        return f"epsilon: no ball with an epsilon: {why}"
+    return (f"epsilon: mean {_pct(float(ds.velocity_deviation_mean))}, "
+            f"std {100 * float(ds.velocity_deviation_std):.3f} %, "
+            f"1-99 % {_quantile_text(ds, q01, 0)} .. {_quantile_text(ds, q99, 1)}, "
+            f"range {_pct(float(ds.velocity_deviation_min))} .. "
+            f"{_pct(float(ds.velocity_deviation_max))}")
+
+
 def _histogram_range(ds):
     """The lower and upper edge of the epsilon histogram [-]."""
     bounds = ds["velocity_deviation_bin_bounds"]
@@ -357,11 +374,7 @@ def summary(ds, output, elapsed) -> str:
         f"study: {a['title'].split(': ', 1)[-1]}  {n_asm} assemblies x {shape}  "
         f"({a['velocity_model']}, {a['static_model']} static, {a['propagation']} "
         f"propagation, {a['sampling']} sampling, seed {a['seed']})",
-        f"epsilon: mean {_pct(float(ds.velocity_deviation_mean))}, "
-        f"std {100 * float(ds.velocity_deviation_std):.3f} %, "
-        f"1-99 % {_quantile_text(ds, at(q, 0.01), 0)} .. {_quantile_text(ds, at(q, 0.99), 1)}, "
-        f"range {_pct(float(ds.velocity_deviation_min))} .. "
-        f"{_pct(float(ds.velocity_deviation_max))}",
+        _epsilon_line(ds, at(q, 0.01), at(q, 0.99)),
     ]
     outside = _outside_histogram_line(ds)
     if outside:

@@ -189,9 +189,10 @@ def tolerance_table(config, ds=None) -> list:
 # --------------------------------------------------------------------------------------------
 def _range(values, fmt="{:.4g}", unit=""):
     values = np.asarray(values, dtype=float)
+    values = values[np.isfinite(values)]  # rho = N_x / N_y of an unloaded ball is NaN
     if values.size == 0:
         return "n/a"
-    lo, hi = float(values.min()), float(values.max())
+    lo, hi = float(values.min()) + 0.0, float(values.max()) + 0.0  # + 0.0: no "-0"
     if math.isclose(lo, hi, rel_tol=1e-12, abs_tol=1e-15):
         return fmt.format(lo) + unit
     return f"{fmt.format(lo)} to {fmt.format(hi)}{unit}"

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tolsim.io.config.reader import Table, show
+from tolsim.physics.carriage import uncarried_motions
 from tolsim.physics.geometry import CONTACTS, Bearing, paired_forces
 from tolsim.physics.hertz import hertz_constants
 
@@ -363,6 +364,28 @@ def check_hertz_pressure(table: Table, normal_load, side_load, bearing: Bearing,
                            "static load rating): the elastic contact model no longer holds")
 
 
+#: The load component conjugate to each carriage DOF (:data:`tolsim.physics.carriage.DOFS`).
+_LOAD_OF_DOF = {"u_x": ("lateral", "force"), "u_y": ("vertical", "force"),
+                "pitch": ("pitch_moment", "moment"), "yaw": ("yaw_moment", "moment"),
+                "roll": ("roll_moment", "moment")}
+
+
+def _check_mechanism(table: Table, load, layout):
+    """Raise for a load along a motion the tracks cannot resist (one ball per track has no
+    stiffness against pitch and yaw), naming the load key and the layout's keys."""
+    locked = uncarried_motions(layout, load)
+    if not locked:
+        return
+    keys = [table.key_for(*_LOAD_OF_DOF[dof]) for dof in locked]
+    given = [k for k in keys if k in table.data and table.data[k] != 0]
+    key = given[0] if given else None
+    raise table.error(key, f"{'= ' + repr(table.data[key]) + ' ' if key else ''}acts along a "
+                           f"motion the balls cannot resist ({', '.join(locked)}) with "
+                           f"carriage.balls_per_track = {layout.balls_per_track} and "
+                           f"{layout.n_tracks} carriage.track rows: give more balls per "
+                           "track or tracks that hold it, or remove that load")
+
+
 def check_carriage_load(table: Table, load, layout, bearing: Bearing):
     """Raise for a carriage load no set of ball forces within :data:`MAX_HERTZ_PRESSURE`
     can carry.
@@ -374,6 +397,7 @@ def check_carriage_load(table: Table, load, layout, bearing: Bearing):
     preload and the layout: a necessary condition (the exact forces need the carriage
     solve, :mod:`tolsim.study.pipeline.carriage`).
     """
+    _check_mechanism(table, load, layout)
     c = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
                         bearing.poisson_ratio)
     f_max = (MAX_HERTZ_PRESSURE / c.pressure_coefficient) ** 3

@@ -51,6 +51,7 @@ from tolsim.physics.carriage.solve import (
     CARRIAGE_TOLERANCE,
     solve_carriage,
     solve_carriage_batch,
+    uncarried_motions,
 )
 
 __all__ = [
@@ -78,4 +79,5 @@ __all__ = [
     "schur_complement",
     "solve_carriage",
     "solve_carriage_batch",
+    "uncarried_motions",
 ]

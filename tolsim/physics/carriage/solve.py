@@ -39,16 +39,28 @@ CARRIAGE_TOLERANCE = 1e-11
 CARRIAGE_MAX_ITER = 60
 
 
-def _carried(layout, load, q_s_ext):
-    """Locked DOFs and the free mask; ValueError for a load along a locked mechanism."""
+def uncarried_motions(layout, load) -> tuple:
+    """The DOFs the layout cannot resist (:func:`locked_dofs`) when ``load`` has a component
+    along them (beyond 1e-9 of its largest, in scaled coordinates: moments / L); () when the
+    layout carries the load."""
     locked, null = locked_dofs(layout)
-    free = np.array([name not in locked for name in DOFS])
+    length = layout.length_scale()
+    q_s_ext = load.generalised() * np.array([1.0, 1.0, 1.0 / length, 1.0 / length,
+                                              1.0 / length])
     load_norm = np.abs(q_s_ext).max()
     if null.shape[1] and load_norm > 0:
-        along = null.T @ q_s_ext
-        if np.abs(along).max() > 1e-9 * load_norm:
-            raise ValueError(f"the track layout cannot carry the load ({load.describe()}): "
-                             f"it has no stiffness against a motion of {', '.join(locked)}")
+        if np.abs(null.T @ q_s_ext).max() > 1e-9 * load_norm:
+            return locked
+    return ()
+
+
+def _carried(layout, load):
+    """Locked DOFs and the free mask; ValueError for a load along a locked mechanism."""
+    locked, _ = locked_dofs(layout)
+    free = np.array([name not in locked for name in DOFS])
+    if uncarried_motions(layout, load):
+        raise ValueError(f"the track layout cannot carry the load ({load.describe()}): "
+                         f"it has no stiffness against a motion of {', '.join(locked)}")
     return locked, free
 
 
@@ -440,7 +452,7 @@ def solve_carriage(layout: CarriageLayout, load: CarriageLoad, bearing: Bearing 
     a = layout.groove_map().reshape(nball, 2, 5)
     a_s = a * scale  # groove map in scaled coordinates (rotations times L)
     q_s_ext = q_ext * scale  # moments / L
-    locked, free = _carried(layout, load, q_s_ext)
+    locked, free = _carried(layout, load)
     load_norm = np.abs(q_s_ext).max()
     dist = bearing.groove_radius - bearing.ball_radius
     k = hertz_k(bearing)
@@ -694,7 +706,7 @@ def solve_carriage_batch(layout: CarriageLayout, load: CarriageLoad, bearing: Be
     inputs, m = _batch_inputs(layout, oversize, groove_errors, bearing)
     length = layout.length_scale()
     scale = np.array([1.0, 1.0, 1.0 / length, 1.0 / length, 1.0 / length])
-    locked, free = _carried(layout, load, q_ext * scale)
+    locked, free = _carried(layout, load)
     free_index = np.flatnonzero(free).astype(np.int64)
     own_z = np.empty((0, nball))  # (the balls' own z: the kernel forms their maps)
     if ball_z is None and loaded is None:  # the fixed nominal balls

@@ -112,7 +112,10 @@ def plot_velocity_deviation(ds):
     ax.set_title(title)
     ax.set_xlabel("velocity deviation ε [%]  (v_B = (1 + ε) v/2)")
     ax.set_ylabel("probability density [1/%]")
-    ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+    if ax.get_legend_handles_labels()[0]:  # none when no ball has an epsilon (all unloaded)
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+    else:
+        ax.text(0.5, 0.5, "no ball with an ε", transform=ax.transAxes, ha="center")
 
     balls = np.asarray(ds["ball"])
     m = 100 * np.asarray(ds["velocity_deviation_mean_by_ball"], dtype=float)

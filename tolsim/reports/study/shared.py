@@ -112,10 +112,15 @@ def glance_rows(ds) -> list:
         ("earliest / median first contact (given contact)",
          f"{number(ds, 'time_to_contact_min'):.4g} s / {med:.4g} s"
          if integer(ds, "n_contact") else "no contact", True),
-        ("ε mean / std", f"{pct(number(ds, 'velocity_deviation_mean'))} / "
-                         f"{100 * number(ds, 'velocity_deviation_std'):.3f} %", True),
-        ("ε range", f"{pct(number(ds, 'velocity_deviation_min'))} to "
-                    f"{pct(number(ds, 'velocity_deviation_max'))}", True),
+        *((("ε mean / std", f"{pct(number(ds, 'velocity_deviation_mean'))} / "
+                            f"{100 * number(ds, 'velocity_deviation_std'):.3f} %", True),
+           ("ε range", f"{pct(number(ds, 'velocity_deviation_min'))} to "
+                       f"{pct(number(ds, 'velocity_deviation_max'))}", True))
+          if integer(ds, "n_balls_valid") else
+          (("ε", "no ball with an ε: "
+            + ("every ball unloaded (no loaded contact, no velocity of its own)"
+               if integer(ds, "n_balls_unloaded") == integer(ds, "n_balls")
+               else "unloaded or unresolved (below)"), True),)),
         (f"balls sent to the full model (outside the {model} model's validity, or an open "
          "contact), solved",
          f"{integer(ds, 'n_balls_resolved_full'):,} of "
