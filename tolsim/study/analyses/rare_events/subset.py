@@ -553,8 +553,8 @@ def _lognormal_interval(p, statistics, confidence_level, ancestral=None):
     levels' df; with ``ancestral`` (variance of ln P, df) of :func:`ancestral_log_variance`
     the larger of the two variances, with the levels' df (the Eve clusters' own effective
     number is often 1-3, one tree dominating the sum of e_r^4, and its t quantile would blow
-    the interval up by a factor of 10 or more). The interval p exp(-+ t s). Returns
-    (lower, upper, delta, df); (0, NaN, inf, NaN) for p = 0.
+    the interval up by a factor of 10 or more). The interval p exp(-+ t s), its upper end at
+    most 1. Returns (lower, upper, delta, df); (0, NaN, inf, NaN) for p = 0.
     """
     if not p > 0:
         return 0.0, float("nan"), float("inf"), float("nan")
@@ -570,7 +570,8 @@ def _lognormal_interval(p, statistics, confidence_level, ancestral=None):
     quantile = float(t_distribution.ppf(0.5 + confidence_level / 2, df)) if np.isfinite(df) \
         else float(ndtri(0.5 + confidence_level / 2))
     s = math.sqrt(total)
-    return p * math.exp(-quantile * s), p * math.exp(quantile * s), \
+    # a probability: the upper end cut at 1 (it passes 1 only for an event that is not rare)
+    return p * math.exp(-quantile * s), min(p * math.exp(quantile * s), 1.0), \
         math.sqrt(math.expm1(total)), df
 
 
