@@ -447,3 +447,17 @@ def test_a_pulling_load_held_by_the_upper_flanks_is_not_lift_off(tmp_path, capsy
     assert main(["run", str(cfg), "-o", str(tmp_path / "out.nc")]) == 0
     out = capsys.readouterr().out
     assert "unresolved 0 (" in out and "balls by regime: 2-point 7,200" in out
+
+
+def test_summary_probabilities_near_one_and_a_frequent_event():
+    # issue s23: importance sampling's P(contact) = 0.99992 (lower end of its interval) read
+    # "1" at 3 significant digits; the plain run's 200 contacts of 200 (Clopper-Pearson lower
+    # end 0.025^(1/200) = 0.98172) show the event is not rare, and the summary says so
+    from tolsim.cli.run import RARE_COUNT, _plain_run_line, _probability
+
+    assert _probability(0.9999151133427296) == "0.99991511"
+    assert _probability(1.0) == "1" and _probability(0.000526) == "0.000526"
+    line = _plain_run_line(200, 200, "trains")
+    assert "P = 1, 95 % CI [0.98172, 1] (Clopper-Pearson)" in line
+    assert "not a rare event" in line
+    assert "not a rare event" not in _plain_run_line(RARE_COUNT - 1, 20000, "trains")

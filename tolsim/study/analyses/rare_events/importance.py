@@ -156,7 +156,8 @@ def importance_sampling(limit_state, dimension, seed, *, samples=2000, design_po
             common.update(design_point=point.point, beta=point.beta,
                           form_probability=point.form_probability,
                           importance_factors=point.importance_factors)
-        return flagged(STATUS_FORM_FAILED, f"FORM found no design point: {found.message}; no "
+        return flagged(STATUS_FORM_FAILED, f"importance sampling: FORM found no design point: "
+                                           f"{found.message}; no "
                                            "probability estimated, use subset simulation",
                        evaluations, form_unresolved, common)
     best = found.points[0]
@@ -186,7 +187,8 @@ def importance_sampling(limit_state, dimension, seed, *, samples=2000, design_po
     evaluations += n
     unresolved = form_unresolved + int(np.count_nonzero(unevaluable))
     if not np.any(failed | unevaluable):
-        return flagged(STATUS_NO_FAILURE, f"no failure among the {n} samples around the "
+        return flagged(STATUS_NO_FAILURE, f"importance sampling found no failure among the "
+                                          f"{n} samples around the "
                                           f"{len(shifts)} design point(s) (smallest beta "
                                           f"{best.beta:.4g}): no probability estimated; "
                                           "check the design points or use subset simulation",
@@ -408,7 +410,8 @@ def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=No
     evaluations = design.evaluations
     if design.failed is not None:
         k = design.failed
-        return flagged(STATUS_FORM_FAILED, f"FORM found no design point for {names[k]}: "
+        return flagged(STATUS_FORM_FAILED, f"importance sampling: FORM found no design point "
+                                            f"for {names[k]}: "
                                             f"{design.design_points[k].message}", evaluations,
                        design.unresolved, common), None
     best = design.most_probable
@@ -425,7 +428,8 @@ def series_importance_sampling(limit_state, seed, *, samples=2000, batch_size=No
     evaluations += n
     unresolved = design.unresolved + int(np.count_nonzero(unevaluable))
     if not np.any(failed | unevaluable):
-        return flagged(STATUS_NO_FAILURE, f"no failure among the {n} samples around the "
+        return flagged(STATUS_NO_FAILURE, f"importance sampling found no failure among the "
+                                          f"{n} samples around the "
                                           f"{len(names)} design points: no probability "
                                           "estimated", evaluations, unresolved,
                        common), design
