@@ -523,3 +523,18 @@ def test_a_carriage_with_clearance_and_no_load_says_it_has_no_epsilon(tmp_path, 
     html = re.sub(r"data:[^\"']*", "", (tmp_path / "rep" / "report.html").read_text())
     assert "no ball with an ε: every ball unloaded" in html  # (figures' base64 removed)
     assert not nan.search(html), nan.search(html)
+
+
+def test_summary_probabilities_near_one_and_a_frequent_event():
+    # an edge-case audit: importance sampling's P(contact) = 0.99992 (lower end of its
+    # interval) read "1" at 3 significant digits; the plain run's 200 contacts of 200
+    # (Clopper-Pearson lower end 0.025^(1/200) = 0.98172) show the event is not rare, and the
+    # summary says so
+    from tolsim.cli.run import RARE_COUNT, _plain_run_line, _probability
+
+    assert _probability(0.9999151133427296) == "0.99991511"
+    assert _probability(1.0) == "1" and _probability(0.000526) == "0.000526"
+    line = _plain_run_line(200, 200, "trains")
+    assert "P = 1, 95 % CI [0.98172, 1] (Clopper-Pearson)" in line
+    assert "not a rare event" in line
+    assert "not a rare event" not in _plain_run_line(RARE_COUNT - 1, 20000, "trains")

@@ -463,9 +463,40 @@ def test_subset_no_failure_found():
     assert "no failure" in r.message and "\n" not in r.message
     assert "P =" not in r.describe() and r.describe().startswith("subset simulation: ")
     assert r.evaluations == 1000 + 3 * 900 and r.levels == 3
+    # the thresholds were still falling (about 0.9 a level at b ~ 9): the budget ran out, and
+    # the advice fits (the edge-case audit: it said "raise max_levels" whatever the cause)
+    assert r.message.startswith("subset simulation found no failure")
+    assert "raise max_levels to about" in r.message and "stalled" not in r.message
     with pytest.raises(RareEventError, match="no failure") as error:
         r.raise_for_status()
     assert "\n" not in str(error.value)
+
+
+def test_subset_tells_a_stalled_limit_state_from_a_spent_budget():
+    # g = 1 + 1e-3 exp(-u_1) > 1 everywhere: the levels creep towards g = 1, never 0. The
+    # thresholds of levels 1-7 fall by ~1e-5 a level at b ~ 1: some 1e5 levels to go, far
+    # beyond STALLED_LEVELS (100), so raising max_levels will not help and the message says
+    # so; one level alone (max_levels = 1) shows no progress to judge by.
+    r = subset_simulation(lambda u: 1.0 + 1e-3 * np.exp(-u[:, 0]), 2, SEED, max_levels=8)
+    assert r.status == STATUS_NO_FAILURE and np.isnan(r.probability)
+    assert r.message.startswith("subset simulation found no failure (g <= 0) in 8 level(s)")
+    assert "g has stalled" in r.message and "more levels will not help" in r.message
+    assert "raise max_levels" not in r.message and "\n" not in r.message
+    one = subset_simulation(lambda u: 12.0 - u[:, 0], 2, SEED, max_levels=1)
+    assert "the level budget ran out before its levels could show progress" in one.message
+    assert one.message.endswith("raise max_levels")
+
+
+def test_importance_sampling_names_itself_when_it_finds_no_failure():
+    # the messages of importance sampling's flags name it, as subset simulation's do
+    # (samples around the design point of beta = 3 never reach g = 12 - u_1 <= 0)
+    r = importance_sampling(lambda u: 12.0 - u[:, 0], 2, SEED, samples=100,
+                            design_point=find_design_point(lambda u: 3.0 - u[:, 0], 2))
+    assert r.status == STATUS_NO_FAILURE
+    assert r.message.startswith("importance sampling found no failure among the 100 samples")
+    flat = importance_sampling(lambda u: np.ones(len(u)), 2, SEED, samples=100)
+    assert flat.status == STATUS_FORM_FAILED
+    assert flat.message.startswith("importance sampling: FORM found no design point")
 
 
 def test_subset_on_a_frequent_event_is_level_zero():
@@ -478,6 +509,35 @@ def test_subset_on_a_frequent_event_is_level_zero():
     assert_allclose(r.coefficient_of_variation ** 2,
                     (1 - r.probability) / (1000 * r.probability), rtol=1e-12)
     assert r.ci_lower <= ndtr(-0.5) <= r.ci_upper
+
+
+@pytest.mark.parametrize("estimator", ["importance", "subset", "rare"])
+def test_a_near_certain_event_stays_in_the_unit_interval(estimator):
+    # failure outside a disc of radius 0.02: exact P = exp(-0.02^2 / 2) = 0.9998 (chi-square,
+    # 2 degrees of freedom). The design point lies at |u*| = 0.02, every importance sample
+    # fails and the weights average 1 only to within their noise: before the fix seeds 2, 4
+    # and 5 gave P = 1.00017 to 1.00036 by importance sampling, and every estimator an upper
+    # interval end up to 1.0017; "rare" divided by subset's standard error of 0 when all of
+    # its level-0 samples failed. A probability and its interval lie in [0, 1].
+    from tolsim.rare_events import estimate
+
+    def g(u):
+        return 0.02 - np.hypot(u[:, 0], u[:, 1])
+
+    exact = float(np.exp(-0.02 ** 2 / 2))
+    for seed in range(6):
+        r = (importance_sampling(g, 2, seed) if estimator == "importance" else
+             subset_simulation(g, 2, seed) if estimator == "subset" else
+             estimate(g, 2, method="rare", seed=seed))
+        assert r.ok, r.message
+        ends = (r.probability, r.ci_lower, r.ci_upper, r.bound_lower, r.bound_upper,
+                r.bounds_ci_lower, r.bounds_ci_upper)
+        assert all(0.0 <= x <= 1.0 for x in ends), ends
+        # subset's level 0 with all 1000 samples failing is [1, 1]: a binomial interval of
+        # 1000 of 1000 that misses 0.9998 (not this fix); importance sampling covers
+        assert r.ci_lower <= exact <= r.ci_upper or r.probability == 1.0
+    clipped = importance_sampling(g, 2, 2)
+    assert clipped.probability == 1.0 and "clipped to [0, 1]" in clipped.interval
 
 
 def test_subset_flags_a_flat_limit_state():

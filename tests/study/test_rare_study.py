@@ -447,26 +447,76 @@ def test_importance_falls_back_to_subset_where_the_limit_state_is_not_smooth():
     assert "checked for a lost failure mode by two independent runs" in estimate.describe()
 
 
-def test_no_number_without_backing(tmp_path):
-    # one level of 100 samples cannot reach P ~ 1e-3: the estimate is flagged, the file
-    # holds NaN with the reason, and the summary prints the reason, not a number
+def unreached_contact(config):
+    """(estimate, dataset, summary lines, contact check) of a study whose estimator did not
+    reach the contact event."""
     from tolsim.cli.run import summary
+    from tolsim.reports.verdict import contact_check
+    from tolsim.study.statistics.intervals import clopper_pearson_interval
 
-    config = study("rare_contact.toml", samples=256, samples_per_level=100, max_levels=1,
-                   sampling="random")
     result = run_study(config)
     estimate = result.rare_events["contact"].result
     assert estimate.status == STATUS_NO_FAILURE and np.isnan(estimate.probability)
     ds = result_to_dataset(result, history="t")
-    assert np.isnan(float(ds.contact_probability))
-    assert ds.contact_probability.attrs["estimator_message"] == estimate.message
-    text = summary(ds, "x.nc", 1.0)
-    line = next(x for x in text.splitlines() if x.startswith("P(contact"))
+    # the file keeps the plain run's k of n and its Clopper-Pearson interval, labelled so,
+    # and the estimator's status and message on contact_probability_status
+    k, n = int(ds.n_contact), int(ds.n_assemblies) - int(ds.n_assemblies_unresolved)
+    assert float(ds.contact_probability) == k / n
+    assert_allclose([float(ds.contact_probability_ci_lower),
+                     float(ds.contact_probability_ci_upper)],
+                    clopper_pearson_interval(k, n, 0.95), rtol=1e-12)
+    attrs = ds.contact_probability.attrs
+    assert attrs["estimator"] == "monte_carlo" and attrs["interval"] == "Clopper-Pearson"
+    assert attrs["estimator_fallback"].startswith("subset simulation did not reach the event")
+    status = ds.contact_probability_status
+    assert rare_events.STATUS_FLAGS[int(status)] == STATUS_NO_FAILURE
+    assert status.attrs["estimator"] == "subset"
+    assert status.attrs["estimator_message"] == estimate.message
+    lines = summary(ds, "x.nc", 1.0).splitlines()
+    at = next(i for i, x in enumerate(lines) if x.startswith("P(contact"))
+    assert f"({k} of {n} trains whose outcome is known)" in lines[at]
+    assert lines[at + 1].startswith(
+        "  the plain run's estimate (Monte Carlo, Clopper-Pearson): subset simulation did "
+        f"not reach the event (no_failure, {estimate.evaluations:,} evaluations): "
+        "subset simulation found no failure")
+    assert "nan" not in (lines[at] + lines[at + 1]).lower()
+    # the report's rare-event table keeps a row: the estimator, its status and message
+    from tolsim.reports.study.page import rare_events_html
+    table = "".join(rare_events_html(ds))
+    assert "(the plain run&#x27;s)" in table and "<b>NO_FAILURE</b>" in table
+    return estimate, ds, lines[at:at + 2], contact_check(ds)
+
+
+def test_no_number_without_backing_keeps_the_plain_run():
+    # one level of 100 samples cannot reach P ~ 1e-3: the estimate is flagged; the file and
+    # the summary keep the plain run's estimate (k of 256 with its Clopper-Pearson interval),
+    # labelled as such, with the reason, and the advice fits: the level budget ran out
+    # (before the edge-case audit the file held NaN for P, interval and bounds, the plain run's
+    # information thrown away)
+    config = study("rare_contact.toml", samples=256, samples_per_level=100, max_levels=1,
+                   sampling="random")
+    estimate, ds, lines, check = unreached_contact(config)
     # 100 chain samples and FORM on the nine pairs (the lost-mode check)
     assert estimate.evaluations > 100
-    assert (f"no estimate (subset simulation, {estimate.evaluations:,} evaluations): no "
-            "failure") in line
-    assert "nan" not in line.lower()
+    assert lines[1].endswith("raise max_levels")
+    assert "did not reach the event" in check.reason
+
+
+def test_a_stalled_limit_state_is_not_sent_to_more_levels():
+    # gaps of 0.9-1 mm that the tolerances cannot close within the stroke: the levels creep
+    # (about 1e-5 m a level at g ~ 7e-4 m, some 90 levels to go), and the message says g has
+    # stalled, not "raise max_levels"; the plain run's 0 of 256 stands with its
+    # Clopper-Pearson upper bound 1 - 0.025^(1/256) = 1.43 % (its verdict decided by it)
+    config = study("rare_contact.toml", samples=256, samples_per_level=100, max_levels=10,
+                   sampling="random", text_change=lambda text: text.replace(
+                       "low_um = 80.0, high_um = 180.0", "low_um = 900.0, high_um = 1000.0"))
+    estimate, ds, lines, check = unreached_contact(config)
+    assert int(ds.n_contact) == 0
+    assert_allclose(float(ds.contact_probability_ci_upper), 1 - 0.025 ** (1 / 256),
+                    rtol=1e-9)
+    assert "g has stalled" in lines[1] and "more levels will not help" in lines[1]
+    assert "raise max_levels" not in lines[1]
+    assert "no train has a known outcome" not in check.reason
 
 
 def test_estimates_are_seeded_and_do_not_depend_on_batch_size():

@@ -241,6 +241,57 @@ def _outside_histogram_line(ds) -> str:
             f"{_pct(float(ds.velocity_deviation_max))}")
 
 
+def _probability(x) -> str:
+    """A probability with 3 significant digits, and as many more as keep a value just below
+    1 from reading as 1 (0.99992, not 1)."""
+    if not (math.isfinite(x) and 0.5 < x < 1):
+        return f"{x:.3g}"
+    return f"{x:.{min(12, 3 - math.floor(math.log10(1 - x)))}g}"
+
+
+def _plain_run_line(k, known, trains) -> str:
+    """The plain run's count beside a rare-event estimate: k of the trains whose outcome is
+    known, its Clopper-Pearson interval, and whether the event is rare at all (>= 25 events:
+    the plain estimate has a CV of at most 0.2, the 25 / P rule of
+    :mod:`tolsim.study.analyses.rare_events`, and no rare-event estimator is needed)."""
+    from tolsim.study.statistics.intervals import clopper_pearson_interval  # noqa: PLC0415
+
+    line = f"  plain run: {k} contacts in {known} {trains} whose outcome is known"
+    if not known:
+        return line
+    lower, upper = clopper_pearson_interval(k, known, 0.95)
+    line += (f", P = {_probability(k / known)}, 95 % CI [{_probability(lower)}, "
+             f"{_probability(upper)}] (Clopper-Pearson)")
+    if k >= RARE_COUNT:
+        line += ("; not a rare event: the plain run resolves it, a rare-event estimator is "
+                 "not needed")
+    return line
+
+
+#: Events in the plain run from which a study's event is not rare (CV of k / n <= 0.2).
+RARE_COUNT = 25
+
+
+def _unreached_lines(ds, prefix) -> list:
+    """Lines under a plain-run probability that a rare-event estimator did not reach
+    (:func:`tolsim.io.schema.rare_events.plain_run_kept`): which estimator, its status, cost
+    and why; [] otherwise."""
+    from tolsim.study.analyses.rare_events import ESTIMATOR_TITLES  # noqa: PLC0415
+
+    status = f"{prefix}_status"
+    if status not in ds or _estimated(ds, prefix):
+        return []
+    a = ds[status].attrs
+    name = ESTIMATOR_TITLES.get(a.get("estimator"), a.get("estimator"))
+    lines = [f"  the plain run's estimate (Monte Carlo, Clopper-Pearson): {name} did not reach "
+             f"the event ({a.get('estimator_status')}, "
+             f"{int(ds[f'{prefix}_evaluations']):,} evaluations): "
+             f"{a.get('estimator_message', '')}"]
+    if ds[prefix].attrs.get("estimator_note"):
+        lines.append(f"  note: {ds[prefix].attrs['estimator_note']}")
+    return lines
+
+
 def _estimated(ds, name) -> bool:
     """Whether a rare-event estimator (not the plain run) made the probability ``name``."""
     return name in ds and ds[name].attrs.get("estimator", "monte_carlo") != "monte_carlo"
@@ -264,9 +315,9 @@ def _estimator_lines(ds, prefix, title) -> list:
     else:
         cv = float(ds[f"{prefix}_coefficient_of_variation"])
         interval = a.get("interval", "").split(" (")[0]
-        lines = [f"{title} = {float(var):.3g} by {name}: CV {cv:.2g}, 95 % CI "
-                 f"[{float(ds[f'{prefix}_ci_lower']):.3g}, "
-                 f"{float(ds[f'{prefix}_ci_upper']):.3g}] ({interval}, approximate), "
+        lines = [f"{title} = {_probability(float(var))} by {name}: CV {cv:.2g}, 95 % CI "
+                 f"[{_probability(float(ds[f'{prefix}_ci_lower']))}, "
+                 f"{_probability(float(ds[f'{prefix}_ci_upper']))}] ({interval}, approximate), "
                  f"{evaluations:,} evaluations ({float(a.get('estimator_seconds', 0)):.2g} s)"]
         if status != "ok":  # a number its estimator does not back (issue 23)
             lines.append(f"  NOT OK ({status}): {a.get('estimator_message', '')}")
@@ -320,6 +371,7 @@ def _friction_text(ds) -> list:
             f"[{float(ds.friction_exceedance_probability_ci_lower):.4f}, "
             f"{float(ds.friction_exceedance_probability_ci_upper):.4f}]  ({k} of "
             f"{n_asm - unresolved} assemblies whose outcome is known)")
+        lines.extend(_unreached_lines(ds, "friction_exceedance_probability"))
         if unresolved:
             lines.append(
                 f"  bounds over all {n_asm} assemblies, the {unresolved} unresolved counted as "
@@ -384,14 +436,14 @@ def summary(ds, output, elapsed) -> str:
     rare = _estimated(ds, "contact_probability")
     if rare:  # a rare-event estimator (issue 15); the plain run's count beside it
         lines.extend(_estimator_lines(ds, "contact_probability", contact))
-        lines.append(f"  plain run: {int(ds.n_contact)} contacts in {n_asm - n_unres} "
-                     f"{trains} whose outcome is known")
+        lines.append(_plain_run_line(int(ds.n_contact), n_asm - n_unres, trains))
     else:
         lines.append(
             f"{contact} = {float(ds.contact_probability):.4f}  95 % CI "
             f"[{float(ds.contact_probability_ci_lower):.4f}, "
             f"{float(ds.contact_probability_ci_upper):.4f}]  "
             f"({int(ds.n_contact)} of {n_asm - n_unres} {trains} whose outcome is known)")
+        lines.extend(_unreached_lines(ds, "contact_probability"))
     if _estimated(ds, "velocity_deviation_exceedance_probability"):
         lines.extend(_estimator_lines(
             ds, "velocity_deviation_exceedance_probability",

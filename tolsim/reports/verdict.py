@@ -125,6 +125,14 @@ def estimator_flag(ds, name):
 def _flagged(status, reason, ds, name):
     """(status, reason) of a check whose estimate :func:`estimator_flag` flags."""
     flag = estimator_flag(ds, name)
+    fallback = ds[name].attrs.get("estimator_fallback") if name in ds.variables else None
+    if flag is None and status != NO_LIMIT and fallback:
+        # the rare-event estimator did not reach the event: the plain run's interval decides
+        own = ds[f"{name}_status"].attrs
+        return status, (f"{reason} (the plain run's Clopper-Pearson interval: "
+                        f"{ESTIMATOR_NAMES.get(own.get('estimator'), own.get('estimator'))} "
+                        f"did not reach the event, {own.get('estimator_status')}: "
+                        f"{own.get('estimator_message', '')})")
     if flag is None and status != NO_LIMIT and name in ds.variables and \
             ds[name].attrs.get("estimator_mode_check") == "none":
         # subset simulation without FORM design points (a limit state that is not smooth):

@@ -167,6 +167,27 @@ def estimator_settings(config) -> str:
     return text
 
 
+#: The events whose probability the plain run estimates too (``n_contact`` of the trains,
+#: ``n_friction_exceedance`` of the assemblies, with their Clopper-Pearson intervals).
+PLAIN_RUN_EVENTS = ("contact", "friction_exceedance")
+
+
+def plain_run_kept(event, estimate) -> bool:
+    """Whether the event's probability variables keep the plain run's Monte Carlo numbers:
+    the estimator gave no number (it did not reach the event) and the plain run has one."""
+    return event in PLAIN_RUN_EVENTS and not np.isfinite(estimate.result.probability)
+
+
+def plain_run_note(estimate) -> str:
+    """The ``estimator_fallback`` of a probability that keeps the plain run's numbers."""
+    r = estimate.result
+    return (f"{ESTIMATOR_TITLES.get(r.estimator, r.estimator)} did not reach the event "
+            f"({r.status}; why in the estimator_message attribute of the _status variable): "
+            "the value, interval and bounds are the plain Monte Carlo run's, k of the n "
+            "assemblies whose outcome is known with the Clopper-Pearson interval (an upper "
+            "bound when k = 0)")
+
+
 def rare_event_variables(result) -> tuple:
     """(factor names or None, data variables, variable attributes, global attributes) of a
     study run with a rare-event estimator (``result.rare_events``).
@@ -180,7 +201,14 @@ def rare_event_variables(result) -> tuple:
     FORM's design points of the event's components), ``replicates`` (a limit state that is not
     smooth: checked by the agreement of two independent runs, ``*_replicate_1``,
     ``*_replicate_2``) or ``none`` (unchecked: no design point found); the plain run's counts
-    (``n_contact`` ...) stay.
+    (``n_contact`` ...) stay. Where the estimator gives no number (``no_failure``,
+    ``plateau``, ``form_failed``: it did not reach the event) and the plain run has one
+    (:data:`PLAIN_RUN_EVENTS`), the probability, interval and bounds stay the plain run's
+    (``estimator`` ``monte_carlo``, ``interval`` Clopper-Pearson, with an
+    ``estimator_fallback`` attribute saying so): a study whose estimator failed still
+    reports what its plain run resolved, and its verdict rests on that interval; the
+    estimator's own status, message and wall time are on ``*_status`` and its CV and
+    evaluations on their variables.
     Per event also ``*_status`` (the status as a CF flag) and the diagnostics of the
     estimator (:data:`DIAGNOSTICS`); with ``estimator = "rare"`` each estimator's own
     estimate (``*_subset``, ``*_importance``: :data:`PART_VALUES`). Importance sampling adds
@@ -199,23 +227,34 @@ def rare_event_variables(result) -> tuple:
             r.bounds_ci_lower, f"{prefix}_bounds_ci_upper": r.bounds_ci_upper,
             f"{prefix}_coefficient_of_variation": r.coefficient_of_variation,
         }
+        tag = {"estimator": r.estimator, "estimator_status": r.status}
+        kept = plain_run_kept(event, estimate)
+        if kept:  # the plain run's numbers stay (labelled monte_carlo by the core section)
+            values = {name: value for name, value in values.items()
+                      if name == f"{prefix}_coefficient_of_variation"}
         data.update({name: float(value) for name, value in values.items()})
         data[f"{prefix}_evaluations"] = np.int64(r.evaluations)
         data[f"{prefix}_unresolved_evaluations"] = np.int64(r.unresolved)
-        tag = {"estimator": r.estimator, "estimator_status": r.status}
         for name in values:
             attrs[name] = dict(tag)
-        attrs[prefix].update(interval=r.interval, estimator_seconds=float(estimate.seconds))
-        attrs[f"{prefix}_ci_lower"].update(interval=r.interval)
-        attrs[f"{prefix}_ci_upper"].update(interval=r.interval)
-        if estimate.note:
-            attrs[prefix]["estimator_note"] = estimate.note
-        if estimate.mode_check:
-            attrs[prefix]["estimator_mode_check"] = estimate.mode_check
-        if r.message:
-            attrs[prefix]["estimator_message"] = r.message
+        if kept:
+            attrs[prefix] = {"estimator_fallback": plain_run_note(estimate),
+                             **({"estimator_note": estimate.note} if estimate.note else {})}
+        else:
+            attrs[prefix].update(interval=r.interval,
+                                 estimator_seconds=float(estimate.seconds))
+            attrs[f"{prefix}_ci_lower"].update(interval=r.interval)
+            attrs[f"{prefix}_ci_upper"].update(interval=r.interval)
+            if estimate.note:
+                attrs[prefix]["estimator_note"] = estimate.note
+            if r.message:
+                attrs[prefix]["estimator_message"] = r.message
+            if estimate.mode_check:
+                attrs[prefix]["estimator_mode_check"] = estimate.mode_check
         data[f"{prefix}_status"] = status_flag(r.status)
-        attrs[f"{prefix}_status"] = {**tag, **flag_attributes()}
+        attrs[f"{prefix}_status"] = {**tag, **flag_attributes(),
+                                     **({"estimator_message": r.message} if r.message else {}),
+                                     "estimator_seconds": float(estimate.seconds)}
         for suffix, (field, kind, _, estimators) in DIAGNOSTICS.items():
             if r.estimator in estimators:
                 value = getattr(r, field)
@@ -253,7 +292,7 @@ def rare_event_variables(result) -> tuple:
     glob = {"estimator": config.study.estimator,
             "estimator_settings": estimator_settings(config),
             "rare_event_seed_streams": SEED_STREAMS}
-    if contact is not None:
+    if contact is not None and not plain_run_kept("contact", contact):
         glob["contact_probability_interval"] = (
             f"{ESTIMATOR_TITLES[contact.result.estimator]}: {contact.result.interval}, 95 %, "
             "over the assemblies whose outcome is known; bounds with the unresolved ones "

@@ -144,22 +144,28 @@ def rare_events_html(ds) -> list:
         if name not in ds.variables or f"{name}_evaluations" not in ds.variables:
             continue
         attrs = ds[name].attrs
-        if attrs.get("estimator", "monte_carlo") == "monte_carlo":
+        fallback = str(attrs.get("estimator_fallback", ""))
+        if attrs.get("estimator", "monte_carlo") == "monte_carlo" and not fallback:
             continue
         p = number(ds, name)
         lo, hi = number(ds, f"{name}_ci_lower"), number(ds, f"{name}_ci_upper")
-        status = str(attrs.get("estimator_status", "ok"))
+        # an estimator that did not reach the event: its status and message are on the
+        # _status variable, the numbers the plain run's (tolsim.io.schema.rare_events)
+        own = ds[f"{name}_status"].attrs if fallback else attrs
+        status = str(own.get("estimator_status", "ok"))
         flag = status if status == "ok" else f"<b>{html.escape(status.upper())}</b>"
-        if attrs.get("estimator_message"):
-            flag += f": {html.escape(str(attrs['estimator_message']))}"
+        if own.get("estimator_message"):
+            flag += f": {html.escape(str(own['estimator_message']))}"
+        estimator = str(own.get("estimator", ""))
+        value = format_fraction(p, lo, hi) + (" (the plain run's)" if fallback else "")
         rows.append(
             f"<tr><td>{html.escape(what)}</td>"
-            f"<td>{html.escape(ESTIMATOR_NAMES.get(attrs['estimator'], attrs['estimator']))}"
-            f"</td><td class='num'>{html.escape(format_fraction(p, lo, hi))}</td>"
+            f"<td>{html.escape(ESTIMATOR_NAMES.get(estimator, estimator))}"
+            f"</td><td class='num'>{html.escape(value)}</td>"
             f"<td class='num'>{number(ds, f'{name}_coefficient_of_variation'):.3g}</td>"
             f"<td class='num'>{integer(ds, f'{name}_evaluations'):,}</td>"
             f"<td>{flag}</td><td>{html.escape(diagnostics_text(ds, name))}</td>"
-            f"<td>{html.escape(str(attrs.get('interval', '')))}"
+            f"<td>{html.escape(fallback or str(attrs.get('interval', '')))}"
             f"{html.escape(' ' + str(attrs['note'])) if attrs.get('note') else ''}</td></tr>")
         prefix = name.removesuffix("_probability")  # contact_, ..._exceedance_
         if f"{prefix}_reliability_index" in ds.variables and "factor_name" in ds.variables:

@@ -800,7 +800,7 @@ def estimate_event(config, event, *, batch_size=None) -> EventEstimate:
             result = combine(parts["subset"], result)
             mode_check = checked
         elif design is None:
-            note = f"importance sampling: {result.message}; subset simulation used"
+            note = f"{result.message}; subset simulation used instead"
             result, components = subset(search=search), None
             mode_check = checked
     else:

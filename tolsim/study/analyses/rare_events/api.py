@@ -10,6 +10,7 @@ import numpy as np
 from tolsim.study.analyses.rare_events.common import (
     check_confidence,
     check_dimension,
+    clip_unit,
     seed_sequence,
 )
 from tolsim.study.analyses.rare_events.form import find_design_points
@@ -290,7 +291,7 @@ def combine_replicates(first, second) -> RareEventResult:
     p = 0.5 * (first.probability + second.probability)
     se = 0.5 * math.hypot(first.standard_error, second.standard_error)
     z = check_confidence(first.confidence_level)
-    ci = (max(p - z * se, 0.0), p + z * se)
+    ci = (clip_unit(p - z * se), clip_unit(p + z * se))  # a probability: in [0, 1]
     unresolved = first.unresolved + second.unresolved
     bounds = ((p, p, *ci) if not unresolved else
               (min(first.bound_lower, second.bound_lower),
@@ -347,7 +348,8 @@ def flagged_pair(a, b):
 def combine(sub, imp) -> RareEventResult:
     """The cross-check of subset simulation and importance sampling (``method="rare"``).
 
-    Both ``ok`` and agreeing (:func:`agree`): their inverse-variance combination. Subset
+    Both ``ok`` and agreeing (:func:`agree`): their inverse-variance combination (when one
+    has a standard error of 0, an event that is not rare, the other's result). Subset
     simulation flagged for a lost failure mode that explains its gap
     (:func:`lost_mode_explains`): importance sampling's result, ``ok``, its message naming
     the subset simulation set aside. One flagged by its own diagnostics but agreeing with the
@@ -395,11 +397,22 @@ def combine(sub, imp) -> RareEventResult:
         return replace(sub, estimator="rare", status=STATUS_ESTIMATORS_DISAGREE,
                        message=f"the estimates differ beyond their CVs (99 % test): {both}",
                        evaluations=evaluations, **diagnostics)
+    if not (sub.standard_error > 0 and imp.standard_error > 0):
+        # a standard error of 0 (every or no sample failing at subset's level 0, an event
+        # that is not rare) has no inverse-variance weight: the other number, which agrees
+        zero = "subset simulation" if not sub.standard_error > 0 else "importance sampling"
+        good = imp if zero == "subset simulation" else sub
+        return replace(good, estimator="rare", evaluations=evaluations, message=(
+            f"{zero} has a standard error of 0 (every or no sample failed): not combined, "
+            f"the other estimate is given; {both}"),
+            **{k: v for k, v in diagnostics.items()
+               if (k == "ancestors") == (good is sub) or k not in
+               ("ancestors", "level_independent_cv")})
     weights = np.array([1.0 / sub.standard_error ** 2, 1.0 / imp.standard_error ** 2])
     p = float(np.dot(weights, [sub.probability, imp.probability]) / weights.sum())
     se = 1.0 / math.sqrt(float(weights.sum()))
     z = check_confidence(sub.confidence_level)
-    ci = (max(p - z * se, 0.0), p + z * se)
+    ci = (clip_unit(p - z * se), clip_unit(p + z * se))  # a probability: in [0, 1]
     unresolved = sub.unresolved + imp.unresolved
     # the bounds: the combined estimate and its interval when every row was resolved (the
     # three coincide, :mod:`~tolsim.study.analyses.rare_events.result`), else the hull of the

@@ -83,6 +83,11 @@ def check_confidence(confidence_level) -> float:
     return float(ndtri(0.5 + confidence_level / 2))
 
 
+def clip_unit(value) -> float:
+    """``value`` clipped to [0, 1] (NaN stays NaN): a probability, or an end of its interval."""
+    return float(np.clip(value, 0.0, 1.0)) if np.isfinite(value) else float(value)
+
+
 def weighted_mean(x):
     """Mean and its standard error (sample standard deviation / sqrt(n))."""
     return float(np.mean(x)), float(np.std(x, ddof=1)) / math.sqrt(x.size)

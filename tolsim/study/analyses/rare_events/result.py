@@ -48,6 +48,9 @@ STATUSES = {
 INTERVAL_CLOPPER_PEARSON = "Clopper-Pearson"
 INTERVAL_LOGNORMAL = "lognormal with the CV and a Student-t quantile (approximate)"
 INTERVAL_NORMAL = "normal approximation, estimate -+ z se (approximate)"
+#: A normal interval (or the estimate) that passed 1 and was clipped to [0, 1] (a probability).
+INTERVAL_NORMAL_CLIPPED = ("normal approximation, estimate -+ z se, estimate and interval "
+                           "clipped to [0, 1] (approximate)")
 
 
 class RareEventError(RuntimeError):

@@ -107,7 +107,17 @@ The interval also neglects the estimate's bias of order 1 / n.
 
 If no level has N_c failures within ``max_levels`` levels, or the limit state is flat at a
 p0-quantile (no threshold between tied values), the result is flagged (``status``), its
-probability NaN, and ``message`` says why in one line.
+probability NaN, and ``message`` says why in one line. Without a failure the message tells
+two causes apart, since they call for opposite advice (:func:`no_failure_message`): the
+level budget ran out while the thresholds were still closing in on 0 (raise ``max_levels``,
+to about the number of levels the last ones' rate extrapolates to), or g has *stalled*: at
+the mean fall of the last :data:`STALL_WINDOW` thresholds, g = 0 lies so far that the levels
+run and those to go exceed :data:`STALLED_LEVELS` (P of order p0^50 = 1e-50 at p0 = 0.1 or
+less, far below any probability a design is judged by), and more levels do not help. On a
+train whose gaps (5-6 mm) no tolerance can close, the thresholds fell by about 9e-6 m a
+level at g ~ 4.7e-3 m: some 500 levels to go; with gaps of 0.9-1 mm, about 95 (P ~ 1e-100).
+The extrapolation is linear, while the thresholds of a smooth limit state fall ever more
+slowly: the number of levels it gives is a lower bound, the P it implies an upper one.
 
 References
 ----------
@@ -160,6 +170,10 @@ MIN_ANCESTORS = 3
 #: subset simulation's estimate of the mass around it flags a lost mode
 #: (:func:`lost_modes`).
 MODE_LIMIT = 5.0
+#: Without a failure: the thresholds whose mean fall per level extrapolates to g = 0, and the
+#: most levels, run and to go at that rate, before g is called stalled (module docstring).
+STALL_WINDOW = 5
+STALLED_LEVELS = 50
 #: Adaptive conditional sampling ([Papaioannou2015]): initial scale and target acceptance.
 INITIAL_SCALE = 0.6
 TARGET_ACCEPTANCE = 0.44
@@ -251,11 +265,9 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
         below, above = key[order[chains - 1]], key[order[chains]]
         if level == max_levels - 1:
             return flagged(STATUS_NO_FAILURE,
-                            f"no failure (g <= 0) in {max_levels} levels of {n} samples "
-                            f"(smallest g reached {key[order[0]]:.3g}, threshold "
-                            f"{below:.3g}); no probability estimated; raise max_levels or "
-                            "check the limit state", evaluations, unresolved, common,
-                            **levels.fields())
+                           no_failure_message(levels.thresholds, key[order[0]], max_levels, n,
+                                              p0),
+                           evaluations, unresolved, common, **levels.fields())
         # b between the N_c-th and the next value; at a tie (a repeated chain state, or a
         # flat limit state) b is the tied value and P_j the share of samples at or below it
         threshold = 0.5 * (below + above) if below < above < np.inf else below
@@ -280,6 +292,40 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
         evaluations += calls
         unresolved += nan_calls
     raise AssertionError("unreachable")  # the loop returns at its last level
+
+
+def no_failure_message(thresholds, smallest, max_levels, samples_per_level, p0) -> str:
+    """Why subset simulation found no failure, in one line: the level budget ran out, or g has
+    stalled (module docstring).
+
+    Parameters
+    ----------
+    thresholds : sequence of float
+        b_1, ..., b_m of the levels run (decreasing; may be empty).
+    smallest : float
+        The smallest g of the last level.
+    max_levels, samples_per_level : int
+    p0 : float
+    """
+    head = (f"subset simulation found no failure (g <= 0) in {max_levels} level(s) of "
+            f"{samples_per_level} samples (smallest g reached {smallest:.3g})")
+    falls = -np.diff(np.asarray(thresholds, dtype=float))[-STALL_WINDOW:]
+    if not falls.size or not np.all(falls > 0) or not thresholds[-1] > 0:
+        return (f"{head}: the level budget ran out before its levels could show progress; no "
+                "probability estimated; raise max_levels")
+    rate = float(np.mean(falls))
+    to_go = thresholds[-1] / rate
+    if max_levels + to_go > STALLED_LEVELS:
+        exponent = (max_levels + to_go) * math.log10(p0)
+        return (f"{head}: g has stalled, its last {falls.size} thresholds fell by {rate:.3g} a "
+                f"level on average, so g = 0 lies some {to_go:.0f} levels further (P of order "
+                f"1e{exponent:.0f} or less); no probability estimated; more levels will not "
+                "help: the event is out of reach of the inputs (check the limit state)")
+    exponent = (max_levels + to_go) * math.log10(p0)
+    return (f"{head}: the level budget ran out while the thresholds were still falling "
+            f"({rate:.3g} a level, g = 0 about {to_go:.0f} levels further, P of order "
+            f"1e{exponent:.0f} or less); no probability estimated; raise max_levels to about "
+            f"{max_levels + math.ceil(to_go) + 1}")
 
 
 @dataclass
@@ -553,8 +599,8 @@ def _lognormal_interval(p, statistics, confidence_level, ancestral=None):
     levels' df; with ``ancestral`` (variance of ln P, df) of :func:`ancestral_log_variance`
     the larger of the two variances, with the levels' df (the Eve clusters' own effective
     number is often 1-3, one tree dominating the sum of e_r^4, and its t quantile would blow
-    the interval up by a factor of 10 or more). The interval p exp(-+ t s). Returns
-    (lower, upper, delta, df); (0, NaN, inf, NaN) for p = 0.
+    the interval up by a factor of 10 or more). The interval p exp(-+ t s), its upper end at
+    most 1. Returns (lower, upper, delta, df); (0, NaN, inf, NaN) for p = 0.
     """
     if not p > 0:
         return 0.0, float("nan"), float("inf"), float("nan")
@@ -570,7 +616,8 @@ def _lognormal_interval(p, statistics, confidence_level, ancestral=None):
     quantile = float(t_distribution.ppf(0.5 + confidence_level / 2, df)) if np.isfinite(df) \
         else float(ndtri(0.5 + confidence_level / 2))
     s = math.sqrt(total)
-    return p * math.exp(-quantile * s), p * math.exp(quantile * s), \
+    # a probability: the upper end cut at 1 (it passes 1 only for an event that is not rare)
+    return p * math.exp(-quantile * s), min(p * math.exp(quantile * s), 1.0), \
         math.sqrt(math.expm1(total)), df
 
 
