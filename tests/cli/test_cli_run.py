@@ -538,3 +538,16 @@ def test_summary_probabilities_near_one_and_a_frequent_event():
     assert "P = 1, 95 % CI [0.98172, 1] (Clopper-Pearson)" in line
     assert "not a rare event" in line
     assert "not a rare event" not in _plain_run_line(RARE_COUNT - 1, 20000, "trains")
+
+
+def test_summary_says_how_many_samples_were_saved(tmp_path, capsys):
+    # --save-samples beyond the run's assemblies saves them all, and the summary says so
+    cfg = tmp_path / "m.toml"
+    cfg.write_text(MINIMAL)
+    out = tmp_path / "m.nc"
+    assert main(["run", str(cfg), "-o", str(out), "--samples", "30", "--save-samples",
+                 "500"]) == 0
+    text = capsys.readouterr().out
+    assert read_result(out).sizes["sample"] == 30
+    assert ("saved samples: the inputs and outputs of the first 30 assemblies (dimension "
+            "'sample'); --save-samples 500 asked for more than the run has") in text

@@ -276,6 +276,10 @@ def test_sweep_unknown_setting_names_it_and_the_valid_ones():
     ("ball_diameter_mm = 10.0", "ball_diameter_mm = 40",
      "bearing.ball_diameter_mm = 40 mm is unusual"),
     ("conformity = 0.54", "conformity = 0.7", "bearing.conformity = 0.7 is unusual"),
+    # a rail field correlated over 1 um (below a tenth of the 10 mm ball): 200 000 steps
+    ("std_deg = 0.5", "std_deg = 0.5\nscope = \"rail\"\ncorrelation_length_mm = 0.001",
+     "tolerances.bottom_rotation.correlation_length_mm = 0.001 mm is unusual: outside "
+     "[1, inf] mm"),
 ])
 def test_unusual_value_warns_one_line(old, new, key):
     with pytest.warns(ConfigWarning) as record:

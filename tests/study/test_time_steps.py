@@ -15,6 +15,7 @@ from tolsim.study.pipeline.propagation_rules import (
     MIN_TIME_STEPS,
     epsilon_lengths,
     propagation_assumption,
+    propagation_caveat,
     time_steps,
 )
 from tolsim.study.sampling import sample_block
@@ -37,6 +38,25 @@ def test_time_steps_is_auto_by_default_or_a_number():
     assert packaged("whatif_along_track", '"auto"').study.time_steps is None
     c = packaged("whatif_along_track", 37)
     assert c.study.time_steps == 37 and time_steps(c) == 37
+
+
+def test_a_step_count_below_the_automatic_one_is_said():
+    # whatif_along_track.toml takes 20 steps automatically (test below); fewer are a choice
+    # the file, summary and report state (the propagation caveat), 20 or more are not
+    coarse = propagation_caveat(packaged("whatif_along_track", 19))
+    assert coarse == ("study.time_steps = 19 is coarser than the automatic step (20 steps, "
+                      '"auto"), whose step error was measured against a fine-step reference: '
+                      "the step error may move P(contact) and the first contacts beyond that "
+                      '(README, "Step size").')
+    for steps in (None, 20, 400):
+        assert "coarser" not in propagation_caveat(packaged("whatif_along_track", steps))
+    # a carriage keeps its circuit sentence before it
+    both = propagation_caveat(packaged("carriage_preload", 2))
+    assert both.startswith("This carriage study ignores the ball circuit")
+    assert both.endswith("study.time_steps = 2 is coarser than the automatic step (10 steps, "
+                         '"auto"), whose step error was measured against a fine-step '
+                         'reference: the step error may move P(contact) and the first '
+                         'contacts beyond that (README, "Step size").')
 
 
 def test_the_assumption_says_whether_the_step_count_is_automatic():

@@ -408,8 +408,8 @@ def _stackup_line(ds) -> str:
     return f"linear stack-up: {ball}; {pair}"
 
 
-def summary(ds, output, elapsed) -> str:
-    """Short plain-text summary of a result Dataset."""
+def summary(ds, output, elapsed, save_requested=0) -> str:
+    """Short plain-text summary of a result Dataset (``save_requested``: --save-samples)."""
     a = ds.attrs
     q = ds["velocity_deviation_quantile"]
     tq = ds["time_to_contact_quantile"]
@@ -536,6 +536,12 @@ def summary(ds, output, elapsed) -> str:
     rate = float(a.get("balls_per_second", float("nan")))
     if not math.isfinite(rate):  # a file from before the attribute
         rate = int(ds.n_balls) / elapsed if elapsed > 0 else float("nan")
+    saved = ds.sizes.get("sample", 0)
+    if saved:
+        lines.append(f"saved samples: the inputs and outputs of the first {saved:,} assemblies "
+                     "(dimension 'sample')" + (
+                         f"; --save-samples {save_requested:,} asked for more than the run has"
+                         if save_requested > saved else ""))
     lines.append(f"wrote {output} ({elapsed:.1f} s, {rate:,.0f} balls/s)")
     return "\n".join(lines)
 
@@ -692,7 +698,8 @@ def run(args) -> int:
     if checkpoint.exists():
         os.unlink(checkpoint)
     if not args.quiet:
-        print(summary(ds, output, result.elapsed - result.loop_compile_seconds))
+        print(summary(ds, output, result.elapsed - result.loop_compile_seconds,
+                      args.save_samples))
     return 0
 
 

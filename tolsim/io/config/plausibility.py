@@ -176,6 +176,16 @@ RANGES = {
     # for a 10 mm ball (estimate, Notes of tolsim.physics.circuit.circuit_length).
     "carriage.circuit.return_drag": Range(0.0, 10.0, 0.0, 0.2, "weight friction and grease: "
                                           "about 0.004 to 0.05 N per 10 mm ball"),
+    # A rail random field's correlation length: a ball meets the groove over its contact
+    # ellipse, a few tenths of a millimetre for a 10 mm ball under tens of newtons (its
+    # semi-axes: tolsim.physics.hertz), so an error correlated over less than a tenth of the
+    # ball is averaged by the contact; ground rails' form errors are waviness of millimetres
+    # to metres. The automatic step follows the shortest length (4 steps per length along
+    # half the stroke: 200 000 steps for 1 um on a 100 mm stroke).
+    "tolerances.correlation_length": Range(0.0, None, 0.1, None, "a ball's contact averages "
+                                           "errors shorter than about a tenth of the ball; "
+                                           "the automatic step count grows as 1 / length",
+                                           open_low=True, per="ball diameter"),
 }
 
 
@@ -192,7 +202,7 @@ DISPLAY_UNITS = {
     "carriage.preload_oversize": ("um", UM), "carriage.track.x": ("m", 1.0),
     "carriage.track.y": ("m", 1.0), "carriage.track.orientation": ("deg", DEG),
     "carriage.circuit.balls": ("", 1.0), "carriage.circuit.slack": ("D", 1.0),
-    "carriage.circuit.return_drag": ("N", 1.0),
+    "carriage.circuit.return_drag": ("N", 1.0), "tolerances.correlation_length": ("D", 1.0),
 }
 
 

@@ -535,6 +535,9 @@ def read_tolerances(t: Table | None, bearing: Bearing) -> tuple:
         if corr and scope != "rail":
             raise sub.error(sub.key_for("correlation_length", "length"),
                             "applies only with scope = 'rail'")
+        if corr:
+            check_quantity(sub, "correlation_length", "length", corr,
+                           "tolerances.correlation_length", 2.0 * bearing.ball_radius)
         sub.finish()
         out.append(Tolerance(source, dist, scope, corr))
     t.finish()

@@ -6,6 +6,8 @@ step count of :func:`tolsim.study.pipeline.propagation.integrate` from the lengt
 which a ball's epsilon changes.
 """
 
+from dataclasses import replace
+
 import numpy as np
 
 #: What each propagation model assumes, in one sentence (summary, report, netCDF attribute).
@@ -197,12 +199,14 @@ def propagation_caveat(config) -> str:
     zone (always: its default is ``along_track``); for an ``along_track`` carriage without
     ``[carriage.circuit]``, that it ignores the circuit (issue 24). Empty otherwise."""
     if config.study.propagation != "constant":
+        notes = []
         if config.carriage is not None and config.carriage.circuit is None:
-            return ("This carriage study ignores the ball circuit: every ball that enters the "
-                    "loaded zone is a fresh, independent draw with a fresh gap, and nothing "
-                    "resists at the zone's ends (open trains). [carriage.circuit] follows "
-                    "the balls round their circuit.")
-        return ""
+            notes.append("This carriage study ignores the ball circuit: every ball that "
+                         "enters the loaded zone is a fresh, independent draw with a fresh "
+                         "gap, and nothing resists at the zone's ends (open trains). "
+                         "[carriage.circuit] follows the balls round their circuit.")
+        notes.append(_coarse_steps_caveat(config))
+        return " ".join(n for n in notes if n)
     fields = [t.source for t in config.tolerances
               if t.scope == "rail" and t.correlation_length > 0 and t.distribution.is_random]
     if config.carriage is not None:
@@ -217,6 +221,21 @@ def propagation_caveat(config) -> str:
     return (f"This study has {' and '.join(causes)}, so a ball's epsilon changes as it moves "
             "along the track; the constant propagation keeps each ball's starting value. "
             "propagation = \"along_track\" answers with the change included.")
+
+
+def _coarse_steps_caveat(config) -> str:
+    """A sentence when ``study.time_steps`` gives fewer steps than the automatic count (whose
+    accuracy :func:`time_steps` documents); empty otherwise."""
+    given = config.study.time_steps
+    if given is None:
+        return ""
+    auto = time_steps(replace(config, study=replace(config.study, time_steps=None)))
+    if given >= auto:
+        return ""
+    return (f"study.time_steps = {given} is coarser than the automatic step ({auto} steps, "
+            "\"auto\"), whose step error was measured against a fine-step reference: the "
+            "step error may move P(contact) and the first contacts beyond that (README, "
+            "\"Step size\").")
 
 
 def _constant_carriage_caveat(config, fields) -> str:
