@@ -37,6 +37,7 @@ from tolsim.study.pipeline.carriage_track import (
     slot_capacity,
 )
 from tolsim.study.pipeline.carriage_track_kernels import advance_kernel, carry_slots_kernel
+from tolsim.study.pipeline.evaluate import settle_unresolved_loads
 from tolsim.study.pipeline.propagation import (
     StepObserver,
     first_contact_tracks,
@@ -664,6 +665,47 @@ def test_end_relief_deeper_than_the_approach_leaves_nothing_unresolved():
     integrate(c, frame, [first, seen])
     assert seen.count > 0  # unloaded balls in the zone
     assert first.valid.all()
+
+
+def test_settle_unresolved_loads_opens_the_balls_below_the_solves_resolution():
+    # source: the Notes of settle_unresolved_loads: a loaded ball whose every force is at or
+    # below tolerance x the largest force of its assembly (here 1e-4 x 2.0 N = 2e-4 N) is
+    # unloaded (forces 0); a ball with one force above it, the balls outside the zone and an
+    # assembly that was not solved (NaN) keep theirs, bit for bit
+    force = np.zeros((3, 2, 3, 4))
+    force[0, 0, 0] = [3e-14, 1e-19, 0.0, 6.3e-5]  # all below 2e-4 N: unloaded
+    force[0, 0, 1] = [2.0, 0.0, 2.0, 1e-9]  # the assembly's largest force
+    force[0, 1, 0] = [1e-5, 1e-5, 1e-5, 3e-4]  # one force above the floor: kept
+    force[0, 1, 1] = [1e-6, 0.0, 0.0, 0.0]  # outside the zone: not a loaded ball
+    force[1] = np.nan  # not solved
+    force[2, 0, 0] = [1e-9, 0.0, 1e-9, 0.0]  # the assembly's only load: its own scale
+    loaded = np.ones((3, 2, 3), dtype=bool)
+    loaded[0, 1, 1] = False
+    got = settle_unresolved_loads(force, loaded, 1e-4)
+    want = force.copy()
+    want[0, 0, 0] = 0.0
+    assert_array_equal(got, want)
+    untouched = force.copy()
+    untouched[0, 0, 0] = [3e-14, 1e-19, 0.0, 3e-4]
+    assert settle_unresolved_loads(untouched, loaded, 1e-4) is untouched
+
+
+def test_a_ball_below_the_solves_force_resolution_is_unloaded():
+    # issue B4 of the audit: configs/carriage_preload.toml without preload or load, seed 12,
+    # 100 assemblies (tolsim run --samples 100 --save-samples 100): assembly 41's ball 6 of
+    # track 1 had the forces [3e-14, 1e-19, 0, 6.3e-5] N beside a largest force of 0.73 N,
+    # was taken for a three-point ball and got epsilon = -1.0044 from the full model (a ball
+    # rolling backwards; epsilon std 2.8 % over the study instead of 0.13 %). Its forces are
+    # below TRACK_TOLERANCE (1e-4) of the largest: unloaded. Bound: every resolved ball's
+    # |epsilon| below 1 % (measured after the fix: 0.71 % at most)
+    text = (ROOT / "configs" / "carriage_preload.toml").read_text().replace(
+        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0").replace(
+        "vertical_N = 300.0", "vertical_N = 0.0").replace(
+        "pitch_moment_N_m = 2.0", "pitch_moment_N_m = 0.0")
+    c = parse_config(text, "carriage_preload.toml").with_overrides(samples=100)
+    state = first_contact_carriage_track(c, sample_block(c, 0))[4]
+    assert state.unloaded[41, 18]
+    assert np.nanmax(np.abs(state.velocity_deviation)) < 0.01
 
 
 class Unloaded(StepObserver):

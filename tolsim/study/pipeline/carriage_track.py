@@ -53,6 +53,7 @@ from tolsim.study.pipeline.evaluate import (
     groove_error_buffers,
     loaded_ball_velocities,
     serial_if_small,
+    settle_unresolved_loads,
 )
 from tolsim.study.pipeline.propagation import (
     AlongTrackFrame,
@@ -221,8 +222,10 @@ class _Evaluation:
         solved = batch.status == STATUS_CONVERGED
         if remember:
             self.remember(rows, t, batch, solved)
-        state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation,
-                                       batch.normal_force, batch.ball_converged, solved)
+        # a ball with less load than the solve resolves is unloaded (settle_unresolved_loads)
+        force = settle_unresolved_loads(batch.normal_force, loaded, TRACK_TOLERANCE)
+        state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation, force,
+                                       batch.ball_converged, solved)
         eps, ok, unloaded = np.empty(shape), np.empty(shape, dtype=bool), np.empty(
             shape, dtype=bool)
         scatter_loaded_balls_kernel(loaded, state.velocity_deviation, state.valid,
