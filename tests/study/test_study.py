@@ -15,6 +15,7 @@ from tolsim.study.execution.runner import StudyInterrupted, run_study
 from tolsim.study.pipeline.evaluate import (
     StaticResult,
     ball_velocities,
+    concatenated_balls,
     evaluate_balls,
     rigid_angle_deviation,
 )
@@ -552,3 +553,28 @@ def test_unloaded_ball_is_counted_as_pushed_not_unresolved():
     acc = Accumulator(3, (-0.01, 0.01), 10, 1.0, 10)
     acc.add(three, np.array([np.inf]), np.array([-1]))
     assert acc.n_unresolved == 0 and acc.n_assemblies_valid == 1
+
+
+def test_trains_with_an_unresolved_ball_add_up():
+    # Audit B5: a train with a ball unresolved along the track and a certain contact (its
+    # pair of resolved balls touched) was counted in n_contact but neither valid nor
+    # unresolved (100 contacts, 99 valid, 0 unresolved of 100). Source: the accumulator's
+    # module docstring, N = v + c + u, k <= N - u; exact counts.
+    c = parse_config((CONFIGS / "known_answer.toml").read_text())
+    force = np.array([paired_forces(-120.0, 200.0), paired_forces(120.0, 200.0)])
+    state = ball_velocities(c, StaticResult(np.zeros((2, 4)), force, np.ones(2, bool)),
+                            (1, 2))
+    state = concatenated_balls(concatenated_balls(state, state), state)  # 3 trains
+    acc = Accumulator(2, (-0.01, 0.01), 10, 1.0, 10)
+    # train 0: resolved, contact at 0.5 s; 1: unresolved along the track, contact certain;
+    # 2: unresolved along the track (two balls), no contact
+    acc.add(state, np.array([0.5, 0.25, np.inf]), np.array([0, 0, -1]),
+            np.array([True, False, False]), np.array([0, 1, 2]))
+    assert (acc.n_assemblies, acc.n_assemblies_valid, acc.n_contact_untimed,
+            acc.n_unresolved, acc.n_contact) == (3, 1, 1, 1, 2)
+    assert acc.n_assemblies == (acc.n_assemblies_valid + acc.n_contact_untimed
+                                + acc.n_unresolved)
+    assert acc.n_unresolved_along_track == 3
+    assert acc.time_histogram.sum() == 1  # the certain contact has no known time
+    again = Accumulator.from_state(acc.state())
+    assert (again.n_contact_untimed, again.n_unresolved_along_track) == (1, 3)

@@ -480,7 +480,19 @@ def summary(ds, output, elapsed, save_requested=0) -> str:
         f"({float(a['full_model_resolve_seconds']):.2f} s); "
         f"unresolved {n_unresolved_balls} (static not converged "
         f"{int(ds.n_balls_not_converged)}, loss of contact {int(ds.n_balls_loss_of_contact)}, "
-        f"full model failed {int(ds.n_balls_full_failed)}); unresolved trains u = {n_unres}")
+        f"full model failed {int(ds.n_balls_full_failed)})"
+        + (f", and {int(ds.n_balls_unresolved_along_track)} more along the track"
+           if a["propagation"] == "along_track" and "n_balls_unresolved_along_track" in ds
+           else "")
+        + f"; unresolved trains u = {n_unres}")
+    untimed = (int(ds.n_assemblies_contact_untimed) if "n_assemblies_contact_untimed" in ds
+               else 0)
+    if untimed:
+        lines.append(
+            f"  {untimed} of the {n_asm - n_unres} {trains} whose outcome is known have an "
+            "unresolved ball and a contact certain without it: counted as contact, outside "
+            f"the time statistics ({int(ds.n_assemblies_valid)} {trains} with every ball "
+            "resolved)")
     if "n_balls_regime" in ds:
         from tolsim.reports.result_view import regime_counts_text  # noqa: PLC0415
 

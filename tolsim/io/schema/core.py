@@ -128,9 +128,17 @@ CORE_VARIABLES = {
     "groove_velocity": V((), "m s-1", "velocity v of the top groove (carriage)"),
     # counts
     "n_assemblies": V((), "1", "number of assemblies (trains) sampled", "i"),
-    "n_assemblies_valid": V((), "1", "trains whose balls are all resolved", "i"),
+    "n_assemblies_valid": V((), "1", "trains whose balls are all resolved: the population of "
+                                     "the time-to-contact statistics and the survival curve",
+                            "i"),
     "n_assemblies_unresolved": V((), "1", "trains with an unresolved ball and no certain "
                                           "contact", "i"),
+    "n_assemblies_contact_untimed": V((), "1", "trains with an unresolved ball and a contact "
+                                               "that is certain without it: in n_contact and "
+                                               "the known outcomes, not in the time "
+                                               "statistics; n_assemblies = n_assemblies_valid + "
+                                               "this + n_assemblies_unresolved", "i",
+                                      required=False),
     "n_contact": V((), "1", "trains with a contact within the horizon", "i"),
     "n_balls": V((), "1", "number of balls evaluated", "i"),
     "n_balls_valid": V((), "1", "balls with a resolved epsilon (fast or full model)", "i"),
@@ -145,6 +153,12 @@ CORE_VARIABLES = {
                                       "solve", "i"),
     "n_balls_unloaded": V((), "1", "balls without a loaded contact: no epsilon of their own, "
                                    "pushed along by their neighbours", "i", required=False),
+    "n_balls_unresolved_along_track": V((), "1", "balls resolved at the start of the stroke "
+                                                 "but unresolved at an evaluation along the "
+                                                 "track (along_track propagation; with a "
+                                                 "carriage before the first contact), each "
+                                                 "once; the other ball counts are of the "
+                                                 "balls at the start", "i", required=False),
     "n_balls_regime": V(("ball_regime",), "1", "number of balls in each regime", "i",
                         required=False),
     # per-assembly totals (tolsim.study.statistics.intervals.CLUSTER_COLUMNS): the assembly as the
@@ -306,6 +320,7 @@ def collect(result, history=None) -> tuple:
         "n_assemblies": acc.n_assemblies,
         "n_assemblies_valid": acc.n_assemblies_valid,
         "n_assemblies_unresolved": acc.n_unresolved,
+        "n_assemblies_contact_untimed": acc.n_contact_untimed,
         "n_contact": acc.n_contact,
         "n_balls": acc.n_balls,
         "n_balls_valid": acc.n_balls_valid,
@@ -315,6 +330,7 @@ def collect(result, history=None) -> tuple:
         "n_balls_resolved_full": acc.n_resolved_full,
         "n_balls_full_failed": acc.n_full_failed,
         "n_balls_unloaded": acc.n_unloaded,
+        "n_balls_unresolved_along_track": acc.n_unresolved_along_track,
         "n_balls_regime": (("ball_regime",), acc.regime_count),
         "assembly_count": np.int64(acc.cluster.count),
         "assembly_total_mean": (("assembly_total",), acc.cluster.mean),

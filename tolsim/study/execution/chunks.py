@@ -130,7 +130,9 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
             sub = state.rows(sl)
             acc = study_accumulator(config)
             acc.add(sub, t[sl], pair[sl],
-                    None if outcome.train_valid is None else outcome.train_valid[sl])
+                    None if outcome.train_valid is None else outcome.train_valid[sl],
+                    None if outcome.unresolved_along_track is None
+                    else outcome.unresolved_along_track[sl])
             if outcome.carriage is not None:  # the carriages at the start of the stroke
                 acc.add_carriage(outcome.carriage.rows(sl))
             if outcome.friction is not None:

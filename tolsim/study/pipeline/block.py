@@ -98,6 +98,10 @@ class BlockOutcome:
     circuit : dict or None
         The circuit figures of a ``[carriage.circuit]`` (:meth:`tolsim.study.pipeline.
         carriage_circuit.CircuitContact.figures`).
+    unresolved_along_track : ndarray of int (m,) or None
+        ``along_track``: the balls of each assembly unresolved at an evaluation after the
+        start and not at it (with a carriage: before its first contact), each once: with the
+        balls at the start, why ``train_valid`` is False; None with ``constant``.
     """
 
     values: dict
@@ -109,6 +113,7 @@ class BlockOutcome:
     carriage: CarriageState | None = None
     friction: FrictionState | None = None
     circuit: dict | None = None
+    unresolved_along_track: np.ndarray | None = None
 
     @property
     def resolved(self) -> np.ndarray:
@@ -177,8 +182,11 @@ def _free_along_track(config, block, values):
     # with [contact] the trains are followed after contact, step by step
     trains = _track_friction(config)
     state, _ = _free_start_along_track(config, block, values)
-    t, pair, ok, seconds = first_contact_along_track(config, block, state, friction=trains)
-    return BlockOutcome(values, state, t, pair, ok, seconds, None, _figures(trains))
+    unresolved = np.zeros(block.size, dtype=np.int64)
+    t, pair, ok, seconds = first_contact_along_track(config, block, state, friction=trains,
+                                                     unresolved=unresolved)
+    return BlockOutcome(values, state, t, pair, ok, seconds, None, _figures(trains),
+                        unresolved_along_track=unresolved)
 
 
 def _carriage_along_track(config, block, values):
@@ -188,10 +196,12 @@ def _carriage_along_track(config, block, values):
         t, pair, ok, seconds, state, carriage, contact = first_contact_carriage_circuit(
             config, block, friction=trains)
         return BlockOutcome(values, state, t, pair, ok, seconds, carriage, _figures(trains),
-                            circuit=contact.figures())
-    t, pair, ok, seconds, state, carriage = first_contact_carriage_track(config, block,
-                                                                         friction=trains)
-    return BlockOutcome(values, state, t, pair, ok, seconds, carriage, _figures(trains))
+                            circuit=contact.figures(), unresolved_along_track=contact.unresolved)
+    unresolved = np.zeros(block.size, dtype=np.int64)
+    t, pair, ok, seconds, state, carriage = first_contact_carriage_track(
+        config, block, friction=trains, unresolved=unresolved)
+    return BlockOutcome(values, state, t, pair, ok, seconds, carriage, _figures(trains),
+                        unresolved_along_track=unresolved)
 
 
 #: variant (:func:`variant`) -> ``f(config, block, values) -> BlockOutcome``.

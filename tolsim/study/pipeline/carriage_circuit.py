@@ -28,7 +28,11 @@ from tolsim.physics.circuit import (
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.physics.velocity.creep_stiffness import creep_stiffness
-from tolsim.study.pipeline.carriage_track import CarriageBalls, CarriageFrame
+from tolsim.study.pipeline.carriage_track import (
+    CarriageBalls,
+    CarriageFrame,
+    count_unresolved_balls,
+)
 from tolsim.study.pipeline.circuit_friction import CircuitTrains
 from tolsim.study.pipeline.circuit_kernels import (
     assembly_stiffness_kernel,
@@ -569,7 +573,8 @@ class CircuitContact(StepObserver):
     of the total gap from the slack at any step (``slack_error`` (size,)) [m]; with
     ``[contact]`` the friction of the column's forces at the zone's ends (``column_friction``
     (size,) [N], :meth:`tolsim.study.pipeline.circuit_friction.CircuitTrains.
-    column_friction`)."""
+    column_friction`); ``unresolved`` (size,) the balls unresolved along the track before the
+    first contact (:func:`tolsim.study.pipeline.carriage_track.count_unresolved_balls`)."""
 
     def __init__(self, frame):
         self.frame = frame
@@ -588,6 +593,8 @@ class CircuitContact(StepObserver):
         self.total_gap_end = self.total_gap_start.copy()
         self.slack_error = np.zeros(m)
         self.travel = 0.0
+        self.unresolved = np.zeros(m, dtype=np.int64)
+        self._seen = set()
 
     def following(self):
         return True  # every assembly over the whole stroke
@@ -597,6 +604,7 @@ class CircuitContact(StepObserver):
         self.searching = searching
         resolved = step.state1.valid & step.state2.valid
         self.valid[step.rows[searching]] &= resolved.all(axis=(1, 2))[searching]
+        count_unresolved_balls(self.unresolved, self._seen, step, searching)
 
     def moved(self, step):
         frame, rows, circ = self.frame, step.rows, step.circuit

@@ -53,6 +53,7 @@ from tolsim.study.pipeline.evaluate import (
     groove_error_buffers,
     loaded_ball_velocities,
     serial_if_small,
+    settle_unresolved_loads,
 )
 from tolsim.study.pipeline.propagation import (
     AlongTrackFrame,
@@ -221,8 +222,10 @@ class _Evaluation:
         solved = batch.status == STATUS_CONVERGED
         if remember:
             self.remember(rows, t, batch, solved)
-        state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation,
-                                       batch.normal_force, batch.ball_converged, solved)
+        # a ball with less load than the solve resolves is unloaded (settle_unresolved_loads)
+        force = settle_unresolved_loads(batch.normal_force, loaded, TRACK_TOLERANCE)
+        state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation, force,
+                                       batch.ball_converged, solved)
         eps, ok, unloaded = np.empty(shape), np.empty(shape, dtype=bool), np.empty(
             shape, dtype=bool)
         scatter_loaded_balls_kernel(loaded, state.velocity_deviation, state.valid,
@@ -563,11 +566,38 @@ class CarriageFrame(AlongTrackFrame):
         step.overflow, step.events = overflow, events
 
 
+def count_unresolved_balls(unresolved, seen, step, searching):
+    """Count the balls that make an assembly unresolved along the track, each once.
+
+    Adds to ``unresolved`` (size,) [balls], for every row a of ``step`` with ``searching[a]``,
+    the loaded balls unresolved at the step's midpoint evaluation (``state2``) that are not in
+    ``seen`` (a set of (assembly, track, ball id), updated): each ball once, however many
+    evaluations it is unresolved at. The balls unresolved at the start of the stroke
+    (``state1`` of the first step) go into ``seen`` uncounted: the ball counters of the balls
+    at t = 0 (static not converged, loss of contact, full model failed) have them. So a train
+    that is unresolved because of a ball along the track (``train_valid`` False, issue B4 of
+    the audit: 8 of 100 assemblies of ``configs/carriage_preload.toml`` without preload or
+    load, every ball counter at t = 0 zero) says why.
+    """
+    rows = step.rows
+    if step.index == 0:
+        for a, tr, j in np.argwhere(~step.state1.valid):
+            seen.add((int(rows[a]), int(tr), int(step.ball_id[a, tr, j])))
+    bad = ~step.state2.valid & np.asarray(searching, dtype=bool)[:, None, None]
+    for a, tr, j in np.argwhere(bad):
+        key = (int(rows[a]), int(tr), int(step.ball_id[a, tr, j]))
+        if key not in seen:
+            seen.add(key)
+            unresolved[rows[a]] += 1
+
+
 class CarriageFirstContact(StepObserver):
     """The first contact of each assembly in the carriage frame (``time``, ``pair``) and
     whether it is known (``valid``), as in the Notes of :func:`first_contact_carriage_track`:
     contacts between adjacent balls, both resolved so far and inside the zone at the time of
-    contact; an assembly is no longer followed after its first contact (by this observer)."""
+    contact; an assembly is no longer followed after its first contact (by this observer).
+    ``unresolved`` (size,): the balls unresolved along the track before the first contact
+    (:func:`count_unresolved_balls`)."""
 
     def __init__(self, frame):
         self.half_zone, self.slots, self.balls = frame.half_zone, frame.slots, frame.balls
@@ -578,6 +608,8 @@ class CarriageFirstContact(StepObserver):
         self.pair = np.full(m, -1, dtype=np.int64)
         self.valid = np.ones(m, dtype=bool)
         self.searching = None
+        self.unresolved = np.zeros(m, dtype=np.int64)
+        self._seen = set()
 
     def following(self):
         return ~np.isfinite(self.time)
@@ -594,6 +626,7 @@ class CarriageFirstContact(StepObserver):
             self.half_zone, float(step.t), float(step.dt), self.balls, self.time, self.pair,
             self.valid, self.searching,
             np.empty((0, 0, 0)) if step.closed is None else step.closed)
+        count_unresolved_balls(self.unresolved, self._seen, step, self.searching)
 
     def moved(self, step):
         searching = self.searching
@@ -695,7 +728,7 @@ class CarriageTrains(StepObserver):
 
 
 def first_contact_carriage_track(config, block, trace: TrackTrace | None = None, *,
-                                 friction=None):
+                                 friction=None, unresolved=None):
     """First contact of a block's carriage assemblies, balls rolling through the carriage.
 
     Parameters
@@ -711,6 +744,10 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
         and its loaded balls move as trains after they touch (Notes, "After contact"); the friction
         figures are accumulated in ``friction``. The first contact and ``train_valid`` are the same
         as without it.
+    unresolved : ndarray of int64 (size,), optional
+        Filled with the balls of each assembly unresolved along the track before its first
+        contact and not at t = 0 (:func:`count_unresolved_balls`): with those at t = 0, why
+        ``train_valid`` is False unless the slots or the entering balls ran out.
 
     Returns
     -------
@@ -879,9 +916,12 @@ def first_contact_carriage_track(config, block, trace: TrackTrace | None = None,
     if trace is not None:
         observers.append(trace)
     integrate(config, frame, observers)
+    if unresolved is not None:
+        unresolved[:] = first.unresolved
     return (first.time, first.pair, first.valid, frame.resolve_seconds, frame.initial_state,
             frame.initial_carriage)
 
 
 __all__ = ["CarriageBalls", "CarriageFirstContact", "CarriageFrame", "CarriageStep",
-           "CarriageTrains", "TrackTrace", "first_contact_carriage_track", "slot_capacity"]
+           "CarriageTrains", "TrackTrace", "count_unresolved_balls", "first_contact_carriage_track",
+           "slot_capacity"]

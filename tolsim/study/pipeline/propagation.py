@@ -708,7 +708,8 @@ class TrainMotion(StepObserver):
         return friction.advance(position, free_motion(position, w2, dt, v))
 
 
-def first_contact_along_track(config, block, initial_state=None, *, friction=None):
+def first_contact_along_track(config, block, initial_state=None, *, friction=None,
+                              unresolved=None):
     """First contact of the trains of a block with epsilon re-evaluated along the track (b).
 
     Parameters
@@ -725,6 +726,10 @@ def first_contact_along_track(config, block, initial_state=None, *, friction=Non
         :class:`tolsim.study.pipeline.track_friction.TrackFriction`). The
         first contact is the same as without it (it is located on the free motion of the
         step, which is the motion up to it).
+    unresolved : ndarray of int64 (size,), optional
+        Filled with the balls of each train unresolved at an evaluation after the start and
+        not at t = 0 (the ball counters of the balls at t = 0 have those): with them, why
+        ``valid`` is False.
 
     Returns
     -------
@@ -738,9 +743,26 @@ def first_contact_along_track(config, block, initial_state=None, *, friction=Non
     resolve_seconds : float
         Time spent re-solving balls with the full model during the integration [s].
     """
-    first = FirstContact()
-    observers = [first]
+    first, start = FirstContact(), _StartUnresolved()
+    observers = [first, start]
     if friction is not None:
         observers.append(TrainMotion(friction, config.motion.groove_velocity))
     ball_ok, resolve_seconds = integrate_along_track(config, block, initial_state, observers)
+    if unresolved is not None:
+        unresolved[:] = np.count_nonzero(~ball_ok & ~start.at_start, axis=1)
     return first.time, first.pair, ball_ok.all(axis=1), resolve_seconds
+
+
+class _StartUnresolved(StepObserver):
+    """The balls without an answer at t = 0 (``at_start``: not ``accounted`` in the balls at
+    the start of the first step)."""
+
+    def begin(self, block, position):
+        self.at_start = np.zeros(position.shape, dtype=bool)
+
+    def following(self):
+        return False
+
+    def observe(self, step):
+        if step.index == 0:
+            self.at_start = ~np.asarray(step.state1.accounted, dtype=bool)

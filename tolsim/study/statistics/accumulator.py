@@ -33,6 +33,16 @@ bit-identical however the blocks were grouped into chunks or spread over workers
   With u = 0 all three coincide with the plain estimate k / N. Time-to-contact statistics
   and the survival curve are over the resolved trains.
 
+  The trains add up: N = v + c + u, v the trains whose balls are all resolved
+  (``n_assemblies_valid``: their outcome and, with a contact, its time and pair are known),
+  c the trains with an unresolved ball and a certain contact (``n_contact_untimed``: counted
+  in k and among the N - u trains whose outcome is known, but outside the time statistics,
+  since the unresolved ball might have touched earlier) and u the unresolved ones. A ball
+  can be unresolved at the start of the stroke (the ball counters say why: static not
+  converged, loss of contact, full model failed) or, with ``along_track`` propagation, at an
+  evaluation along the track (``n_unresolved_along_track``, each ball once; a carriage's
+  train is also unresolved when its slots or entering balls run out).
+
 References: T. F. Chan, G. H. Golub, R. J. LeVeque, "Updating formulae and a pairwise algorithm
 for computing sample variances", Stanford CS report STAN-CS-79-773 (1979).
 [Manski2003] C. F. Manski, Partial Identification of Probability Distributions, Springer, 2003.
@@ -109,6 +119,7 @@ class Accumulator:
         "n_assemblies", "n_assemblies_valid", "n_contact", "n_unresolved", "n_balls",
         "n_balls_valid", "n_not_converged", "n_loss_of_contact", "n_outside_validity",
         "n_resolved_full", "n_full_failed", "n_unloaded", "regime_count",
+        "n_contact_untimed", "n_unresolved_along_track",
         "eps_mean", "eps_m2", "eps_min", "eps_max", "eps_histogram", "eps_underflow",
         "eps_overflow", "ball_count", "ball_mean", "ball_m2", "time_histogram", "time_min",
         "time_max", "pair_count", "carriage_count", "carriage_failed", "carriage_mean",
@@ -142,6 +153,10 @@ class Accumulator:
         self.n_resolved_full = i8(0)
         self.n_full_failed = i8(0)
         self.n_unloaded = i8(0)  # balls without a loaded contact: pushed along, no epsilon
+        # trains with an unresolved ball and a certain contact: known outcome, no time
+        self.n_contact_untimed = i8(0)
+        # balls unresolved at an evaluation along the track, not at the start (each once)
+        self.n_unresolved_along_track = i8(0)
         # balls per regime, in the order of BALL_REGIMES (unresolved, A, B, 3-, 2-point,
         # unloaded)
         self.regime_count = np.zeros(len(BALL_REGIMES), dtype=i8)
@@ -253,7 +268,8 @@ class Accumulator:
             self.CARRIAGE_COLUMNS, np.nan)
 
     # ---------------------------------------------------------------------------------------
-    def add(self, state, contact_time, contact_pair, train_valid=None):
+    def add(self, state, contact_time, contact_pair, train_valid=None,
+            unresolved_along_track=None):
         """Add one block of trains.
 
         Parameters
@@ -267,6 +283,10 @@ class Accumulator:
         train_valid : ndarray of bool (m,), optional
             Extra validity of the train (along-track propagation: every ball resolved at
             every step).
+        unresolved_along_track : ndarray of int (m,), optional
+            Along-track propagation: the balls of each train unresolved at an evaluation
+            after the start and not at it (:attr:`tolsim.study.pipeline.block.BlockOutcome.
+            unresolved_along_track`).
         """
         # statistics sit below the pipeline, whose package imports this module
 
@@ -311,6 +331,9 @@ class Accumulator:
         block.n_assemblies_valid = np.int64(np.count_nonzero(ok))
         block.n_contact = np.int64(np.count_nonzero(hit))
         block.n_unresolved = np.int64(np.count_nonzero(~ok & ~hit))
+        block.n_contact_untimed = np.int64(np.count_nonzero(~ok & hit))
+        if unresolved_along_track is not None:
+            block.n_unresolved_along_track = np.int64(np.sum(unresolved_along_track))
         timed = ok & hit  # first-contact time and pair known
         if np.any(timed):
             th = contact_time[timed]
@@ -326,7 +349,8 @@ class Accumulator:
         for name in ("n_assemblies", "n_assemblies_valid", "n_contact", "n_unresolved",
                      "n_balls", "n_balls_valid", "n_not_converged", "n_loss_of_contact",
                      "n_outside_validity", "n_resolved_full", "n_full_failed",
-                     "n_unloaded", "regime_count", "resolve_seconds", "eps_histogram",
+                     "n_unloaded", "regime_count", "n_contact_untimed",
+                     "n_unresolved_along_track", "resolve_seconds", "eps_histogram",
                      "eps_underflow", "eps_overflow", "time_histogram", "pair_count"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         n_a = self.n_balls_valid - other.n_balls_valid  # already added above
