@@ -150,6 +150,10 @@ def test_an_estimator_without_a_number_is_named_so_in_the_message():
     assert "second run found no failure" in combine_replicates(run(1e-4), missing).message
     plateau = dataclasses.replace(missing, status="plateau")
     assert "nan" not in combine_replicates(plateau, missing).message
+    # rc_imposs_rare.toml: FORM found no design point, importance sampling did not sample
+    form = dataclasses.replace(imp, status="form_failed")
+    assert ("importance sampling gave no estimate (FORM found no accepted design point)"
+            in combine(missing, form).message)
 
 
 def test_along_track_subset_is_checked_by_replicates(tmp_path):

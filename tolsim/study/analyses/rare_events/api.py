@@ -20,6 +20,7 @@ from tolsim.study.analyses.rare_events.result import (
     STATUS_ESTIMATORS_DISAGREE,
     STATUS_NO_FAILURE,
     STATUS_OK,
+    STATUSES,
     RareEventResult,
 )
 from tolsim.study.analyses.rare_events.subset import MODE_LIMIT, subset_simulation
@@ -258,13 +259,15 @@ def replicated_subset(g, dimension, seed, *, samples_per_level=1000, **options):
 def estimate_text(name, result) -> str:
     """'importance sampling 0.0012 [0.0011, 0.0013]': an estimate with its interval for a
     message that names both estimates, or what the estimator found instead of a number
-    ('importance sampling found no failure'), never 'nan [nan, nan]'."""
+    ('importance sampling found no failure', or the status's meaning), never
+    'nan [nan, nan]'."""
     if np.isfinite(result.probability):
         return (f"{name} {result.probability:.3g} [{result.ci_lower:.3g}, "
                 f"{result.ci_upper:.3g}]")
     if result.status == STATUS_NO_FAILURE:
         return f"{name} found no failure"
-    return f"{name} gave no estimate ({result.status})"
+    why = STATUSES.get(result.status, result.status).split(":")[0]
+    return f"{name} gave no estimate ({why})"
 
 
 def combine_replicates(first, second) -> RareEventResult:
