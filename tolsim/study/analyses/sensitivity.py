@@ -37,7 +37,7 @@ and its indices are undefined (0/0 or x/0). When more resamples than the interva
 point estimate is the noise of a handful of rows (a total index of 1.67 over 3 varying rows in
 2 048 on the audit's rc_certain_imp.toml): the indices are NaN, with the reason in
 ``reasons``. With fewer undefined resamples they are left out of the percentiles. (A resample
-misses k given rows of n with probability (1 - 1/n)^(n k) ~ e^-k, so at 95 % about 3 or fewer
+misses k given rows of n with probability (1 - k/n)^n ~ e^-k, so at 95 % about 3 or fewer
 varying rows make an output not estimable.) An output with a defined variance in every
 resample, the usual case, is not affected.
 
