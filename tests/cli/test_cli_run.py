@@ -29,6 +29,27 @@ def test_run_writes_file_and_summary(tmp_path, capsys):
     assert not Path(f"{out}.partial").exists()
 
 
+def test_summary_says_why_sobol_indices_are_not_estimable(tmp_path):
+    # rc_certain_imp.toml (audit) with sensitivity_samples: contact varied in 3 of 2 048 rows
+    # and the summary ranked its drivers by noise; NaN indices now come with the reason
+    from tolsim.cli.run import summary
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL)
+    out = tmp_path / "s.nc"
+    assert main(["run", str(cfg), "-o", str(out), "--samples", "20", "--quiet"]) == 0
+    reason = ("the output varies in only 3 of 2,048 rows: indices not estimable (51 of 1,000 "
+              "bootstrap resamples have no variance)")
+    ds = read_result(out).assign_coords(factor=("factor", [0, 1]),
+                                        factor_name=("factor", ["a", "b"]))
+    ds["sensitivity_total"] = ("factor", [0.3, 0.6])
+    ds["sensitivity_contact_total"] = ("factor", [np.nan, np.nan])
+    ds["sensitivity_contact_total"].attrs["not_estimable"] = reason
+    text = summary(ds, out, 1.0)
+    assert "drivers of epsilon (total Sobol' index): b 0.60, a 0.30" in text
+    assert f"drivers of contact (total Sobol' index): {reason}" in text
+
+
 def test_overrides_and_quiet(tmp_path, capsys):
     cfg = tmp_path / "s.toml"
     cfg.write_text(MINIMAL)

@@ -343,8 +343,11 @@ def test_compare_carriage_runs_and_bounds(tmp_path):
     nominal = comparison.differences[("carriage_rotational_stiffness_nominal_pitch", "car2")]
     assert nominal.estimate == nominal.ci_lower == nominal.ci_upper == 0.0  # same config
     assert nominal.interval == "exact"
-    assert "P(contact within the stroke) per assembly" in comparison.statistic(
-        "contact_probability").description
+    description = comparison.statistic("contact_probability").description
+    assert "P(contact within the stroke) per assembly" in description
+    assert "over the assemblies whose outcome is known" in description  # not "assemblys"
+    with open(result.csv, encoding="utf-8") as fh:
+        assert "assemblys" not in fh.read()
     assert os.path.exists(result.html) and os.path.exists(result.csv)
 
     ds = read_result(a)
@@ -362,6 +365,42 @@ def test_compare_carriage_runs_and_bounds(tmp_path):
     assert_allclose([lower, upper], [k_y / n_y - (k + 8) / n, k_y / n_y - k / n], rtol=1e-12)
     assert ci_lower == newcombe_difference(k_y, n_y, k + 8, n)[1]
     assert ci_upper == newcombe_difference(k_y, n_y, k, n)[2]
+
+
+def test_a_rare_event_estimate_is_labelled_and_differenced_as_such(yaw_runs):
+    # a run whose P(contact) an estimator made (here importance sampling, as the file of
+    # rc_certain_imp.toml labels it) is not k / n of its plain run: its interval is the
+    # estimator's, and its difference to a plain run the MOVER of the two intervals (the
+    # audit's compare labelled it Clopper-Pearson and took Newcombe's difference of the counts)
+    from tolsim.io.netcdf import read_result
+
+    plain = read_result(yaw_runs[0])
+    rare = read_result(yaw_runs[1])
+    interval = "normal approximation, estimate -+ z se (approximate)"
+    for name, value in (("contact_probability", 1.2e-3), ("contact_probability_ci_lower",
+                                                          1.0e-3),
+                        ("contact_probability_ci_upper", 1.4e-3)):
+        rare[name] = rare[name] * 0 + value
+        rare[name].attrs.update(estimator="importance", interval=interval)
+    comparison = compare_datasets([plain, rare], ["plain", "rare"])
+    stat = comparison.runs[1].statistics["contact_probability"]
+    assert stat.interval == f"importance sampling: {interval}"
+    assert "by importance sampling" in stat.description
+    assert comparison.runs[0].statistics["contact_probability"].interval == "Clopper-Pearson"
+    diff = comparison.differences[("contact_probability", "rare")]
+    ref = comparison.runs[0].statistics["contact_probability"]
+    expected = mover_difference(1.2e-3, 1.0e-3, 1.4e-3, ref.estimate, ref.ci_lower,
+                                ref.ci_upper)
+    assert_allclose([diff.estimate, diff.ci_lower, diff.ci_upper], expected, rtol=1e-12)
+    assert diff.interval.startswith("MOVER from the two intervals")
+    # the same with the rare-event run as the reference, and two rare-event runs
+    back = compare_datasets([rare, plain], ["rare", "plain"]).differences[
+        ("contact_probability", "plain")]
+    assert_allclose(back.estimate, -diff.estimate, rtol=1e-12)
+    assert back.interval.startswith("MOVER")
+    both = compare_datasets([rare, rare], ["r1", "r2"]).differences[
+        ("contact_probability", "r2")]
+    assert both.estimate == 0.0 and both.interval.startswith("MOVER")
 
 
 # --------------------------------------------------------------------------------------------

@@ -231,6 +231,43 @@ def test_sensitivity_figure(rng):
     assert labels[-1] == "a long name"
 
 
+def test_indices_not_estimable_are_said_so_in_file_report_and_figure():
+    # rc_certain_imp.toml (audit): contact varied in 3 of 2 048 base rows; the report ranked
+    # the sources by S_T = 1.669 [0.334, nan]. Now the indices are NaN with the reason, which
+    # the result file carries (not_estimable attribute), the report's table and its figure say
+    from scipy import stats
+
+    from tolsim.io.schema import sensitivity as schema
+    from tolsim.reports.study.sensitivity import sensitivity_from_file
+    from tolsim.reports.study.shared import sensitivity_blocks
+    from tolsim.study.analyses.sensitivity import sobol_sensitivity
+
+    def func(x):
+        contact = np.zeros(len(x))
+        contact[[5, 17, 1024 + 40, 2048 + 40, 3072 + 40]] = 1.0  # rows 5, 17 of A, 40 of B
+        return {"velocity_deviation": x @ [1.0, 0.5], "contact": contact}
+
+    res = sobol_sensitivity(func, [stats.norm()] * 2, 1024, np.random.default_rng(7),
+                            factors=["a", "b"], n_resamples=1000)
+    reason = res.reasons[1]
+    assert res.reasons[0] == "" and reason.startswith("the output varies in only 3 of 2,048")
+    result = SimpleNamespace(sensitivity=res, config=SimpleNamespace(
+        study=SimpleNamespace(sensitivity_samples=1024)))
+    ds = schema.assign(result, xr.Dataset())
+    schema.finish(result, ds)
+    assert ds["sensitivity_contact_total"].attrs["not_estimable"] == reason
+    assert "not_estimable" not in ds["sensitivity_total"].attrs
+    sens = sensitivity_from_file(ds)
+    assert sens.reasons == ("", reason) and np.all(np.isnan(sens.total[1]))
+    blocks = sensitivity_blocks(sens, ds)
+    assert blocks[1]["table"] is None and reason in blocks[1]["lead"]
+    fig = study_report.plot_sensitivity(sens)
+    assert check_figure(fig) == []
+    assert "not estimable" in " ".join(t.get_text() for t in fig.axes[1].texts)
+    for ax in fig.axes:
+        assert np.all(np.isfinite(ax.get_xlim()))
+
+
 def test_check_figure_catches_problems():
     # The checker itself must be able to fail: no labels, and a legend over a title.
     fig, ax = style.new_figure(4, 3)

@@ -27,7 +27,11 @@ from tolsim.study.analyses.rare_events import (
     RareEventResult,
     subset_simulation,
 )
-from tolsim.study.analyses.rare_events.api import combine_replicates, replicated_subset
+from tolsim.study.analyses.rare_events.api import (
+    combine,
+    combine_replicates,
+    replicated_subset,
+)
 from tolsim.study.execution.runner import run_study
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -133,6 +137,23 @@ def test_combine_replicates_rules():
     assert combine_replicates(run(1e-4), run(1.2e-4)).ok
     missing = dataclasses.replace(run(np.nan), status=STATUS_NO_FAILURE)
     assert combine_replicates(run(1e-4), missing).status == STATUS_NO_FAILURE
+
+
+def test_an_estimator_without_a_number_is_named_so_in_the_message():
+    # rc_imposs_rare.toml (audit): both estimators found no failure and the message read
+    # "subset simulation nan [nan, nan], importance sampling nan [nan, nan]"
+    missing = dataclasses.replace(run(np.nan), status=STATUS_NO_FAILURE, message="none")
+    imp = dataclasses.replace(missing, estimator="importance")
+    both = combine(missing, imp).message
+    assert "subset simulation found no failure, importance sampling found no failure" in both
+    assert "nan" not in combine(run(1e-4), imp).message
+    assert "second run found no failure" in combine_replicates(run(1e-4), missing).message
+    plateau = dataclasses.replace(missing, status="plateau")
+    assert "nan" not in combine_replicates(plateau, missing).message
+    # rc_imposs_rare.toml: FORM found no design point, importance sampling did not sample
+    form = dataclasses.replace(imp, status="form_failed")
+    assert ("importance sampling gave no estimate (FORM found no accepted design point)"
+            in combine(missing, form).message)
 
 
 def test_along_track_subset_is_checked_by_replicates(tmp_path):

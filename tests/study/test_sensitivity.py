@@ -145,6 +145,51 @@ def test_non_finite_evaluations_are_excluded(rng):
 def test_constant_output_gives_nan_indices(rng):
     res = sobol_sensitivity(lambda x: np.zeros(len(x)), [stats.norm()] * 2, 64, rng)
     assert np.all(np.isnan(res.first_order)) and np.all(np.isnan(res.total))
+    assert res.reasons == ("the output does not vary: indices not estimable",)
+    # a constant that is not 0: its centred values are rounding residue, still no variance
+    res = sobol_sensitivity(lambda x: np.full(len(x), 0.1), [stats.norm()] * 2, 64, rng)
+    assert np.all(np.isnan(res.total)) and res.reasons[0].startswith("the output does not")
+
+
+def _nearly_constant(n, rows_a, rows_b):
+    """A 0/1 output, 1 only in the given rows of A and B (contact nearly impossible), with
+    factor 0 inert and factor 1 carrying B's rows into AB_1."""
+    f_a, f_b = np.zeros(n), np.zeros(n)
+    f_a[rows_a], f_b[rows_b] = 1.0, 1.0
+    f_ab = np.stack([f_a, np.maximum(f_a, f_b)])
+    return f_a, f_b, f_ab
+
+
+def test_nearly_constant_output_is_not_estimable():
+    # The audit's rc_certain_imp.toml: the contact indicator differed in 3 of 2 048 base rows
+    # and the report showed S_T = 1.669 with CI [0.334, nan]. A resample misses those 3 rows
+    # with probability ~e^-3 = 5 % > 2.5 %: no variance there, the interval has no upper end.
+    f_a, f_b, f_ab = _nearly_constant(1024, [5, 17], [40])
+    res = indices_from_evaluations(f_a, f_b, f_ab, _gen(7), n_resamples=1000)
+    assert res["variance"] > 0
+    assert res["reason"].startswith("the output varies in only 3 of 2,048 rows: indices not "
+                                    "estimable (")
+    for key in ("first_order", "total", "first_order_ci", "total_ci"):
+        assert np.all(np.isnan(res[key])), (key, res[key])
+    # ... and the reason is carried to the result of several outputs
+    evaluations = np.concatenate([f_a, f_b, *f_ab])
+    both = sobol_sensitivity(
+        lambda x: {"constant": evaluations, "sum": x.sum(axis=1)},
+        lambda rng, n: np.zeros((n, 2)), 1024, _gen(7))
+    assert both.reasons[0].startswith("the output varies in only 3 of 2,048 rows")
+    assert both.reasons[1] == "the output does not vary: indices not estimable"
+
+
+def test_an_output_varying_in_enough_rows_keeps_finite_indices():
+    # 12 varying rows: a resample misses them all with probability ~e^-12; every resample has
+    # a variance and the indices and both ends of their intervals are finite
+    f_a, f_b, f_ab = _nearly_constant(1024, [3, 50, 90, 200, 300, 400], [7, 60, 95, 600,
+                                                                         700, 800])
+    res = indices_from_evaluations(f_a, f_b, f_ab, _gen(8), n_resamples=1000)
+    assert res["reason"] == ""
+    assert np.all(np.isfinite(res["total"])) and np.all(np.isfinite(res["total_ci"]))
+    assert np.all(np.isfinite(res["first_order_ci"]))
+    assert res["total"][0] == 0.0 and 0.0 < res["total"][1] <= res["total_ci"][1, 1]
 
 
 @pytest.mark.parametrize("kwargs, word", [

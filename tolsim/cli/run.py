@@ -533,7 +533,10 @@ def summary(ds, output, elapsed, save_requested=0) -> str:
         for var, what in (("sensitivity_total", "epsilon"),
                           ("sensitivity_contact_total", "contact"),
                           ("sensitivity_friction_total", "the friction increase")):
-            if var in ds:
+            if var in ds and ds[var].attrs.get("not_estimable"):  # NaN indices: why
+                lines.append(f"drivers of {what} (total Sobol' index): "
+                             f"{ds[var].attrs['not_estimable']}")
+            elif var in ds:
                 # indexed by the source names (the factor_name label), not the factor index
                 by_name = ds[var].swap_dims(factor="factor_name").to_series()
                 ranked = by_name.sort_values(ascending=False).head(3)

@@ -53,6 +53,13 @@ def sensitivity_variables(result: SensitivityResult) -> dict:
     return out
 
 
+#: Attribute of an output's index variables that says why they are NaN (not estimable,
+#: :mod:`tolsim.study.analyses.sensitivity`).
+NOT_ESTIMABLE = "not_estimable"
+#: Output -> prefix of its variables.
+PREFIXES = {VELOCITY_DEVIATION: "", CONTACT: "_contact", FRICTION_INCREASE: "_friction"}
+
+
 def assign(result, ds):
     """The Sobol' indices along ``factor`` (with its names) and ``sensitivity_samples``."""
     if result.sensitivity is None:
@@ -67,4 +74,20 @@ def assign(result, ds):
     return ds
 
 
-SECTION = Section(assign=assign)
+def finish(result, ds) -> None:
+    """Why an output's indices are not estimable: the :data:`NOT_ESTIMABLE` attribute of its
+    index variables and their interval ends."""
+    sens = result.sensitivity
+    if sens is None:
+        return
+    for output, reason in zip(sens.outputs, sens.reasons, strict=False):
+        if not reason or output not in PREFIXES:
+            continue
+        for index in ("first_order", "total"):
+            for suffix in ("", "_ci_lower", "_ci_upper"):
+                name = f"sensitivity{PREFIXES[output]}_{index}{suffix}"
+                if name in ds.variables:
+                    ds[name].attrs[NOT_ESTIMABLE] = reason
+
+
+SECTION = Section(assign=assign, finish=finish)

@@ -71,7 +71,9 @@ def plot_contact_probability(comparison: Comparison):
     ax.set_yticks(y, [r.label for r in runs])
     ax.set_ylim(-0.7, len(runs) - 0.3)
     ax.set_xlabel(f"P(contact within the stroke) [{unit}]")
-    ax.set_title("(a) contact probability, 95 % Clopper-Pearson", fontsize=10)
+    plain = all(s is None or s.interval == "Clopper-Pearson" for s in stats)
+    ax.set_title("(a) contact probability, 95 % " + ("Clopper-Pearson" if plain else
+                 "interval (Clopper-Pearson or the rare-event estimator's)"), fontsize=10)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize=8, framealpha=0.9)
 
@@ -95,7 +97,8 @@ def plot_contact_probability(comparison: Comparison):
     if span > 0:
         ax_d.set_xlim(-1.15 * span, 1.15 * span)
     ax_d.set_xlabel(f"difference to {runs[0].label} [{'ppm' if ppm else 'percentage points'}]")
-    ax_d.set_title("(b) difference to the reference, 95 % Newcombe (unpaired)", fontsize=10)
+    ax_d.set_title("(b) difference to the reference, 95 % " + (
+        "Newcombe" if plain else "Newcombe or MOVER") + " (unpaired)", fontsize=10)
     ax_d.tick_params(labelleft=False)
     return fig
 
@@ -176,9 +179,10 @@ def plot_survival(comparison: Comparison):
 FIGURES = {
     "contact_probability": (plot_contact_probability,
                             "(a) P(contact) of every run with its 95 % Clopper-Pearson "
-                            "interval (grey: the bounds when trains are unresolved); (b) the "
-                            "difference to the reference with its 95 % Newcombe interval "
-                            "(unpaired)."),
+                            "interval, or its rare-event estimator's (grey: the bounds when "
+                            "trains are unresolved); (b) the difference to the reference with "
+                            "its 95 % Newcombe interval, or the MOVER from the two intervals "
+                            "where a rare-event estimator made a P (unpaired)."),
     "velocity_deviation": (plot_velocity_deviation,
                            "The ε histograms of the runs as densities, with the spec limits."),
     "survival": (plot_survival, "Survival curves of the time to first contact, with pointwise "

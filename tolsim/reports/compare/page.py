@@ -211,15 +211,23 @@ def _statistics_table(comparison):
 
 
 def _methods_table(comparison):
-    rows, seen = [], set()
+    # (family, the runs' intervals, the differences' intervals): a P(contact) may come from a
+    # rare-event estimator in some runs only, with its own interval and difference
+    rows = {}
     for name in comparison.names:
         stat = comparison.statistic(name)
-        family = stat.family or stat.name
-        if family in seen:
-            continue
-        seen.add(family)
-        rows.append((family, stat.interval, DIFFERENCE_METHODS[stat.kind][1]))
-    return rows
+        intervals, methods = rows.setdefault(stat.family or stat.name, ([], []))
+        for run in comparison.runs:
+            if name in run.statistics and run.statistics[name].interval not in intervals:
+                intervals.append(run.statistics[name].interval)
+            diff = comparison.differences.get((name, run.label))
+            method = diff.interval.split(";")[0] if diff is not None else None
+            if method is not None and method not in methods:
+                methods.append(method)
+        if not methods:
+            methods.append(DIFFERENCE_METHODS[stat.kind][1])
+    return [(family, "; ".join(intervals), "; ".join(methods))
+            for family, (intervals, methods) in rows.items()]
 
 
 def comparison_html(comparison: Comparison, pngs: dict) -> str:
@@ -274,10 +282,12 @@ def comparison_html(comparison: Comparison, pngs: dict) -> str:
                  "(different random numbers): there the unpaired interval is the right one. "
                  "Label: <i>" + PAIRING_INDEPENDENT + "</i>. ")
     text += ("P(contact) and its bounds: Newcombe's hybrid score interval (Newcombe 1998, "
-             "Stat. Med. 17:873, method 10). Means and standard deviations: Welch's interval "
-             "with the Welch-Satterthwaite degrees of freedom. Quantiles, the fraction out of "
-             "spec and Cpk: the MOVER of Zou &amp; Donner (2008, Stat. Med. 27:1693) from the "
-             "two runs' own intervals. A Δ in bold has an interval that excludes 0.")
+             "Stat. Med. 17:873, method 10); a P(contact) made by a rare-event estimator: "
+             "the MOVER from the two runs' own intervals. Means and standard deviations: "
+             "Welch's interval with the Welch-Satterthwaite degrees of freedom. Quantiles, "
+             "the fraction out of spec and Cpk: the MOVER of Zou &amp; Donner (2008, Stat. "
+             "Med. 27:1693) from the two runs' own intervals. A Δ in bold has an interval "
+             "that excludes 0.")
     parts.append(f"<p>{text}</p>")
 
     parts.append("<h2>3. Config keys that differ</h2>")

@@ -9,6 +9,7 @@ from scipy.stats import t as t_distribution
 
 from tolsim.reports.result_view import bin_edges, integer, number, quantile_index
 from tolsim.reports.verdict import contact_unit, tracks_of
+from tolsim.study.analyses.rare_events import ESTIMATOR_TITLES
 from tolsim.study.statistics.intervals import (
     ClusterMoments,
     clopper_pearson_interval,
@@ -113,15 +114,31 @@ def _t_interval(estimate, se, df, confidence_level):
     return estimate - t * se, estimate + t * se
 
 
+def contact_estimator(ds) -> tuple:
+    """(estimator, interval) of the file's P(contact), from the ``estimator`` and ``interval``
+    attributes of ``contact_probability``: ``("monte_carlo", "Clopper-Pearson")`` for a plain
+    run (and a file without them), else the rare-event estimator that made the number
+    (:mod:`tolsim.io.schema.rare_events`) and its interval."""
+    attrs = (getattr(ds["contact_probability"], "attrs", {})
+             if "contact_probability" in ds.variables else {})
+    return (str(attrs.get("estimator", "monte_carlo")),
+            str(attrs.get("interval", "Clopper-Pearson")))
+
+
 def _contact_statistics(ds, bounds):
-    one = contact_unit(ds)[0]
+    one, many = contact_unit(ds)
     n_asm, k, u = (integer(ds, n) for n in ("n_assemblies", "n_contact",
                                              "n_assemblies_unresolved"))
+    estimator, interval = contact_estimator(ds)
+    by, kind = "", "proportion"
+    if estimator != "monte_carlo":  # the difference from this estimate, not the plain counts
+        title = ESTIMATOR_TITLES.get(estimator, estimator)
+        by, kind, interval = f" by {title}", "mover", f"{title}: {interval}"
     out = [Statistic(
-        "contact_probability", f"P(contact within the stroke) per {one}, over the {one}s "
+        "contact_probability", f"P(contact within the stroke) per {one}{by}, over the {many} "
         "whose outcome is known", "1", number(ds, "contact_probability"),
         number(ds, "contact_probability_ci_lower"), number(ds, "contact_probability_ci_upper"),
-        "Clopper-Pearson", "proportion", "probability", successes=k, trials=n_asm - u)]
+        interval, kind, "probability", successes=k, trials=n_asm - u)]
     if bounds:
         for name, hits, what in (("lower", k, "unresolved counted as no contact"),
                                  ("upper", k + u, "unresolved counted as contact")):
@@ -129,7 +146,7 @@ def _contact_statistics(ds, bounds):
                       else (float("nan"), float("nan")))
             out.append(Statistic(
                 f"contact_probability_bound_{name}",
-                f"{name} bound of P(contact) over all {one}s ({what})", "1",
+                f"{name} bound of P(contact) over all {many} ({what})", "1",
                 hits / n_asm if n_asm else float("nan"), lo, hi, "Clopper-Pearson",
                 "proportion", "probability", successes=hits, trials=n_asm))
     return out
@@ -278,9 +295,10 @@ def run_statistics(ds, *, bounds=None, confidence_level=CONFIDENCE_LEVEL) -> lis
     **Statistics and their intervals (95 %).**
 
     * **P(contact)** per train (per assembly in a carriage study): k of the n trains whose outcome
-      is known, with the file's Clopper-Pearson interval. When a run has unresolved trains, also
-      the partial-identification bounds k/N and (k + u)/N over all N trains, each with its
-      Clopper-Pearson interval.
+      is known, with the file's Clopper-Pearson interval; or, in a run with a rare-event
+      estimator, that estimator's number and interval (labelled by its method). When a run
+      has unresolved trains, also the partial-identification bounds k/N and (k + u)/N over all
+      N trains (from the plain run's counts), each with its Clopper-Pearson interval.
     * **epsilon mean and standard deviation**: the file's estimates; their standard errors by the
       delta method over assemblies (the balls of an assembly are correlated, the assemblies are
       independent: ratio estimator, [Cochran1977] Sec. 6.3-6.4) from the per-assembly moments the
@@ -388,7 +406,9 @@ def difference(run: Statistic, reference: Statistic, pairing=PAIRING_INDEPENDENT
 
     * P(contact) and its bounds: Newcombe's hybrid score interval ([Newcombe1998] method 10),
       from the Wilson intervals of the two proportions
-      (:func:`~tolsim.study.statistics.intervals.newcombe_difference`).
+      (:func:`~tolsim.study.statistics.intervals.newcombe_difference`). A P(contact) made by
+      a rare-event estimator (its ``estimator`` attribute, :func:`contact_estimator`) is not
+      k / n of the plain run: its difference is the MOVER from the two runs' own intervals.
     * means and standard deviations (epsilon, carriage stiffness): Welch's interval with the
       Welch-Satterthwaite degrees of freedom ([Welch1947], [Satterthwaite1946];
       :func:`~tolsim.study.statistics.intervals.welch_difference`).
@@ -410,12 +430,15 @@ def difference(run: Statistic, reference: Statistic, pairing=PAIRING_INDEPENDENT
        variance components", Biometrics Bulletin 2 (1946) 110-114.
     .. [Law2015] A. M. Law, Simulation Modeling and Analysis, 5th ed., McGraw-Hill, 2015.
     """
-    if run.name != reference.name or run.kind != reference.kind:
+    kind = run.kind
+    if run.name == reference.name and {run.kind, reference.kind} == {"proportion", "mover"}:
+        kind = "mover"  # a rare-event estimate against a plain run's k / n: from the intervals
+    elif run.name != reference.name or run.kind != reference.kind:
         raise ValueError(f"cannot take the difference of {run.name!r} ({run.kind}) and "
                          f"{reference.name!r} ({reference.kind})")
-    function, method = DIFFERENCE_METHODS[run.kind]
+    function, method = DIFFERENCE_METHODS[kind]
     d, lo, hi = function(run, reference, confidence_level)
-    if run.kind != "exact":
+    if kind != "exact":
         method = f"{method}; {pairing}"
     return Difference(float(d), float(lo), float(hi), method)
 

@@ -2,6 +2,8 @@
 distribution, the spot checks, the sensitivity indices and the quality tails."""
 
 
+import textwrap
+
 import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
@@ -15,6 +17,7 @@ from tolsim.reports.result_view import (
     integer,
     number,
 )
+from tolsim.reports.study.sensitivity import error_bar_lengths, not_estimable
 from tolsim.reports.style import (
     LIMIT_COLOUR,
     MODEL_COLOURS,
@@ -444,13 +447,13 @@ def plot_sensitivity(sens, unit="train"):
         err = np.abs(np.stack([tot - ci_t[:, 0], ci_t[:, 1] - tot]))
         ax.barh(y + 0.18, np.nan_to_num(tot), height=0.36, color=SERIES_COLOURS[0],
                 label="total effect S_T")
-        ax.errorbar(np.nan_to_num(tot), y + 0.18, xerr=np.nan_to_num(err), fmt="none",
+        ax.errorbar(np.nan_to_num(tot), y + 0.18, xerr=error_bar_lengths(err), fmt="none",
                     ecolor="k", capsize=2, lw=0.8)
         ax.barh(y - 0.18, np.nan_to_num(first), height=0.36, color=SERIES_COLOURS[4],
                 label="first order S")
         ci_f = sens.first_order_ci[k][order]
         err_f = np.abs(np.stack([first - ci_f[:, 0], ci_f[:, 1] - first]))
-        ax.errorbar(np.nan_to_num(first), y - 0.18, xerr=np.nan_to_num(err_f), fmt="none",
+        ax.errorbar(np.nan_to_num(first), y - 0.18, xerr=error_bar_lengths(err_f), fmt="none",
                     ecolor="k", capsize=2, lw=0.8)
         ax.set_yticks(y, [sens.factors[i].replace("_", " ") for i in order], fontsize=8.5)
         ends = np.concatenate([sens.total_ci[k].ravel(), sens.first_order_ci[k].ravel()])
@@ -462,8 +465,10 @@ def plot_sensitivity(sens, unit="train"):
         ax.set_ylabel("tolerance source")
         ax.set_title(titles.get(output, output), fontsize=10)
         if np.all(np.isnan(total)):
-            ax.text(0.5, 0.5, "output does not vary:\nno index", transform=ax.transAxes,
-                    ha="center", va="center")
+            reason = not_estimable(sens, k)
+            ax.text(0.5, 0.5, textwrap.fill(f"indices not estimable: {reason.split(':')[0]}",
+                                            36) if reason else "output does not vary:\nno index",
+                    transform=ax.transAxes, ha="center", va="center")
         ax.legend(loc="lower right", fontsize=8)
     fig.suptitle(f"What drives the risk: Sobol' indices, n = {sens.n} per base sample "
                  f"({sens.evaluations:,} assemblies evaluated)" if sens.n else

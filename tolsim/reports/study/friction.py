@@ -13,7 +13,11 @@ from tolsim.reports.result_view import (
     quantile_value,
 )
 from tolsim.reports.study.sections import ReportTable, section_titles, significant
-from tolsim.reports.study.sensitivity import FileSensitivity
+from tolsim.reports.study.sensitivity import (
+    FileSensitivity,
+    error_bar_lengths,
+    not_estimable,
+)
 from tolsim.reports.style import (
     LIMIT_COLOUR,
     SERIES_COLOURS,
@@ -66,7 +70,8 @@ def without_output(sens, output=FRICTION_OUTPUT):
                             np.asarray(sens.first_order_ci)[keep],
                             np.asarray(sens.total_ci)[keep], n=int(sens.n),
                             evaluations=int(sens.evaluations),
-                            confidence_level=float(sens.confidence_level))
+                            confidence_level=float(sens.confidence_level),
+                            reasons=tuple(not_estimable(sens, k) for k in keep))
 
 
 def friction_indices(sens):
@@ -283,7 +288,7 @@ def plot_friction(ds, sens=None, ball_diameter=np.nan):
             v, c = values[order], ci[order]
             ax_s.barh(y + shift, np.nan_to_num(v), height=0.36, color=colour, label=label)
             err = np.abs(np.stack([v - c[:, 0], c[:, 1] - v]))
-            ax_s.errorbar(np.nan_to_num(v), y + shift, xerr=np.nan_to_num(err), fmt="none",
+            ax_s.errorbar(np.nan_to_num(v), y + shift, xerr=error_bar_lengths(err), fmt="none",
                           ecolor="k", capsize=2, lw=0.8)
         ax_s.set_yticks(y, [sens.factors[i].replace("_", " ") for i in order], fontsize=8)
         ends = np.concatenate([total_ci.ravel(), first_ci.ravel()])
@@ -484,7 +489,9 @@ def friction_content(ds, sens=None) -> dict:
             "interactions: the rise needs a contact first, which takes both a difference in ε "
             "and a gap small enough to close.", (0, 2, 3)))
     elif indices is not None:
-        notes.append("The friction increase does not vary over the Sobol' samples: no "
+        reason = not_estimable(sens, list(sens.outputs).index(FRICTION_OUTPUT))
+        notes.append(f"The friction increase: {reason}; no ranking of its drivers." if reason
+                     else "The friction increase does not vary over the Sobol' samples: no "
                      "ranking of its drivers.")
     else:
         notes.append("No Sobol' indices of the friction increase (none stored in the result "

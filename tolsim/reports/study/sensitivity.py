@@ -32,6 +32,7 @@ class FileSensitivity:
     n: int = 0
     evaluations: int = 0
     confidence_level: float = 0.95
+    reasons: tuple = ()  # why an output's indices are not estimable, '' when they are
 
 
 def sensitivity_from_file(ds):
@@ -54,12 +55,13 @@ def sensitivity_from_file(ds):
     def get(name):
         return np.asarray(ds[name], dtype=float) if name in ds.variables else np.full(d, np.nan)
 
-    outputs, first, total, first_ci, total_ci = [], [], [], [], []
+    outputs, first, total, first_ci, total_ci, reasons = [], [], [], [], [], []
     for prefix, output in (("", "velocity_deviation"), ("_contact", "contact"),
                            ("_friction", "friction_increase")):
         if f"sensitivity{prefix}_total" not in ds.variables:
             continue
         outputs.append(output)
+        reasons.append(str(ds[f"sensitivity{prefix}_total"].attrs.get("not_estimable", "")))
         first.append(get(f"sensitivity{prefix}_first_order"))
         total.append(get(f"sensitivity{prefix}_total"))
         first_ci.append(np.stack([get(f"sensitivity{prefix}_first_order_ci_lower"),
@@ -67,7 +69,19 @@ def sensitivity_from_file(ds):
         total_ci.append(np.stack([get(f"sensitivity{prefix}_total_ci_lower"),
                                   get(f"sensitivity{prefix}_total_ci_upper")], axis=-1))
     return FileSensitivity(factors, tuple(outputs), np.array(first), np.array(total),
-                            np.array(first_ci), np.array(total_ci))
+                            np.array(first_ci), np.array(total_ci), reasons=tuple(reasons))
+
+
+def error_bar_lengths(values):
+    """Interval half-lengths for an error bar, NaN and infinite ones as 0 (no axis of a
+    figure is scaled by them)."""
+    return np.nan_to_num(values, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def not_estimable(sens, k) -> str:
+    """Why output ``k``'s indices are not estimable ('' when they are, or not known)."""
+    reasons = tuple(getattr(sens, "reasons", ()) or ())
+    return reasons[k] if k < len(reasons) else ""
 
 
 def config_error_text(ds) -> str:

@@ -8,6 +8,7 @@ from tolsim.reports.result_view import circuit_rows, integer, number, regime_cou
 from tolsim.reports.study.figures import OUTPUT_SHORT, output_titles
 from tolsim.reports.study.friction import without_output
 from tolsim.reports.study.sections import ReportTable
+from tolsim.reports.study.sensitivity import not_estimable
 from tolsim.reports.verdict import (
     CPK_QUANTITY,
     any_train,
@@ -218,8 +219,8 @@ def sensitivity_blocks(sens, ds) -> list:
     for k, output in enumerate(sens.outputs):
         title = titles.get(output, output)
         if np.all(np.isnan(sens.total[k])):
-            out.append({"lead": f"{title}: the output does not vary, no ranking.",
-                        "table": None})
+            reason = not_estimable(sens, k) or "the output does not vary"
+            out.append({"lead": f"{title}: {reason}, no ranking.", "table": None})
             continue
         top = int(np.nanargmax(sens.total[k]))
         lead = (f"Largest driver of {OUTPUT_SHORT.get(output, output)}: {sens.factors[top]} "

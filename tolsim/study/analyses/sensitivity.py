@@ -28,6 +28,19 @@ Confidence intervals: a nonparametric bootstrap over the n rows of (A, B, AB_i) 
 interval, ``n_resamples`` replicates, vectorised as a multinomial weight matrix), the same kind
 of interval as ``scipy.stats.sobol_indices(...).bootstrap()``.
 
+Indices that cannot be estimated: an output without variance (up to rounding, relative
+:data:`ZERO_VARIANCE`) has none. A nearly constant output (the contact indicator when contact
+is nearly certain or nearly impossible) has a variance, but only from the few rows where it
+differs from its most common value; a bootstrap resample that misses those rows has no variance
+and its indices are undefined (0/0 or x/0). When more resamples than the interval's tail share
+((1 - confidence_level) / 2) are undefined, the percentile interval has no defined end and the
+point estimate is the noise of a handful of rows (a total index of 1.67 over 3 varying rows in
+2 048 on the audit's rc_certain_imp.toml): the indices are NaN, with the reason in
+``reasons``. With fewer undefined resamples they are left out of the percentiles. (A resample
+misses k given rows of n with probability (1 - k/n)^n ~ e^-k, so at 95 % about 3 or fewer
+varying rows make an output not estimable.) An output with a defined variance in every
+resample, the usual case, is not affected.
+
 Cost: n (d + 2) evaluations. With tolsim's pipeline at millions of balls per second, n = 4096
 assemblies of 10 balls and d = 8 factors is 0.4 M balls: a second or two, so the cheaper
 one-at-a-time or regression estimators are not needed; their answers are also wrong for the
@@ -58,6 +71,9 @@ CONTACT = "contact"
 FRICTION_INCREASE = "friction_increase"
 #: Factor name of the initial gaps between balls in :func:`study_sensitivity`.
 INITIAL_GAP = "initial_gap"
+#: A variance at most this share of the mean square of the centred values is zero: what is
+#: left of an output that does not vary after rounding (module docstring) [-].
+ZERO_VARIANCE = 1e-12
 
 
 @dataclass(frozen=True)
@@ -69,7 +85,7 @@ class SensitivityResult:
     factors : tuple of str, length d
     outputs : tuple of str, length k
     first_order, total : ndarray, shape (k, d)
-        S_i and S_Ti [-] (NaN for an output with zero variance).
+        S_i and S_Ti [-] (NaN for an output whose indices are not estimable: ``reasons``).
     first_order_ci, total_ci : ndarray, shape (k, d, 2)
         Lower and upper ends of the bootstrap percentile interval [-].
     variance : ndarray, shape (k,)
@@ -87,6 +103,8 @@ class SensitivityResult:
     confidence_level : float
     n_resamples : int
     method : str
+    reasons : tuple of str, length k
+        Why an output's indices are not estimable (module docstring), '' when they are.
     """
 
     factors: tuple
@@ -104,6 +122,7 @@ class SensitivityResult:
     confidence_level: float
     n_resamples: int
     method: str = "Saltelli 2010 first order, Jansen 1999 total, bootstrap percentile CI"
+    reasons: tuple = ()
 
     def output_index(self, output) -> int:
         """Position of ``output`` (a name or an int) in :attr:`outputs`."""
@@ -187,7 +206,8 @@ def indices_from_evaluations(f_a, f_b, f_ab, rng, *, confidence_level=0.95,
     -------
     dict
         ``first_order``, ``total`` (d,), ``first_order_ci``, ``total_ci`` (d, 2),
-        ``variance``, ``mean``, ``used``, ``excluded``.
+        ``variance``, ``mean``, ``used``, ``excluded``, and ``reason``: why the indices are
+        not estimable (all NaN then; module docstring), '' when they are.
     """
     f_a = np.asarray(f_a, dtype=float)
     f_b = np.asarray(f_b, dtype=float)
@@ -229,36 +249,62 @@ def indices_from_evaluations(f_a, f_b, f_ab, rng, *, confidence_level=0.95,
             var = (s2 - np.where(cnt > 0, s1 * s1 / cnt, 0.0)).sum(axis=1) / total_cnt
             first = (weights @ row_first) / total_cnt[:, None] / var[:, None]
             total = (weights @ row_total) / total_cnt[:, None] / var[:, None]
-        return first, total, var
+            # no variance, up to rounding: the indices are undefined (module docstring)
+            defined = var > ZERO_VARIANCE * s2.sum(axis=1) / total_cnt
+        return first, total, var, defined
 
-    first, total, var = estimate(np.ones((1, n)))
+    first, total, var, defined = estimate(np.ones((1, n)))
     first, total, var = first[0], total[0], float(var[0])
     nan2 = np.full((d, 2), np.nan)
     first_ci, total_ci = nan2.copy(), nan2.copy()
-    if var > 0 and n_resamples > 0:
+    used = int(mask.sum())
+    reason = ("" if defined[0] else "the output does not vary: indices not estimable" if used
+              else "no finite evaluation: indices not estimable")
+    if not reason and n_resamples > 0:
         alpha = 1.0 - confidence_level
-        f_boot, t_boot = [], []
+        f_boot, t_boot, ok = [], [], []
         chunk = max(1, int(2**22 // max(n, 1)))
         for start in range(0, n_resamples, chunk):
             r = min(chunk, n_resamples - start)
             weights = rng.multinomial(n, np.full(n, 1.0 / n), size=r).astype(float)
-            fb, tb, _ = estimate(weights)
+            fb, tb, _, db = estimate(weights)
             f_boot.append(fb)
             t_boot.append(tb)
-        f_boot = np.concatenate(f_boot)
-        t_boot = np.concatenate(t_boot)
-        levels = [100 * alpha / 2, 100 * (1 - alpha / 2)]
-        with np.errstate(invalid="ignore"):
-            first_ci = np.nanpercentile(f_boot, levels, axis=0).T
-            total_ci = np.nanpercentile(t_boot, levels, axis=0).T
-    if not var > 0:
+            ok.append(db)
+        ok = np.concatenate(ok)
+        undefined = int(n_resamples - ok.sum())
+        if undefined > alpha / 2 * n_resamples:  # an end of the interval is undefined
+            reason = (f"the output varies in only {_varying(f_a, f_b, mask):,} of "
+                      f"{2 * used:,} {'rows' if m == 1 else 'values'}: indices not estimable "
+                      f"({undefined:,} of {n_resamples:,} bootstrap resamples have no "
+                      "variance)")
+        else:  # the few undefined resamples are left out of the percentiles
+            f_boot = np.concatenate(f_boot)[ok]
+            t_boot = np.concatenate(t_boot)[ok]
+            levels = [100 * alpha / 2, 100 * (1 - alpha / 2)]
+            with np.errstate(invalid="ignore"):
+                first_ci = np.nanpercentile(f_boot, levels, axis=0).T
+                total_ci = np.nanpercentile(t_boot, levels, axis=0).T
+    if reason:
         first = np.full(d, np.nan)
         total = np.full(d, np.nan)
-    used = int(mask.sum())
     mean = float(np.where(mask, f_a + f_b, 0.0).sum() / (2 * used)) if used else np.nan
     return {"first_order": first, "total": total, "first_order_ci": first_ci,
             "total_ci": total_ci, "variance": var if used else np.nan, "mean": mean,
-            "used": used, "excluded": int(mask.size - used)}
+            "used": used, "excluded": int(mask.size - used), "reason": reason}
+
+
+def _varying(f_a, f_b, mask) -> int:
+    """Rows of A and B (pooled columns: row-column values) where the output differs from
+    its most common value in the column, for the reason of an output that is not
+    estimable."""
+    count = 0
+    for j in range(f_a.shape[1]):
+        values = np.concatenate([f_a[mask[:, j], j], f_b[mask[:, j], j]])
+        if values.size:
+            _, counts = np.unique(values, return_counts=True)
+            count += int(values.size - counts.max())
+    return count
 
 
 def _assemble(factors, per_output, n, confidence_level, n_resamples):
@@ -271,7 +317,8 @@ def _assemble(factors, per_output, n, confidence_level, n_resamples):
         variance=stack("variance"), mean=stack("mean"),
         used=stack("used").astype(np.int64), excluded=stack("excluded").astype(np.int64),
         n=int(n), evaluations=int(n * (len(factors) + 2)),
-        confidence_level=float(confidence_level), n_resamples=int(n_resamples))
+        confidence_level=float(confidence_level), n_resamples=int(n_resamples),
+        reasons=tuple(per_output[o]["reason"] for o in outputs))
 
 
 def sobol_sensitivity(func, sampler, n, rng, *, factors=None, groups=None,

@@ -18,7 +18,9 @@ from tolsim.study.analyses.rare_events.importance import importance_sampling
 from tolsim.study.analyses.rare_events.monte_carlo import monte_carlo
 from tolsim.study.analyses.rare_events.result import (
     STATUS_ESTIMATORS_DISAGREE,
+    STATUS_NO_FAILURE,
     STATUS_OK,
+    STATUSES,
     RareEventResult,
 )
 from tolsim.study.analyses.rare_events.subset import MODE_LIMIT, subset_simulation
@@ -254,6 +256,20 @@ def replicated_subset(g, dimension, seed, *, samples_per_level=1000, **options):
     return combine_replicates(first, second), (first, second)
 
 
+def estimate_text(name, result) -> str:
+    """'importance sampling 0.0012 [0.0011, 0.0013]': an estimate with its interval for a
+    message that names both estimates, or what the estimator found instead of a number
+    ('importance sampling found no failure', or the status's meaning), never
+    'nan [nan, nan]'."""
+    if np.isfinite(result.probability):
+        return (f"{name} {result.probability:.3g} [{result.ci_lower:.3g}, "
+                f"{result.ci_upper:.3g}]")
+    if result.status == STATUS_NO_FAILURE:
+        return f"{name} found no failure"
+    why = STATUSES.get(result.status, result.status).split(":")[0]
+    return f"{name} gave no estimate ({why})"
+
+
 def combine_replicates(first, second) -> RareEventResult:
     """The cross-check of two independent subset simulations (:func:`replicated_subset`).
 
@@ -267,9 +283,7 @@ def combine_replicates(first, second) -> RareEventResult:
     number (then ``"estimators_disagree"``: a run that could not finish is no check), as in
     :func:`combine`.
     """
-    both = (f"first run {first.probability:.3g} [{first.ci_lower:.3g}, {first.ci_upper:.3g}], "
-            f"second run {second.probability:.3g} [{second.ci_lower:.3g}, "
-            f"{second.ci_upper:.3g}]")
+    both = f"{estimate_text('first run', first)}, {estimate_text('second run', second)}"
     evaluations = first.evaluations + second.evaluations
     ancestors = first.ancestors + second.ancestors
     if not first.ok or not second.ok:
@@ -356,9 +370,8 @@ def combine(sub, imp) -> RareEventResult:
     other: the other's result. Otherwise ``"estimators_disagree"`` (or the flag of a failing
     one, when neither has a trusted number), both numbers in the message.
     """
-    both = (f"subset simulation {sub.probability:.3g} [{sub.ci_lower:.3g}, "
-            f"{sub.ci_upper:.3g}], importance sampling {imp.probability:.3g} "
-            f"[{imp.ci_lower:.3g}, {imp.ci_upper:.3g}]")
+    both = (f"{estimate_text('subset simulation', sub)}, "
+            f"{estimate_text('importance sampling', imp)}")
     evaluations = sub.evaluations + imp.evaluations
     diagnostics = dict(design_point=imp.design_point, beta=imp.beta,
                        form_probability=imp.form_probability,
