@@ -30,7 +30,8 @@ def test_run_writes_file_and_summary(tmp_path, capsys):
 
 
 def test_summary_says_why_sobol_indices_are_not_estimable(tmp_path):
-    # rc_certain_imp.toml (audit) with sensitivity_samples: contact varied in 3 of 2 048 rows
+    # rare_contact.toml with gaps U(0, 1 um), importance sampling and sensitivity_samples:
+    # contact varied in 3 of 2 048 rows
     # and the summary ranked its drivers by noise; NaN indices now come with the reason
     from tolsim.cli.run import summary
 

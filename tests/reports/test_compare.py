@@ -371,7 +371,8 @@ def test_a_rare_event_estimate_is_labelled_and_differenced_as_such(yaw_runs):
     # a run whose P(contact) an estimator made (here importance sampling, as the file of
     # rc_certain_imp.toml labels it) is not k / n of its plain run: its interval is the
     # estimator's, and its difference to a plain run the MOVER of the two intervals (the
-    # audit's compare labelled it Clopper-Pearson and took Newcombe's difference of the counts)
+    # compare before this fix labelled it Clopper-Pearson and took Newcombe's difference of
+    # the counts)
     from tolsim.io.netcdf import read_result
 
     plain = read_result(yaw_runs[0])

@@ -232,7 +232,8 @@ def test_sensitivity_figure(rng):
 
 
 def test_indices_not_estimable_are_said_so_in_file_report_and_figure():
-    # rc_certain_imp.toml (audit): contact varied in 3 of 2 048 base rows; the report ranked
+    # rare_contact.toml with gaps U(0, 1 um) and importance sampling: contact varied in 3 of
+    # 2 048 base rows; the report ranked
     # the sources by S_T = 1.669 [0.334, nan]. Now the indices are NaN with the reason, which
     # the result file carries (not_estimable attribute), the report's table and its figure say
     from scipy import stats

@@ -691,7 +691,7 @@ def test_settle_unresolved_loads_opens_the_balls_below_the_solves_resolution():
 
 
 def test_a_ball_below_the_solves_force_resolution_is_unloaded():
-    # issue B4 of the audit: configs/carriage_preload.toml without preload or load, seed 12,
+    # found by an edge-case audit: configs/carriage_preload.toml without preload or load, seed 12,
     # 100 assemblies (tolsim run --samples 100 --save-samples 100): assembly 41's ball 6 of
     # track 1 had the forces [3e-14, 1e-19, 0, 6.3e-5] N beside a largest force of 0.73 N,
     # was taken for a three-point ball and got epsilon = -1.0044 from the full model (a ball
@@ -709,7 +709,8 @@ def test_a_ball_below_the_solves_force_resolution_is_unloaded():
 
 
 def test_an_assembly_with_a_ball_unresolved_along_the_track_says_why():
-    # Audit B5: configs/carriage_preload.toml with 2 deg rail rotation, 12 um rail offsets,
+    # An edge-case audit: configs/carriage_preload.toml with 2 deg rail rotation, 12 um rail
+    # offsets,
     # +-6 deg and +-30 um carriage tolerances, seed 12, 100 assemblies: assembly 6 has a ball
     # (track 1, slot 11) that the full model cannot solve at the first midpoint (t = 0.025 s,
     # 12 to 39 N on its four contacts) and, in the same step, a contact of two resolved balls
@@ -737,7 +738,7 @@ def test_an_assembly_with_a_ball_unresolved_along_the_track_says_why():
 
 
 def test_unresolved_trains_along_the_track_are_counted_by_their_balls():
-    # Audit B4, second part: configs/carriage_preload.toml without preload or load, seed 12,
+    # An edge-case audit: configs/carriage_preload.toml without preload or load, seed 12,
     # 100 assemblies: 8 trains (5 after the force floor of settle_unresolved_loads) were
     # unresolved while every ball count at t = 0 was 0. Each is unresolved by a lightly
     # loaded ball (forces 1e-5 to 5e-4 N beside 0.2 to 0.7 N) that the full model could not

@@ -140,7 +140,8 @@ def test_combine_replicates_rules():
 
 
 def test_an_estimator_without_a_number_is_named_so_in_the_message():
-    # rc_imposs_rare.toml (audit): both estimators found no failure and the message read
+    # rare_contact.toml with gaps of 5-6 mm and estimator = "rare": both estimators found no
+    # failure and the message read
     # "subset simulation nan [nan, nan], importance sampling nan [nan, nan]"
     missing = dataclasses.replace(run(np.nan), status=STATUS_NO_FAILURE, message="none")
     imp = dataclasses.replace(missing, estimator="importance")

@@ -161,7 +161,7 @@ def _nearly_constant(n, rows_a, rows_b):
 
 
 def test_nearly_constant_output_is_not_estimable():
-    # The audit's rc_certain_imp.toml: the contact indicator differed in 3 of 2 048 base rows
+    # rare_contact.toml with gaps U(0, 1 um): the contact indicator differed in 3 of 2 048 base rows
     # and the report showed S_T = 1.669 with CI [0.334, nan]. A resample misses those 3 rows
     # with probability ~e^-3 = 5 % > 2.5 %: no variance there, the interval has no upper end.
     f_a, f_b, f_ab = _nearly_constant(1024, [5, 17], [40])

@@ -556,7 +556,7 @@ def test_unloaded_ball_is_counted_as_pushed_not_unresolved():
 
 
 def test_trains_with_an_unresolved_ball_add_up():
-    # Audit B5: a train with a ball unresolved along the track and a certain contact (its
+    # An edge-case audit: a train with a ball unresolved along the track and a certain contact (its
     # pair of resolved balls touched) was counted in n_contact but neither valid nor
     # unresolved (100 contacts, 99 valid, 0 unresolved of 100). Source: the accumulator's
     # module docstring, N = v + c + u, k <= N - u; exact counts.

@@ -35,7 +35,7 @@ differs from its most common value; a bootstrap resample that misses those rows 
 and its indices are undefined (0/0 or x/0). When more resamples than the interval's tail share
 ((1 - confidence_level) / 2) are undefined, the percentile interval has no defined end and the
 point estimate is the noise of a handful of rows (a total index of 1.67 over 3 varying rows in
-2 048 on the audit's rc_certain_imp.toml): the indices are NaN, with the reason in
+2 048 on rare_contact.toml with gaps U(0, 1 um)): the indices are NaN, with the reason in
 ``reasons``. With fewer undefined resamples they are left out of the percentiles. (A resample
 misses k given rows of n with probability (1 - k/n)^n ~ e^-k, so at 95 % about 3 or fewer
 varying rows make an output not estimable.) An output with a defined variance in every

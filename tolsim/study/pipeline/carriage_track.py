@@ -575,9 +575,9 @@ def count_unresolved_balls(unresolved, seen, step, searching):
     evaluations it is unresolved at. The balls unresolved at the start of the stroke
     (``state1`` of the first step) go into ``seen`` uncounted: the ball counters of the balls
     at t = 0 (static not converged, loss of contact, full model failed) have them. So a train
-    that is unresolved because of a ball along the track (``train_valid`` False, issue B4 of
-    the audit: 8 of 100 assemblies of ``configs/carriage_preload.toml`` without preload or
-    load, every ball counter at t = 0 zero) says why.
+    that is unresolved because of a ball along the track (``train_valid`` False; an edge-case
+    audit found 8 of 100 assemblies of ``configs/carriage_preload.toml`` without preload or
+    load so, every ball counter at t = 0 zero) says why.
     """
     rows = step.rows
     if step.index == 0:
