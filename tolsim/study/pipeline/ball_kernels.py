@@ -221,6 +221,38 @@ def paired_analytic_kernel(tangential0, tangential1, tangential2, tangential3, b
     return settled
 
 
+@pjit
+def unresolved_loads_kernel(force, loaded, tolerance, out_small):
+    """The loaded balls whose every force is finite and <= tolerance x the largest finite
+    force of their assembly's loaded balls (at least 0), and > 0 somewhere: ``out_small``
+    (m, k) and their number (:func:`tolsim.study.pipeline.evaluate.settle_unresolved_loads`,
+    one pass over force (m, k, 4) instead of NumPy's reductions)."""
+    m, k = loaded.shape
+    count = 0
+    for a in prange(m):
+        largest = 0.0
+        for b in range(k):
+            if loaded[a, b]:
+                for c in range(4):
+                    f = force[a, b, c]
+                    if np.isfinite(f) and f > largest:
+                        largest = f
+        floor = tolerance * largest
+        for b in range(k):
+            small = False
+            if loaded[a, b]:
+                below, positive = True, False
+                for c in range(4):
+                    f = force[a, b, c]
+                    below = below and np.isfinite(f) and f <= floor
+                    positive = positive or f > 0.0
+                small = below and positive
+            out_small[a, b] = small
+            if small:
+                count += 1
+    return count
+
+
 @jit
 def ball_outcomes_kernel(eps, valid, converged, four_point, count, fast, model_fast,
                          model_unresolved, regime_a, regime_unresolved, regime_unloaded,

@@ -82,6 +82,7 @@ from tolsim.study.pipeline.ball_kernels import (
     loads_at_kernel,
     paired_analytic_kernel,
     paired_balls_kernel,
+    unresolved_loads_kernel,
 )
 
 CONTACTS = ("BL", "BR", "TR", "TL")
@@ -509,15 +510,11 @@ def settle_unresolved_loads(force, loaded, tolerance):
     :func:`settle_round_off_contacts` (2.4e-8 N) is the one that matters at the default
     tolerance of 1e-11 (a floor of 1e-11 F_max is below it up to F_max = 2 400 N).
     """
-    finite = np.isfinite(force)
-    carried = loaded[..., None] & finite
-    axes = tuple(range(1, force.ndim))
-    largest = np.max(np.where(carried, force, 0.0), axis=axes, initial=0.0)
-    floor = (tolerance * largest).reshape((-1,) + (1,) * (force.ndim - 1))
-    with np.errstate(invalid="ignore"):
-        small = loaded & np.all(finite & (force <= floor), axis=-1) & np.any(force > 0.0,
-                                                                             axis=-1)
-    if not small.any():
+    m = force.shape[0]
+    small = np.empty(loaded.shape, dtype=bool)
+    if not unresolved_loads_kernel(kernel_array(force).reshape(m, -1, 4),
+                                   kernel_array(loaded, bool).reshape(m, -1), float(tolerance),
+                                   small.reshape(m, -1)):
         return force
     return np.where(small[..., None], 0.0, force)
 
