@@ -690,6 +690,15 @@ def test_settle_unresolved_loads_opens_the_balls_below_the_solves_resolution():
     assert settle_unresolved_loads(untouched, loaded, 1e-4) is untouched
 
 
+def _without_preload_or_load():
+    """configs/carriage_preload.toml without preload or load, 100 assemblies (seed 12)."""
+    text = (ROOT / "configs" / "carriage_preload.toml").read_text().replace(
+        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0").replace(
+        "vertical_N = 300.0", "vertical_N = 0.0").replace(
+        "pitch_moment_N_m = 2.0", "pitch_moment_N_m = 0.0")
+    return parse_config(text, "carriage_preload.toml").with_overrides(samples=100)
+
+
 def test_a_ball_below_the_solves_force_resolution_is_unloaded():
     # found by an edge-case audit: configs/carriage_preload.toml without preload or load, seed 12,
     # 100 assemblies (tolsim run --samples 100 --save-samples 100): assembly 41's ball 6 of
@@ -698,11 +707,7 @@ def test_a_ball_below_the_solves_force_resolution_is_unloaded():
     # rolling backwards; epsilon std 2.8 % over the study instead of 0.13 %). Its forces are
     # below TRACK_TOLERANCE (1e-4) of the largest: unloaded. Bound: every resolved ball's
     # |epsilon| below 1 % (measured after the fix: 0.71 % at most)
-    text = (ROOT / "configs" / "carriage_preload.toml").read_text().replace(
-        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0").replace(
-        "vertical_N = 300.0", "vertical_N = 0.0").replace(
-        "pitch_moment_N_m = 2.0", "pitch_moment_N_m = 0.0")
-    c = parse_config(text, "carriage_preload.toml").with_overrides(samples=100)
+    c = _without_preload_or_load()
     state = first_contact_carriage_track(c, sample_block(c, 0))[4]
     assert state.unloaded[41, 18]
     assert np.nanmax(np.abs(state.velocity_deviation)) < 0.01
@@ -710,13 +715,12 @@ def test_a_ball_below_the_solves_force_resolution_is_unloaded():
 
 def test_an_assembly_with_a_ball_unresolved_along_the_track_says_why():
     # An edge-case audit: configs/carriage_preload.toml with 2 deg rail rotation, 12 um rail
-    # offsets,
-    # +-6 deg and +-30 um carriage tolerances, seed 12, 100 assemblies: assembly 6 has a ball
-    # (track 1, slot 11) that the full model cannot solve at the first midpoint (t = 0.025 s,
-    # 12 to 39 N on its four contacts) and, in the same step, a contact of two resolved balls
-    # at 0.0442 s. Its contact is certain and counted; it was neither valid nor unresolved
-    # (100 contacts, 99 valid, 0 unresolved of 100) and no ball count showed the ball. Exact
-    # counts (measured with tolsim run --samples 100).
+    # offsets, +-6 deg and +-30 um carriage tolerances, seed 12, 100 assemblies: assembly 6
+    # has a ball (track 1, slot 11) that the full model cannot solve at the first midpoint
+    # (t = 0.025 s, 12 to 39 N on its four contacts) and, in the same step, a contact of two
+    # resolved balls at 0.0442 s. Its contact is certain and counted; it was neither valid
+    # nor unresolved (100 contacts, 99 valid, 0 unresolved of 100) and no ball count showed
+    # the ball. Exact counts (measured with tolsim run --samples 100).
     text = (ROOT / "configs" / "carriage_preload.toml").read_text()
     for old, new in (("std_deg = 0.1", "std_deg = 2.0"), ("std_um = 1.0", "std_um = 12.0"),
                      ("low_deg = -0.3", "low_deg = -6.0"), ("high_deg = 0.3", "high_deg = 6.0"),
@@ -743,11 +747,7 @@ def test_unresolved_trains_along_the_track_are_counted_by_their_balls():
     # unresolved while every ball count at t = 0 was 0. Each is unresolved by a lightly
     # loaded ball (forces 1e-5 to 5e-4 N beside 0.2 to 0.7 N) that the full model could not
     # certify at a midpoint along the track; no slots or entering balls ran out. Exact counts.
-    text = (ROOT / "configs" / "carriage_preload.toml").read_text().replace(
-        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0").replace(
-        "vertical_N = 300.0", "vertical_N = 0.0").replace(
-        "pitch_moment_N_m = 2.0", "pitch_moment_N_m = 0.0")
-    c = parse_config(text, "carriage_preload.toml").with_overrides(samples=100)
+    c = _without_preload_or_load()
     unresolved = np.zeros(100, dtype=np.int64)
     time, _, valid, _, state, _ = first_contact_carriage_track(c, sample_block(c, 0),
                                                                unresolved=unresolved)
