@@ -359,6 +359,15 @@ def flagged_pair(a, b):
     return bad, keep, status
 
 
+def _diagnostics_for(subset_stands, diagnostics) -> dict:
+    """The cross-check's ``diagnostics`` that go with the result of the estimator that
+    stands: with subset simulation's, all but ``level_independent_cv`` (already its own);
+    with importance sampling's, all but subset's ``ancestors``."""
+    return {k: v for k, v in diagnostics.items()
+            if (k == "ancestors") == subset_stands or k not in
+            ("ancestors", "level_independent_cv")}
+
+
 def combine(sub, imp) -> RareEventResult:
     """The cross-check of subset simulation and importance sampling (``method="rare"``).
 
@@ -395,9 +404,7 @@ def combine(sub, imp) -> RareEventResult:
         # passed all of its own: the one that passed stands
         good = sub if sub.ok else imp
         return replace(good, estimator="rare", evaluations=evaluations,
-                       **{k: v for k, v in diagnostics.items()
-                          if (k == "ancestors") == (good is sub) or k not in
-                          ("ancestors", "level_independent_cv")})
+                       **_diagnostics_for(good is sub, diagnostics))
     if not sub.ok or not imp.ok:
         bad, keep, status = flagged_pair(sub, imp)
         message = (f"{'subset simulation' if bad is sub else 'importance sampling'} not ok: "
@@ -417,10 +424,7 @@ def combine(sub, imp) -> RareEventResult:
         good = imp if zero == "subset simulation" else sub
         return replace(good, estimator="rare", evaluations=evaluations, message=(
             f"{zero} has a standard error of 0 (every or no sample failed): not combined, "
-            f"the other estimate is given; {both}"),
-            **{k: v for k, v in diagnostics.items()
-               if (k == "ancestors") == (good is sub) or k not in
-               ("ancestors", "level_independent_cv")})
+            f"the other estimate is given; {both}"), **_diagnostics_for(good is sub, diagnostics))
     weights = np.array([1.0 / sub.standard_error ** 2, 1.0 / imp.standard_error ** 2])
     p = float(np.dot(weights, [sub.probability, imp.probability]) / weights.sum())
     se = 1.0 / math.sqrt(float(weights.sum()))

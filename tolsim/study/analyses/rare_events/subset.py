@@ -315,13 +315,12 @@ def no_failure_message(thresholds, smallest, max_levels, samples_per_level, p0) 
                 "probability estimated; raise max_levels")
     rate = float(np.mean(falls))
     to_go = thresholds[-1] / rate
+    exponent = (max_levels + to_go) * math.log10(p0)
     if max_levels + to_go > STALLED_LEVELS:
-        exponent = (max_levels + to_go) * math.log10(p0)
         return (f"{head}: g has stalled, its last {falls.size} thresholds fell by {rate:.3g} a "
                 f"level on average, so g = 0 lies some {to_go:.0f} levels further (P of order "
                 f"1e{exponent:.0f} or less); no probability estimated; more levels will not "
                 "help: the event is out of reach of the inputs (check the limit state)")
-    exponent = (max_levels + to_go) * math.log10(p0)
     return (f"{head}: the level budget ran out while the thresholds were still falling "
             f"({rate:.3g} a level, g = 0 about {to_go:.0f} levels further, P of order "
             f"1e{exponent:.0f} or less); no probability estimated; raise max_levels to about "
