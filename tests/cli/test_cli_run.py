@@ -355,13 +355,17 @@ def test_bad_target_ci_width(tmp_path, capsys, value):
     assert sorted(os.listdir(tmp_path)) == ["s.toml"]
 
 
-def test_summary_warns_when_balls_are_unresolved(tmp_path, capsys):
+def test_summary_warns_when_balls_are_unresolved(tmp_path, capsys, monkeypatch):
     # Issue 17, item 4: a study in which many balls have no epsilon must say so next to its
     # ppm and Cpk. The third ball (rho = 1.5) loses a contact in every assembly (paired
-    # forces put one flank in tension), so a third of the balls and every train without a
-    # certain contact are unresolved.
+    # forces put one flank in tension); with the solved model's fallback taken away (a ball
+    # no model can solve) a third of the balls and every train without a certain contact are
+    # unresolved.
     from pathlib import Path
 
+    import tolsim.study.pipeline.evaluate as evaluate
+
+    monkeypatch.setattr(evaluate, "STATIC_FALLBACK", {})
     text = (Path(__file__).resolve().parents[2] / "configs" / "known_answer.toml").read_text()
     text = text.replace("balls = 2", "balls = 3").replace(
         "side_force_ratio = [-0.6, 0.6]", "side_force_ratio = [-0.6, 0.6, 1.5]")
@@ -399,8 +403,9 @@ def _variant(tmp_path, name, replacements):
 # The two cases of issue 26 printed nan, "(1e+02 %)" and "ball -1" with exit 0. Since issue 25
 # the full model answers a ball with two loaded contacts (two-point, epsilon = 0), so a yaw
 # moment of 1500 N m with solved statics and the -50 kN pull on the four-point carriage are
-# answered now (tests below). What cannot answer: paired forces in tension (the paired
-# statics under 1500 N m put a contact of every ball in tension: loss of contact), and a
+# answered now (tests below), and so are the paired statics under 1500 N m, which put a
+# contact of every ball in tension: the solved model answers those balls
+# (test_paired_forces_in_tension_are_answered_by_the_solved_model). What cannot answer: a
 # carriage that truly lifts off (two upward-facing tracks pulled up: the carriage solver's
 # LIFT_OFF, the same verdict as tolsim carriage's).
 LIFT_OFF = [("orientation_deg = 90.0", "orientation_deg = 0.0"),
@@ -408,16 +413,16 @@ LIFT_OFF = [("orientation_deg = 90.0", "orientation_deg = 0.0"),
             ("vertical_N = 300.0 ", "vertical_N = -300.0 "),
             ("preload_oversize_um = 2.0 ", "preload_oversize_um = 0.0 "),
             ("samples = 2000", "samples = 300")]
+PAIRED_IN_TENSION = [("yaw_moment_N_m = 15.0", "yaw_moment_N_m = 1500.0"),
+                     ('static_model = "solved"', 'static_model = "paired"'),
+                     ("samples = 20000", "samples = 3000"),
+                     ("sensitivity_samples = 1024", "sensitivity_samples = 0")]
 UNANSWERABLE = [
-    pytest.param("yaw_moment_tolerances.toml",
-                 [("yaw_moment_N_m = 15.0", "yaw_moment_N_m = 1500.0"),
-                  ('static_model = "solved"', 'static_model = "paired"'),
-                  ("samples = 20000", "samples = 3000"),
-                  ("sensitivity_samples = 1024", "sensitivity_samples = 0")],
+    pytest.param("yaw_moment_tolerances.toml", PAIRED_IN_TENSION,
                  ["no train of the first block (1,024 assemblies) resolves",
                   "loss of contact: 10,240 of 10,240 balls",
                   "change loads.normal_load_N = 200.0, loads.yaw_moment_N_m = 1500.0"],
-                 id="paired_yaw_moment_1500_N_m"),
+                 id="paired_yaw_moment_1500_N_m_without_fallback"),
     pytest.param("carriage_preload.toml", LIFT_OFF,
                  ["the carriage lifts off the rail under the load",
                   "no assembly of the first block (300 assemblies) resolves",
@@ -431,7 +436,10 @@ UNANSWERABLE = [
 def test_study_that_cannot_answer_is_refused(tmp_path, capsys, monkeypatch, name,
                                              replacements, words):
     import tolsim.study.execution.runner as runner
+    import tolsim.study.pipeline.evaluate as evaluate
 
+    # a ball no model can solve: the paired model's fallback to the solved one taken away
+    monkeypatch.setattr(evaluate, "STATIC_FALLBACK", {})
     cfg = _variant(tmp_path, name, replacements)
     chunks = []
 
@@ -467,6 +475,21 @@ def test_lift_off_is_the_carriage_solvers_verdict_in_run_and_carriage(tmp_path, 
     assert err.count("\n") == 1 and f"the study cannot answer: {message}" in err, err
     assert "carriage.load.vertical_N = -300.0" in err
     assert sorted(os.listdir(tmp_path)) == ["carriage_preload.toml"]
+
+
+def test_paired_forces_in_tension_are_answered_by_the_solved_model(tmp_path, capsys):
+    # Under a yaw moment of 1500 N m the paired forces put a contact of every ball in tension
+    # (|N_x| >= N_y: loss of contact, which stopped the study before). Each such ball goes to
+    # the solved model (STATIC_FALLBACK), which finds it on two or three contacts; every ball
+    # is answered, and the summary says how many the solved model answered.
+    cfg = _variant(tmp_path, "yaw_moment_tolerances.toml", PAIRED_IN_TENSION)
+    assert main(["run", str(cfg), "-o", str(tmp_path / "out.nc"), "--samples", "64"]) == 0
+    out = capsys.readouterr().out
+    assert "unresolved 0 (static not converged 0, loss of contact 0, full model failed 0)" in out
+    assert ("640 of 640 balls answered by the solved static model: the paired model left "
+            "them without balance") in out
+    ds = read_result(tmp_path / "out.nc")
+    assert int(ds.n_balls_static_fallback) == 640 and int(ds.n_balls_valid) == 640
 
 
 def test_a_pulling_load_held_by_the_upper_flanks_is_not_lift_off(tmp_path, capsys):

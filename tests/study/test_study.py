@@ -271,19 +271,22 @@ def test_balls_outside_validity_are_resolved_with_the_full_model():
                     eq24(db[:, :-1], f[:, :-1]).velocity_deviation, rtol=0, atol=1e-15)
 
 
-def test_unresolved_trains_are_bounded_not_dropped():
+def test_unresolved_trains_are_bounded_not_dropped(monkeypatch):
     # Closed form (configs/known_answer.toml's case plus a third ball that loses contact):
     # balls 0 and 1 are [Lin2018] Sec. 3.2's pair (rho -0.6, +0.6, gap 0.5 mm, 10 mm/s, 10 s)
     # and touch iff the rail rotation theta >= theta* (1.2908 deg with the full model, which
     # evaluates the balls there: tests/study/test_known_answer.py::test_threshold_of_the_issue), so
     # with theta ~ N(0, 2 deg) P = 1 - Phi(1.2908 / 2) = 0.2593. Ball 2 has rho = 1.5: its
-    # paired forces put one contact in tension (loss of contact), no model can solve it, and
-    # every train without a certain contact of the pair (0, 1) is unresolved. The bounds are
-    # then [k/N, 1], and k/N estimates 0.2535.
+    # paired forces put one contact in tension (loss of contact). With its fallback to the
+    # solved model taken away (a ball no model can solve), every train without a certain
+    # contact of the pair (0, 1) is unresolved. The bounds are then [k/N, 1], and k/N
+    # estimates 0.2535.
     from scipy.stats import norm
 
+    import tolsim.study.pipeline.evaluate as evaluate
     from tolsim.study.statistics.intervals import clopper_pearson_interval
 
+    monkeypatch.setattr(evaluate, "STATIC_FALLBACK", {})
     text = (CONFIGS / "known_answer.toml").read_text()
     text = text.replace("balls = 2", "balls = 3").replace(
         "side_force_ratio = [-0.6, 0.6]", "side_force_ratio = [-0.6, 0.6, 1.5]")
@@ -578,3 +581,39 @@ def test_trains_with_an_unresolved_ball_add_up():
     assert acc.time_histogram.sum() == 1  # the certain contact has no known time
     again = Accumulator.from_state(acc.state())
     assert (again.n_contact_untimed, again.n_unresolved_along_track) == (1, 3)
+
+
+def test_paired_forces_in_tension_go_to_the_solved_model():
+    # A ball whose paired forces put a contact in tension (rho = N_x / N_y = 1.5: [Lin2018]
+    # Sec. 3.1's F_1 = sqrt(2)/2 (N_y - N_x) < 0) has no balance in the paired model; it was
+    # left unresolved (loss of contact). It goes to the solved model (STATIC_FALLBACK): its
+    # numbers are those of static_model = "solved" on the same ball, and the other balls keep
+    # the paired model's, bit for bit. A ball at rho = 2 runs on two contacts, which carry
+    # equal and opposite forces through its centre and so lie on one diameter: rolling on
+    # both, its centre moves at the mean of the contact speeds, v / 2 (epsilon = 0; 1e-12).
+    from dataclasses import replace
+
+    from tolsim.study.sampling import error_values, sample_block
+
+    text = (CONFIGS / "known_answer.toml").read_text().replace("balls = 2", "balls = 4")
+    c = parse_config(text.replace("side_force_ratio = [-0.6, 0.6]",
+                                  "side_force_ratio = [-0.6, 0.6, 1.5, -2.0]"))
+    c = c.with_overrides(samples=64)
+    values = error_values(c, sample_block(c, 0))
+    ny = np.full(4, 200.0)
+    nx = np.array([-0.6, 0.6, 1.5, -2.0]) * ny
+    paired = evaluate_balls(c, values, nx, ny)
+    solved = evaluate_balls(replace(c, study=replace(c.study, static_model="solved")),
+                            values, nx, ny)
+    pair_only = evaluate_balls(c, {k: np.broadcast_to(v, (64, 4))[:, :2]
+                                   for k, v in values.items()}, nx[:2], ny[:2])
+    assert_array_equal(paired.static_fallback, np.tile([False, False, True, True], (64, 1)))
+    assert paired.valid.all() and not paired.loss_of_contact.any()
+    for name in ("velocity_deviation", "normal_force", "contact_angle_deviation", "regime"):
+        assert_array_equal(getattr(paired, name)[:, 2:], getattr(solved, name)[:, 2:])
+        assert_array_equal(getattr(paired, name)[:, :2], getattr(pair_only, name))
+    assert np.all(np.count_nonzero(paired.normal_force[:, 3] > 0, axis=1) == 2)
+    assert_allclose(paired.velocity_deviation[:, 3], 0.0, rtol=0, atol=1e-12)
+    acc = Accumulator(4, (-0.01, 0.01), 10, 1.0, 10)
+    acc.add(paired, np.full(64, np.inf), np.full(64, -1))
+    assert (acc.n_static_fallback, acc.n_loss_of_contact, acc.n_unresolved) == (128, 0, 0)

@@ -485,6 +485,11 @@ def summary(ds, output, elapsed, save_requested=0) -> str:
            if a["propagation"] == "along_track" and "n_balls_unresolved_along_track" in ds
            else "")
         + f"; unresolved trains u = {n_unres}")
+    from tolsim.reports.result_view import static_fallback_text  # noqa: PLC0415
+
+    fallback = static_fallback_text(ds)
+    if fallback:
+        lines.append(f"  {fallback}")
     untimed = (int(ds.n_assemblies_contact_untimed) if "n_assemblies_contact_untimed" in ds
                else 0)
     if untimed:

@@ -137,6 +137,18 @@ def regime_counts_text(ds) -> str:
                      if count)
 
 
+def static_fallback_text(ds) -> str:
+    """The balls whose static model left them without balance, answered by the ``solved``
+    model (``n_balls_static_fallback``) in one line; "" for none or a file without the count."""
+    n = int(ds["n_balls_static_fallback"]) if "n_balls_static_fallback" in ds.variables else 0
+    if not n:
+        return ""
+    model = ds.attrs.get("static_model", "the study's")
+    return (f"{n:,} of {int(ds['n_balls']):,} balls answered by the solved static model: the "
+            f"{model} model left them without balance (a contact in tension, as where "
+            "|N_x| >= N_y with paired forces, one loaded contact, or not converged)")
+
+
 def circuit_rows(ds) -> list:
     """(label, text) of an along-track carriage result (issue 24): the fraction of first
     contacts at the ends of the loaded zone, and a ``[carriage.circuit]``'s figures; [] for

@@ -153,6 +153,11 @@ CORE_VARIABLES = {
                                       "solve", "i"),
     "n_balls_unloaded": V((), "1", "balls without a loaded contact: no epsilon of their own, "
                                    "pushed along by their neighbours", "i", required=False),
+    "n_balls_static_fallback": V((), "1", "balls the study's static model left without "
+                                          "balance (a contact in tension, one loaded contact, "
+                                          "or not converged) and the 'solved' model answered "
+                                          "instead (at the start of the stroke)", "i",
+                                 required=False),
     "n_balls_unresolved_along_track": V((), "1", "balls resolved at the start of the stroke "
                                                  "but unresolved at an evaluation along the "
                                                  "track (along_track propagation; with a "
@@ -330,6 +335,7 @@ def collect(result, history=None) -> tuple:
         "n_balls_resolved_full": acc.n_resolved_full,
         "n_balls_full_failed": acc.n_full_failed,
         "n_balls_unloaded": acc.n_unloaded,
+        "n_balls_static_fallback": acc.n_static_fallback,
         "n_balls_unresolved_along_track": acc.n_unresolved_along_track,
         "n_balls_regime": (("ball_regime",), acc.regime_count),
         "assembly_count": np.int64(acc.cluster.count),

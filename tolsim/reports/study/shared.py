@@ -4,7 +4,13 @@ a glance, the quality table, the linear stack-up, the ranked Sobol' tables and t
 
 import numpy as np
 
-from tolsim.reports.result_view import circuit_rows, integer, number, regime_counts_text
+from tolsim.reports.result_view import (
+    circuit_rows,
+    integer,
+    number,
+    regime_counts_text,
+    static_fallback_text,
+)
 from tolsim.reports.study.figures import OUTPUT_SHORT, output_titles
 from tolsim.reports.study.friction import without_output
 from tolsim.reports.study.sections import ReportTable
@@ -131,6 +137,9 @@ def glance_rows(ds) -> list:
     if "n_balls_regime" in ds:
         rows.append(("balls by regime (A: every contact slips; B: one sticks)",
                      regime_counts_text(ds), False))
+    fallback = static_fallback_text(ds)
+    if fallback:
+        rows.append(("balls answered by the solved static model", fallback, True))
     rows += [
         ("unresolved balls (static not converged / loss of contact / full model failed)",
          f"{integer(ds, 'n_balls_not_converged')} / {integer(ds, 'n_balls_loss_of_contact')} / "

@@ -32,7 +32,8 @@ epsilon enters the train like any other. Each ball's regime is recorded
 *unloaded*: it has no epsilon of its own, is pushed along by its neighbours, and is counted as
 such (:func:`tolsim.study.pipeline.propagation.pushed_velocity_deviation`). Only a ball that no
 model can solve stays *unresolved* (epsilon NaN): its static solve did not converge, its static
-model put a contact in tension or left it one loaded contact (loss of contact), or ``full``
+model put a contact in tension or left it one loaded contact (loss of contact; a static model
+other than ``solved`` hands such a ball to ``solved`` first, :data:`STATIC_FALLBACK`), or ``full``
 could not certify it (or a contact angle or ellipse outside the model's range). The statistics
 count unresolved balls by cause and bound the probabilities over their trains
 (:mod:`tolsim.study.statistics.accumulator`); none is silently dropped. Since invalid balls are
@@ -377,6 +378,14 @@ STATIC_MODELS = {
     "linearised": linearised_static,
 }
 
+#: The static model that answers a ball the study's static model leaves without balance: a
+#: contact in tension or one loaded contact (``loss_of_contact``), or not converged. The
+#: ``paired`` forces put a contact in tension where |N_x| >= N_y (|rho| >= 1): the ball then
+#: runs on two or three contacts at shifted angles, which the elastic load-controlled solve
+#: finds (:func:`with_static_fallback`). ``solved`` has no better model: its failures stay
+#: unresolved and are counted.
+STATIC_FALLBACK = {"paired": "solved", "rigid": "solved", "linearised": "solved"}
+
 #: Static models that :func:`evaluate_balls` runs from the source values in one compiled pass
 #: with the contact counts, name -> ``f(config, values, shape, side_load, normal_load,
 #: carriage_position) -> (StaticResult, counts)`` (the same numbers as ``STATIC_MODELS``).
@@ -623,7 +632,8 @@ class BallState:
     valid, else ``BALL_UNRESOLVED``). ``loss_of_contact``: balls the static model left
     without balance (a contact in tension, or one loaded contact). ``resolve_seconds`` is the
     time spent in the full-model solves [s], compilation of the
-    kernels (a cold cache) excluded.
+    kernels (a cold cache) excluded. ``static_fallback``: balls answered by the static model of
+    :data:`STATIC_FALLBACK` instead of the study's (:func:`with_static_fallback`; None: none).
     """
 
     velocity_deviation: np.ndarray
@@ -635,11 +645,14 @@ class BallState:
     model: np.ndarray
     resolve_seconds: float = 0.0
     regime: np.ndarray | None = None
+    static_fallback: np.ndarray | None = None
 
     def __post_init__(self):
         if self.regime is None:
             self.regime = np.where(self.valid, np.int8(BALL_REGIME_A),
                                    np.int8(BALL_UNRESOLVED))
+        if self.static_fallback is None:
+            self.static_fallback = np.zeros(np.shape(self.valid), dtype=np.bool_)
 
     @property
     def unloaded(self) -> np.ndarray:
@@ -655,7 +668,8 @@ class BallState:
         """The balls of the assemblies ``sl`` (a slice or an index array of the first axis)."""
         return BallState(self.velocity_deviation[sl], self.valid[sl], self.converged[sl],
                          self.loss_of_contact[sl], self.contact_angle_deviation[sl],
-                         self.normal_force[sl], self.model[sl], 0.0, self.regime[sl])
+                         self.normal_force[sl], self.model[sl], 0.0, self.regime[sl],
+                         self.static_fallback[sl])
 
 
 def concatenated_balls(first: BallState, second: BallState) -> BallState:
@@ -666,7 +680,8 @@ def concatenated_balls(first: BallState, second: BallState) -> BallState:
 
     return BallState(both("velocity_deviation"), both("valid"), both("converged"),
                      both("loss_of_contact"), both("contact_angle_deviation"),
-                     both("normal_force"), both("model"), 0.0, both("regime"))
+                     both("normal_force"), both("model"), 0.0, both("regime"),
+                     both("static_fallback"))
 
 
 def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
@@ -690,18 +705,24 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
     """
     shape = np.broadcast_shapes(np.shape(side_load), np.shape(normal_load),
                                 *(np.shape(v) for v in values.values()))
+    n = int(np.prod(shape))
+    nx = np.broadcast_to(side_load, shape).reshape(n)
+    ny = np.broadcast_to(normal_load, shape).reshape(n)
+
+    def loads(index):
+        return nx[index], ny[index]
+
     one_pass = ONE_PASS_STATIC_MODELS.get(config.study.static_model)
     if one_pass is not None:
         static, counts = one_pass(config, values, shape, side_load, normal_load)
-        return ball_velocities(config, static, shape, counts)
-    n = int(np.prod(shape))
-    errors = groove_error_fields({k: np.broadcast_to(v, shape) for k, v in values.items()},
-                                 shape)
-    nx = np.broadcast_to(side_load, shape).reshape(n)
-    ny = np.broadcast_to(normal_load, shape).reshape(n)
-    with serial_if_small(n):
-        static = STATIC_MODELS[config.study.static_model](errors, nx, ny, config.bearing)
-    return ball_velocities(config, static, shape)
+        state = ball_velocities(config, static, shape, counts)
+    else:
+        errors = groove_error_fields(
+            {k: np.broadcast_to(v, shape) for k, v in values.items()}, shape)
+        with serial_if_small(n):
+            static = STATIC_MODELS[config.study.static_model](errors, nx, ny, config.bearing)
+        state = ball_velocities(config, static, shape)
+    return with_static_fallback(config, state, values, loads)
 
 
 def evaluate_balls_at(config, values: dict, carriage_position) -> BallState:
@@ -716,7 +737,63 @@ def evaluate_balls_at(config, values: dict, carriage_position) -> BallState:
     shape = np.broadcast_shapes(np.shape(carriage_position),
                                 *(np.shape(v) for v in values.values()))
     static, counts = one_pass(config, values, shape, carriage_position=carriage_position)
-    return ball_velocities(config, static, shape, counts)
+    state = ball_velocities(config, static, shape, counts)
+
+    def loads(index):
+        return loads_at(config, np.broadcast_to(carriage_position, shape).reshape(-1)[index])
+
+    return with_static_fallback(config, state, values, loads)
+
+
+def with_static_fallback(config, state: BallState, values: dict, loads) -> BallState:
+    """``state`` with the balls its static model left without balance answered by the model of
+    :data:`STATIC_FALLBACK` (the same ``state`` if there is none, or no such ball).
+
+    A ball goes to the fallback when its static model left it with a contact in tension or one
+    loaded contact (``loss_of_contact``) or did not converge; the ``solved`` model then finds
+    its contact state from all its error sources and loads, and the study's velocity model (and
+    the full model where that one does not hold) its epsilon, as for any other ball. Such balls
+    are marked (``static_fallback``) and counted by the statistics. A ball the fallback cannot
+    balance either stays unresolved, with its cause.
+
+    Parameters
+    ----------
+    config : StudyConfig
+    state : BallState
+        The balls of the study's static model, of shape ``shape``.
+    values : dict
+        source -> ndarray broadcastable to ``shape`` [m or rad].
+    loads : callable
+        index (k,) into the flattened balls -> (N_x, N_y) (k,) [N] of those balls.
+    """
+    fallback = STATIC_FALLBACK.get(config.study.static_model)
+    if fallback is None or (state.converged.all() and not state.loss_of_contact.any()):
+        return state  # (two reductions of booleans: no cost along the track)
+    shape = state.valid.shape
+    redo = np.flatnonzero((state.loss_of_contact | ~state.converged).reshape(-1))
+    n = int(np.prod(shape))
+    errors = groove_error_fields(
+        {k: np.broadcast_to(v, shape).reshape(n)[redo] for k, v in values.items()},
+        (len(redo),))
+    nx, ny = loads(redo)
+    with serial_if_small(len(redo)):
+        static = STATIC_MODELS[fallback](errors, np.ascontiguousarray(nx, dtype=np.float64),
+                                         np.ascontiguousarray(ny, dtype=np.float64),
+                                         config.bearing)
+    again = ball_velocities(config, static, (len(redo),))
+
+    def merged(name, tail=()):
+        x = np.array(getattr(state, name)).reshape((n,) + tail)
+        x[redo] = getattr(again, name)
+        return x.reshape(shape + tail)
+
+    marked = state.static_fallback.copy().reshape(n)
+    marked[redo] = True
+    return BallState(merged("velocity_deviation"), merged("valid"), merged("converged"),
+                     merged("loss_of_contact"), merged("contact_angle_deviation", (4,)),
+                     merged("normal_force", (4,)), merged("model"),
+                     state.resolve_seconds + again.resolve_seconds, merged("regime"),
+                     marked.reshape(shape))
 
 
 def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallState:

@@ -466,7 +466,7 @@ def _flat_balls(state, index):
     return BallState(flat(state.velocity_deviation), flat(state.valid),
                      flat(state.converged), flat(state.loss_of_contact),
                      flat(state.contact_angle_deviation, (4,)), flat(state.normal_force, (4,)),
-                     flat(state.model), 0.0, flat(state.regime))
+                     flat(state.model), 0.0, flat(state.regime), flat(state.static_fallback))
 
 
 class TrackFriction:

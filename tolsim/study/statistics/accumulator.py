@@ -119,7 +119,7 @@ class Accumulator:
         "n_assemblies", "n_assemblies_valid", "n_contact", "n_unresolved", "n_balls",
         "n_balls_valid", "n_not_converged", "n_loss_of_contact", "n_outside_validity",
         "n_resolved_full", "n_full_failed", "n_unloaded", "regime_count",
-        "n_contact_untimed", "n_unresolved_along_track",
+        "n_contact_untimed", "n_unresolved_along_track", "n_static_fallback",
         "eps_mean", "eps_m2", "eps_min", "eps_max", "eps_histogram", "eps_underflow",
         "eps_overflow", "ball_count", "ball_mean", "ball_m2", "time_histogram", "time_min",
         "time_max", "pair_count", "carriage_count", "carriage_failed", "carriage_mean",
@@ -157,6 +157,8 @@ class Accumulator:
         self.n_contact_untimed = i8(0)
         # balls unresolved at an evaluation along the track, not at the start (each once)
         self.n_unresolved_along_track = i8(0)
+        # balls the study's static model left without balance, answered by its fallback
+        self.n_static_fallback = i8(0)
         # balls per regime, in the order of BALL_REGIMES (unresolved, A, B, 3-, 2-point,
         # unloaded)
         self.regime_count = np.zeros(len(BALL_REGIMES), dtype=i8)
@@ -302,6 +304,7 @@ class Accumulator:
         block.n_loss_of_contact = np.int64(np.count_nonzero(state.loss_of_contact))
         block.n_resolved_full = np.int64(np.count_nonzero(state.model == MODEL_FULL))
         block.n_unloaded = np.int64(np.count_nonzero(state.unloaded))
+        block.n_static_fallback = np.int64(np.count_nonzero(state.static_fallback))
         block.regime_count = np.bincount(state.regime.reshape(-1).astype(np.int64) + 1,
                                          minlength=len(BALL_REGIMES)).astype(np.int64)
         block.n_full_failed = block.n_balls - block.n_balls_valid - \
@@ -350,7 +353,8 @@ class Accumulator:
                      "n_balls", "n_balls_valid", "n_not_converged", "n_loss_of_contact",
                      "n_outside_validity", "n_resolved_full", "n_full_failed",
                      "n_unloaded", "regime_count", "n_contact_untimed",
-                     "n_unresolved_along_track", "resolve_seconds", "eps_histogram",
+                     "n_unresolved_along_track", "n_static_fallback", "resolve_seconds",
+                     "eps_histogram",
                      "eps_underflow", "eps_overflow", "time_histogram", "pair_count"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         n_a = self.n_balls_valid - other.n_balls_valid  # already added above
