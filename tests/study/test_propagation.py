@@ -124,17 +124,25 @@ def test_along_track_equals_constant_when_epsilon_is_constant():
     assert_array_equal(pair_b, pair_a)
 
 
-def test_balls_unresolved_along_the_track_are_counted_once_apart_from_the_start():
+def test_balls_unresolved_along_the_track_are_counted_once_apart_from_the_start(monkeypatch):
     # Closed form of the paired model: side force ratio 1.5 at the trailing slot, 0 at the
     # others, interpolated along the carriage; rho > 1 puts a contact in tension (loss of
-    # contact, no model solves it). Ball 0 starts at the trailing slot: unresolved at t = 0
-    # (the ball counters of the start have it). Balls 1 and 2 start at rho <= 0.75 and drift
-    # back through the carriage at v / 2, 200 mm over the 400 mm stroke, past rho = 1: each
-    # unresolved along the track, counted once (2 per train), every train unresolved.
+    # contact). The solved model answers such a ball (STATIC_FALLBACK): every train resolved.
+    # With that fallback taken away (a ball no model solves), ball 0 starts at the trailing
+    # slot: unresolved at t = 0 (the ball counters of the start have it). Balls 1 and 2 start
+    # at rho <= 0.75 and drift back through the carriage at v / 2, 200 mm over the 400 mm
+    # stroke, past rho = 1: each unresolved along the track, counted once (2 per train),
+    # every train unresolved.
+    import tolsim.study.pipeline.evaluate as evaluate
+
     c = parse_config(TRAIN.format(loads="side_force_ratio = [1.5, 0.0, 0.0]", field="",
                                   steps=40)).with_overrides(samples=16)
     b = sample_block(c, 0)
     unresolved = np.zeros(b.size, dtype=np.int64)
+    _, _, ok, _ = first_contact_along_track(c, b, unresolved=unresolved)
+    assert ok.all()
+    assert_array_equal(unresolved, 0)
+    monkeypatch.setattr(evaluate, "STATIC_FALLBACK", {})
     _, _, ok, _ = first_contact_along_track(c, b, unresolved=unresolved)
     assert not ok.any()
     assert_array_equal(unresolved, 2)
