@@ -227,6 +227,26 @@ def test_unresolved_points_show_their_bounds(tmp_path, monkeypatch):
     assert [int(r["n_assemblies_unresolved"]) for r in rows] == list(unresolved)
 
 
+def test_points_whose_balls_the_solved_model_answered_say_so(tmp_path):
+    # The sweep of test_unresolved_points_show_their_bounds with the paired model's fallback:
+    # the balls whose paired forces are in tension at 45 N m are answered by the solved model,
+    # no train is unresolved, and the model checks and points.csv give their number per point.
+    text = re.sub(r"(?ms)^\[sweep\].*", "", (CONFIGS / "sweep_yaw_moment.toml").read_text())
+    text = text.replace("samples = 20000", "samples = 128").replace(
+        "spot_checks = 50", "spot_checks = 2").replace('static_model = "solved"',
+                                                       'static_model = "paired"')
+    c = parse_config(text + '[sweep]\n"loads.yaw_moment_N_m" = [30.0, 45.0]\n', "f.toml")
+    ds, _ = run_sweep(c, tmp_path / "f.nc")
+    fallback = ds.n_balls_static_fallback.values
+    np.testing.assert_array_equal(ds.n_assemblies_unresolved.values, [0, 0])
+    assert fallback[0] == 0 and fallback[1] > 0
+    out = make_sweep_report(tmp_path / "f.nc", tmp_path / "report")
+    page = Path(out.html).read_text(encoding="utf-8")
+    assert "balls the static model left without balance, answered by the solved model" in page
+    rows = _csv(out.csv)
+    assert [int(r["n_balls_static_fallback"]) for r in rows] == list(fallback)
+
+
 def test_friction_of_a_contact_study(tmp_path):
     # a study with [contact] (configs/friction_yaw.toml): the friction increase and
     # P(friction increase > limit) per point

@@ -377,14 +377,17 @@ def sweep_html(ds, path, layout: Sweep, points, pngs: dict) -> str:
 
 
 def _checks_table(layout, points, section_number) -> list:
-    """The model checks per point: balls re-solved with the full model, unresolved balls,
-    spot checks."""
+    """The model checks per point: balls re-solved with the full model, balls answered by the
+    solved static model (a column only where a point has any), unresolved balls, spot
+    checks."""
+    fallback = any(integer(p.ds, "n_balls_static_fallback") for p in points)
     rows = []
     for p in points:
         ds = p.ds
         rows.append((str(p.number), *(value_text(v) for v in p.values),
                      f"{integer(ds, 'n_balls_resolved_full'):,} of "
                      f"{integer(ds, 'n_balls_outside_validity'):,}",
+                     *((f"{integer(ds, 'n_balls_static_fallback'):,}",) if fallback else ()),
                      f"{integer(ds, 'n_balls_not_converged')} / "
                      f"{integer(ds, 'n_balls_loss_of_contact')}"
                      f" / {integer(ds, 'n_balls_full_failed')}",
@@ -396,6 +399,8 @@ def _checks_table(layout, points, section_number) -> list:
         f"{section_number}. Model checks per point", (
             "point", *(k.label for k in layout.axes),
             f"balls outside the {model} model's validity, re-solved with the full model",
+            *(("balls the static model left without balance, answered by the solved model",)
+              if fallback else ()),
             "unresolved balls (not converged / loss of contact / full model failed)",
             "spot checks valid in both models", "RMS ε difference", "largest |ε difference|"),
         tuple(rows), (), "Spot checks: balls re-solved with the full friction model, half of "

@@ -229,7 +229,8 @@ CSV_COLUMNS = (
     "time_to_contact_median_s", "time_to_contact_median_ci_lower_s",
     "time_to_contact_median_ci_upper_s", "travel_to_contact_median_m",
     "n_balls_outside_validity", "n_balls_resolved_full", "n_balls_unresolved",
-    "spot_check_count", "spot_check_n_valid", "spot_check_rms_difference",
+    "n_balls_static_fallback", "spot_check_count", "spot_check_n_valid",
+    "spot_check_rms_difference",
     "verdict", "contact_verdict",
 )
 #: Columns added for a study with ``[contact]``.
@@ -265,7 +266,8 @@ def csv_rows(layout: Sweep, points) -> list:
                      "spot_check_rms_difference"):
             row[name] = _number(number(ds, name))
         for name in ("n_contact", "n_assemblies", "n_assemblies_unresolved",
-                     "n_balls_outside_validity", "n_balls_resolved_full", "spot_check_n_valid"):
+                     "n_balls_outside_validity", "n_balls_resolved_full",
+                     "n_balls_static_fallback", "spot_check_n_valid"):
             row[name] = str(integer(ds, name))
         row["n_balls_unresolved"] = str(sum(integer(ds, n) for n in (
             "n_balls_not_converged", "n_balls_loss_of_contact", "n_balls_full_failed")))
