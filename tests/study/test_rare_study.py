@@ -18,6 +18,7 @@ Where the numbers come from:
 """
 
 import dataclasses
+import re
 from pathlib import Path
 
 import numpy as np
@@ -202,6 +203,14 @@ def test_limit_state_sign_is_the_plain_indicator(case):
         assert_array_equal(g[event][known] <= 0, indicator[known] == 1, err_msg=event)
         # both outcomes occur, so the comparison says something
         assert 0 < np.sum(indicator == 1) < known.sum(), event
+    if "velocity_deviation_exceedance" in g:
+        # the plain run counts the same event on the same assemblies (its fallback when the
+        # estimator does not reach it): its k and u are the limit state's
+        statistics = run_study(dataclasses.replace(config, study=dataclasses.replace(
+            config.study, sensitivity_samples=0))).statistics
+        exceed = g["velocity_deviation_exceedance"]
+        assert (statistics.n_exceedance, statistics.n_exceedance_unresolved) == (
+            np.count_nonzero(exceed <= 0), np.count_nonzero(np.isnan(exceed)))
 
 
 def test_unresolved_assemblies_give_nan():
@@ -357,6 +366,8 @@ def test_summary_says_which_estimator(rare_results, tmp_path):
     assert "by subset simulation: CV " in text and "evaluations" in text
     assert "plain run: " in text and " contacts in 20000 trains" in text
     assert "P(an assembly has |epsilon| > 0.5 %) = " in text
+    k = int(subset.statistics.n_exceedance)  # the plain run's count beside the estimate
+    assert f"plain run: {k} exceeding assemblies in 20000 assemblies whose outcome" in text
     text = summary(result_to_dataset(importance, history="t"), "x.nc", 1.0)
     assert "by importance sampling: CV " in text
     line = next(x for x in text.splitlines() if "design point" in x)
@@ -517,6 +528,192 @@ def test_a_stalled_limit_state_is_not_sent_to_more_levels():
     assert "g has stalled" in lines[1] and "more levels will not help" in lines[1]
     assert "raise max_levels" not in lines[1]
     assert "no train has a known outcome" not in check.reason
+
+
+#: The |epsilon| exceedance probability's variable (its interval and bounds: suffixes).
+EXCEEDANCE = "velocity_deviation_exceedance_probability"
+
+
+def unreached_exceedance(result):
+    """(estimate, dataset, summary lines, report table row) of a study whose estimator did not
+    reach the |epsilon| exceedance event."""
+    from tolsim.cli.run import summary
+    from tolsim.reports.study.page import rare_events_html
+    from tolsim.study.statistics.intervals import clopper_pearson_interval
+
+    estimate = result.rare_events["velocity_deviation_exceedance"].result
+    assert estimate.status == STATUS_NO_FAILURE and np.isnan(estimate.probability)
+    ds = result_to_dataset(result, history="t")
+    # the file keeps the plain run's k of the n assemblies whose outcome is known with its
+    # Clopper-Pearson interval and bounds, labelled as P(contact)'s fallback is, and the
+    # estimator's status and message on the _status variable
+    attrs = ds[EXCEEDANCE].attrs
+    assert attrs["estimator"] == "monte_carlo" and attrs["interval"] == "Clopper-Pearson"
+    assert attrs["estimator_fallback"].startswith("subset simulation did not reach the event")
+    k = int(ds.n_velocity_deviation_exceedance)
+    u = int(ds.n_assemblies_velocity_deviation_unresolved)
+    n = int(ds.n_assemblies) - u
+    assert float(ds[EXCEEDANCE]) == k / n
+    assert_allclose([float(ds[f"{EXCEEDANCE}_ci_lower"]), float(ds[f"{EXCEEDANCE}_ci_upper"])],
+                    clopper_pearson_interval(k, n, 0.95), rtol=1e-12)
+    assert [float(ds[f"{EXCEEDANCE}_bound_{side}"]) for side in ("lower", "upper")] == [
+        k / int(ds.n_assemblies), (k + u) / int(ds.n_assemblies)]
+    for suffix in ("_ci_lower", "_ci_upper", "_bound_lower", "_bound_upper",
+                   "_bounds_ci_lower", "_bounds_ci_upper"):
+        assert ds[f"{EXCEEDANCE}{suffix}"].attrs["estimator"] == "monte_carlo", suffix
+    status = ds[f"{EXCEEDANCE}_status"]
+    assert rare_events.STATUS_FLAGS[int(status)] == STATUS_NO_FAILURE
+    assert status.attrs["estimator"] == "subset"
+    assert status.attrs["estimator_message"] == estimate.message
+    # the summary: the plain line, then which estimator did not reach the event and why
+    lines = summary(ds, "x.nc", 1.0).splitlines()
+    at = next(i for i, x in enumerate(lines) if x.startswith("P(an assembly has |epsilon|"))
+    assert f"({k} of {n} assemblies whose outcome is known)" in lines[at]
+    assert lines[at + 1].startswith(
+        "  the plain run's estimate (Monte Carlo, Clopper-Pearson): subset simulation did "
+        f"not reach the event (no_failure, {estimate.evaluations:,} evaluations): "
+        "subset simulation found no failure")
+    assert "nan" not in (lines[at] + lines[at + 1]).lower()
+    # the report's rare-event table: a row with the plain run's number, the estimator's
+    # status and message, and no "nan" (its CV, which the estimator did not give, is n/a)
+    row = next(r for r in "".join(rare_events_html(ds)).split("<tr>") if "|ε| over" in r)
+    assert "(the plain run&#x27;s)" in row and "<b>NO_FAILURE</b>" in row
+    assert "did not reach the event" in row and not re.search(r"\bnan\b", row, re.I)
+    return estimate, ds, lines[at:at + 2], row
+
+
+@pytest.fixture(scope="module")
+def impossible_limit():
+    """The result of rare_contact.toml with |epsilon| limited to 40 %."""
+    return run_study(study("rare_contact.toml", samples=256, samples_per_level=100,
+                           max_levels=10, velocity_deviation_limit=0.4))
+
+
+def test_an_unreached_exceedance_keeps_the_plain_run(impossible_limit):
+    # |epsilon| stays within +-0.5 %, a limit of 40 % is out of reach: the levels creep and
+    # subset simulation finds no failure (g has stalled). The file held NaN for
+    # P(an assembly has |epsilon| > L), its interval and bounds ("no plain per-assembly
+    # estimate of it to fall back on"); it keeps the plain run's 0 of 256 assemblies with
+    # the exact 95 % upper bound for 0 of n, 1 - 0.025^(1/n) (Clopper & Pearson 1934: the
+    # upper end p solves (1 - p)^n = 0.025), as P(contact)'s fallback does
+    _, ds, lines, row = unreached_exceedance(impossible_limit)
+    assert int(ds.n_velocity_deviation_exceedance) == 0
+    assert int(ds.n_assemblies_velocity_deviation_unresolved) == 0
+    assert float(ds[EXCEEDANCE]) == 0.0 == float(ds[f"{EXCEEDANCE}_ci_lower"])
+    assert_allclose(float(ds[f"{EXCEEDANCE}_ci_upper"]), 1 - 0.025 ** (1 / 256), rtol=1e-12)
+    assert_allclose(float(ds[f"{EXCEEDANCE}_bounds_ci_upper"]), 1 - 0.025 ** (1 / 256),
+                    rtol=1e-12)
+    assert lines[0].startswith("P(an assembly has |epsilon| > 40 %) = 0.0000  95 % CI "
+                               "[0.0000, 0.0143]")
+    assert "g has stalled" in lines[1] and "raise max_levels" not in lines[1]
+    assert "0 % (95 % CI 0 to 1.43 %) (the plain run&#x27;s)" in row
+    assert "bounds with the unresolved" not in row  # none unresolved
+
+
+def test_an_unreached_exceedance_that_the_plain_run_sees():
+    # L = 0.35 %: about 4 % of the assemblies have a ball beyond it, so one level of 100
+    # samples holds fewer failures than its 10 chains (max_levels = 1: no failure found),
+    # while the plain run of 256 sees 10. They are assemblies, the limit state's sampling
+    # unit: the plain run's assemblies whose g = L - max_b |eps_b| is <= 0, not its balls
+    # beyond L (more of them: an assembly may have several)
+    config = study("rare_contact.toml", samples=256, samples_per_level=100, max_levels=1,
+                   velocity_deviation_limit=0.0035)
+    result = run_study(config)
+    _, ds, lines, row = unreached_exceedance(result)
+    block = sample_block(config, 0)  # the plain run's 256 assemblies
+    assert block.size == 256
+    g = limit_state.event_values(config, block, ("velocity_deviation_exceedance",))[
+        "velocity_deviation_exceedance"]
+    assert int(ds.n_velocity_deviation_exceedance) == np.count_nonzero(g <= 0) == 10
+    assert int(ds.n_assemblies_velocity_deviation_unresolved) == np.count_nonzero(
+        np.isnan(g)) == 0
+    balls_beyond = result.statistics.cluster.mean[1] * result.statistics.cluster.count
+    assert round(balls_beyond) > 10
+    assert "= 0.0391  95 % CI [0.0189, 0.0707]  (10 of 256 assemblies" in lines[0]
+    assert lines[1].endswith("raise max_levels")  # the level budget ran out
+    assert "3.91 % (95 % CI 1.89 to 7.07 %) (the plain run&#x27;s)" in row
+
+
+def test_plain_exceedance_counts_keep_unresolved_assemblies():
+    # The plain run's count of assemblies with |epsilon| > L = 0.5 %, by hand (module
+    # docstring of tolsim.study.statistics.accumulator): a resolved ball beyond L is certain
+    # whatever an unresolved ball did (assembly 0, as a certain contact); an unresolved ball
+    # without one leaves the assembly unknown (1); an unloaded ball has no epsilon of its own
+    # and cannot exceed (2); -0.51 % is beyond too (3). k = 2 of the N - u = 3 known, bounds
+    # [2/4, 3/4] with the Clopper-Pearson lower end of 2 of 4 and upper end of 3 of 4
+    from tolsim.physics.velocity.models import (
+        BALL_REGIME_A,
+        BALL_UNLOADED,
+        BALL_UNRESOLVED,
+        MODEL_FAST,
+        MODEL_UNRESOLVED,
+    )
+    from tolsim.study.pipeline.evaluate import BallState
+    from tolsim.study.statistics.accumulator import Accumulator
+    from tolsim.study.statistics.intervals import clopper_pearson_interval
+
+    eps = np.array([[0.006, np.nan, 0.001], [0.001, np.nan, 0.001],
+                    [0.001, np.nan, -0.002], [-0.0051, 0.0, 0.0]])
+    regime = np.full(eps.shape, BALL_REGIME_A, dtype=np.int8)
+    regime[:2, 1], regime[2, 1] = BALL_UNRESOLVED, BALL_UNLOADED
+    valid = np.isfinite(eps)
+    state = BallState(eps, valid, np.ones(eps.shape, bool), np.zeros(eps.shape, bool),
+                      np.zeros(eps.shape + (4,)), np.ones(eps.shape + (4,)),
+                      np.where(valid, MODEL_FAST, MODEL_UNRESOLVED), 0.0, regime)
+
+    def accumulate(rows):
+        part = state.rows(rows)
+        m = part.velocity_deviation.shape[0]
+        acc = Accumulator(3, (-0.01, 0.01), 10, 1.0, 10, velocity_deviation_limit=0.005)
+        acc.add(part, np.full(m, np.inf), np.full(m, -1))  # no contact
+        return acc
+
+    acc = accumulate(slice(None))
+    assert (acc.n_exceedance, acc.n_exceedance_unresolved) == (2, 1)
+    p, lo, hi, low, high, ci_low, ci_high = acc.exceedance_probability()
+    assert (p, low, high) == (2 / 3, 2 / 4, 3 / 4)
+    assert_allclose([lo, hi], clopper_pearson_interval(2, 3, 0.95), rtol=1e-12)
+    assert_allclose([ci_low, ci_high], [clopper_pearson_interval(2, 4, 0.95)[0],
+                                        clopper_pearson_interval(3, 4, 0.95)[1]], rtol=1e-12)
+    # merged in blocks and through a checkpoint, the same counts
+    merged = accumulate(slice(0, 1))
+    merged.merge(accumulate(slice(1, 4)))
+    again = Accumulator.from_state(merged.state())
+    assert (again.n_exceedance, again.n_exceedance_unresolved) == (2, 1)
+    # without a limit there is no event: no counts, no probability
+    none = Accumulator(3, (-0.01, 0.01), 10, 1.0, 10)
+    none.add(state, np.full(4, np.inf), np.full(4, -1))
+    assert (none.n_exceedance, none.n_exceedance_unresolved) == (0, 0)
+    assert np.all(np.isnan(none.exceedance_probability()))
+
+
+def test_summary_and_report_bound_an_exceedance_with_unresolved_assemblies(
+        impossible_limit):
+    # the summary and the report's table give the bounds of an unreached exceedance whose
+    # plain run has unresolved assemblies (the counts of the impossible limit's file replaced
+    # by 3 of 256 unresolved, 0 beyond: bounds [0, 3/256])
+    from tolsim.cli.run import _exceedance_lines
+    from tolsim.reports.study.page import rare_events_html
+    from tolsim.study.statistics.intervals import clopper_pearson_interval
+
+    plain = result_to_dataset(impossible_limit, history="t")
+    ds = plain.copy(deep=True)
+    bounds_upper = clopper_pearson_interval(3, 256, 0.95)[1]
+    ds["n_assemblies_velocity_deviation_unresolved"] = np.int64(3)
+    ds[f"{EXCEEDANCE}_ci_upper"] = clopper_pearson_interval(0, 253, 0.95)[1]
+    ds[f"{EXCEEDANCE}_bound_upper"] = 3 / 256
+    ds[f"{EXCEEDANCE}_bounds_ci_upper"] = bounds_upper
+    for name in (f"{EXCEEDANCE}_ci_upper", f"{EXCEEDANCE}_bound_upper",
+                 f"{EXCEEDANCE}_bounds_ci_upper"):
+        ds[name].attrs.update(plain[name].attrs)
+    lines = _exceedance_lines(ds)
+    assert "(0 of 253 assemblies whose outcome is known)" in lines[0]
+    assert lines[2] == ("  bounds over all 256 assemblies, with the 3 unresolved ones counted "
+                        f"as within / beyond the limit: [0.0000, {3 / 256:.4f}], 95 % interval "
+                        f"[0.0000, {bounds_upper:.4f}]")
+    row = next(r for r in "".join(rare_events_html(ds)).split("<tr>") if "|ε| over" in r)
+    assert ("(the plain run&#x27;s); bounds with the unresolved ones counted as without / "
+            "with it: 0 to 1.17 %") in row
 
 
 def test_estimates_are_seeded_and_do_not_depend_on_batch_size():

@@ -249,14 +249,14 @@ def _probability(x) -> str:
     return f"{x:.{min(12, 3 - math.floor(math.log10(1 - x)))}g}"
 
 
-def _plain_run_line(k, known, trains) -> str:
-    """The plain run's count beside a rare-event estimate: k of the trains whose outcome is
-    known, its Clopper-Pearson interval, and whether the event is rare at all (>= 25 events:
-    the plain estimate has a CV of at most 0.2, the 25 / P rule of
+def _plain_run_line(k, known, trains, events="contacts") -> str:
+    """The plain run's count beside a rare-event estimate: k ``events`` of the trains (or
+    assemblies) whose outcome is known, its Clopper-Pearson interval, and whether the event is
+    rare at all (>= 25 events: the plain estimate has a CV of at most 0.2, the 25 / P rule of
     :mod:`tolsim.study.analyses.rare_events`, and no rare-event estimator is needed)."""
     from tolsim.study.statistics.intervals import clopper_pearson_interval  # noqa: PLC0415
 
-    line = f"  plain run: {k} contacts in {known} {trains} whose outcome is known"
+    line = f"  plain run: {k} {events} in {known} {trains} whose outcome is known"
     if not known:
         return line
     lower, upper = clopper_pearson_interval(k, known, 0.95)
@@ -338,6 +338,44 @@ def _estimator_lines(ds, prefix, title) -> list:
         lines.append(f"  design point ({b.get('design_point_component', '')}, beta "
                      f"{float(ds[beta]):.3g}; FORM {form:.3g}, summed over the components): "
                      f"{b.get('design_point_description', '')}")
+    return lines
+
+
+def _exceedance_lines(ds) -> list:
+    """Lines on P(an assembly has |epsilon| > limit), which a study with a rare-event
+    estimator and a velocity_deviation_limit estimates (issue 15): the estimator's number with
+    the plain run's count beside it, or, where the estimator did not reach the event, the
+    plain run's k of the assemblies whose outcome is known with its Clopper-Pearson interval,
+    why, and the bounds with the unresolved ones; [] otherwise."""
+    prefix = "velocity_deviation_exceedance_probability"
+    if prefix not in ds:
+        return []
+    title = f"P(an assembly has |epsilon| > {100 * float(ds.velocity_deviation_limit):.3g} %)"
+    counted = "n_velocity_deviation_exceedance" in ds  # files before the plain count: none
+    n_asm = int(ds.n_assemblies)
+    k = int(ds.n_velocity_deviation_exceedance) if counted else 0
+    unresolved = int(ds.n_assemblies_velocity_deviation_unresolved) if counted else 0
+    if _estimated(ds, prefix):
+        lines = _estimator_lines(ds, prefix, title)
+        if counted:
+            lines.append(_plain_run_line(k, n_asm - unresolved, "assemblies",
+                                         "exceeding assemblies"))
+        return lines
+    if n_asm == unresolved:  # no number over the known ones: the bounds below say it all
+        lines = [f"{title}: no assembly has a known outcome (all {n_asm} unresolved)"]
+    else:
+        lines = [f"{title} = {float(ds[prefix]):.4f}  95 % CI "
+                 f"[{float(ds[f'{prefix}_ci_lower']):.4f}, "
+                 f"{float(ds[f'{prefix}_ci_upper']):.4f}]  ({k} of {n_asm - unresolved} "
+                 "assemblies whose outcome is known)"]
+    lines.extend(_unreached_lines(ds, prefix))
+    if unresolved:
+        lines.append(
+            f"  bounds over all {n_asm} assemblies, with the {unresolved} unresolved ones "
+            f"counted as within / beyond the limit: [{float(ds[f'{prefix}_bound_lower']):.4f}, "
+            f"{float(ds[f'{prefix}_bound_upper']):.4f}], 95 % interval "
+            f"[{float(ds[f'{prefix}_bounds_ci_lower']):.4f}, "
+            f"{float(ds[f'{prefix}_bounds_ci_upper']):.4f}]")
     return lines
 
 
@@ -444,10 +482,7 @@ def summary(ds, output, elapsed, save_requested=0) -> str:
             f"{float(ds.contact_probability_ci_upper):.4f}]  "
             f"({int(ds.n_contact)} of {n_asm - n_unres} {trains} whose outcome is known)")
         lines.extend(_unreached_lines(ds, "contact_probability"))
-    if _estimated(ds, "velocity_deviation_exceedance_probability"):
-        lines.extend(_estimator_lines(
-            ds, "velocity_deviation_exceedance_probability",
-            f"P(an assembly has |epsilon| > {100 * float(ds.velocity_deviation_limit):.3g} %)"))
+    lines.extend(_exceedance_lines(ds))
     if tracks:
         lines.append(_carriage_text(ds))
     if n_unres and not rare:

@@ -140,6 +140,15 @@ CORE_VARIABLES = {
                                                "this + n_assemblies_unresolved", "i",
                                       required=False),
     "n_contact": V((), "1", "trains with a contact within the horizon", "i"),
+    "n_velocity_deviation_exceedance": V((), "1", "assemblies with a resolved ball with "
+                                                  "|epsilon| above its limit (0 without a "
+                                                  "limit)", "i", required=False),
+    "n_assemblies_velocity_deviation_unresolved": V((), "1", "assemblies without a resolved "
+                                                             "ball with |epsilon| above its "
+                                                             "limit and with an unresolved "
+                                                             "ball (an unloaded ball is within "
+                                                             "it; 0 without a limit)", "i",
+                                                    required=False),
     "n_balls": V((), "1", "number of balls evaluated", "i"),
     "n_balls_valid": V((), "1", "balls with a resolved epsilon (fast or full model)", "i"),
     "n_balls_not_converged": V((), "1", "balls whose static solution did not converge", "i"),
@@ -215,6 +224,14 @@ PLAIN_PROBABILITY_VARIABLES = tuple(
                                        EVENT_PROBABILITY["friction_exceedance"])
     for suffix in ("", "_ci_lower", "_ci_upper", "_bound_lower", "_bound_upper",
                    "_bounds_ci_lower", "_bounds_ci_upper"))
+
+
+def plain_probability_attributes(name) -> dict:
+    """The labels of a probability variable of the plain run (``name``: the probability, an
+    end of its interval, a bound or an end of the bounds' interval): ``estimator``
+    ``monte_carlo``, and ``interval`` Clopper-Pearson on the probability and its interval."""
+    interval = name.endswith(("probability", "_ci_lower", "_ci_upper")) and "bounds" not in name
+    return {"estimator": "monte_carlo", **({"interval": "Clopper-Pearson"} if interval else {})}
 
 
 def _nan_if_zero(value):
@@ -327,6 +344,8 @@ def collect(result, history=None) -> tuple:
         "n_assemblies_unresolved": acc.n_unresolved,
         "n_assemblies_contact_untimed": acc.n_contact_untimed,
         "n_contact": acc.n_contact,
+        "n_velocity_deviation_exceedance": acc.n_exceedance,
+        "n_assemblies_velocity_deviation_unresolved": acc.n_exceedance_unresolved,
         "n_balls": acc.n_balls,
         "n_balls_valid": acc.n_balls_valid,
         "n_balls_not_converged": acc.n_not_converged,
@@ -434,10 +453,7 @@ def finish(result, ds) -> None:
     checks' strata."""
     for name in PLAIN_PROBABILITY_VARIABLES:  # which estimator made each number
         if name in ds and "estimator" not in ds[name].attrs:
-            ds[name].attrs["estimator"] = "monte_carlo"
-            if name.endswith(("probability", "_ci_lower", "_ci_upper")) and \
-                    "bounds" not in name:
-                ds[name].attrs["interval"] = "Clopper-Pearson"
+            ds[name].attrs.update(plain_probability_attributes(name))
     ds["spot_check_stratum"].attrs.update(  # CF 3.5 flags
         flag_values=np.arange(len(SPOT_CHECK_STRATA), dtype=np.int8),
         flag_meanings=" ".join(SPOT_CHECK_STRATA))

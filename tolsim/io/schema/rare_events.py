@@ -5,6 +5,7 @@ numbers."""
 
 import numpy as np
 
+from tolsim.io.schema.core import plain_probability_attributes
 from tolsim.io.schema.declaration import Section
 from tolsim.study.analyses.limit_state import EVENT_KEYS, EVENT_PROBABILITY
 from tolsim.study.analyses.rare_events import ESTIMATOR_TITLES, STATUSES
@@ -168,14 +169,31 @@ def estimator_settings(config) -> str:
 
 
 #: The events whose probability the plain run estimates too (``n_contact`` of the trains,
-#: ``n_friction_exceedance`` of the assemblies, with their Clopper-Pearson intervals).
-PLAIN_RUN_EVENTS = ("contact", "friction_exceedance")
+#: ``n_velocity_deviation_exceedance`` and ``n_friction_exceedance`` of the assemblies, with
+#: their Clopper-Pearson intervals).
+PLAIN_RUN_EVENTS = ("contact", "velocity_deviation_exceedance", "friction_exceedance")
+#: The probability variables' suffixes in the order of
+#: :meth:`tolsim.study.statistics.accumulator.Accumulator.exceedance_probability`.
+_PLAIN_SUFFIXES = ("", "_ci_lower", "_ci_upper", "_bound_lower", "_bound_upper",
+                   "_bounds_ci_lower", "_bounds_ci_upper")
 
 
 def plain_run_kept(event, estimate) -> bool:
     """Whether the event's probability variables keep the plain run's Monte Carlo numbers:
     the estimator gave no number (it did not reach the event) and the plain run has one."""
     return event in PLAIN_RUN_EVENTS and not np.isfinite(estimate.result.probability)
+
+
+def plain_run_values(event, statistics) -> dict:
+    """name -> value of the plain run's probability, interval and bounds of an event that
+    only this section writes (``velocity_deviation_exceedance``: the plain run's counts
+    ``n_velocity_deviation_exceedance`` of the assemblies whose outcome is known); {} for the
+    events whose probability the core and friction sections write anyway."""
+    if event != "velocity_deviation_exceedance":
+        return {}
+    prefix = EVENT_PROBABILITY[event]
+    return {f"{prefix}{suffix}": float(value) for suffix, value in
+            zip(_PLAIN_SUFFIXES, statistics.exceedance_probability(), strict=True)}
 
 
 def plain_run_note(estimate) -> str:
@@ -205,7 +223,9 @@ def rare_event_variables(result) -> tuple:
     ``plateau``, ``form_failed``: it did not reach the event) and the plain run has one
     (:data:`PLAIN_RUN_EVENTS`), the probability, interval and bounds stay the plain run's
     (``estimator`` ``monte_carlo``, ``interval`` Clopper-Pearson, with an
-    ``estimator_fallback`` attribute saying so): a study whose estimator failed still
+    ``estimator_fallback`` attribute saying so; for the |epsilon| exceedance, which only a
+    study with an estimator writes, from the plain run's ``n_velocity_deviation_exceedance``
+    and ``n_assemblies_velocity_deviation_unresolved``): a study whose estimator failed still
     reports what its plain run resolved, and its verdict rests on that interval; the
     estimator's own status, message and wall time are on ``*_status`` and its CV and
     evaluations on their variables.
@@ -229,17 +249,24 @@ def rare_event_variables(result) -> tuple:
         }
         tag = {"estimator": r.estimator, "estimator_status": r.status}
         kept = plain_run_kept(event, estimate)
-        if kept:  # the plain run's numbers stay (labelled monte_carlo by the core section)
+        plain = {}
+        if kept:  # the plain run's numbers stay: contact's and friction's written and labelled
+            # monte_carlo by their sections, the |epsilon| exceedance's here
             values = {name: value for name, value in values.items()
                       if name == f"{prefix}_coefficient_of_variation"}
+            plain = plain_run_values(event, result.statistics)  # those written here
         data.update({name: float(value) for name, value in values.items()})
+        data.update(plain)
         data[f"{prefix}_evaluations"] = np.int64(r.evaluations)
         data[f"{prefix}_unresolved_evaluations"] = np.int64(r.unresolved)
         for name in values:
             attrs[name] = dict(tag)
+        for name in plain:
+            attrs[name] = plain_probability_attributes(name)
         if kept:
             attrs[prefix] = {"estimator_fallback": plain_run_note(estimate),
-                             **({"estimator_note": estimate.note} if estimate.note else {})}
+                             **({"estimator_note": estimate.note} if estimate.note else {}),
+                             **attrs.get(prefix, {})}
         else:
             attrs[prefix].update(interval=r.interval,
                                  estimator_seconds=float(estimate.seconds))

@@ -158,11 +158,14 @@ def rare_events_html(ds) -> list:
             flag += f": {html.escape(str(own['estimator_message']))}"
         estimator = str(own.get("estimator", ""))
         value = format_fraction(p, lo, hi) + (" (the plain run's)" if fallback else "")
+        if fallback:
+            value += _plain_bounds_text(ds, name)
+        cv = number(ds, f"{name}_coefficient_of_variation")
         rows.append(
             f"<tr><td>{html.escape(what)}</td>"
             f"<td>{html.escape(ESTIMATOR_NAMES.get(estimator, estimator))}"
             f"</td><td class='num'>{html.escape(value)}</td>"
-            f"<td class='num'>{number(ds, f'{name}_coefficient_of_variation'):.3g}</td>"
+            f"<td class='num'>{'n/a' if np.isnan(cv) else f'{cv:.3g}'}</td>"
             f"<td class='num'>{integer(ds, f'{name}_evaluations'):,}</td>"
             f"<td>{flag}</td><td>{html.escape(diagnostics_text(ds, name))}</td>"
             f"<td>{html.escape(fallback or str(attrs.get('interval', '')))}"
@@ -181,6 +184,18 @@ def rare_events_html(ds) -> list:
             "<th>P (95 % interval)</th><th>CV</th><th>model evaluations</th>"
             "<th>status</th><th>diagnostics</th><th>interval</th></tr>", *rows, "</table>",
             *points]
+
+
+def _plain_bounds_text(ds, name) -> str:
+    """The bounds of a plain-run probability with unresolved trains or assemblies, counted as
+    without and with the event ("" when every outcome is known, or the file has no bounds)."""
+    low, high = number(ds, f"{name}_bound_lower"), number(ds, f"{name}_bound_upper")
+    if not (np.isfinite(low) and np.isfinite(high)) or low == high:
+        return ""
+    upper = format_fraction(high)  # "1.17 %" or "117 ppm": the lower bound in its unit
+    scale = 1e6 if upper.endswith("ppm") else 1e2
+    return (f"; bounds with the unresolved ones counted as without / with it: "
+            f"{scale * low:.3g} to {upper}")
 
 
 #: The diagnostics of a rare-event estimate in the report: variable suffix -> format.

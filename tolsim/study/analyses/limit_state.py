@@ -387,10 +387,14 @@ def event_values(config, block, events=None) -> dict:
         run counts it); otherwise a train with an unresolved ball (at any evaluation) gives NaN.
     ``velocity_deviation_exceedance`` (a ``velocity_deviation_limit``, L) [-]
         g = L - max_b |eps_b| over the balls of the assembly: the probability that an
-        **assembly** has a ball beyond the limit (the plain run's ppm are per ball). With
-        ``along_track`` the balls' epsilon at the start of the stroke (as the plain run's epsilon
-        statistics). An unresolved ball gives NaN unless a resolved ball of the assembly exceeds.
-        A series system of 2 T n components, L - eps_b and L + eps_b (each ball, either side).
+        **assembly** has a ball beyond the limit (the plain run's ppm are per ball; its count
+        of such assemblies, ``Accumulator.n_exceedance``, is the plain estimate of this event,
+        kept when the estimator does not reach it). With ``along_track`` the balls' epsilon at
+        the start of the stroke (as the plain run's epsilon statistics). An unresolved ball
+        gives NaN unless a resolved ball of the assembly exceeds (an unloaded ball too, having
+        no epsilon, where the plain count takes it as within the limit, as the plain
+        P(contact) takes it as answered). A series system of 2 T n components, L - eps_b and
+        L + eps_b (each ball, either side).
     ``friction_exceedance`` (``[contact]`` with a ``friction_increase_limit``, L) [-]
         The increase of the worst track's friction force needs a contact: without one it is 0,
         and g = (L - increase) / L would be flat (1) over most of the space, which stops subset

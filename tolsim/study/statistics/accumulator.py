@@ -42,6 +42,17 @@ bit-identical however the blocks were grouped into chunks or spread over workers
   converged, loss of contact, full model failed) or, with ``along_track`` propagation, at an
   evaluation along the track (``n_unresolved_along_track``, each ball once; a carriage's
   train is also unresolved when its slots or entering balls run out).
+* |epsilon| exceedance per assembly (with a spec limit L on |epsilon|): exact counts of the
+  assemblies with a resolved ball with |epsilon| > L (``n_exceedance``, certain whatever
+  the other balls did) and of the others with a ball without an answer
+  (``n_exceedance_unresolved``: unresolved at the start of the stroke; an unloaded ball has
+  no epsilon of its own and cannot exceed). P(an assembly has |epsilon| > L) is reported as
+  P(contact) is, k / (N - u) with its Clopper-Pearson interval and the bounds
+  [k / N, (k + u) / N] (:meth:`Accumulator.exceedance_probability`): the plain run's
+  estimate of the event of the rare-event estimator, whose g = L - max |epsilon| <= 0 on the
+  same assemblies (:func:`tolsim.study.analyses.limit_state.event_values`; |epsilon| = L, a
+  tie of measure zero, is beyond for g and within here, as in the per-ball counts), kept when
+  the estimator does not reach it.
 
 References: T. F. Chan, G. H. Golub, R. J. LeVeque, "Updating formulae and a pairwise algorithm
 for computing sample variances", Stanford CS report STAN-CS-79-773 (1979).
@@ -119,7 +130,8 @@ class Accumulator:
         "n_assemblies", "n_assemblies_valid", "n_contact", "n_unresolved", "n_balls",
         "n_balls_valid", "n_not_converged", "n_loss_of_contact", "n_outside_validity",
         "n_resolved_full", "n_full_failed", "n_unloaded", "regime_count",
-        "n_contact_untimed", "n_unresolved_along_track", "n_static_fallback",
+        "n_contact_untimed", "n_unresolved_along_track", "n_static_fallback", "n_exceedance",
+        "n_exceedance_unresolved",
         "eps_mean", "eps_m2", "eps_min", "eps_max", "eps_histogram", "eps_underflow",
         "eps_overflow", "ball_count", "ball_mean", "ball_m2", "time_histogram", "time_min",
         "time_max", "pair_count", "carriage_count", "carriage_failed", "carriage_mean",
@@ -159,6 +171,10 @@ class Accumulator:
         self.n_unresolved_along_track = i8(0)
         # balls the study's static model left without balance, answered by its fallback
         self.n_static_fallback = i8(0)
+        # assemblies with a resolved ball with |epsilon| > L, and the others with a ball
+        # without an answer (L: velocity_deviation_limit; both 0 without one)
+        self.n_exceedance = i8(0)
+        self.n_exceedance_unresolved = i8(0)
         # balls per regime, in the order of BALL_REGIMES (unresolved, A, B, 3-, 2-point,
         # unloaded)
         self.regime_count = np.zeros(len(BALL_REGIMES), dtype=i8)
@@ -295,7 +311,15 @@ class Accumulator:
         eps, valid = state.velocity_deviation, state.valid
         block = self._empty_like()
         limit = self.velocity_deviation_limit if self.velocity_deviation_limit > 0 else np.inf
-        block.cluster = ClusterMoments.from_totals(assembly_totals(eps, limit))
+        totals = assembly_totals(eps, limit)
+        block.cluster = ClusterMoments.from_totals(totals)
+        if self.velocity_deviation_limit > 0:
+            # a resolved ball beyond L is certain whatever the others did (as a certain
+            # contact); else a ball without an answer leaves the assembly unresolved
+            exceeds = totals[:, 1] > 0
+            block.n_exceedance = np.int64(np.count_nonzero(exceeds))
+            block.n_exceedance_unresolved = np.int64(np.count_nonzero(
+                ~exceeds & ~state.accounted.all(axis=1)))
         m = eps.shape[0]
         block.n_assemblies = np.int64(m)
         block.n_balls = np.int64(eps.size)
@@ -353,8 +377,8 @@ class Accumulator:
                      "n_balls", "n_balls_valid", "n_not_converged", "n_loss_of_contact",
                      "n_outside_validity", "n_resolved_full", "n_full_failed",
                      "n_unloaded", "regime_count", "n_contact_untimed",
-                     "n_unresolved_along_track", "n_static_fallback", "resolve_seconds",
-                     "eps_histogram",
+                     "n_unresolved_along_track", "n_static_fallback", "n_exceedance",
+                     "n_exceedance_unresolved", "resolve_seconds", "eps_histogram",
                      "eps_underflow", "eps_overflow", "time_histogram", "pair_count"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         n_a = self.n_balls_valid - other.n_balls_valid  # already added above
@@ -451,10 +475,27 @@ class Accumulator:
             k / N and (k + u) / N, and the Clopper-Pearson lower end of k of N and upper end
             of k + u of N (NaN when N = 0).
         """
-        n, k, u = int(self.n_assemblies), int(self.n_contact), int(self.n_unresolved)
-        low, ci_low, _ = clopper_pearson(k, n, confidence)
-        high, _, ci_high = clopper_pearson(k + u, n, confidence)
-        return low, high, ci_low, ci_high
+        return proportion_bounds(int(self.n_contact), int(self.n_unresolved),
+                                 int(self.n_assemblies), confidence)
+
+    def exceedance_probability(self, confidence: float = 0.95):
+        """P(an assembly has a ball with |epsilon| > L) over the assemblies whose outcome is
+        known, its Clopper-Pearson interval and the partial-identification bounds over all N
+        (module docstring; NaN without a limit L).
+
+        Returns
+        -------
+        (p, lower, upper, bound_lower, bound_upper, bounds_ci_lower, bounds_ci_upper) : floats
+            k / (N - u) with its interval, k / N and (k + u) / N with the Clopper-Pearson lower
+            end of k of N and upper end of k + u of N; k = ``n_exceedance``,
+            u = ``n_exceedance_unresolved``.
+        """
+        if not self.velocity_deviation_limit > 0:
+            return (float("nan"),) * 7
+        n, k = int(self.n_assemblies), int(self.n_exceedance)
+        u = int(self.n_exceedance_unresolved)
+        return (*clopper_pearson(k, n - u, confidence),
+                *proportion_bounds(k, u, n, confidence))
 
     def time_to_contact_quantiles(self, levels=QUANTILES) -> np.ndarray:
         """Quantiles of the time to first contact given contact [s] (error <= one bin).
@@ -471,6 +512,22 @@ class Accumulator:
             return np.full(len(self.time_edges), np.nan)
         cum = np.concatenate([[0], np.cumsum(self.time_histogram)])
         return 1.0 - cum / n
+
+
+def proportion_bounds(successes: int, unresolved: int, trials: int,
+                      confidence: float = 0.95):
+    """Partial-identification bounds of a proportion with ``unresolved`` of the ``trials``
+    unknown ([Manski2003] Ch. 1), and the interval that covers them.
+
+    Returns
+    -------
+    (lower, upper, ci_lower, ci_upper) : floats
+        k / n and (k + u) / n, and the Clopper-Pearson lower end of k of n and upper end of
+        k + u of n (NaN when n = 0).
+    """
+    low, ci_low, _ = clopper_pearson(successes, trials, confidence)
+    high, _, ci_high = clopper_pearson(successes + unresolved, trials, confidence)
+    return low, high, ci_low, ci_high
 
 
 def clopper_pearson(successes: int, trials: int, confidence: float = 0.95):
