@@ -649,3 +649,18 @@ def test_metropolis_sampler_agrees():
     assert all(r.ok for r in results)
     assert abs(np.mean(np.log([r.probability / exact for r in results]))) < 0.4
     assert covered(results, exact) >= 6
+
+
+def test_weight_diagnostics_of_deep_tail_weights():
+    # Weights below 1e-154 square to 0 in floating point: Kish's effective sample size
+    # (sum w)^2 / sum w^2 divided by zero (a traceback for a 5 % limit on |epsilon| with
+    # importance sampling). It depends only on the weights' ratios: for k equal weights it is
+    # k and the largest share 1 / k (closed form; 1e-12), at any scale.
+    from tolsim.study.analyses.rare_events.importance import weight_diagnostics
+
+    for scale in (1.0, 1e-200, 1e-300):
+        ess, share, ratio, message = weight_diagnostics(np.full(40, scale), 1e-6, 1e-6)
+        assert_allclose((ess, share, ratio), (40.0, 1 / 40, 1.0), rtol=1e-12)
+        assert message == ""
+    ess, share, _, _ = weight_diagnostics(np.array([3e-250, 1e-250]), 1e-6, 1e-6)
+    assert_allclose((ess, share), (16 / 10, 0.75), rtol=1e-12)  # (3+1)^2 / (9+1)

@@ -60,9 +60,11 @@ def _fast_path(path):
     from tolsim.study.execution.runner import run_study  # noqa: PLC0415
 
     config = load_config(path)
-    config = config.with_overrides(samples=config.study.block_size)
-    run_study(replace(config, study=replace(config.study, spot_checks=0,
-                                            sensitivity_samples=0)))
+    # a sweep's points share its kernels but for the swept values: each point, one block
+    for point in (config.sweep.points if config.sweep is not None else (config,)):
+        point = point.with_overrides(samples=point.study.block_size)
+        run_study(replace(point, study=replace(point.study, spot_checks=0,
+                                               sensitivity_samples=0)))
 
 
 def _study(path, out):

@@ -232,8 +232,12 @@ def weight_diagnostics(failing_weights, form_probability, probability):
     total = float(np.sum(failing_weights))
     if not total > 0:
         return 0.0, float("nan"), float("nan"), "no failing sample carries weight"
-    ess = total ** 2 / float(np.sum(failing_weights ** 2))
-    share = float(np.max(failing_weights)) / total
+    # Kish's (sum w)^2 / sum w^2 on w / max w: the same number, without sum w^2 underflowing
+    # to 0 for weights below 1e-154 (deep tails: a division by zero before)
+    largest = float(np.max(failing_weights))
+    scaled = failing_weights / largest
+    ess = float(np.sum(scaled)) ** 2 / float(np.sum(scaled ** 2))
+    share = largest / total
     ratio = form_probability / probability if probability > 0 else float("inf")
     message = ""
     if ess < MIN_EFFECTIVE_SAMPLES:
