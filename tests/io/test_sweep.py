@@ -71,6 +71,29 @@ def test_zip_and_scale():
     np.testing.assert_allclose(got, [0.5 * base, base, 1.25 * base], rtol=1e-15)
 
 
+def test_whole_number_keys_are_swept_as_whole_numbers():
+    # A key the config gives as a whole number (carriage.circuit.balls) could not be swept:
+    # every swept value became a float, which the key refuses ("must be an integer"). Its
+    # points now take whole numbers, and a fraction is refused at the swept key.
+    text = (CONFIGS / "carriage_circuit.toml").read_text()
+    c = parse_config(text + '\n[sweep]\n"carriage.circuit.balls" = [24, 26.0, 30]\n')
+    balls = [p.circuit.balls for p in c.sweep.points]
+    assert balls == [24, 26, 30] and all(type(b) is int for b in balls)
+    message = error(text + '\n[sweep]\n"carriage.circuit.balls" = [24, 26.5]\n')
+    assert "carriage.circuit.balls takes whole numbers (the config gives one), not 26.5" in message
+
+
+def test_zip_points_may_repeat_a_value_of_one_key():
+    # In zip mode the points are the tuples: a key may repeat a value where another differs
+    # (refused before as "repeated values"); the same tuple twice is still refused.
+    c = parse_config(known('mode = "zip"\n"loads.normal_load_N" = [100, 100, 200]\n'
+                           '"tolerances.bottom_rotation.scale" = [0.5, 1.0, 1.0]'))
+    assert [p.loads.normal_load[0] for p in c.sweep.points] == [100.0, 100.0, 200.0]
+    message = error(known('mode = "zip"\n"loads.normal_load_N" = [100, 100]\n'
+                          '"tolerances.bottom_rotation.scale" = [0.5, 0.5]'))
+    assert "repeats a point" in message
+
+
 def test_dotted_keys_read_like_quoted_ones():
     a = parse_config(known('"loads.normal_load_N" = [100, 200]')).sweep
     b = parse_config(known('loads.normal_load_N = [100, 200]')).sweep

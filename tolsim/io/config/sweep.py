@@ -90,7 +90,9 @@ def _values(t, key, spec):
 
 
 def _resolve(t, key, given_unit, base):
-    """(parent table path, key to set, key to remove or None, unit) of a swept key."""
+    """(parent table path, key to set, key to remove or None, unit, whole) of a swept key;
+    ``whole``: the config gives the key a whole number (``train.balls``, ``carriage.circuit.
+    balls``), so its points take whole numbers too."""
     parts = key.split(".")
     parent = base
     for depth, part in enumerate(parts[:-1]):
@@ -105,7 +107,7 @@ def _resolve(t, key, given_unit, base):
     if name == "scale" and len(parts) == 3 and parts[0] == "tolerances":
         if given_unit:
             raise t.error(key, f"is a factor: no unit (got start_{given_unit})")
-        return parts[:-1], name, None, ""
+        return parts[:-1], name, None, "", False
     if name in parent:
         value = parent[name]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -117,7 +119,7 @@ def _resolve(t, key, given_unit, base):
         if given_unit:
             raise t.error(key, f"already carries its unit ({unit or 'none'}): write "
                                "start and stop without one")
-        return parts[:-1], name, None, unit
+        return parts[:-1], name, None, unit, isinstance(value, int)
     # the quantity under another unit: the key without its suffix, or with another one
     quantity, unit, kind = _split_unit(name, parent)
     if given_unit is not None and unit:
@@ -127,7 +129,7 @@ def _resolve(t, key, given_unit, base):
         k, parent)[0] == quantity]
     if not present:
         if unit and given_unit is None:  # a key the config leaves at its default
-            return parts[:-1], name, None, unit  # (each point's validation checks it)
+            return parts[:-1], name, None, unit, False  # (each point's validation checks it)
         raise t.error(key, "is not a key of the config: sweep a key the config sets (with "
                            "its base value), a key with its unit suffix, or "
                            "tolerances.<source>.scale")
@@ -143,7 +145,7 @@ def _resolve(t, key, given_unit, base):
         raise t.error(key, f"has the unit {unit}, which does not fit {'.'.join(parts[:-1])}."
                            f"{quantity} ({'an' if old_kind[0] in 'aeiou' else 'a'} {old_kind}: "
                            f"{', '.join(u for u in units[old_kind] if u)})")
-    return parts[:-1], f"{quantity}_{unit}", old, unit
+    return parts[:-1], f"{quantity}_{unit}", old, unit, False
 
 
 def _coordinate_name(key: str, unit: str) -> str:
@@ -170,13 +172,16 @@ def parse_sweep(t, base: dict, build) -> Sweep:
     axes, targets = [], []
     for key, spec in specs:
         values, given_unit = _values(t, key, spec)
-        path, set_key, old_key, unit = _resolve(t, key, given_unit, base)
+        path, set_key, old_key, unit, whole = _resolve(t, key, given_unit, base)
         full = ".".join([*path, set_key])
-        if len(set(values)) != len(values):
+        if mode != "zip" and len(set(values)) != len(values):
             raise t.error(key, "has repeated values: each point must differ")
+        if whole and not all(float(v).is_integer() for v in values):
+            odd = next(v for v in values if not float(v).is_integer())
+            raise t.error(key, f"takes whole numbers (the config gives one), not {odd:g}")
         axes.append(SweepAxis(full, _coordinate_name(full, unit), tuple(values), unit,
                               UDUNITS.get(unit, unit)))
-        targets.append((path, set_key, old_key))
+        targets.append((path, set_key, old_key, whole))
     names = [a.name for a in axes]
     for a in axes:
         if names.count(a.name) > 1:
@@ -186,18 +191,23 @@ def parse_sweep(t, base: dict, build) -> Sweep:
     if mode == "zip" and len({len(a.values) for a in axes}) > 1:
         lengths = ", ".join(f"{a.key}: {len(a.values)}" for a in axes)
         raise t.error(axes[-1].key, f"mode = 'zip' needs as many values for every key ({lengths})")
+    if mode == "zip":  # a key may repeat a value where another key differs
+        tuples = list(zip(*(a.values for a in axes), strict=True))
+        if len(set(tuples)) != len(tuples):
+            raise t.error(axes[-1].key, "mode = 'zip' repeats a point (the same values of "
+                                        "every key twice): each point must differ")
     sweep = Sweep(tuple(axes), mode)
     points = []
     for k in range(sweep.size):
         data = copy.deepcopy(base)
-        for (path, set_key, old_key), value in zip(
+        for (path, set_key, old_key, whole), value in zip(
                 targets, sweep.values_at(k).values(), strict=True):
             parent = data
             for part in path:
                 parent = parent[part]
             if old_key is not None:
                 del parent[old_key]
-            parent[set_key] = value
+            parent[set_key] = int(value) if whole else value
         try:
             points.append(build(data))
         except ConfigError as exc:
