@@ -130,6 +130,31 @@ def test_failed_write_leaves_nothing(result, tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
+def test_ctrl_c_during_a_write_takes_effect_after_it(result, tmp_path, monkeypatch):
+    # Ctrl-C inside the netCDF library could leave xarray's HDF5 lock held, and the next write
+    # (a sweep's next part) waited on it for ever. SIGINT during the write now waits for the
+    # write to end: the file is whole and verified, nothing else is left, and the
+    # KeyboardInterrupt follows; the next write works.
+    import signal
+
+    path = tmp_path / "r.nc"
+    ds = result_to_dataset(result, history="test")
+    to_netcdf = xr.Dataset.to_netcdf
+
+    def interrupted(self, *args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)  # delivered at once without the hold
+        return to_netcdf(self, *args, **kwargs)
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_dataset(ds, path)
+    assert os.listdir(tmp_path) == ["r.nc"]
+    assert int(read_result(path).n_balls) == int(ds.n_balls)
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", to_netcdf)
+    write_dataset(ds, tmp_path / "again.nc")
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_invalid_dataset_is_not_written(result, tmp_path):
     ds = result_to_dataset(result, history="test").drop_vars("n_balls")
     with pytest.raises(schema.SchemaError):

@@ -8,7 +8,10 @@ opens a file, verifies the checksums and checks that it is a tolsim result.
 """
 
 import os
+import signal
 import tempfile
+import threading
+from contextlib import contextmanager
 
 import numpy as np
 import xarray as xr
@@ -87,6 +90,28 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
     return schema.validate(ds)
 
 
+@contextmanager
+def interrupts_held():
+    """Hold Ctrl-C (SIGINT) back until the block ends, then raise KeyboardInterrupt.
+
+    A KeyboardInterrupt raised inside the netCDF/HDF5 library can leave xarray's HDF5 lock
+    held and a file half-open; the next write (a sweep's next part, say) then waited on that
+    lock for ever. Writing a result takes about a second, so the interrupt is taken after it.
+    Only in the main thread (where Python delivers signals), else a no-op.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if received:
+        raise KeyboardInterrupt
+
+
 def write_dataset(ds: xr.Dataset, path) -> dict:
     """Validate ``ds`` and write it to ``path`` through a temporary file and a rename.
 
@@ -94,6 +119,8 @@ def write_dataset(ds: xr.Dataset, path) -> dict:
     (:func:`tolsim.io.checksums.sign_file`), replacing any it had. On an error (a full disk,
     say) the temporary file is removed and the target is left as it was; an OSError names
     the target.
+
+    Ctrl-C during the write takes effect after it (:func:`interrupts_held`).
 
     Coordinates are written without ``_FillValue`` (CF 2.5.1; xarray adds one to every float
     variable by default): they never hold missing values.
@@ -114,12 +141,13 @@ def write_dataset(ds: xr.Dataset, path) -> dict:
                                dir=folder)
     os.close(fd)
     try:
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
-        sums = sign_file(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual file mode
-        os.replace(tmp, path)
+        with interrupts_held():
+            ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+            sums = sign_file(tmp)
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual file mode
+            os.replace(tmp, path)
     except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
