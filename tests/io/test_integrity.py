@@ -216,7 +216,9 @@ def test_full_disk_at_a_checkpoint(tmp_path, capsys, monkeypatch):
 
 @pytest.fixture
 def checkpointed(tmp_path):
-    """A config, its output and a checkpoint of a run stopped half-way."""
+    """A config, its output and a checkpoint of a run stopped half-way (the one `tolsim run`
+    of the config resumes)."""
+    from tolsim.io.config import load_config
     from tolsim.study.execution.runner import run_study
 
     cfg = tmp_path / "s.toml"
@@ -224,7 +226,7 @@ def checkpointed(tmp_path):
     cfg.write_text(text)
     out = tmp_path / "s.nc"
     with pytest.raises(StudyInterrupted):
-        run_study(parse_config(text), checkpoint_path=f"{out}.partial", chunk_blocks=1,
+        run_study(load_config(cfg), checkpoint_path=f"{out}.partial", chunk_blocks=1,
                   checkpoint_interval=0, max_blocks=2)
     return cfg, out, Path(f"{out}.partial")
 
@@ -238,6 +240,27 @@ def test_truncated_checkpoint_names_fresh(checkpointed, capsys):
         assert not out.exists()
     assert main(["run", str(cfg), "-o", str(out), "--quiet", "--fresh"]) == 0
     assert out.exists() and not partial.exists()
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("acc_n_contact", 10**6, "n_contact > n_assemblies - n_unresolved"),
+    ("acc_n_balls", 3, "n_balls != n_assemblies x balls"),
+    ("acc_n_unresolved", -1, "n_unresolved < 0"),
+])
+def test_an_inconsistent_checkpoint_is_refused(checkpointed, capsys, name, value, words):
+    # A checkpoint that reads but breaks the counts' identities (edited, or damaged inside
+    # the zip's checksums) was resumed: the run ended in a traceback after its last block
+    # (n_contact > n_assemblies). It is refused before any work, naming the identity and
+    # --fresh, as a truncated one is.
+    cfg, out, partial = checkpointed
+    with np.load(partial) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays[name] = np.int64(value)
+    with open(partial, "wb") as fh:
+        np.savez(fh, **arrays)
+    _one_line_error(capsys, ["run", str(cfg), "-o", str(out), "--quiet"], str(partial),
+                    f"is inconsistent ({words})")
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("seed", [str(2**64), str(2**70), "-1"])

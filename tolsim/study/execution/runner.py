@@ -394,6 +394,9 @@ def _load_checkpoint(path, fp) -> _Progress | None:
     if lengths.shape != (next_block, len(SPOT_FIELDS)):
         raise DamagedCheckpoint(f"checkpoint {path} is inconsistent (part_lengths "
                                 f"{lengths.shape} for {next_block} blocks)")
+    broken = acc.inconsistency()
+    if broken:
+        raise DamagedCheckpoint(f"checkpoint {path} is inconsistent ({broken})")
     pieces = {k: np.split(v, np.cumsum(lengths[:, j])[:-1]) if next_block else []
               for j, (k, v) in enumerate(spots.items())}
     parts = [{k: pieces[k][i] for k in SPOT_FIELDS} for i in range(next_block)]

@@ -407,6 +407,31 @@ class Accumulator:
         return out
 
     # ---------------------------------------------------------------------------------------
+    def inconsistency(self) -> str:
+        """What breaks the counts' identities (module docstring), or "" if none does: every
+        count >= 0, N = v + c + u with k <= N - u, balls = N x balls per assembly, every ball
+        in one regime, exceeding and undecided assemblies at most N. A state read back from
+        a checkpoint is checked with it (an edited or damaged one is refused)."""
+        counts = {name: int(np.asarray(getattr(self, name)).min(initial=0))
+                  for name in self.FIELDS
+                  if name.startswith("n_") or name in ("regime_count", "pair_count")}
+        negative = [name for name, low in counts.items() if low < 0]
+        if negative:
+            return f"{negative[0]} < 0"
+        n, u = int(self.n_assemblies), int(self.n_unresolved)
+        rules = (
+            (int(self.n_assemblies_valid) + int(self.n_contact_untimed) + u == n,
+             "n_assemblies_valid + n_contact_untimed + n_unresolved != n_assemblies"),
+            (int(self.n_contact) <= n - u, "n_contact > n_assemblies - n_unresolved"),
+            (int(self.n_balls) == n * self.balls, "n_balls != n_assemblies x balls"),
+            (int(self.n_balls_valid) <= int(self.n_balls), "n_balls_valid > n_balls"),
+            (int(np.sum(self.regime_count)) == int(self.n_balls),
+             "the balls per regime do not add up to n_balls"),
+            (int(self.n_exceedance) + int(self.n_exceedance_unresolved) <= n,
+             "n_exceedance + n_exceedance_unresolved > n_assemblies"),
+        )
+        return next((message for ok, message in rules if not ok), "")
+
     def state(self) -> dict:
         """All arrays, for a checkpoint (``np.savez``)."""
         out = {name: np.asarray(getattr(self, name)) for name in self.FIELDS}
