@@ -526,7 +526,8 @@ def test_resume_and_ignored_checkpoint_are_said(tmp_path):
     assert said == [f"resumed from {ckpt}: 384 of 1 000 assemblies already done"]
     said.clear()
     run_study(make(samples=1000, seed=5), checkpoint_path=str(ckpt), notify=said.append)
-    assert len(said) == 1 and said[0].startswith(f"ignoring {ckpt}: it is not a checkpoint")
+    assert len(said) == 1 and said[0].startswith(
+        f"replacing {ckpt}: it is a checkpoint of another study")
 
 
 def test_unloaded_ball_is_counted_as_pushed_not_unresolved():

@@ -517,8 +517,9 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     if checkpoint_path is not None and os.path.exists(checkpoint_path):
         loaded = _load_checkpoint(checkpoint_path, fp)
         if loaded is None:
-            _say(notify, f"ignoring {checkpoint_path}: it is not a checkpoint of this study "
-                         "(config, seed, samples or tolsim version differ); starting afresh")
+            _say(notify, f"replacing {checkpoint_path}: it is a checkpoint of another study "
+                         "(config, seed, samples or tolsim version differ); starting afresh "
+                         "(--resume refuses to)")
         elif loaded.next_block:
             committed = loaded
             done = int(committed.statistics.n_assemblies)
