@@ -487,6 +487,19 @@ def test_subset_tells_a_stalled_limit_state_from_a_spent_budget():
     assert one.message.endswith("raise max_levels")
 
 
+def test_subset_says_when_its_last_level_has_too_few_failures():
+    # g = 2.5 - u_1 (P = Phi(-2.5) = 6.2e-3): at max_levels = 1 about 6 of 1 000 samples of
+    # level 0 fail, fewer than its n p0 = 100 chains. The message said "found no failure
+    # (g <= 0) ... smallest g reached -0.3" (a contradiction); it says how many failed and
+    # what an estimate needs.
+    r = subset_simulation(lambda u: 2.5 - u[:, 0], 2, SEED, max_levels=1)
+    assert r.status == STATUS_NO_FAILURE and np.isnan(r.probability)
+    k = int(r.message.split("with only ")[1].split(" of ")[0])
+    assert 0 < k < 100
+    assert "found no failure" not in r.message and "an estimate needs n p0 = 100" in r.message
+    assert r.message.endswith("raise max_levels to 2 or more") and "\n" not in r.message
+
+
 def test_importance_sampling_names_itself_when_it_finds_no_failure():
     # the messages of importance sampling's flags name it, as subset simulation's do
     # (samples around the design point of beta = 3 never reach g = 12 - u_1 <= 0)

@@ -266,7 +266,7 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
         if level == max_levels - 1:
             return flagged(STATUS_NO_FAILURE,
                            no_failure_message(levels.thresholds, key[order[0]], max_levels, n,
-                                              p0),
+                                              p0, int(np.count_nonzero(failed))),
                            evaluations, unresolved, common, **levels.fields())
         # b between the N_c-th and the next value; at a tie (a repeated chain state, or a
         # flat limit state) b is the tied value and P_j the share of samples at or below it
@@ -294,9 +294,11 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
     raise AssertionError("unreachable")  # the loop returns at its last level
 
 
-def no_failure_message(thresholds, smallest, max_levels, samples_per_level, p0) -> str:
+def no_failure_message(thresholds, smallest, max_levels, samples_per_level, p0,
+                       failures=0) -> str:
     """Why subset simulation found no failure, in one line: the level budget ran out, or g has
-    stalled (module docstring).
+    stalled (module docstring); or, with ``failures`` > 0, why the few failures of its last
+    level give no estimate.
 
     Parameters
     ----------
@@ -306,7 +308,15 @@ def no_failure_message(thresholds, smallest, max_levels, samples_per_level, p0) 
         The smallest g of the last level.
     max_levels, samples_per_level : int
     p0 : float
+    failures : int
+        Samples of the last level with g <= 0 (fewer than its chains, n p0).
     """
+    if failures:
+        chains = int(round(samples_per_level * p0))
+        return (f"subset simulation reached g <= 0 with only {failures} of {samples_per_level} "
+                f"samples at its last level (level {max_levels} of max_levels = {max_levels}; "
+                f"an estimate needs n p0 = {chains}); no probability estimated; raise "
+                f"max_levels to {max_levels + 1} or more")
     head = (f"subset simulation found no failure (g <= 0) in {max_levels} level(s) of "
             f"{samples_per_level} samples (smallest g reached {smallest:.3g})")
     falls = -np.diff(np.asarray(thresholds, dtype=float))[-STALL_WINDOW:]
