@@ -247,6 +247,33 @@ def test_points_whose_balls_the_solved_model_answered_say_so(tmp_path):
     assert [int(r["n_balls_static_fallback"]) for r in rows] == list(fallback)
 
 
+def test_a_points_config_is_its_own_and_warnings_name_the_sweep(tmp_path):
+    # The report re-reads the embedded config per point. Its warning about point 2's value
+    # came out named after point 1 ("..., point 1: carriage.preload_oversize_um = 0 um:32:
+    # carriage.preload_oversize_um = 100.0 um is unusual"), and the point's config was the
+    # sweep's base. The warning names the sweep now, and each point gets its own config
+    # (here point 2's friction coefficient of 0.5, beyond the usual 0.3).
+    import warnings
+
+    from tolsim.io.config import ConfigWarning
+    from tolsim.reports.result_view import config_of
+    from tolsim.reports.sweep.points import point_dataset
+
+    text = (CONFIGS / "known_answer.toml").read_text().replace("samples = 20000",
+                                                                "samples = 64")
+    text += '\n[sweep]\n"bearing.friction_coefficient" = [0.1, 0.5]\n'
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConfigWarning)
+        ds, _ = run_sweep(parse_config(text, "big.toml"), tmp_path / "big.nc")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        configs = [config_of(point_dataset(ds, k)) for k in range(2)]
+    assert [cfg.bearing.friction_coefficient for cfg in configs] == [0.1, 0.5]
+    said = [str(w.message) for w in caught if issubclass(w.category, ConfigWarning)]
+    assert said and all("point 1" not in s for s in said), said
+    assert all(s.startswith("big.toml (sweep of 1 key, 2 points):") for s in said), said
+
+
 def test_friction_of_a_contact_study(tmp_path):
     # a study with [contact] (configs/friction_yaw.toml): the friction increase and
     # P(friction increase > limit) per point

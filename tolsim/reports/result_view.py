@@ -10,6 +10,7 @@ got the item. Every report module reads a result through them.
 """
 
 import os
+import re
 import tomllib
 
 import numpy as np
@@ -211,9 +212,19 @@ def quantile_value(ds, name, level) -> float:
 # The embedded config
 # --------------------------------------------------------------------------------------------
 def config_of(ds):
-    """The :class:`~tolsim.study.spec.StudyConfig` embedded in a result (seed of the file)."""
+    """The :class:`~tolsim.study.spec.StudyConfig` embedded in a result (seed of the file); of
+    a sweep's point (:func:`tolsim.reports.sweep.points.point_dataset`), that point's.
+
+    The config's warnings name the file by its title, a sweep's without the point's suffix:
+    the embedded config is the whole sweep's, so a warning may be about another point.
+    """
     name = ds.attrs.get("title", "result").split(": ", 1)[-1]
+    point = re.search(r", point (\d+): .*$", name)
+    if point:
+        name = name[:point.start()]
     config = parse_config(str(ds.attrs["config"]), name)
+    if point and config.sweep is not None:
+        config = config.sweep.points[int(point.group(1)) - 1]
     return config.with_overrides(seed=int(ds.attrs["seed"]))
 
 
