@@ -677,3 +677,26 @@ def test_weight_diagnostics_of_deep_tail_weights():
         assert message == ""
     ess, share, _, _ = weight_diagnostics(np.array([3e-250, 1e-250]), 1e-6, 1e-6)
     assert_allclose((ess, share), (16 / 10, 0.75), rtol=1e-12)  # (3+1)^2 / (9+1)
+
+
+def test_subset_at_level_0_is_plain_monte_carlo_with_its_exact_interval():
+    # An event that is not rare is settled by level 0 (n p0 or more failures): plain Monte
+    # Carlo. Every sample failing (g = -10 - u_1) gave P = 1 with CV 0 and the interval
+    # [1, 1], and FORM's design points, overlapping when P is near 1, each holding more than
+    # five times the share of the failures nearest to it, flagged the right answer as a lost
+    # mode. Now the interval is Clopper-Pearson's ([1 - ...] of 1 000 of 1 000: lower end
+    # 0.025^(1/1000); Clopper & Pearson 1934, 1e-12) and level 0 is not checked for modes.
+    import dataclasses as dc
+
+    g = lambda u: 0.08 - u[:, 0]  # noqa: E731 - P = Phi(-0.08) = 0.468
+    point = find_design_point(g, 2)
+    spread = [dc.replace(point, point=0.08 * np.array([np.cos(a), np.sin(a)]))
+              for a in np.linspace(-1.2, 1.2, 20)]
+    r = subset_simulation(g, 2, SEED, design_points=spread)
+    assert r.ok and r.levels == 1 and r.interval == "Clopper-Pearson"
+    k = round(r.probability * 1000)
+    assert_allclose(r.probability, k / 1000, rtol=0, atol=1e-15)
+    assert r.ci_lower < ndtr(-0.08) < r.ci_upper
+    everything = subset_simulation(lambda u: -10.0 - u[:, 0], 2, SEED, design_points=spread)
+    assert everything.ok and everything.probability == 1.0 and everything.ci_upper == 1.0
+    assert_allclose(everything.ci_lower, 0.025 ** (1 / 1000), rtol=1e-12)

@@ -152,6 +152,7 @@ from tolsim.study.analyses.rare_events.common import (
     seed_sequence,
 )
 from tolsim.study.analyses.rare_events.result import (
+    INTERVAL_CLOPPER_PEARSON,
     INTERVAL_LOGNORMAL,
     STATUS_DIAGNOSTIC_FAILED,
     STATUS_NO_FAILURE,
@@ -160,6 +161,7 @@ from tolsim.study.analyses.rare_events.result import (
     RareEventResult,
     flagged,
 )
+from tolsim.study.statistics.intervals import clopper_pearson_interval
 
 #: Fewest chains (n p0) of subset simulation.
 MIN_CHAINS = 10
@@ -259,7 +261,9 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
         if np.count_nonzero(failed | unevaluable) >= chains:
             result = _subset_result(failed, unevaluable, structure, levels, evaluations,
                                     unresolved, confidence_level, common, eve)
-            return _check_modes(result, u[failed], design_points)
+            # level 0 is plain Monte Carlo: no chain to lose a mode (FORM's design points of
+            # an event that is not rare overlap, and their sum flagged a right answer)
+            return _check_modes(result, u[failed], design_points if level else None)
         key = np.where(unevaluable, -np.inf, g)
         order = np.argsort(key, kind="stable")
         below, above = key[order[chains - 1]], key[order[chains]]
@@ -385,6 +389,19 @@ def _subset_result(failed, unevaluable, structure, levels, evaluations, unresolv
         if chained else None)
     resolved = 1.0 - (upper - lower)                               # 1 - P(N), estimated
     p = lower / resolved
+    interval = INTERVAL_LOGNORMAL
+    ci = (lo_lo / resolved, lo_hi / resolved)
+    bounds_ci = (lo_lo, up_hi)
+    if not chained:
+        # level 0 alone is plain Monte Carlo: the exact binomial intervals of
+        # monte_carlo_probability, which the lognormal one is not near 0 or 1 (every sample
+        # failing gave CV 0 and [1, 1])
+        n, k = failed.size, int(np.count_nonzero(failed))
+        m = int(np.count_nonzero(unevaluable & ~failed))
+        ci = clopper_pearson_interval(k, n - m, confidence_level)
+        bounds_ci = (clopper_pearson_interval(k, n, confidence_level)[0],
+                     clopper_pearson_interval(k + m, n, confidence_level)[1])
+        interval = INTERVAL_CLOPPER_PEARSON
     levels.add(0.0, last_upper)
     ancestors = int(np.unique(eve[failed]).size)
     status, message = STATUS_OK, ""
@@ -396,10 +413,11 @@ def _subset_result(failed, unevaluable, structure, levels, evaluations, unresolv
                    "importance sampling")
     return RareEventResult(
         probability=p, standard_error=p * cv_lower if lower > 0 else float("nan"),
-        coefficient_of_variation=cv_lower, ci_lower=lo_lo / resolved,
-        ci_upper=lo_hi / resolved, interval=INTERVAL_LOGNORMAL, evaluations=evaluations,
+        coefficient_of_variation=cv_lower, ci_lower=float(ci[0]), ci_upper=float(ci[1]),
+        interval=interval, evaluations=evaluations,
         unresolved=unresolved, failures=int(np.count_nonzero(failed)), bound_lower=lower,
-        bound_upper=upper, bounds_ci_lower=lo_lo, bounds_ci_upper=up_hi,
+        bound_upper=upper, bounds_ci_lower=float(bounds_ci[0]),
+        bounds_ci_upper=float(bounds_ci[1]),
         degrees_of_freedom=df, ancestors=ancestors, level_independent_cv=independent_cv,
         status=status, message=message, **levels.fields(), **common)
 
