@@ -700,3 +700,18 @@ def test_subset_at_level_0_is_plain_monte_carlo_with_its_exact_interval():
     everything = subset_simulation(lambda u: -10.0 - u[:, 0], 2, SEED, design_points=spread)
     assert everything.ok and everything.probability == 1.0 and everything.ci_upper == 1.0
     assert_allclose(everything.ci_lower, 0.025 ** (1 / 1000), rtol=1e-12)
+
+
+def test_weighted_mean_of_deep_tail_weights():
+    # The standard error of weights near 1e-300 came out 0 (their squared deviations
+    # underflow), so importance sampling gave P = 2.21e-303 with CV 0 and a zero-width
+    # interval for a 5 % limit on |epsilon|. The mean and standard error scale with the
+    # weights (exact: a power-of-two scale; 1e-12 here).
+    from tolsim.study.analyses.rare_events.common import weighted_mean
+
+    x = np.random.default_rng(3).exponential(size=500) * (np.arange(500) % 7 == 0)
+    mean, se = weighted_mean(x)
+    for scale in (1e-200, 1e-300):
+        tiny_mean, tiny_se = weighted_mean(x * scale)
+        assert_allclose((tiny_mean / scale, tiny_se / scale), (mean, se), rtol=1e-12)
+        assert tiny_se > 0

@@ -88,7 +88,21 @@ def clip_unit(value) -> float:
     return float(np.clip(value, 0.0, 1.0)) if np.isfinite(value) else float(value)
 
 
+#: Below this largest |x|, :func:`weighted_mean` works on x over its largest: squares of values
+#: under about 1e-154 underflow to 0 (importance weights deep in the tail).
+TINY_WEIGHTS = 1e-150
+
+
 def weighted_mean(x):
-    """Mean and its standard error (sample standard deviation / sqrt(n))."""
+    """Mean and its standard error (sample standard deviation / sqrt(n)).
+
+    Values all below :data:`TINY_WEIGHTS` in size are scaled by their largest first: their
+    squared deviations underflowed to 0, which gave a standard error (and CV) of 0, an interval
+    of zero width around a P of 2e-303.
+    """
+    largest = float(np.max(np.abs(x), initial=0.0))
+    if 0.0 < largest < TINY_WEIGHTS:
+        mean, se = weighted_mean(x / largest)
+        return mean * largest, se * largest
     return float(np.mean(x)), float(np.std(x, ddof=1)) / math.sqrt(x.size)
 
