@@ -272,6 +272,16 @@ def test_parse_allocation_errors_name_the_key(extra, match):
         parse_config(text, "k.toml")
 
 
+def test_a_source_without_spread_is_not_called_fixed():
+    # A normal tolerance with std 0 has no spread to scale; the message said
+    # "distribution = 'fixed'", which the config does not say.
+    text = (CONFIGS / "known_answer.toml").read_text().replace("std_deg = 2.0", "std_deg = 0.0")
+    with pytest.raises(ConfigError, match=r"allocate.sources.bottom_rotation has no spread to "
+                                          r"scale \(\[tolerances.bottom_rotation\] is a fixed "
+                                          r"value: distribution = 'fixed', or a spread of 0\)"):
+        parse_config(text + "\n[allocate.sources.bottom_rotation]\n", "k.toml")
+
+
 # --------------------------------------------------------------------------------------------
 # The allocated config
 # --------------------------------------------------------------------------------------------

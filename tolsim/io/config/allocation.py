@@ -90,8 +90,8 @@ def parse_allocation(table, tolerances) -> AllocationSettings:
             if name not in given:
                 raise sub.error(name, f"has no [tolerances.{name}] in the config to scale")
             if not given[name].distribution.is_random:
-                raise sub.error(name, f"is a fixed value ([tolerances.{name}] distribution = "
-                                      "'fixed'): it has no spread to scale")
+                raise sub.error(name, f"has no spread to scale ([tolerances.{name}] is a fixed "
+                                      "value: distribution = 'fixed', or a spread of 0)")
             t = sub.table(name)
             values = {key: t.quantity(key, "dimensionless", default=default, positive=True,
                                       required=default is not None)
