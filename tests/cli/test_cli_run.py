@@ -130,6 +130,31 @@ def test_rerun_resumes_from_checkpoint(tmp_path, capsys):
     b.close()
 
 
+def test_another_studys_checkpoint_is_kept_unless_fresh(tmp_path, capsys):
+    # A rerun with another --samples said "ignoring ...partial" and then overwrote it: an
+    # audit lost 1.08 M finished assemblies that way. Another study's checkpoint is now
+    # refused (exit 2, one line naming it and --fresh) and kept; --fresh discards it.
+    from tolsim.io.config import load_config
+    from tolsim.study.execution.runner import StudyInterrupted, run_study
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(MINIMAL.replace("samples = 100", "samples = 1000\nblock_size = 100"))
+    out = tmp_path / "s.nc"
+    partial = Path(f"{out}.partial")
+    with pytest.raises(StudyInterrupted):
+        run_study(load_config(cfg), chunk_blocks=1, checkpoint_path=str(partial),
+                  max_blocks=3)
+    saved = partial.read_bytes()
+    for extra in ([], ["--resume"]):
+        assert main(["run", str(cfg), "-o", str(out), "--samples", "500", *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1, err
+        assert f"{partial} is the checkpoint of another study" in err and "--fresh" in err
+        assert partial.read_bytes() == saved and not out.exists()
+    assert main(["run", str(cfg), "-o", str(out), "--samples", "500", "--fresh", "--quiet"]) == 0
+    assert out.exists() and not partial.exists()
+
+
 def test_console_script_process(tmp_path):
     # The real process: exit codes and stderr as a user sees them (not a TTY: no progress bar).
     out = tmp_path / "m.nc"

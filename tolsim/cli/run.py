@@ -28,7 +28,8 @@ for a few tens of seconds, and says so; later runs load them from Numba's cache.
 
 Stopping and resuming: progress is saved next to the output in OUT.partial, every 30 s
 (--checkpoint-interval) and when you press Ctrl-C. Rerunning the same command resumes from
-it (and says from where), with a result bit-identical to an uninterrupted run.
+it (and says from where), with a result bit-identical to an uninterrupted run. A checkpoint
+of another study (other config, seed or --samples) is refused and kept: --fresh discards it.
 
 Precision target: with --target-ci-width the run stops at the first block of assemblies at
 which the 95 % interval of P(contact) is that narrow, and --samples (or study.samples) is
@@ -702,20 +703,23 @@ def run(args) -> int:
 
     if args.fresh and checkpoint.exists():
         checkpoint.unlink()
-    if args.resume:
+    if args.resume or checkpoint.exists():
         import numpy as np  # noqa: PLC0415
 
+        flag = "--resume: " if args.resume else ""
         try:
             with np.load(checkpoint) as data:
                 matches = str(data["fingerprint"]) == fingerprint(config)
         except FileNotFoundError:
-            matches = False
+            raise UsageError(f"--resume: no checkpoint {checkpoint}") from None
         except Exception as exc:  # noqa: BLE001 - zipfile, zlib, numpy and OS errors alike
-            raise UsageError(f"--resume: checkpoint {checkpoint} cannot be read, it is damaged "
+            raise UsageError(f"{flag}checkpoint {checkpoint} cannot be read, it is damaged "
                              f"or truncated ({type(exc).__name__}); --fresh discards it"
                              ) from None
-        if not matches:
-            raise UsageError(f"--resume: no checkpoint {checkpoint} for this study")
+        if not matches:  # another study's progress: never discarded unasked
+            raise UsageError(f"{flag}{checkpoint} is the checkpoint of another study (its "
+                             "config, seed, samples or tolsim version differ); --fresh "
+                             "discards its progress, or write this study to another -o")
 
     bar = tqdm.tqdm(total=config.study.samples, unit="asm", unit_scale=True, file=sys.stderr,
                     desc="tolsim run", disable=True if args.quiet else None, smoothing=0.1)
