@@ -29,7 +29,8 @@ from tolsim.study.execution.runner import StudyInterrupted
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 #: Attributes that stamp a run (its time), not its result.
 STAMPS = ("history", "date_created", "elapsed_seconds", "full_model_resolve_seconds",
-          "compile_seconds", "balls_per_second")
+          "compile_seconds", "balls_per_second",
+          "attributes_sha256")  # (the checksum of the global attributes, stamps included)
 
 
 def _one_line_error(capsys, argv, *words):
@@ -74,7 +75,7 @@ def _digest(values) -> str:
 def test_every_variable_carries_a_checksum_verifiable_from_the_file(result_file):
     with netCDF4.Dataset(result_file) as nc:
         nc.set_auto_maskandscale(False)
-        assert nc.getncattr("checksum_scheme").startswith("sha256-per-variable/1")
+        assert nc.getncattr("checksum_scheme").startswith("sha256-per-variable/2")
         assert len(nc.variables) > 50
         for name, var in nc.variables.items():
             assert var.getncattr("sha256") == _digest(np.asarray(var[...])), name
@@ -112,6 +113,58 @@ def test_corrupted_data_is_refused_by_report_compare_and_read_result(result_file
                  "--no-verify"]) == 0
 
 
+def test_an_altered_and_signed_again_file_is_refused_or_marked(result_file, tmp_path, capsys):
+    # P(contact) moved outside its own interval and the file signed again (or its checksums
+    # stripped): the report's figure raised "'yerr' must not contain negative values". Such
+    # data, which tolsim never writes, are refused in one line; --no-verify (forensics)
+    # draws the report, which says on its page, in the PDF and its sign-off that the
+    # checksums were not verified.
+    from tolsim.io.checksums import sign_file
+
+    bad = _copy(result_file, tmp_path)
+    with netCDF4.Dataset(bad, "a") as nc:
+        nc.variables["contact_probability"][...] = 0.9
+    sign_file(bad)
+    _one_line_error(capsys, ["report", str(bad), "-o", str(tmp_path / "r"), "--no-pdf",
+                             "--no-sensitivity"], "inconsistent data: contact_probability = 0.9 "
+                                                  "lies outside its interval")
+    assert not (tmp_path / "r").exists()
+    assert main(["report", str(bad), "-o", str(tmp_path / "r"), "--no-sensitivity",
+                 "--quiet", "--no-verify"]) == 0
+    page = (tmp_path / "r" / "report.html").read_text()
+    assert "<b>Checksums NOT verified</b>: the report was made with --no-verify" in page
+    assert (tmp_path / "r" / "report.pdf").stat().st_size > 0
+    # a verified file's report has no such warning
+    assert main(["report", str(result_file), "-o", str(tmp_path / "ok"), "--no-pdf",
+                 "--no-sensitivity", "--quiet"]) == 0
+    assert "NOT verified" not in (tmp_path / "ok" / "report.html").read_text()
+
+
+def test_pdf_pages_of_an_unverified_file_say_so():
+    # the PDF: under the title, above the sign-off and in every page's footer
+    import matplotlib.pyplot as plt
+
+    from tolsim.reports.pdf import report_pages
+
+    texts = []
+    for fig in _unverified_pages(report_pages):
+        texts.append(" ".join(t.get_text() for t in fig.texts))
+        plt.close(fig)
+    assert "CHECKSUMS NOT VERIFIED: forensics" in texts[0]
+    assert "CHECKSUMS NOT VERIFIED: forensics" in texts[-1]
+    assert all("checksums NOT verified" in t for t in texts)
+
+
+def _unverified_pages(report_pages):
+    from tolsim.reports.verdict import Verdict
+
+    return report_pages(
+        title="t", subtitle="s", verdict=Verdict("pass", ()), headline=["h"], facts=[],
+        tolerances=[], assumptions=[], figures={}, captions={}, sections={},
+        result_path=__file__, sign_off=(("author",), ("name",), ("accept",)),
+        unverified="forensics")
+
+
 def test_a_file_without_checksums_is_read_with_a_warning(result_file, tmp_path, capsys):
     old = _copy(result_file, tmp_path)
     with netCDF4.Dataset(old, "a") as nc:
@@ -142,12 +195,39 @@ def _set_attribute(path, name, value):
     ("config", None, "config"),
 ])
 def test_corrupted_attributes_are_one_line(result_file, tmp_path, capsys, name, value, word):
+    # The global attributes' checksum refuses any change to them; without the verification
+    # (--no-verify) the attribute's own check names it, as it does a missing attribute always
     bad = _copy(result_file, tmp_path)
     _set_attribute(bad, name, value)
+    fails = word if value is None else ("the global attributes (the embedded config, seed and "
+                                        "settings) fail their SHA-256")
     _one_line_error(capsys, ["report", str(bad), "-o", str(tmp_path / "r"), "--no-pdf",
-                             "--no-sensitivity"], word)
+                             "--no-sensitivity"], fails)
     _one_line_error(capsys, ["compare", str(result_file), str(bad), "-o",
-                             str(tmp_path / "c")], word)
+                             str(tmp_path / "c")], fails)
+    _one_line_error(capsys, ["report", str(bad), "-o", str(tmp_path / "r"), "--no-pdf",
+                             "--no-sensitivity", "--no-verify"], word)
+
+
+def test_an_edited_config_attribute_fails_the_checksum(result_file, tmp_path, capsys):
+    # The embedded config (the text a report re-reads for its assumptions, Sobol' indices
+    # and spot checks) was outside the checksums: an edited limit went unnoticed, and the
+    # report showed the file's 70 % beside the edited text's 50. Signed since scheme /2, with
+    # the recipe of tolsim.io.checksums' docstring, which needs no tolsim.
+    import hashlib
+
+    from tolsim.io.checksums import digest
+
+    bad = _copy(result_file, tmp_path)
+    with netCDF4.Dataset(bad, "a") as nc:
+        nc.setncattr("config", nc.getncattr("config") + "\n# edited\n")
+    _one_line_error(capsys, ["report", str(bad), "-o", str(tmp_path / "r"), "--no-pdf",
+                             "--no-sensitivity"], "global attributes", "fail their SHA-256")
+    with netCDF4.Dataset(result_file) as nc:  # the docstring's recipe on the good file
+        h = hashlib.sha256()
+        for name in sorted(set(nc.ncattrs()) - {"checksum_scheme", "attributes_sha256"}):
+            h.update(name.encode("utf-8") + b"\0" + bytes.fromhex(digest(nc.getncattr(name))))
+        assert h.hexdigest() == nc.getncattr("attributes_sha256")
 
 
 def test_damaged_header_is_one_line(result_file, tmp_path, capsys):
@@ -171,7 +251,7 @@ def test_sweep_files_carry_checksums(tmp_path):
     out = tmp_path / "sw.nc"
     run_sweep(c, out)
     ds = read_result(out)
-    assert ds.attrs["checksum_scheme"].startswith("sha256-per-variable/1")
+    assert ds.attrs["checksum_scheme"].startswith("sha256-per-variable/2")
     assert all(re.fullmatch("[0-9a-f]{64}", ds[n].attrs["sha256"]) for n in ds.variables)
     _corrupt_data(out, "velocity_deviation_quantile")
     with pytest.raises(ValueError, match="velocity_deviation_quantile"):

@@ -51,7 +51,8 @@ TEXT_ATTRIBUTES = (
     "sampling", "spot_check_status", "contact_probability_interval", "propagation_assumption",
     "propagation_caveat", "stopping_rule", "target_ci_width", "estimator", "estimator_settings",
     "rare_event_seed_streams", "contact_creep_model", "friction_assumptions",
-    SWEEP_DIMENSIONS, SWEEP_COORDINATES, "sweep_mode", "sweep_keys", "checksum_scheme")
+    SWEEP_DIMENSIONS, SWEEP_COORDINATES, "sweep_mode", "sweep_keys", "checksum_scheme",
+    "attributes_sha256")
 
 
 def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:

@@ -396,7 +396,7 @@ def render_pdf(**report) -> bytes:
 def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assumptions,
                  figures, captions, sections, result_path, sign_off, carriage=None,
                  friction=None, glance=(), glance_notes=(), section_tables=None,
-                 provenance=(), tolerance_note="") -> list:
+                 provenance=(), tolerance_note="", unverified="") -> list:
     """The pages of the PDF report, A4 portrait Figures in order.
 
     Parameters
@@ -442,6 +442,9 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
     provenance : list of (str, str)
         The provenance table (global attributes of the result file), before the sign-off
         (the HTML page has it after; the sign-off closes the PDF on its own page).
+    unverified : str
+        Why the file's checksums were not verified ("" when they were): said under the
+        title, at the sign-off and in every page's footer.
 
     Returns
     -------
@@ -457,6 +460,10 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
         page.y += 0.3
     doc.paragraph(subtitle, size=8, colour="0.4")
     doc.paragraph(f"Result file SHA-256: {sha}", size=7.5, colour="0.4")
+    warning = (f"CHECKSUMS NOT VERIFIED: {unverified}. The numbers of this report may not be "
+               "those tolsim wrote: do not sign off on it." if unverified else "")
+    if warning:
+        doc.paragraph(warning, size=9, colour="#b00020", weight="bold")
     colour = STATUS_COLOURS.get(verdict.status, "#555555")
     doc.box(f"Verdict: {verdict.label}", colour, headline)
     doc.table(["quantity", "requirement", "estimate", "verdict", "why"],
@@ -511,8 +518,11 @@ def report_pages(*, title, subtitle, verdict, headline, facts, tolerances, assum
         doc.heading("Provenance", size=11.5)
         doc.table(["attribute", "value"], [list(r) for r in provenance], [0.3, 0.7])
     doc.new_page()
+    if warning:
+        doc.paragraph(warning, size=9, colour="#b00020", weight="bold")
     _sign_off(doc, sha, *sign_off)
-    doc.finish(f"{title} | tolsim {__version__} | result SHA-256 {sha[:16]}…")
+    doc.finish(f"{title} | tolsim {__version__} | result SHA-256 {sha[:16]}…"
+               + (" | checksums NOT verified" if unverified else ""))
     return [p.fig for p in doc.pages]
 
 

@@ -53,7 +53,9 @@ def read_result_file(path, *, validate=False, verify=True):
     verify : bool
         Verify the variables' SHA-256 checksums (:mod:`tolsim.io.checksums`): a variable that
         fails is refused, a file without checksums is read with an
-        :class:`~tolsim.io.checksums.UnverifiedResultWarning`. False for forensics.
+        :class:`~tolsim.io.checksums.UnverifiedResultWarning`. False for forensics. Without
+        the study report's validation, the Dataset says why it is not verified
+        (:func:`unverified_reason`), which the reports print on their pages.
 
     Returns
     -------
@@ -99,14 +101,53 @@ def read_result_file(path, *, validate=False, verify=True):
     # The full schema check (tolsim.io.schema.validate) is not applied here: the report
     # needs only the variables above, and reads older or partial files as far as it can.
     try:
-        if verify:
-            verify_checksums(path)
+        verified = verify_checksums(path) if verify else False
         check_attributes(ds, path)
     except IntegrityError as exc:
         raise FailsChecksum(" ".join(str(exc).split())) from None
     except ValueError as exc:
         raise NotAResult(" ".join(str(exc).split())) from None
+    broken = interval_inconsistency(ds)
+    if broken and verify:  # tolsim never writes these: altered (and signed again) or damaged
+        raise FailsChecksum(f"{path}: inconsistent data: {broken}")
+    ds.encoding[UNVERIFIED] = "" if verified else (
+        "the file has no checksums (written before tolsim stored them)" if verify else
+        "the report was made with --no-verify: the file's checksums were not checked")
     return ds
+
+
+def interval_inconsistency(ds) -> str:
+    """The first probability of a result outside its own interval or outside [0, 1], as a
+    phrase ("" if none): ``X`` against ``X_ci_lower`` and ``X_ci_upper`` (1e-12 of slack),
+    over every point of a sweep. tolsim writes none (estimates and interval ends of rare
+    events are clipped to [0, 1] together)."""
+    for name in ds.data_vars:
+        if "probability" not in name or name.endswith(("_ci_lower", "_ci_upper")):
+            continue
+        low, high = f"{name}_ci_lower", f"{name}_ci_upper"
+        if low not in ds.data_vars or high not in ds.data_vars:
+            continue
+        p, lo, hi = (np.asarray(ds[x], dtype=float) for x in (name, low, high))
+        if p.shape != lo.shape or p.shape != hi.shape:
+            continue
+        with np.errstate(invalid="ignore"):
+            bad = (p < lo - 1e-12) | (p > hi + 1e-12) | (p < 0.0) | (p > 1.0)
+        if np.any(bad):
+            k = int(np.flatnonzero(bad.ravel())[0])
+            return (f"{name} = {p.ravel()[k]:.6g} lies outside its interval "
+                    f"[{lo.ravel()[k]:.6g}, {hi.ravel()[k]:.6g}] or [0, 1]")
+    return ""
+
+
+#: ``Dataset.encoding`` key of :func:`read_result_file`: why the data of the file read are not
+#: verified against their checksums ("" when they are).
+UNVERIFIED = "tolsim_unverified"
+
+
+def unverified_reason(ds) -> str:
+    """Why the data of a result read by :func:`read_result_file` are not verified ("" when
+    they are, or the Dataset did not come from it)."""
+    return str(ds.encoding.get(UNVERIFIED, ""))
 
 
 # --------------------------------------------------------------------------------------------

@@ -95,6 +95,7 @@ from tolsim.reports.study.page import (
     study_facts,
     table_html,
     tolerance_rows,
+    unverified_html,
 )
 from tolsim.reports.study.report import (
     ReportOutputs,
@@ -131,5 +132,5 @@ __all__ = [
     "plot_quality", "plot_sensitivity", "plot_spot_checks", "plot_velocity_deviation",
     "rare_events_html", "read_result_file", "report_html", "section_titles",
     "sensitivity_from_file", "study_facts", "table_html", "tolerance_rows", "track_labels",
-    "without_output", "render_report_pdf", "write_report_pdf",
+    "without_output", "render_report_pdf", "write_report_pdf", "unverified_html",
 ]

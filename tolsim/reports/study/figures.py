@@ -204,7 +204,9 @@ def plot_contact(ds):
     limit = number(ds, "contact_probability_limit")
     if np.isfinite(p):
         ax_p.bar([0], [p], color=SERIES_COLOURS[1], width=0.5, alpha=0.85)
-        ax_p.errorbar([0], [p], yerr=[[p - lo], [hi - p]], color="k", capsize=6, lw=1.5)
+        # (a file read with --no-verify may hold an estimate outside its interval)
+        ax_p.errorbar([0], [p], yerr=[[max(p - lo, 0.0)], [max(hi - p, 0.0)]], color="k",
+                      capsize=6, lw=1.5)
         ax_p.set_xticks([0], [f"P = {format_fraction(p)}\n95 % CI\n{format_fraction(lo)} to "
                               f"{format_fraction(hi)}"], fontsize=8.5)
     top = max(hi if np.isfinite(hi) else 0.0, limit if np.isfinite(limit) else 0.0)

@@ -16,6 +16,7 @@ from tolsim.reports.result_view import (
     config_or_none,
     integer,
     number,
+    unverified_reason,
 )
 from tolsim.reports.study.friction import (
     FRICTION_CAPTION,
@@ -58,6 +59,7 @@ from tolsim.study.statistics.quality import format_fraction
 # HTML
 # --------------------------------------------------------------------------------------------
 CSS = """
+p.unverified { border: 2px solid #b00020; color: #b00020; padding: 0.5em 0.8em; }
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; max-width: 1150px;
        margin: 2em auto; padding: 0 1em; color: #222; line-height: 1.45; }
 h1 { font-size: 1.6em; margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ddd;
@@ -390,6 +392,17 @@ def table_html(table):
     return parts
 
 
+def unverified_html(ds) -> list:
+    """The warning of a report on a file whose checksums were not verified (``--no-verify``,
+    or a file without checksums; :func:`tolsim.reports.result_view.unverified_reason`); []
+    for a verified file."""
+    reason = unverified_reason(ds)
+    if not reason:
+        return []
+    return [f"<p class='unverified'><b>Checksums NOT verified</b>: {html.escape(reason)}. The "
+            "numbers of this report may not be those tolsim wrote: do not sign off on it.</p>"]
+
+
 def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=None,
                 friction=None, pdf=True):
     """The HTML page of a study report; ``pdf``: whether a ``report.pdf`` is made beside it
@@ -409,6 +422,7 @@ def report_html(ds, figures, sens, sens_source, q, path, verdict=None, carriage=
         + ("The same report as PDF, with the sign-off fields: <code>report.pdf</code>.</p>"
            if pdf else "Made without a PDF (<code>--no-pdf</code>): the sign-off table is at "
                        "the end of this page.</p>"),
+        *unverified_html(ds),
         *_verdict_html(verdict, headline(ds, sens)),
         "<h2>1. What was studied</h2><table>",
         *(_row(label, value, num) for label, value, num in study_facts(ds)),

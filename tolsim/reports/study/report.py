@@ -14,6 +14,7 @@ from tolsim.reports.files import write_files
 from tolsim.reports.result_view import (
     config_or_none,
     read_result_file,
+    unverified_reason,
 )
 from tolsim.reports.study.figures import (
     plot_carriage_loads,
@@ -248,7 +249,7 @@ def pdf_content(ds, figs, sens, verdict, path, carriage=None, friction=None, q=N
         glance_notes=[str(a["propagation_caveat"])] if a.get("propagation_caveat") else [],
         tolerance_note=scope_note(ds) if tolerance_rows(ds) else "",
         section_tables=_section_tables(ds, sens, verdict, q, sens_source),
-        provenance=provenance_rows(ds), **extra)
+        provenance=provenance_rows(ds), unverified=unverified_reason(ds), **extra)
 
 
 def _section_tables(ds, sens, verdict, q, sens_source="") -> dict:

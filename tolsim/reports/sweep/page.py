@@ -9,7 +9,14 @@ import numpy as np
 
 from tolsim import __version__
 from tolsim.reports.result_view import attribute, integer, number, quantile_value
-from tolsim.reports.study import CSS, ReportTable, study_facts, table_html, tolerance_rows
+from tolsim.reports.study import (
+    CSS,
+    ReportTable,
+    study_facts,
+    table_html,
+    tolerance_rows,
+    unverified_html,
+)
 from tolsim.reports.style import data_uri
 from tolsim.reports.sweep.figures import FIGURES, point_column
 from tolsim.reports.sweep.points import (
@@ -303,6 +310,7 @@ def sweep_html(ds, path, layout: Sweep, points, pngs: dict) -> str:
         f"tolsim {__version__} on {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}. The "
         f"table per point as CSV: <code>{CSV_NAME}</code>; the figures as PNG beside this "
         "page. A sweep has no PDF: the sign-off report is that of a single study.</p>",
+        *unverified_html(ds),
         "<div class='verdict-box' id='verdict'>",
         f"<p class='verdict-label'>{layout.size} points: "
         + (_esc(summary[-1].removeprefix("All spec limits together: ").rstrip("."))
