@@ -236,6 +236,19 @@ def _result(p, cv, status="ok", lost=0.0):
                            message="" if status == "ok" else "flagged", lost_mode_mass=lost)
 
 
+def test_combine_says_which_estimator_it_set_aside_when_they_agree():
+    # importance sampling flagged by its own diagnostic (2 importance samples), its number
+    # agreeing with subset simulation's: subset's stands. The result said nothing of the one
+    # set aside ("by subset simulation and importance sampling", an empty message).
+    sub, imp = _result(1e-3, 0.3), _result(1.1e-3, 0.3, STATUS_DIAGNOSTIC_FAILED)
+    kept = combine(sub, imp)
+    assert kept.ok and kept.probability == sub.probability and kept.estimator == "rare"
+    assert kept.message.startswith("importance sampling set aside (diagnostic_failed: "
+                                   "flagged); its number agrees with subset simulation's")
+    other = combine(_result(1.1e-3, 0.3, STATUS_DIAGNOSTIC_FAILED), _result(1e-3, 0.3))
+    assert other.ok and other.message.startswith("subset simulation set aside")
+
+
 def test_combine_sets_subset_aside_only_when_its_lost_mode_explains_the_gap():
     # constructed numbers (no model): importance sampling 3.2e-5 (CV 0.05) against subset
     # simulation 3e-7 (CV 0.5), far beyond the 99 % agreement test

@@ -322,6 +322,8 @@ def _estimator_lines(ds, prefix, title) -> list:
                  f"{evaluations:,} evaluations ({float(a.get('estimator_seconds', 0)):.2g} s)"]
         if status != "ok":  # a number its estimator does not back (issue 23)
             lines.append(f"  NOT OK ({status}): {a.get('estimator_message', '')}")
+        elif a.get("estimator_message"):  # ok, with a word on how (one estimator set aside)
+            lines.append(f"  {a['estimator_message']}")
         if unresolved:
             lines.append(f"  {unresolved:,} evaluated assemblies unresolved: bounds "
                          f"[{float(ds[f'{prefix}_bound_lower']):.3g}, "

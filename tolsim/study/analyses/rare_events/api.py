@@ -402,9 +402,12 @@ def combine(sub, imp) -> RareEventResult:
     if sub.ok != imp.ok and overlap:
         # one flagged by its own diagnostic, but its number agrees with the other's, which
         # passed all of its own: the one that passed stands
-        good = sub if sub.ok else imp
-        return replace(good, estimator="rare", evaluations=evaluations,
-                       **_diagnostics_for(good is sub, diagnostics))
+        good, bad = (sub, imp) if sub.ok else (imp, sub)
+        names = ("subset simulation", "importance sampling")
+        kept, aside = names if good is sub else names[::-1]
+        return replace(good, estimator="rare", evaluations=evaluations, message=(
+            f"{aside} set aside ({bad.status}: {bad.message}); its number agrees with "
+            f"{kept}'s, which is given: {both}"), **_diagnostics_for(good is sub, diagnostics))
     if not sub.ok or not imp.ok:
         bad, keep, status = flagged_pair(sub, imp)
         message = (f"{'subset simulation' if bad is sub else 'importance sampling'} not ok: "
