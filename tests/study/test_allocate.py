@@ -272,7 +272,23 @@ def test_parse_allocation_errors_name_the_key(extra, match):
         parse_config(text, "k.toml")
 
 
-def test_a_source_without_spread_is_not_called_fixed():
+def test_a_fraction_of_balls_with_few_assemblies_is_warned_before_the_search():
+    # A quantile target q = 0.999 bounds the fraction of balls beyond the limit by 1e-3. With
+    # the balls of an assembly as correlated as one, N assemblies bound it at best by
+    # 1 - 0.05^(1/N) (Clopper & Pearson 1934, no ball beyond): 1000 assemblies reach 0.003
+    # only; the search ran and then blamed min_scale. Now a warning says so at once and names
+    # the assemblies that always suffice, ceil(ln 0.05 / ln 0.999) = 2995.
+    from dataclasses import replace
+
+    from tolsim.study.design.allocate.run import check_allocation
+
+    config = load_config(EXAMPLE)
+    settings = replace(config.allocation, samples=1000, verify_samples=4000,
+                       target=parse_target("velocity_deviation_abs_quantile(0.999) <= 0.5%"))
+    with pytest.warns(UserWarning, match=r"samples = 1000 assemblies may not show .* could "
+                                         r"not fall below 0.00299 > 0.001 .* 2995 assemblies"):
+        check_allocation(config, settings)
+
     # A normal tolerance with std 0 has no spread to scale; the message said
     # "distribution = 'fixed'", which the config does not say.
     text = (CONFIGS / "known_answer.toml").read_text().replace("std_deg = 2.0", "std_deg = 0.0")
@@ -453,6 +469,9 @@ def test_allocate_cli_errors(tmp_path, capsys):
            "argument --confidence: expected a level in (0.5, 1)", out)
     _error(capsys, ["allocate", example, "-o", str(out), "--samples", "100"],
            "samples = 100 cannot show P <= 0.01", out)
+    # the verification's sample too, before the search (it ran, then did NOT meet the target)
+    _error(capsys, ["allocate", example, "-o", str(out), "--verify-samples", "10"],
+           "verify_samples = 10 cannot show P <= 0.01", out)
     fixed = tmp_path / "fixed.toml"
     fixed.write_text((CONFIGS / "known_answer.toml").read_text().replace(
         'distribution = "normal"\nstd_deg = 2.0', 'distribution = "fixed"\nvalue_deg = 2.0'))

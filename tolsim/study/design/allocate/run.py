@@ -2,6 +2,7 @@
 the verification on a fresh sample (:func:`run_allocation`)."""
 
 import math
+import warnings
 import time
 from dataclasses import dataclass, replace
 
@@ -91,13 +92,22 @@ def check_allocation(config, settings: AllocationSettings) -> tuple:
     sources = resolve_sources(config, settings)
     samples = settings.samples or config.study.samples
     limit, confidence = target.probability_limit, float(settings.confidence)
-    if target.variable in ("contact_probability", "friction_exceedance_probability"):
-        need = minimum_samples(limit, confidence)
-        if samples < need:
-            raise ValueError(f"samples = {samples} cannot show P <= {limit:g} at {confidence:g} "
+    verify_samples = settings.verify_samples or VERIFY_SAMPLES_FACTOR * samples
+    need = minimum_samples(limit, confidence)
+    per_assembly = target.variable in ("contact_probability", "friction_exceedance_probability")
+    for key, n in (("samples", samples), ("verify_samples", verify_samples)):
+        if per_assembly and n < need:
+            raise ValueError(f"{key} = {n} cannot show P <= {limit:g} at {confidence:g} "
                              f"confidence even with no event (the upper bound is then "
                              f"1 - (1 - c)^(1/N)); use at least {need}, better 10 times that")
-    verify_samples = settings.verify_samples or VERIFY_SAMPLES_FACTOR * samples
+        if not per_assembly and n < need:
+            # a fraction of balls: the balls of an assembly count as fewer than their number
+            # (they share its errors), as one where they are fully correlated
+            warnings.warn(
+                f"{key} = {n} assemblies may not show {target} at {confidence:g} confidence: "
+                f"were an assembly's balls as correlated as one, the upper bound could not "
+                f"fall below {1 - (1 - confidence) ** (1 / n):.3g} > {limit:g} even with no "
+                f"ball beyond; {need} assemblies would always do", UserWarning, stacklevel=2)
     return target, sources, samples, verify_samples
 
 
