@@ -2,8 +2,8 @@
 the verification on a fresh sample (:func:`run_allocation`)."""
 
 import math
-import warnings
 import time
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -63,6 +63,11 @@ def minimum_samples(limit: float, confidence: float) -> int:
     return math.ceil(math.log(1.0 - confidence) / math.log1p(-limit))
 
 
+class AllocationWarning(UserWarning):
+    """An allocation that may not be able to show its target (the command line prints it
+    as one line)."""
+
+
 def check_allocation(config, settings: AllocationSettings) -> tuple:
     """Everything about an allocation that can be wrong before any work.
 
@@ -107,7 +112,8 @@ def check_allocation(config, settings: AllocationSettings) -> tuple:
                 f"{key} = {n} assemblies may not show {target} at {confidence:g} confidence: "
                 f"were an assembly's balls as correlated as one, the upper bound could not "
                 f"fall below {1 - (1 - confidence) ** (1 / n):.3g} > {limit:g} even with no "
-                f"ball beyond; {need} assemblies would always do", UserWarning, stacklevel=2)
+                f"ball beyond; {need} assemblies would always do", AllocationWarning,
+                stacklevel=2)
     return target, sources, samples, verify_samples
 
 
