@@ -378,6 +378,8 @@ def test_bad_target_ci_width(tmp_path, capsys, value):
     err = capsys.readouterr().err
     assert "--target-ci-width" in err and "10%" in err and err.count("\n") == 1
     assert sorted(os.listdir(tmp_path)) == ["s.toml"]
+    if value == "1.5":  # the reason: an absolute width is below 1
+        assert "must be in (0, 1) when absolute" in err
 
 
 def test_summary_warns_when_balls_are_unresolved(tmp_path, capsys, monkeypatch):

@@ -311,6 +311,13 @@ def checkpointed(tmp_path):
     return cfg, out, Path(f"{out}.partial")
 
 
+def test_a_report_of_a_checkpoint_says_what_it_is(checkpointed, tmp_path, capsys):
+    # `tolsim report OUT.nc.partial` said "not a netCDF file"
+    _, _, partial = checkpointed
+    _one_line_error(capsys, ["report", str(partial), "-o", str(tmp_path / "r")],
+                    "the checkpoint of an interrupted tolsim run", "run the same command again")
+
+
 def test_truncated_checkpoint_names_fresh(checkpointed, capsys):
     cfg, out, partial = checkpointed
     partial.write_bytes(partial.read_bytes()[:200])

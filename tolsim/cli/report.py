@@ -135,6 +135,7 @@ def _sweep_report(args, out, say, started) -> int:
     if not args.quiet:
         figures = ", ".join(result.figures.values())
         print(f"wrote {result.html}, {result.csv} and {len(result.figures)} figures "
-              f"({figures}): the sweep report of {result.layout.size} points "
+              f"({figures}): the sweep report of {result.layout.size} "
+              f"point{'' if result.layout.size == 1 else 's'} "
               f"({time.perf_counter() - started:.1f} s)")
     return 0

@@ -795,7 +795,7 @@ def sweep_summary(ds, output, work) -> str:
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
     lines.extend("  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in rows)
     # the points run in this process only: a resumed sweep's earlier points took no time here
-    lines.append(f"wrote {output} ({n} points, {work.elapsed:.1f} s, "
+    lines.append(f"wrote {output} ({n} point{'' if n == 1 else 's'}, {work.elapsed:.1f} s, "
                  f"{work.balls_per_second:,.0f} balls/s)")
     return "\n".join(lines)
 

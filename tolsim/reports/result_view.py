@@ -82,6 +82,9 @@ def read_result_file(path, *, validate=False, verify=True):
             raise NotAResult(" ".join(str(exc).split())) from None
     with open(path, "rb") as fh:
         magic = fh.read(8)
+    if magic.startswith(b"PK\x03\x04") and path.endswith(".partial"):
+        raise NotAResult(f"{path}: the checkpoint of an interrupted tolsim run, not a result: "
+                         "run the same command again to finish it")
     if not (magic.startswith(b"\x89HDF\r\n\x1a\n") or magic[:3] == b"CDF"):
         raise NotAResult(f"{path}: not a netCDF file")
     try:

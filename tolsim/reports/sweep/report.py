@@ -58,7 +58,7 @@ def make_sweep_report(path, folder, *, progress=None, verify=True) -> SweepRepor
     say = progress or (lambda msg: None)
     ds = read_result_file(path, verify=verify)
     layout = sweep_layout(ds)
-    say(f"{layout.size} sweep points")
+    say(f"{layout.size} sweep point{'' if layout.size == 1 else 's'}")
     points = sweep_points(ds, layout)
     say("figures")
     pngs = {name: render_png(plot(layout, points))

@@ -181,8 +181,8 @@ class PrecisionTarget:
     def __post_init__(self):
         if not (np.isfinite(self.width) and self.width > 0
                 and (self.relative or self.width < 1)):
-            raise ValueError(f"target width {self.width!r} must be in (0, 1), or > 0 when "
-                             "relative")
+            raise ValueError(f"target width {self.width!r} must be in (0, 1) when absolute "
+                             "(such as 0.005), or > 0 when relative (such as 10%)")
 
     @classmethod
     def parse(cls, text: str) -> "PrecisionTarget":
@@ -197,10 +197,10 @@ class PrecisionTarget:
         relative = raw.endswith("%")
         try:
             value = float(raw[:-1] if relative else raw)
-            return cls(value / 100 if relative else value, relative)
         except ValueError:
             raise ValueError(f"expected a width such as 0.005 or a relative width such as "
                              f"10%, got {text!r}") from None
+        return cls(value / 100 if relative else value, relative)  # (its range, said)
 
     def __str__(self):
         return f"{100 * self.width:g}%" if self.relative else f"{self.width:g}"
