@@ -427,6 +427,27 @@ def test_resumed_sweep_equals_an_uninterrupted_one_attributes_included(tmp_path)
             k: str(v) for k, v in whole[name].attrs.items()}, name
 
 
+def test_a_damaged_sweep_part_is_said_and_run_again(tmp_path):
+    # A damaged finished point (OUT.sweep/point-K.nc) was run again without a word; the
+    # result was right, but the user did not learn why the resume took longer.
+    text = MINIMAL.replace("samples = 100", "samples = 64\nblock_size = 16")
+    c = parse_config(text + '\n[sweep]\n"loads.normal_load_N" = [150, 250]\n')
+    out = tmp_path / "cut.nc"
+    for _ in range(2):  # point 1 ends in the second call, point 2 stops half-way
+        with pytest.raises(StudyInterrupted):
+            run_sweep(c, out, max_blocks=3, checkpoint_interval=0, chunk_blocks=1)
+    part = parts_folder(out) / "point-0000.nc"
+    part.write_bytes(part.read_bytes()[:300])
+    said = []
+    run_sweep(c, out, notify=said.append)
+    assert any(s.startswith(f"point 1 of 2: {part} is damaged (") and
+               s.endswith("running the point again") for s in said), said
+    run_sweep(c, tmp_path / "whole.nc")
+    whole, again = read_result(tmp_path / "whole.nc"), read_result(out)
+    np.testing.assert_array_equal(again.contact_probability.values,
+                                  whole.contact_probability.values)
+
+
 def test_resumed_sweep_counts_only_the_work_done_after_resuming(tmp_path):
     # issue 26, item 8 for sweeps: the summary's balls/s was all points' balls over the time
     # of the points run now, overstated after a resume. Point 1 (64 assemblies x 6 balls)

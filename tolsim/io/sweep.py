@@ -254,10 +254,14 @@ def _run_points(config, folder, history, progress, on_point, notify, run_options
         fp = runner.fingerprint(point)
         if part.exists():
             try:
-                ds = read_result(part)
-            except ValueError:
-                ds = None
-            if ds is not None and ds.attrs.get("sweep_point_fingerprint") == fp:
+                ds, why = read_result(part), "of another study (its config or tolsim differ)"
+            except ValueError as exc:
+                ds, why = None, f"damaged ({' '.join(str(exc).split())[:160]})"
+            if ds is None or ds.attrs.get("sweep_point_fingerprint") != fp:
+                if notify:  # (the point runs again; its part file is then replaced)
+                    notify(f"point {k + 1} of {sweep.size}: {part} is {why}; running the "
+                           "point again")
+            else:
                 datasets.append(ds)
                 if notify:
                     notify(f"point {k + 1} of {sweep.size} ({sweep.describe(k)}) taken from "

@@ -706,11 +706,10 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
     shape = np.broadcast_shapes(np.shape(side_load), np.shape(normal_load),
                                 *(np.shape(v) for v in values.values()))
     n = int(np.prod(shape))
-    nx = np.broadcast_to(side_load, shape).reshape(n)
-    ny = np.broadcast_to(normal_load, shape).reshape(n)
 
-    def loads(index):
-        return nx[index], ny[index]
+    def loads(index=slice(None)):  # flattened (copies): only where a model needs them
+        return tuple(np.broadcast_to(x, shape).reshape(n)[index]
+                     for x in (side_load, normal_load))
 
     one_pass = ONE_PASS_STATIC_MODELS.get(config.study.static_model)
     if one_pass is not None:
@@ -720,7 +719,8 @@ def evaluate_balls(config, values: dict, side_load, normal_load) -> BallState:
         errors = groove_error_fields(
             {k: np.broadcast_to(v, shape) for k, v in values.items()}, shape)
         with serial_if_small(n):
-            static = STATIC_MODELS[config.study.static_model](errors, nx, ny, config.bearing)
+            static = STATIC_MODELS[config.study.static_model](errors, *loads(),
+                                                              config.bearing)
         state = ball_velocities(config, static, shape)
     return with_static_fallback(config, state, values, loads)
 
