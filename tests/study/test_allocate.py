@@ -492,9 +492,12 @@ def test_allocate_cli_errors(tmp_path, capsys):
     range_ = tmp_path / "range.toml"
     range_.write_text((CONFIGS / "known_answer.toml").read_text()
                       + "\n[allocate.sources.bottom_rotation]\nmax_scale = 3\n")
+    range_line = len((CONFIGS / "known_answer.toml").read_text().splitlines()) + 3
+    # at the key's line, as every other allocate error (it had no file:line)
     _error(capsys, ["allocate", str(range_), "-o", str(out), "--target",
-                    "contact_probability<=0.01"], "max_scale = 3 takes the tolerance beyond",
-           out)
+                    "contact_probability<=0.01"],
+           f"range.toml:{range_line}: allocate.sources.bottom_rotation.max_scale = 3 takes the "
+           "tolerance beyond", out)
     inline = tmp_path / "inline.toml"
     inline.write_text((CONFIGS / "known_answer.toml").read_text().replace(
         '[tolerances.bottom_rotation]    # one rail rotation per assembly\n'

@@ -160,7 +160,7 @@ def _build(data: dict, source: "Source", text: str, path: str,
                       train, study, bearing)
     allocation = None
     if root.has("allocate"):  # read by `tolsim allocate` (issue 14); `tolsim run` ignores it
-        allocation = parse_allocation(root.table("allocate"), tolerances)
+        allocation = parse_allocation(root.table("allocate"), tolerances, bearing)
     for key in data:
         if key not in root.used:
             raise source.error(key, None, "is not a known section (bearing, motion, train, "

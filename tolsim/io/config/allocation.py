@@ -46,6 +46,7 @@ from tolsim.study.design.allocate import (
     SourceCost,
     parse_target,
 )
+from tolsim.study.design.allocate.targets import largest_scale
 from tolsim.study.spec import SOURCES, set_study_value, toml_lines
 
 #: Keys of an ``[allocate.sources.<source>]`` table and their defaults (``max_scale``:
@@ -54,7 +55,7 @@ SOURCE_KEYS = {"min_scale": DEFAULT_MIN_SCALE, "max_scale": None,
                "cost_exponent": DEFAULT_COST_EXPONENT, "cost_weight": DEFAULT_COST_WEIGHT}
 
 
-def parse_allocation(table, tolerances) -> AllocationSettings:
+def parse_allocation(table, tolerances, bearing) -> AllocationSettings:
     """Read ``[allocate]`` (a :class:`tolsim.io.config.reader.Table`) for the config's
     ``tolerances``.
 
@@ -102,6 +103,11 @@ def parse_allocation(table, tolerances) -> AllocationSettings:
                 raise t.error(bad, f"= {t.data.get(bad, values[bad])!r}: min_scale "
                                    f"({values['min_scale']:g}) must be less than max_scale "
                                    f"({high:g})")
+            top = largest_scale(given[name], bearing)
+            if values["max_scale"] is not None and values["max_scale"] > top:
+                raise t.error("max_scale", f"= {t.data['max_scale']!r} takes the tolerance "
+                                           "beyond the errors the static model accepts: at "
+                                           f"most {top:.4g}")
             t.finish()
             sources.append(SourceCost(name, **values))
         sub.finish()
