@@ -200,6 +200,17 @@ def test_verdict_per_point_against_the_contact_limit(sweeps, tmp_path):
     assert "Verdict per point" not in text and "no spec limit given" in text
 
 
+def _paired_yaw_moment_sweep(out):
+    """configs/sweep_yaw_moment.toml at 30 and 45 N m with the paired static model, 128
+    assemblies per point, run to ``out``: its Dataset."""
+    text = re.sub(r"(?ms)^\[sweep\].*", "", (CONFIGS / "sweep_yaw_moment.toml").read_text())
+    text = text.replace("samples = 20000", "samples = 128").replace(
+        "spot_checks = 50", "spot_checks = 2").replace('static_model = "solved"',
+                                                       'static_model = "paired"')
+    c = parse_config(text + '[sweep]\n"loads.yaw_moment_N_m" = [30.0, 45.0]\n', out.name)
+    return run_sweep(c, out)[0]
+
+
 def test_unresolved_points_show_their_bounds(tmp_path, monkeypatch):
     # Beyond about 35 N m the end balls lose a contact (configs/sweep_yaw_moment.toml). The
     # full model solves such balls (issue 25), but the paper's paired forces put a contact in
@@ -209,12 +220,7 @@ def test_unresolved_points_show_their_bounds(tmp_path, monkeypatch):
     import tolsim.study.pipeline.evaluate as evaluate
 
     monkeypatch.setattr(evaluate, "STATIC_FALLBACK", {})
-    text = re.sub(r"(?ms)^\[sweep\].*", "", (CONFIGS / "sweep_yaw_moment.toml").read_text())
-    text = text.replace("samples = 20000", "samples = 128").replace(
-        "spot_checks = 50", "spot_checks = 2").replace('static_model = "solved"',
-                                                       'static_model = "paired"')
-    c = parse_config(text + '[sweep]\n"loads.yaw_moment_N_m" = [30.0, 45.0]\n', "u.toml")
-    ds, _ = run_sweep(c, tmp_path / "u.nc")
+    ds = _paired_yaw_moment_sweep(tmp_path / "u.nc")
     unresolved = ds.n_assemblies_unresolved.values
     assert unresolved[0] == 0 and unresolved[1] > 0
     out = make_sweep_report(tmp_path / "u.nc", tmp_path / "report")
@@ -231,12 +237,7 @@ def test_points_whose_balls_the_solved_model_answered_say_so(tmp_path):
     # The sweep of test_unresolved_points_show_their_bounds with the paired model's fallback:
     # the balls whose paired forces are in tension at 45 N m are answered by the solved model,
     # no train is unresolved, and the model checks and points.csv give their number per point.
-    text = re.sub(r"(?ms)^\[sweep\].*", "", (CONFIGS / "sweep_yaw_moment.toml").read_text())
-    text = text.replace("samples = 20000", "samples = 128").replace(
-        "spot_checks = 50", "spot_checks = 2").replace('static_model = "solved"',
-                                                       'static_model = "paired"')
-    c = parse_config(text + '[sweep]\n"loads.yaw_moment_N_m" = [30.0, 45.0]\n', "f.toml")
-    ds, _ = run_sweep(c, tmp_path / "f.nc")
+    ds = _paired_yaw_moment_sweep(tmp_path / "f.nc")
     fallback = ds.n_balls_static_fallback.values
     np.testing.assert_array_equal(ds.n_assemblies_unresolved.values, [0, 0])
     assert fallback[0] == 0 and fallback[1] > 0

@@ -458,10 +458,30 @@ def test_importance_falls_back_to_subset_where_the_limit_state_is_not_smooth():
     assert "checked for a lost failure mode by two independent runs" in estimate.describe()
 
 
+def _unreached_status_and_summary(ds, estimate, name, title, counted):
+    """The estimator's status and message on ``name``_status, and the summary's plain line
+    (starting ``title``, with ``counted`` whose outcome is known) followed by which estimator
+    did not reach the event and why, with no "nan": (summary lines, index of the plain one)."""
+    from tolsim.cli.run import summary
+
+    status = ds[f"{name}_status"]
+    assert rare_events.STATUS_FLAGS[int(status)] == STATUS_NO_FAILURE
+    assert status.attrs["estimator"] == "subset"
+    assert status.attrs["estimator_message"] == estimate.message
+    lines = summary(ds, "x.nc", 1.0).splitlines()
+    at = next(i for i, x in enumerate(lines) if x.startswith(title))
+    assert f"{counted} whose outcome is known)" in lines[at]
+    assert lines[at + 1].startswith(
+        "  the plain run's estimate (Monte Carlo, Clopper-Pearson): subset simulation did "
+        f"not reach the event (no_failure, {estimate.evaluations:,} evaluations): "
+        f"{estimate.message}")
+    assert "nan" not in (lines[at] + lines[at + 1]).lower()
+    return lines, at
+
+
 def unreached_contact(config):
     """(estimate, dataset, summary lines, contact check) of a study whose estimator did not
     reach the contact event."""
-    from tolsim.cli.run import summary
     from tolsim.reports.verdict import contact_check
     from tolsim.study.statistics.intervals import clopper_pearson_interval
 
@@ -479,18 +499,8 @@ def unreached_contact(config):
     attrs = ds.contact_probability.attrs
     assert attrs["estimator"] == "monte_carlo" and attrs["interval"] == "Clopper-Pearson"
     assert attrs["estimator_fallback"].startswith("subset simulation did not reach the event")
-    status = ds.contact_probability_status
-    assert rare_events.STATUS_FLAGS[int(status)] == STATUS_NO_FAILURE
-    assert status.attrs["estimator"] == "subset"
-    assert status.attrs["estimator_message"] == estimate.message
-    lines = summary(ds, "x.nc", 1.0).splitlines()
-    at = next(i for i, x in enumerate(lines) if x.startswith("P(contact"))
-    assert f"({k} of {n} trains whose outcome is known)" in lines[at]
-    assert lines[at + 1].startswith(
-        "  the plain run's estimate (Monte Carlo, Clopper-Pearson): subset simulation did "
-        f"not reach the event (no_failure, {estimate.evaluations:,} evaluations): "
-        "subset simulation found no failure")
-    assert "nan" not in (lines[at] + lines[at + 1]).lower()
+    lines, at = _unreached_status_and_summary(ds, estimate, "contact_probability",
+                                              "P(contact", f"({k} of {n} trains")
     # the report's rare-event table keeps a row: the estimator, its status and message
     from tolsim.reports.study.page import rare_events_html
     table = "".join(rare_events_html(ds))
@@ -537,7 +547,6 @@ EXCEEDANCE = "velocity_deviation_exceedance_probability"
 def unreached_exceedance(result):
     """(estimate, dataset, summary lines, report table row) of a study whose estimator did not
     reach the |epsilon| exceedance event."""
-    from tolsim.cli.run import summary
     from tolsim.reports.study.page import rare_events_html
     from tolsim.study.statistics.intervals import clopper_pearson_interval
 
@@ -561,19 +570,10 @@ def unreached_exceedance(result):
     for suffix in ("_ci_lower", "_ci_upper", "_bound_lower", "_bound_upper",
                    "_bounds_ci_lower", "_bounds_ci_upper"):
         assert ds[f"{EXCEEDANCE}{suffix}"].attrs["estimator"] == "monte_carlo", suffix
-    status = ds[f"{EXCEEDANCE}_status"]
-    assert rare_events.STATUS_FLAGS[int(status)] == STATUS_NO_FAILURE
-    assert status.attrs["estimator"] == "subset"
-    assert status.attrs["estimator_message"] == estimate.message
     # the summary: the plain line, then which estimator did not reach the event and why
-    lines = summary(ds, "x.nc", 1.0).splitlines()
-    at = next(i for i, x in enumerate(lines) if x.startswith("P(an assembly has |epsilon|"))
-    assert f"({k} of {n} assemblies whose outcome is known)" in lines[at]
-    assert lines[at + 1].startswith(
-        "  the plain run's estimate (Monte Carlo, Clopper-Pearson): subset simulation did "
-        f"not reach the event (no_failure, {estimate.evaluations:,} evaluations): "
-        f"{estimate.message}")
-    assert "nan" not in (lines[at] + lines[at + 1]).lower()
+    lines, at = _unreached_status_and_summary(ds, estimate, EXCEEDANCE,
+                                              "P(an assembly has |epsilon|",
+                                              f"({k} of {n} assemblies")
     # the report's rare-event table: a row with the plain run's number, the estimator's
     # status and message, and no "nan" (its CV, which the estimator did not give, is n/a)
     row = next(r for r in "".join(rare_events_html(ds)).split("<tr>") if "|ε| over" in r)
