@@ -9,6 +9,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import load_config, parse_config
 from tolsim.physics.velocity.models import BALL_UNLOADED
+from tolsim.study.execution.runner import run_study
 from tolsim.study.pipeline.evaluate import evaluate_balls, loads_at
 from tolsim.study.pipeline.propagation import (
     FirstContact,
@@ -139,9 +140,15 @@ def test_balls_unresolved_along_the_track_are_counted_once_apart_from_the_start(
                                   steps=40)).with_overrides(samples=16)
     b = sample_block(c, 0)
     unresolved = np.zeros(b.size, dtype=np.int64)
-    _, _, ok, _ = first_contact_along_track(c, b, unresolved=unresolved)
+    fallback = np.zeros((b.size, 3), dtype=bool)
+    _, _, ok, _ = first_contact_along_track(c, b, unresolved=unresolved,
+                                            static_fallback=fallback)
     assert ok.all()
     assert_array_equal(unresolved, 0)
+    # answered by the solved model: ball 0 from the start, balls 1 and 2 along the track;
+    # the study counts each once
+    assert fallback.all()
+    assert int(run_study(c).statistics.n_static_fallback) == 3 * 16
     monkeypatch.setattr(evaluate, "STATIC_FALLBACK", {})
     _, _, ok, _ = first_contact_along_track(c, b, unresolved=unresolved)
     assert not ok.any()

@@ -165,7 +165,8 @@ CORE_VARIABLES = {
     "n_balls_static_fallback": V((), "1", "balls the study's static model left without "
                                           "balance (a contact in tension, one loaded contact, "
                                           "or not converged) and the 'solved' model answered "
-                                          "instead (at the start of the stroke)", "i",
+                                          "instead, each once: at the start of the stroke or, "
+                                          "along the track, at any evaluation", "i",
                                  required=False),
     "n_balls_unresolved_along_track": V((), "1", "balls resolved at the start of the stroke "
                                                  "but unresolved at an evaluation along the "

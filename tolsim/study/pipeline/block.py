@@ -183,8 +183,11 @@ def _free_along_track(config, block, values):
     trains = _track_friction(config)
     state, _ = _free_start_along_track(config, block, values)
     unresolved = np.zeros(block.size, dtype=np.int64)
+    fallback = state.static_fallback.copy()
     t, pair, ok, seconds = first_contact_along_track(config, block, state, friction=trains,
-                                                     unresolved=unresolved)
+                                                     unresolved=unresolved,
+                                                     static_fallback=fallback)
+    state.static_fallback = fallback  # counted once per ball, at t = 0 or along the track
     return BlockOutcome(values, state, t, pair, ok, seconds, None, _figures(trains),
                         unresolved_along_track=unresolved)
 

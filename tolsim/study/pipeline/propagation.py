@@ -709,7 +709,7 @@ class TrainMotion(StepObserver):
 
 
 def first_contact_along_track(config, block, initial_state=None, *, friction=None,
-                              unresolved=None):
+                              unresolved=None, static_fallback=None):
     """First contact of the trains of a block with epsilon re-evaluated along the track (b).
 
     Parameters
@@ -730,6 +730,10 @@ def first_contact_along_track(config, block, initial_state=None, *, friction=Non
         Filled with the balls of each train unresolved at an evaluation after the start and
         not at t = 0 (the ball counters of the balls at t = 0 have those): with them, why
         ``valid`` is False.
+    static_fallback : ndarray of bool (size, balls), optional
+        Set where a ball was answered by its static model's fallback
+        (:data:`tolsim.study.pipeline.evaluate.STATIC_FALLBACK`) at t = 0 or at any
+        evaluation along the track.
 
     Returns
     -------
@@ -743,14 +747,32 @@ def first_contact_along_track(config, block, initial_state=None, *, friction=Non
     resolve_seconds : float
         Time spent re-solving balls with the full model during the integration [s].
     """
-    first, start = FirstContact(), _StartUnresolved()
-    observers = [first, start]
+    first, start, fallback = FirstContact(), _StartUnresolved(), _StaticFallback()
+    observers = [first, start, fallback]
     if friction is not None:
         observers.append(TrainMotion(friction, config.motion.groove_velocity))
     ball_ok, resolve_seconds = integrate_along_track(config, block, initial_state, observers)
     if unresolved is not None:
         unresolved[:] = np.count_nonzero(~ball_ok & ~start.at_start, axis=1)
+    if static_fallback is not None:
+        static_fallback |= fallback.marked
     return first.time, first.pair, ball_ok.all(axis=1), resolve_seconds
+
+
+class _StaticFallback(StepObserver):
+    """The balls answered by their static model's fallback at any evaluation, t = 0 included
+    (``marked``: (size, balls))."""
+
+    def begin(self, block, position):
+        self.marked = np.zeros(position.shape, dtype=bool)
+
+    def following(self):
+        return False
+
+    def observe(self, step):
+        if step.index == 0:
+            self.marked |= step.state1.static_fallback
+        self.marked |= step.state2.static_fallback
 
 
 class _StartUnresolved(StepObserver):
