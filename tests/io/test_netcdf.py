@@ -117,6 +117,14 @@ def test_optional_factor_dimension_is_accepted(result):
     schema.validate(ds)
 
 
+def test_a_write_into_a_missing_folder_names_the_target(result, tmp_path):
+    # the error named the temporary file (.x.nc.XXXX.tmp), not the file asked for
+    target = tmp_path / "missing" / "x.nc"
+    with pytest.raises(OSError) as error:
+        write_dataset(result_to_dataset(result, history="test"), target)
+    assert error.value.filename == str(target)
+
+
 def test_failed_write_leaves_nothing(result, tmp_path, monkeypatch):
     path = tmp_path / "r.nc"
     ds = result_to_dataset(result, history="test")

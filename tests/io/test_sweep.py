@@ -94,6 +94,17 @@ def test_zip_points_may_repeat_a_value_of_one_key():
     assert "repeats a point" in message
 
 
+def test_run_sweep_with_bad_arguments_leaves_no_folder(tmp_path):
+    # run_sweep made OUT.sweep/ before anything was checked: workers=0 or a config without
+    # [sweep] (an AttributeError on None) left it behind with nothing in it to resume
+    out = tmp_path / "s.nc"
+    with pytest.raises(ValueError, match="workers = 0"):
+        run_sweep(parse_config(known('"loads.normal_load_N" = [100, 200]')), out, workers=0)
+    with pytest.raises(ValueError, match=r"has no \[sweep\]: run it with"):
+        run_sweep(parse_config(KNOWN), out)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_dotted_keys_read_like_quoted_ones():
     a = parse_config(known('"loads.normal_load_N" = [100, 200]')).sweep
     b = parse_config(known('loads.normal_load_N = [100, 200]')).sweep

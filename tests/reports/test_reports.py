@@ -492,3 +492,16 @@ def test_fraction_verdict_agrees_with_the_displayed_interval(upper, status):
     lo, hi = (float(x.split()[0]) / 100 for x in shown.split(" to "))
     assert judge_upper_limit(lo, hi, 0.002) == status
     assert hi != 0.002
+
+
+@pytest.mark.parametrize("name, value", [("out_of_spec_limit", -1.0),
+                                         ("out_of_spec_limit", float("nan")),
+                                         ("out_of_spec_limit", 2.0),
+                                         ("cpk_minimum", -5.0),
+                                         ("friction_exceedance_limit", 0.0)])
+def test_make_report_refuses_a_spec_limit_out_of_its_range(tmp_path, name, value):
+    # make_report took these as "no spec limit given" (or 2.0 as "<= 200 %"): refused,
+    # naming the argument, before the file is read
+    with pytest.raises(ValueError, match=f"{name} = .* must be in"):
+        study_report.make_report(tmp_path / "none.nc", tmp_path / "rep", **{name: value})
+    assert not (tmp_path / "rep").exists()

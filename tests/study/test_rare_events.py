@@ -715,3 +715,16 @@ def test_weighted_mean_of_deep_tail_weights():
         tiny_mean, tiny_se = weighted_mean(x * scale)
         assert_allclose((tiny_mean / scale, tiny_se / scale), (mean, se), rtol=1e-12)
         assert tiny_se > 0
+
+
+def test_subset_ended_by_unresolved_rows_alone_says_so():
+    # g NaN over the region that would fail (u_1 > 2.5; g = 3 - u_1 elsewhere never fails):
+    # subset simulation's levels end on unresolved rows alone. It returned "ok" with P = 0 and
+    # a NaN interval end, where P may be anything up to P(u_1 > 2.5) = 6.2e-3; with g NaN
+    # everywhere it raised ZeroDivisionError. Both are "unresolved" now, with the bounds.
+    r = subset_simulation(lambda u: np.where(u[:, 0] > 2.5, np.nan, 3.0 - u[:, 0]), 2, SEED)
+    assert r.status == "unresolved" and np.isnan(r.probability) and not r.ok
+    assert r.bound_lower == 0 and 0 < r.bound_upper < 1 and r.bounds_ci_upper >= r.bound_upper
+    assert "P is only known to lie in [0, " in r.message and "\n" not in r.message
+    nothing = subset_simulation(lambda u: np.full(len(u), np.nan), 2, SEED)
+    assert nothing.status == "unresolved" and nothing.bound_upper == 1.0

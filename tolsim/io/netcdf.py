@@ -138,8 +138,11 @@ def write_dataset(ds: xr.Dataset, path) -> dict:
         ds.variables[name].encoding["_FillValue"] = None
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
-                               dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
+                                   dir=folder)
+    except OSError as exc:  # a folder that does not exist, say: name the target
+        raise OSError(exc.errno, exc.strerror or str(exc), path) from None
     os.close(fd)
     try:
         with interrupts_held():

@@ -218,17 +218,25 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
     (xr.Dataset, SweepWork): the combined result, and the work done here
     """
     sweep = config.sweep
-    folder = parts_folder(output)
-    if fresh and folder.exists():
-        shutil.rmtree(folder)
-    folder.mkdir(exist_ok=True)
+    if sweep is None:
+        raise ValueError(f"{config.path} has no [sweep]: run it with "
+                         "tolsim.study.execution.runner.run_study")
     scheduler = run_options.get("scheduler")
     cluster = None
     if isinstance(scheduler, str):  # one cluster for all points (a LocalCluster starts once)
         run_options["scheduler"], cluster, _ = connect(scheduler)
+    folder = parts_folder(output)
+    if fresh and folder.exists():
+        shutil.rmtree(folder)
+    created = not folder.exists()
+    folder.mkdir(exist_ok=True)
     try:
         datasets, work = _run_points(config, folder, history, progress, on_point, notify,
-                                        run_options)
+                                     run_options)
+    except BaseException:
+        if created and not any(folder.iterdir()):  # (bad arguments: nothing to resume)
+            folder.rmdir()
+        raise
     finally:
         if cluster is not None or isinstance(scheduler, str):
             run_options["scheduler"].close()

@@ -1,6 +1,7 @@
 """The driver of a study report: :func:`make_report` writes the PNGs, ``report.html`` and
 ``report.pdf`` of a result file."""
 
+import math
 import os
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -132,7 +133,15 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
     ------
     NotAResult
         If ``path`` is not a tolsim result.
+    ValueError
+        Naming a spec limit that is not a number in its range (a fraction in (0, 1), a Cpk
+        > 0); it was taken as "no spec limit given".
     """
+    for name, value, top in (("out_of_spec_limit", out_of_spec_limit, 1.0),
+                             ("friction_exceedance_limit", friction_exceedance_limit, 1.0),
+                             ("cpk_minimum", cpk_minimum, math.inf)):
+        if value is not None and not 0.0 < float(value) < top:
+            raise ValueError(f"{name} = {value!r} must be in (0, {top:g})")
     say = progress or (lambda msg: None)
     ds = read_result_file(path, verify=verify)
     folder = os.fspath(folder)

@@ -158,6 +158,7 @@ from tolsim.study.analyses.rare_events.result import (
     STATUS_NO_FAILURE,
     STATUS_OK,
     STATUS_PLATEAU,
+    STATUS_UNRESOLVED,
     RareEventResult,
     flagged,
 )
@@ -388,6 +389,17 @@ def _subset_result(failed, unevaluable, structure, levels, evaluations, unresolv
         ancestral_log_variance([*levels.indicators, failed], [*levels.eves, eve])
         if chained else None)
     resolved = 1.0 - (upper - lower)                               # 1 - P(N), estimated
+    if not np.any(failed):
+        # the levels were ended by unresolved rows alone (g NaN over the region that would
+        # fail, say): P = 0 with a NaN interval said "ok" for what may be up to the bound
+        levels.add(0.0, last_upper)
+        n = int(np.count_nonzero(unevaluable))
+        return flagged(STATUS_UNRESOLVED, (
+            f"no sample of the last level failed with a resolved g; its {n} unresolved ones "
+            f"(g NaN) ended the levels: P is only known to lie in [0, {upper:.3g}]"),
+            evaluations, unresolved, common, bound_lower=0.0, bound_upper=upper,
+            bounds_ci_lower=0.0, bounds_ci_upper=up_hi if chained else
+            clopper_pearson_interval(n, failed.size, confidence_level)[1], **levels.fields())
     p = lower / resolved
     interval = INTERVAL_LOGNORMAL
     ci = (lo_lo / resolved, lo_hi / resolved)
