@@ -220,8 +220,10 @@ def subset_simulation(limit_state, dimension, seed, *, samples_per_level=1000, p
     RareEventResult
         With ``thresholds``, ``level_probabilities``, ``level_coefficients_of_variation``,
         ``chain_correlation_factors`` and ``acceptance_rates``; the interval is the
-        lognormal one with the CV (approximate). Flagged (``status`` ``"no_failure"`` or
-        ``"plateau"``, probability NaN) when no level reaches the failure domain.
+        lognormal one with the CV (approximate), or Clopper-Pearson's when level 0 settles
+        it (plain Monte Carlo: an event that is not rare). Flagged (``status``
+        ``"no_failure"`` or ``"plateau"``, probability NaN) when no level reaches the failure
+        domain, ``"unresolved"`` (with the bounds) when unresolved rows alone end the levels.
     """
     d = check_dimension(dimension)
     n = check_count("samples_per_level", samples_per_level, 1)
