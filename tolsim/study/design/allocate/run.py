@@ -82,7 +82,13 @@ def check_allocation(config, settings: AllocationSettings) -> tuple:
     ValueError
         One line: no target, a target the config cannot report, a config with a
         ``[sweep]`` or without random sources, bounds beyond the static model's range,
-        too few samples to show the limit at the confidence.
+        too few samples (or verify_samples) to show a probability limit at the confidence.
+
+    Warns
+    -----
+    AllocationWarning
+        A fraction-of-balls target (a quantile, out of spec) with fewer assemblies than
+        always suffice: it may not be shown (the balls of an assembly share its errors).
     """
     target = settings.target
     if target is None:
