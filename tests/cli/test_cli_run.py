@@ -150,6 +150,9 @@ def test_another_studys_checkpoint_is_kept_unless_fresh(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1, err
         assert f"{partial} is the checkpoint of another study" in err and "--fresh" in err
+        # what differs, so the user can tell a typo from another study (session 25)
+        assert "its config differs at line" in err, err
+        assert "'samples = 1000' there, 'samples = 500' here" in err, err
         assert partial.read_bytes() == saved and not out.exists()
     assert main(["run", str(cfg), "-o", str(out), "--samples", "500", "--fresh", "--quiet"]) == 0
     assert out.exists() and not partial.exists()

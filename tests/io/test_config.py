@@ -308,3 +308,16 @@ def test_with_overrides_any_study_layout(layout):
 def test_with_overrides_default_config_round_trips():
     c = load_config().with_overrides(samples=3, seed=4)
     assert parse_config(c.text, "default.toml") == c
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: parse_config(None), "<string>: the config text must be a str (the TOML document), "
+                                 "not NoneType"),
+    (lambda: parse_config(b"[study]"), "not bytes"),
+    (lambda: load_config(5), "path = 5: a config file's path must be a str or os.PathLike"),
+])
+def test_config_readers_name_a_wrong_argument_type(call, message):
+    # API audit, session 24: AttributeError 'NoneType' has no 'splitlines', tomllib's TypeError
+    # for bytes, pathlib's for an int
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        call()

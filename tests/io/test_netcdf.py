@@ -206,3 +206,9 @@ def test_sensitivity_and_quality_stored_and_round_trip(tmp_path):
     assert back.attrs["sensitivity_samples"] == 128
     assert 0.0 <= float(back["velocity_deviation_out_of_spec_fraction"]) <= 1.0
     assert np.isfinite(float(back["velocity_deviation_cpk"]))
+
+
+def test_read_result_names_a_wrong_path_type():
+    # API audit, session 24: xarray's "invalid filename for netCDF4 backend: None"
+    with pytest.raises(ValueError, match="path = None: a result file's path must be a str"):
+        read_result(None)

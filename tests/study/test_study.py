@@ -1,5 +1,7 @@
 """The study pipeline: reproducibility, resuming, streamed statistics, an independent check."""
 
+import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -530,6 +532,36 @@ def test_resume_and_ignored_checkpoint_are_said(tmp_path):
         f"replacing {ckpt}: it is a checkpoint of another study")
 
 
+def test_a_refused_checkpoint_says_what_differs(tmp_path, monkeypatch):
+    # Session 24 left this: the fingerprint is a hash, so a refused checkpoint could not say
+    # which setting differs. The checkpoint now keeps its config text and tolsim version.
+    import tolsim.study.execution.runner as runner
+
+    c = make(samples=1000)
+    ckpt = tmp_path / "out.nc.partial"
+    with pytest.raises(StudyInterrupted):
+        run_study(c, chunk_blocks=1, checkpoint_path=str(ckpt), max_blocks=1)
+    assert runner.checkpoint_mismatch(ckpt, c) is None
+    line = c.text.splitlines().index("seed = 11") + 1
+    assert runner.checkpoint_mismatch(ckpt, make(samples=1000, seed=5)) == (
+        f"its config differs at line {line}: 'seed = 11' there, 'seed = 5' here")
+    shorter = replace(c, text=c.text[:c.text.index("[study]")])
+    assert runner.checkpoint_mismatch(ckpt, shorter).endswith(
+        "'[study]' there, the end here")
+    changed = replace(c, study=replace(c.study, time_steps=7))  # the text is not changed
+    assert runner.checkpoint_mismatch(ckpt, changed).startswith(
+        "its settings differ with the same config text")
+    monkeypatch.setattr(runner, "__version__", "0.0.1")
+    assert runner.checkpoint_mismatch(ckpt, c).startswith("it was written by tolsim ")
+    assert runner.checkpoint_mismatch(ckpt, c).endswith(", this is tolsim 0.0.1")
+    # a checkpoint of an earlier tolsim: the fingerprint alone
+    with np.load(ckpt) as data:
+        old = {k: data[k] for k in data.files if k not in ("config_text", "tolsim_version")}
+    np.savez(tmp_path / "old.npz", **old)
+    assert runner.checkpoint_mismatch(tmp_path / "old.npz", changed) == (
+        "its config, seed, samples or tolsim version differ")
+
+
 def test_unloaded_ball_is_counted_as_pushed_not_unresolved():
     # Issue 25: a ball without a loaded contact has no epsilon of its own (NaN, not valid) but
     # is pushed along: counted as unloaded, its train resolved; a ball with one loaded contact
@@ -618,3 +650,49 @@ def test_paired_forces_in_tension_go_to_the_solved_model():
     acc = Accumulator(4, (-0.01, 0.01), 10, 1.0, 10)
     acc.add(paired, np.full(64, np.inf), np.full(64, -1))
     assert (acc.n_static_fallback, acc.n_loss_of_contact, acc.n_unresolved) == (128, 0, 0)
+
+
+@pytest.mark.parametrize("arguments, message", [
+    ({"workers": 0}, "workers = 0 must be an integer >= 1"),
+    ({"workers": True}, "workers = True must be an integer >= 1"),
+    ({"workers": 1.0}, "workers = 1.0 must be an integer >= 1"),
+    ({"chunk_blocks": 0}, "chunk_blocks = 0 must be an integer >= 1"),
+    ({"chunk_blocks": 1.5}, "chunk_blocks = 1.5 must be an integer >= 1"),
+    ({"max_blocks": 0}, "max_blocks = 0 must be an integer >= 1"),
+    ({"max_blocks": -1}, "max_blocks = -1 must be an integer >= 1"),
+    ({"save_samples": -1}, "save_samples = -1 must be an integer >= 0"),
+    ({"target": 0.1}, "target = 0.1 must be a PrecisionTarget"),
+    ({"progress": 5}, "progress = 5 must be callable"),
+    ({"notify": "x"}, "notify = 'x' must be callable"),
+    ({"checkpoint_interval": -1.0}, "checkpoint_interval = -1.0 must be a number of seconds"),
+    ({"checkpoint_interval": "30"}, "checkpoint_interval = '30' must be a number of seconds"),
+    ({"checkpoint_path": "/no/such/folder/run.partial"}, "the folder /no/such/folder does not"),
+])
+def test_run_study_refuses_bad_arguments_before_any_work(arguments, message, monkeypatch):
+    # API audit, session 24: chunk_blocks=0 ran with the default, max_blocks=0 acted as 1,
+    # a float target or an int progress failed only after the first chunk, a checkpoint in a
+    # missing folder only at its first write (or never, in a short run)
+    import tolsim.study.execution.runner as runner
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the study started")
+
+    monkeypatch.setattr(runner, "spot_check_plan", no_work)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        run_study(make(samples=128), **arguments)
+
+
+def test_run_study_takes_numpy_integers():
+    # len(a) or an element of np.arange: a numpy integer is a whole number (bool is not)
+    a = run_study(make(samples=256), workers=np.int64(1), chunk_blocks=np.int32(1),
+                  save_samples=np.int64(2))
+    assert_identical(a, run_study(make(samples=256)))
+    assert make(samples=np.int64(256), seed=np.uint64(11)).study.samples == 256
+    with pytest.raises(ValueError, match="samples = True must be an integer >= 1"):
+        make(samples=True)
+
+
+@pytest.mark.parametrize("config", [None, str(CONFIGS / "default.toml")])
+def test_run_study_wants_a_config_object(config):
+    with pytest.raises(ValueError, match="must be a StudyConfig: read it with tolsim.load_con"):
+        run_study(config)

@@ -699,29 +699,26 @@ def run(args) -> int:
     from tolsim.io.netcdf import write_result  # noqa: PLC0415
     from tolsim.study.execution.runner import (  # noqa: PLC0415
         DamagedCheckpoint,
-        fingerprint,
+        checkpoint_mismatch,
         run_study,
     )
 
     if args.fresh and checkpoint.exists():
         checkpoint.unlink()
     if args.resume or checkpoint.exists():
-        import numpy as np  # noqa: PLC0415
-
         flag = "--resume: " if args.resume else ""
         try:
-            with np.load(checkpoint) as data:
-                matches = str(data["fingerprint"]) == fingerprint(config)
+            mismatch = checkpoint_mismatch(checkpoint, config)
         except FileNotFoundError:
             raise UsageError(f"--resume: no checkpoint {checkpoint}") from None
         except Exception as exc:  # noqa: BLE001 - zipfile, zlib, numpy and OS errors alike
             raise UsageError(f"{flag}checkpoint {checkpoint} cannot be read, it is damaged "
                              f"or truncated ({type(exc).__name__}); --fresh discards it"
                              ) from None
-        if not matches:  # another study's progress: never discarded unasked
-            raise UsageError(f"{flag}{checkpoint} is the checkpoint of another study (its "
-                             "config, seed, samples or tolsim version differ); --fresh "
-                             "discards its progress, or write this study to another -o")
+        if mismatch:  # another study's progress: never discarded unasked
+            raise UsageError(f"{flag}{checkpoint} is the checkpoint of another study "
+                             f"({mismatch}); --fresh discards its progress, or write this "
+                             "study to another -o")
 
     bar = tqdm.tqdm(total=config.study.samples, unit="asm", unit_scale=True, file=sys.stderr,
                     desc="tolsim run", disable=True if args.quiet else None, smoothing=0.1)

@@ -215,6 +215,8 @@ def read_result(path, *, verify=True) -> xr.Dataset:
         of the wrong type included); :class:`~tolsim.io.checksums.IntegrityError` (a
         ValueError) if a variable fails its checksum.
     """
+    if not isinstance(path, str | os.PathLike):
+        raise ValueError(f"path = {path!r}: a result file's path must be a str or os.PathLike")
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
             ds = ds.load()

@@ -4,6 +4,7 @@ Built by :func:`tolsim.io.config.load_config` from TOML (where the unit suffixes
 converted), or directly in Python. Nothing here knows about files or units.
 """
 
+import numbers
 import re
 from dataclasses import dataclass, field, replace
 
@@ -54,6 +55,22 @@ CREEP_MODELS = ("analytic", "full")
 PLAUSIBLE_NORMAL_RANGE = 8.0
 #: The largest seed: numpy's SeedSequence takes any, the result file stores it as uint64.
 MAX_SEED = 2**64 - 1
+
+
+def whole_number(name, value, minimum=0, maximum=None):
+    """``value`` as an int if it is a whole number in [minimum, maximum]; else a ValueError
+    naming ``name``.
+
+    Python and NumPy integers pass (``len(a)``, an element of ``np.arange``); a bool, a
+    float or a string does not, even when its value would (``True``, ``2.0``, ``"2"``).
+    """
+    limits = f"from {minimum} to {maximum}" if maximum is not None else f">= {minimum}"
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{name} = {value!r} must be an integer {limits}")
+    value = int(value)
+    if value < minimum or (maximum is not None and value > maximum):
+        raise ValueError(f"{name} = {value!r} must be an integer {limits}")
+    return value
 
 
 # --------------------------------------------------------------------------------------------
@@ -686,13 +703,9 @@ class StudyConfig:
         """
         changes = {}
         if samples is not None:
-            if not (isinstance(samples, int) and samples > 0):
-                raise ValueError(f"samples = {samples!r} must be a positive integer")
-            changes["samples"] = samples
+            changes["samples"] = whole_number("samples", samples, 1)
         if seed is not None:
-            if not (isinstance(seed, int) and 0 <= seed <= MAX_SEED):
-                raise ValueError(f"seed = {seed!r} must be an integer from 0 to {MAX_SEED}")
-            changes["seed"] = seed
+            changes["seed"] = whole_number("seed", seed, 0, MAX_SEED)
         text = self.text
         for key, value in changes.items():
             if text:

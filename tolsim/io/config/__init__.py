@@ -17,6 +17,7 @@ checked against its possible range (an error) and its usual one (a
 :mod:`~tolsim.io.config.plausibility`.
 """
 
+import os
 import re
 import tomllib
 from dataclasses import replace
@@ -73,6 +74,9 @@ def parse_config(text: str, path: str = "<string>", *, study: bool = True) -> St
     ConfigError
         One line: ``path:line: section.key problem``.
     """
+    if not isinstance(text, str):  # bytes included: tomllib reads text
+        raise ConfigError(f"{path}: the config text must be a str (the TOML document), not "
+                          f"{type(text).__name__}; tolsim.load_config reads a file")
     source = Source(text, path)
     try:
         data = tomllib.loads(text)
@@ -193,6 +197,9 @@ def load_config(path=None, *, study: bool = True) -> StudyConfig:
     """
     if path is None:
         return parse_config(default_config_text(), "default.toml", study=study)
+    if not isinstance(path, str | os.PathLike):
+        raise ConfigError(f"path = {path!r}: a config file's path must be a str or "
+                          "os.PathLike (None: the packaged default)")
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")

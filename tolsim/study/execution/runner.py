@@ -38,6 +38,7 @@ target applies to plain Monte Carlo only and is refused with another estimator.
 
 import hashlib
 import multiprocessing
+import numbers
 import os
 import threading
 import time
@@ -75,6 +76,7 @@ from tolsim.study.sampling import (
     near_limit_kept,
     spot_check_plan,
 )
+from tolsim.study.spec import StudyConfig, whole_number
 from tolsim.study.statistics.accumulator import Accumulator
 from tolsim.study.statistics.friction import accumulator_from_state, study_accumulator
 
@@ -236,6 +238,41 @@ def fingerprint(config) -> str:
     return h.hexdigest()
 
 
+def checkpoint_mismatch(path, config) -> str | None:
+    """None if ``path`` is a checkpoint of ``config``'s study, else what differs, as a
+    clause ("its config differs at line 3: ...").
+
+    A checkpoint keeps its study's config text and tolsim version beside the fingerprint
+    (checkpoints written before session 25 keep the fingerprint alone, and get the general
+    clause).
+
+    Raises
+    ------
+    OSError, ValueError and numpy's or zipfile's errors
+        If ``path`` cannot be read as a checkpoint.
+    """
+    with np.load(path, allow_pickle=False) as data:
+        if str(data["fingerprint"]) == fingerprint(config):
+            return None
+        if not {"config_text", "tolsim_version"} <= set(data.files):
+            return "its config, seed, samples or tolsim version differ"
+        text, version = str(data["config_text"]), str(data["tolsim_version"])
+    if version != __version__:
+        return f"it was written by tolsim {version}, this is tolsim {__version__}"
+    if text != config.text:
+        theirs, ours = text.splitlines(), config.text.splitlines()
+        line = next((i for i, (a, b) in enumerate(zip(theirs, ours, strict=False)) if a != b),
+                    min(len(theirs), len(ours)))
+
+        def shown(lines):
+            return repr(lines[line].strip()[:60]) if line < len(lines) else "the end"
+
+        return (f"its config differs at line {line + 1}: {shown(theirs)} there, "
+                f"{shown(ours)} here")
+    return ("its settings differ with the same config text (a config changed in Python, or "
+            "another spot-check scheme)")
+
+
 def default_chunk_blocks(config) -> int:
     """Blocks per chunk so that a chunk holds about :data:`CHUNK_BALLS` balls."""
     per_block = config.study.block_size * config.balls
@@ -337,8 +374,10 @@ class DamagedCheckpoint(ValueError):
     """A checkpoint file that cannot be read: truncated, damaged, or not a checkpoint."""
 
 
-def _save_checkpoint(path, fp, state: _Progress):
-    """Write ``state`` to ``path`` through a temporary file and a rename (atomic).
+def _save_checkpoint(path, fp, state: _Progress, config_text: str):
+    """Write ``state`` to ``path`` through a temporary file and a rename (atomic), with the
+    study's fingerprint and, to say what differs when it is refused, its config text and
+    tolsim version (:func:`checkpoint_mismatch`).
 
     Raises
     ------
@@ -358,6 +397,7 @@ def _save_checkpoint(path, fp, state: _Progress):
     try:
         with open(tmp, "wb") as fh:
             np.savez(fh, fingerprint=np.array(fp), next_block=np.int64(state.next_block),
+                     config_text=np.array(config_text), tolsim_version=np.array(__version__),
                      **arrays)
         os.replace(tmp, path)
     except BaseException as exc:
@@ -485,8 +525,29 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     UnanswerableStudy
         With ``require_answer``, if every train of the first block is unresolved.
     """
-    if not (isinstance(workers, int) and workers >= 1):
-        raise ValueError(f"workers = {workers!r} must be a positive integer")
+    if not isinstance(config, StudyConfig):
+        raise ValueError(f"config = {config!r:.60} must be a StudyConfig: read it with "
+                         "tolsim.load_config(path) or tolsim.parse_config(text)")
+    workers = whole_number("workers", workers, 1)
+    save_samples = whole_number("save_samples", save_samples, 0)
+    if chunk_blocks is not None:
+        chunk_blocks = whole_number("chunk_blocks", chunk_blocks, 1)
+    if max_blocks is not None:
+        max_blocks = whole_number("max_blocks", max_blocks, 1)
+    if target is not None and not isinstance(target, PrecisionTarget):
+        raise ValueError(f"target = {target!r} must be a PrecisionTarget (or None)")
+    for name, value in (("progress", progress), ("notify", notify)):
+        if value is not None and not callable(value):
+            raise ValueError(f"{name} = {value!r} must be callable (or None)")
+    if isinstance(checkpoint_interval, bool) or not isinstance(
+            checkpoint_interval, numbers.Real) or not checkpoint_interval >= 0:
+        raise ValueError(f"checkpoint_interval = {checkpoint_interval!r} must be a number of "
+                         "seconds >= 0")
+    if checkpoint_path is not None:
+        folder = os.path.dirname(os.path.abspath(os.fspath(checkpoint_path)))
+        if not os.path.isdir(folder):
+            raise ValueError(f"checkpoint_path = {os.fspath(checkpoint_path)!r}: the folder "
+                             f"{folder} does not exist")
     if config.sweep is not None:
         raise ValueError(f"{config.path} has a [sweep] of {config.sweep.size} points: run them "
                          "with tolsim.io.sweep.run_sweep (tolsim run does), or one of "
@@ -494,8 +555,6 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     if scheduler is not None and workers != 1:
         raise ValueError(f"workers = {workers} and a scheduler: the scheduler's workers do the "
                          "work (local:N starts N of them); leave workers at 1")
-    if not (isinstance(save_samples, int) and save_samples >= 0):
-        raise ValueError(f"save_samples = {save_samples!r} must be a non-negative integer")
     if config.study.estimator != "monte_carlo":  # before any work
         check_supported(config)
         if target is not None:
@@ -505,11 +564,8 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     retain_freed_memory()
     st = config.study
     total_blocks = n_blocks(st.samples, st.block_size)
-    chunk_blocks = chunk_blocks or default_chunk_blocks(config)
-    if not chunk_blocks >= 1:
-        raise ValueError(f"chunk_blocks = {chunk_blocks!r} must be >= 1")
-    if not checkpoint_interval >= 0:
-        raise ValueError(f"checkpoint_interval = {checkpoint_interval!r} must be >= 0")
+    if chunk_blocks is None:
+        chunk_blocks = default_chunk_blocks(config)
     spot_indices = spot_check_plan(config)
     fp = fingerprint(config)
     # The committed state: replaced as a whole, never changed (module docstring).
@@ -518,8 +574,8 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         loaded = _load_checkpoint(checkpoint_path, fp)
         if loaded is None:
             _say(notify, f"replacing {checkpoint_path}: it is a checkpoint of another study "
-                         "(config, seed, samples or tolsim version differ); starting afresh "
-                         "(--resume refuses to)")
+                         f"({checkpoint_mismatch(checkpoint_path, config)}); starting afresh "
+                         "(tolsim run refuses to)")
         elif loaded.next_block:
             committed = loaded
             done = int(committed.statistics.n_assemblies)
@@ -583,7 +639,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
             now = time.perf_counter()
             if checkpoint_path is not None and committed.next_block < total_blocks and (
                     stop or now - last_save >= checkpoint_interval):
-                _save_checkpoint(checkpoint_path, fp, committed)
+                _save_checkpoint(checkpoint_path, fp, committed, config.text)
                 last_save = now
             if stop and committed.next_block < total_blocks:
                 raise StudyInterrupted(
@@ -592,7 +648,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     except KeyboardInterrupt:
         # Ctrl-C: keep what is merged; only a committed state, never one half-merged
         if checkpoint_path is not None and committed.next_block > resumed:
-            _save_checkpoint(checkpoint_path, fp, committed)
+            _save_checkpoint(checkpoint_path, fp, committed, config.text)
         raise
     finally:
         if watch is not None:
