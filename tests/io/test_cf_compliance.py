@@ -9,7 +9,7 @@ be cell bounds": no ``bounds`` attribute on purpose, see tolsim.io.schema.apply_
 The negative controls show that the check can fail.
 """
 
-from dataclasses import replace
+import re
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +19,7 @@ import xarray as xr
 pytest.importorskip("compliance_checker", reason="compliance-checker is not installed")
 from cf_checker import check, load_checkers, report  # noqa: E402
 
-from tolsim.io.config import load_config  # noqa: E402
+from tolsim.io.config import parse_config, with_study_settings  # noqa: E402
 from tolsim.io.netcdf import result_to_dataset, write_result  # noqa: E402
 from tolsim.study.execution.runner import run_study  # noqa: E402
 
@@ -45,16 +45,19 @@ def checkers():
     load_checkers()
 
 
-def small(path):
-    config = replace(load_config(path), sweep=None)  # a sweep's base study (its file: below)
+def small(path, **settings):
+    # a sweep's base study (its file: below): the text without its [sweep], the last table
+    config = parse_config(re.split(r"^\[sweep\]", path.read_text(), flags=re.M)[0], str(path))
     st = config.study
-    study = replace(st, samples=SAMPLES[st.propagation],
-                    spot_checks=min(st.spot_checks, SPOT_CHECKS),
-                    sensitivity_samples=SENSITIVITY_SAMPLES if path.name == EMPTY_FACTORS
-                    else min(st.sensitivity_samples, SENSITIVITY_SAMPLES),
-                    samples_per_level=SAMPLES_PER_LEVEL, p0=0.1,
-                    importance_samples=IMPORTANCE_SAMPLES)
-    return replace(config, study=study)
+    estimator = settings.get("estimator", st.estimator)
+    if estimator != "monte_carlo":
+        settings.update(samples_per_level=SAMPLES_PER_LEVEL, p0=0.1)
+    if estimator in ("importance", "rare"):
+        settings.update(importance_samples=IMPORTANCE_SAMPLES)
+    return with_study_settings(
+        config, samples=SAMPLES[st.propagation], spot_checks=min(st.spot_checks, SPOT_CHECKS),
+        sensitivity_samples=SENSITIVITY_SAMPLES if path.name == EMPTY_FACTORS
+        else min(st.sensitivity_samples, SENSITIVITY_SAMPLES), **settings)
 
 
 def test_configs_are_covered_with_sensitivity():
@@ -128,8 +131,7 @@ def test_result_file_with_saved_samples_passes_cf_checker(tmp_path, capsys):
 def test_rare_estimator_file_passes_cf_checker(tmp_path, capsys):
     # issue 23: estimator = "rare": each event's status (a CF flag variable), diagnostics and
     # both estimators' numbers, with the design point along ``factor``
-    config = small(ROOT / "configs" / "rare_contact.toml")
-    config = replace(config, study=replace(config.study, estimator="rare"))
+    config = small(ROOT / "configs" / "rare_contact.toml", estimator="rare")
     out = tmp_path / "rare.nc"
     ds = write_result(run_study(config), out, history="test")
     assert {"contact_probability_status", "contact_probability_subset",

@@ -2,15 +2,25 @@
 
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 from scipy import stats
 
-from tolsim.io.config import ConfigError, default_config_text, load_config, parse_config
+from tolsim.io.config import (
+    ConfigError,
+    default_config_text,
+    load_config,
+    parse_config,
+    text_mismatch,
+    with_study_settings,
+)
 from tolsim.physics.geometry import Bearing
 from tolsim.study.spec import MAX_SEED, Distribution
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 MINIMAL = """\
 [bearing]
@@ -321,3 +331,50 @@ def test_config_readers_name_a_wrong_argument_type(call, message):
     # for bytes, pathlib's for an int
     with pytest.raises(ConfigError, match=re.escape(message)):
         call()
+
+
+def test_study_settings_are_changed_in_the_text_and_checked():
+    # Session 24 left this: a config changed with dataclasses.replace is neither checked nor
+    # recorded. with_study_settings edits [study] in the text and reads it again.
+    config = load_config()
+    changed = with_study_settings(config, spot_checks=0, propagation="along_track",
+                                  time_steps=12, velocity_deviation_limit=0.002)
+    assert (changed.study.spot_checks, changed.study.propagation, changed.study.time_steps,
+            changed.study.velocity_deviation_limit) == (0, "along_track", 12, 0.002)
+    assert text_mismatch(changed) is None and changed.text != config.text
+    # every other line stays; None removes a key (time_steps: back to the automatic step)
+    back = with_study_settings(changed, time_steps=None)
+    assert back.study.time_steps is None
+    assert not [line for line in back.text.splitlines() if line.startswith("time_steps")]
+    assert {line.split("#")[0].strip() for line in set(back.text.splitlines())
+            - set(config.text.splitlines())} == {  # values changed, comments kept
+        "spot_checks = 0", 'propagation = "along_track"',
+        "velocity_deviation_limit_percent = 0.2"}
+    # values are checked as in a file, naming the key
+    with pytest.raises(ConfigError, match=r"study.spot_checks = -1 must be >= 0"):
+        with_study_settings(config, spot_checks=-1)
+    with pytest.raises(ConfigError, match=r"study.nonsense is not a known key"):
+        with_study_settings(config, nonsense=3)
+    with pytest.raises(ConfigError, match="samples_per_level has no effect with estimator"):
+        with_study_settings(config, samples_per_level=100)
+    with pytest.raises(ConfigError, match="a point of a sweep"):
+        with_study_settings(load_config(CONFIGS / "sweep_preload.toml").sweep.points[0],
+                            samples=5)
+
+
+def test_text_mismatch_names_the_setting_the_text_does_not_say():
+    from dataclasses import replace
+
+    config = load_config(CONFIGS / "carriage_preload.toml")
+    assert text_mismatch(config) is None
+    assert text_mismatch(config.with_overrides(samples=77, seed=3)) is None
+    sweep = load_config(CONFIGS / "sweep_preload.toml")
+    assert text_mismatch(sweep) is None
+    assert {text_mismatch(p) for p in sweep.sweep.points} == {None}
+    assert text_mismatch(replace(config, study=replace(config.study, time_steps=7))) == (
+        "config.study.time_steps = 7, but its text gives None")
+    bearing = replace(config.bearing, friction_coefficient=0.2)
+    assert text_mismatch(replace(config, bearing=bearing)) == (
+        "config.bearing.friction_coefficient = 0.2, but its text gives 0.1")
+    assert text_mismatch(replace(config, text="[study\n")).startswith(
+        "its text is not a valid config")

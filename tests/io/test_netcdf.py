@@ -212,3 +212,21 @@ def test_read_result_names_a_wrong_path_type():
     # API audit, session 24: xarray's "invalid filename for netCDF4 backend: None"
     with pytest.raises(ValueError, match="path = None: a result file's path must be a str"):
         read_result(None)
+
+
+def test_a_config_its_text_does_not_say_is_not_written(tmp_path):
+    # The file embeds the config text alone: a config changed with dataclasses.replace would
+    # be recorded as the study it was read from (session 24's API audit). It is refused, and
+    # nothing is written.
+    from dataclasses import replace
+
+    config = parse_config(CONFIG, "small.toml")
+    result = run_study(config)
+    changed = replace(result, config=replace(config, study=replace(config.study, seed=99)))
+    out = tmp_path / "r.nc"
+    with pytest.raises(ValueError, match=r"the study's config.study.seed = 99, but its text "
+                                         r"gives \d+: the file would not say what ran"):
+        write_result(changed, out, history="test")
+    assert not out.exists() and not list(tmp_path.iterdir())
+    write_result(result, out, history="test")  # the config as read
+    assert out.exists()

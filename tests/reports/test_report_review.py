@@ -8,13 +8,12 @@ import itertools
 import re
 import shutil
 import subprocess
-from dataclasses import replace
 
 import numpy as np
 import pytest
 import xarray as xr
 
-from tolsim.io.config import load_config
+from tolsim.io.config import load_config, with_study_settings
 from tolsim.io.netcdf import write_result
 from tolsim.physics.velocity.analytic import VALIDITY_ERROR_BUDGET
 from tolsim.reports import assumptions as A
@@ -30,8 +29,8 @@ from tolsim.study.statistics import quality
 def default_result(tmp_path_factory):
     """The packaged default study, small: 400 assemblies, 8 spot checks, no Sobol'."""
     config = load_config()
-    config = replace(config, study=replace(config.study, samples=400, spot_checks=8,
-                                           sensitivity_samples=0))
+    config = with_study_settings(config, samples=400, spot_checks=8,
+                                 sensitivity_samples=0)
     path = tmp_path_factory.mktemp("default") / "default.nc"
     write_result(run_study(config), path, history="test")
     with xr.open_dataset(path) as ds:
@@ -231,7 +230,7 @@ def test_verdict_takes_every_limit_from_the_config(tmp_path):
         "contact_probability_limit_percent = 90\nout_of_spec_limit_percent = 5\n"
         "cpk_minimum = 3")
     config = parse_config(text).with_overrides(samples=400)
-    config = replace(config, study=replace(config.study, spot_checks=0, sensitivity_samples=0))
+    config = with_study_settings(config, spot_checks=0, sensitivity_samples=0)
     assert config.study.out_of_spec_limit == 0.05 and config.study.cpk_minimum == 3.0
     path = tmp_path / "limits.nc"
     write_result(run_study(config), path, history="test")

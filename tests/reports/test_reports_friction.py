@@ -12,7 +12,6 @@ file's numbers, not numbers of its own.
 
 import os
 import re
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,7 +19,7 @@ import xarray as xr
 from scipy.stats import binomtest
 from test_reports import check_figure
 
-from tolsim.io.config import load_config, parse_config
+from tolsim.io.config import load_config, parse_config, with_study_settings
 from tolsim.io.netcdf import write_result
 from tolsim.io.schema.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
 from tolsim.reports import assumptions as A
@@ -38,7 +37,7 @@ def friction_result(tmp_path_factory):
     """The friction study, small: 600 assemblies, Sobol' indices at n = 64."""
     config = load_config(os.path.join(CONFIGS, "friction_yaw.toml")).with_overrides(
         samples=600)
-    config = replace(config, study=replace(config.study, sensitivity_samples=64))
+    config = with_study_settings(config, sensitivity_samples=64)
     path = tmp_path_factory.mktemp("friction") / "friction.nc"
     write_result(run_study(config), path, history="test")
     with xr.open_dataset(path) as ds:
@@ -340,7 +339,7 @@ def test_carriage_with_friction_counts_the_worst_track(tmp_path):
     text = load_config(os.path.join(CONFIGS, "carriage_preload.toml")).text
     config = parse_config(text + "\n[contact]\nfriction_increase_limit_N = 0.1\n",
                           "carriage_contact.toml").with_overrides(samples=60)
-    config = replace(config, study=replace(config.study, sensitivity_samples=0))
+    config = with_study_settings(config, sensitivity_samples=0)
     path = tmp_path / "carriage_contact.nc"
     write_result(run_study(config), path, history="test")
     out = study_report.make_report(path, tmp_path / "rep", sensitivity=False, pdf=False)

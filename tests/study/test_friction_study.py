@@ -20,7 +20,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy.stats import binomtest
 
 from tolsim.cli import main
-from tolsim.io.config import load_config, parse_config
+from tolsim.io.config import load_config, parse_config, with_study_settings
 from tolsim.io.netcdf import read_result, result_to_dataset, write_result
 from tolsim.io.schema.friction import FRICTION_COORDINATES, FRICTION_VARIABLES
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, paired_forces
@@ -425,8 +425,8 @@ def test_statistics_merge_and_state_round_trip(rng):
 # --------------------------------------------------------------------------------------------
 def friction_yaw(samples=600, block=64, sensitivity=0):
     c = load_config(CONFIGS / "friction_yaw.toml")
-    c = replace(c, study=replace(c.study, block_size=block, spot_checks=0,
-                                 sensitivity_samples=sensitivity))
+    c = with_study_settings(c, block_size=block, spot_checks=0,
+                            sensitivity_samples=sensitivity)
     return c.with_overrides(samples=samples)
 
 
@@ -660,7 +660,7 @@ def test_carriage_reports_the_worst_track():
     c = load_config(CONFIGS / "carriage_preload.toml")
     text = c.text + "\n[contact]\n"
     c = parse_config(text, "carriage_contact.toml").with_overrides(samples=24)
-    c = replace(c, study=replace(c.study, block_size=24, propagation="constant"))
+    c = with_study_settings(c, block_size=24, propagation="constant")
     block = sample_block(c, 0)
     state = fx._evaluate_assemblies(c, block)
     out = fr.evaluate_friction(c, block.initial_gap, state)
@@ -757,7 +757,7 @@ def test_contact_settings_validate():
         with pytest.raises(ValueError, match=field):
             ContactSettings(**{field: value})
     c = two_balls()
-    c = replace(c, study=replace(c.study, propagation="along_track"))
+    c = with_study_settings(c, propagation="along_track")
     assert isinstance(fs.study_accumulator(c), fs.FrictionAccumulator)
 
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tolsim.io.config import ConfigError, parse_config
+from tolsim.io.config import ConfigError, parse_config, with_study_settings
 from tolsim.io.netcdf import read_result, result_to_dataset, write_result
 from tolsim.io.schema.rare_events import STATUS_FLAGS, status_flag
 from tolsim.study.analyses import limit_state
@@ -53,9 +53,10 @@ def with_estimator(lines):
 def rare_config(estimator="rare", **settings):
     """rare_contact.toml with the estimator given and small settings."""
     config = parse_config(with_estimator(f'estimator = "{estimator}"'), str(RARE))
-    settings = {"samples": 1000, "samples_per_level": 500, "importance_samples": 1000,
-                "sampling": "random", **settings}
-    return dataclasses.replace(config, study=dataclasses.replace(config.study, **settings))
+    settings = {"samples": 1000, "samples_per_level": 500, "sampling": "random", **settings}
+    if estimator in ("importance", "rare"):  # the reader refuses it for subset
+        settings.setdefault("importance_samples", 1000)
+    return with_study_settings(config, **settings)
 
 
 def times_100(*args, **kwargs):
@@ -153,7 +154,7 @@ def test_the_file_carries_status_diagnostics_and_both_numbers(rare, tmp_path):
 
 def test_a_subset_file_carries_its_diagnostics(tmp_path):
     # a single estimator: its own diagnostics only
-    result = run_study(rare_config("subset", importance_samples=2000))
+    result = run_study(rare_config("subset"))
     ds = result_to_dataset(result, history="t")
     r = result.rare_events["contact"].result
     assert int(ds.contact_probability_ancestors) == r.ancestors > 0
@@ -211,9 +212,8 @@ def test_rare_settings_in_the_config():
 def test_rare_falls_back_to_subset_where_importance_is_not_attempted():
     text = (ROOT / "configs" / "friction_yaw.toml").read_text()
     config = parse_config(text, "friction_yaw.toml")
-    config = dataclasses.replace(config, study=dataclasses.replace(
-        config.study, samples=64, estimator="rare", samples_per_level=100,
-        importance_samples=200, sampling="random"))
+    config = with_study_settings(config, samples=64, estimator="rare", samples_per_level=100,
+                                 importance_samples=200, sampling="random")
     estimate = limit_state.estimate_event(config, "friction_exceedance")
     assert estimate.result.estimator == "subset"
     # no design point: two subset simulation runs check each other (issue 23)

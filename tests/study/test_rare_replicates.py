@@ -18,7 +18,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 from scipy.special import ndtr
 
-from tolsim.io.config import load_config
+from tolsim.io.config import load_config, with_study_settings
 from tolsim.io.netcdf import read_result, write_result
 from tolsim.study.analyses import limit_state
 from tolsim.study.analyses.rare_events import (
@@ -160,9 +160,8 @@ def test_an_estimator_without_a_number_is_named_so_in_the_message():
 def test_along_track_subset_is_checked_by_replicates(tmp_path):
     # whatif_along_track: the smallest gap over the time steps is not smooth, no FORM
     config = load_config(ROOT / "configs" / "whatif_along_track.toml")
-    st = dataclasses.replace(config.study, samples=64, sampling="random", estimator="subset",
-                             samples_per_level=200)
-    config = dataclasses.replace(config, study=st)
+    config = with_study_settings(config, samples=64, sampling="random", estimator="subset",
+                                 samples_per_level=200)
     result = run_study(config)
     estimate = result.rare_events["contact"]
     assert estimate.mode_check == limit_state.MODE_CHECK_REPLICATES

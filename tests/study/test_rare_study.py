@@ -17,7 +17,6 @@ Where the numbers come from:
   that their 95 % intervals agree (overlap pairwise).
 """
 
-import dataclasses
 import re
 from pathlib import Path
 
@@ -25,7 +24,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from tolsim.io.config import ConfigError, load_config, parse_config
+from tolsim.io.config import ConfigError, load_config, parse_config, with_study_settings
 from tolsim.io.netcdf import read_result, result_to_dataset, write_result
 from tolsim.io.schema import rare_events
 from tolsim.study.analyses import limit_state
@@ -70,7 +69,7 @@ def study(name, *, text_change=None, **settings):
     else:
         config = parse_config(text_change(path.read_text()), name)
     settings.setdefault("sampling", "random")
-    return dataclasses.replace(config, study=dataclasses.replace(config.study, **settings))
+    return with_study_settings(config, **settings)
 
 
 def normals_of_block(config, index):
@@ -206,8 +205,7 @@ def test_limit_state_sign_is_the_plain_indicator(case):
     if "velocity_deviation_exceedance" in g:
         # the plain run counts the same event on the same assemblies (its fallback when the
         # estimator does not reach it): its k and u are the limit state's
-        statistics = run_study(dataclasses.replace(config, study=dataclasses.replace(
-            config.study, sensitivity_samples=0))).statistics
+        statistics = run_study(with_study_settings(config, sensitivity_samples=0)).statistics
         exceed = g["velocity_deviation_exceedance"]
         assert (statistics.n_exceedance, statistics.n_exceedance_unresolved) == (
             np.count_nonzero(exceed <= 0), np.count_nonzero(np.isnan(exceed)))
@@ -244,8 +242,7 @@ def test_limit_state_rows_are_independent(event):
 def rare_results():
     base = load_config(RARE)
     subset = run_study(base)
-    importance = run_study(dataclasses.replace(base, study=dataclasses.replace(
-        base.study, estimator="importance")))
+    importance = run_study(with_study_settings(base, estimator="importance"))
     return subset, importance
 
 

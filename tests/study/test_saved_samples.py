@@ -1,6 +1,5 @@
 """Per-assembly export, ``tolsim run --save-samples N`` (issue 17)."""
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +7,7 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from tolsim.cli import main
-from tolsim.io.config import load_config, parse_config
+from tolsim.io.config import load_config, parse_config, with_study_settings
 from tolsim.io.netcdf import read_result, write_result
 from tolsim.physics.velocity.models import BALL_THREE_POINT, BALL_TWO_POINT
 from tolsim.study.execution.runner import StudyInterrupted, run_study
@@ -24,8 +23,8 @@ SAMPLES, SAVED = 3000, 1500
 
 def small_default(samples=SAMPLES):
     config = load_config()
-    return replace(config, study=replace(config.study, samples=samples, spot_checks=0,
-                                         sensitivity_samples=0))
+    return with_study_settings(config, samples=samples, spot_checks=0,
+                               sensitivity_samples=0)
 
 
 @pytest.fixture(scope="module")
@@ -141,8 +140,8 @@ def test_result_file_round_trip(config, saved, tmp_path):
 def test_along_track_run_saves_samples():
     # along-track propagation: the state at the start of the stroke, the contact over it
     config = load_config(ROOT / "configs" / "whatif_along_track.toml")
-    config = replace(config, study=replace(config.study, samples=6, spot_checks=0,
-                                           sensitivity_samples=0))
+    config = with_study_settings(config, samples=6, spot_checks=0,
+                                 sensitivity_samples=0)
     result = run_study(config, save_samples=4)
     rows = result.samples
     assert_array_equal(rows["sample_index"], np.arange(4))
@@ -162,8 +161,8 @@ def test_saved_samples_record_each_balls_regime(oversize_um, regimes):
     text = (ROOT / "configs" / "carriage_preload.toml").read_text().replace(
         "preload_oversize_um = 2.0", f"preload_oversize_um = {oversize_um}")
     config = parse_config(text, "carriage_preload.toml")
-    config = replace(config, study=replace(config.study, samples=6, block_size=6,
-                                           spot_checks=0, sensitivity_samples=0))
+    config = with_study_settings(config, samples=6, block_size=6,
+                                 spot_checks=0, sensitivity_samples=0)
     rows = run_study(config, save_samples=5).samples
     state = evaluate_block(config, sample_block(config, 0), propagate=False).state
     assert rows["sample_regime"].shape == (5, config.balls)

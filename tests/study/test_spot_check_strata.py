@@ -2,13 +2,12 @@
 half among the balls of the fast model with |epsilon| in a band around the limit, chosen by
 seeded priorities so that the choice does not depend on the chunking or on resuming."""
 
-from dataclasses import replace
 
 import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from tolsim.io.config import parse_config
+from tolsim.io.config import parse_config, with_study_settings
 from tolsim.physics.velocity.models import MODEL_FAST
 from tolsim.study import sampling
 from tolsim.study.execution.runner import StudyInterrupted, run_study
@@ -47,8 +46,8 @@ LIMIT = 0.002
 
 def make(limit=LIMIT, **study):
     config = parse_config(STUDY)
-    return replace(config, study=replace(config.study, velocity_deviation_limit=limit,
-                                         **study))
+    return with_study_settings(config, velocity_deviation_limit=limit,
+                               **study)
 
 
 def test_priority_is_splitmix64():

@@ -1,6 +1,5 @@
 """Worst case and RSS beside the Monte Carlo (issue 17): tolsim.study.analyses.worst_case."""
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +7,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import stats
 
-from tolsim.io.config import load_config, parse_config
+from tolsim.io.config import load_config, parse_config, with_study_settings
 from tolsim.study.analyses.worst_case import (
     NORMAL_BAND_STDS,
     linear_stackup,
@@ -29,8 +28,8 @@ MC_SAMPLES = 16_384
 @pytest.fixture(scope="module")
 def default_study():
     config = load_config()
-    study = replace(config.study, samples=MC_SAMPLES, sensitivity_samples=0, spot_checks=0)
-    return run_study(replace(config, study=study))
+    return run_study(with_study_settings(config, samples=MC_SAMPLES, sensitivity_samples=0,
+                                         spot_checks=0))
 
 
 def test_default_study_worst_case_and_rss_against_monte_carlo(default_study):
@@ -62,8 +61,8 @@ def test_default_study_gap_closure_rss_against_monte_carlo():
     # neighbours) and per-ball sources: its RSS must match the Monte Carlo spread of the
     # same study's assemblies (measured when written: within 0.8 %).
     config = load_config()
-    config = replace(config, study=replace(config.study, samples=MC_SAMPLES,
-                                           block_size=MC_SAMPLES))
+    config = with_study_settings(config, samples=MC_SAMPLES,
+                                 block_size=MC_SAMPLES)
     stack = linear_stackup(config)
     block = sample_block(config, 0)
     nx, ny = loads_per_ball(config, (block.size, config.train.balls))
@@ -240,8 +239,8 @@ def test_correlated_sources_add_their_covariance():
     var = ((g[t] * s[t]) ** 2 + (g[b] * s[b]) ** 2 + (g[k[0]] * s[k[0]]) ** 2
            + (g[k[1]] * s[k[1]]) ** 2 + 2 * 0.8 * g[k[0]] * s[k[0]] * g[k[1]] * s[k[1]])
     assert_allclose(stack.velocity_deviation_rss, np.sqrt(var), rtol=1e-12)
-    big = replace(config, study=replace(config.study, samples=MC_SAMPLES,
-                                        block_size=MC_SAMPLES))
+    big = with_study_settings(config, samples=MC_SAMPLES,
+                              block_size=MC_SAMPLES)
     block = sample_block(big, 0)
     nx, ny = loads_per_ball(big, (block.size, big.train.balls))
     eps = evaluate_balls(big, error_values(big, block), nx, ny).velocity_deviation

@@ -24,6 +24,7 @@ from tolsim.io.checksums import (
     sign_file,
     verify_file,
 )
+from tolsim.io.config import text_mismatch
 from tolsim.io.schema import SWEEP_COORDINATES, SWEEP_DIMENSIONS
 from tolsim.io.schema.core import (
     PLAIN_PROBABILITY_VARIABLES,
@@ -71,7 +72,19 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
     the Dataset is made of (``collect``), what is added to it (``assign``) and, once every
     declared variable has its ``units`` and ``long_name``, the other variable attributes
     (``finish``, in reverse order).
+
+    Raises
+    ------
+    ValueError
+        If the result's config is not what its text reads as (changed with
+        ``dataclasses.replace``, :func:`tolsim.io.config.text_mismatch`): the file embeds the
+        text alone, and would not say what ran.
     """
+    mismatch = text_mismatch(result.config)
+    if mismatch:
+        raise ValueError(f"the study's {mismatch}: the file would not say what ran; change a "
+                         "study through its text or StudyConfig.with_overrides, which keep "
+                         "the text right")
     coords, data, attrs = {}, {}, {}
     for section in schema.SECTIONS:  # what the Dataset is made of
         if section.collect is not None:

@@ -17,12 +17,16 @@ checked against its possible range (an error) and its usual one (a
 :mod:`~tolsim.io.config.plausibility`.
 """
 
+import numbers
 import os
 import re
 import tomllib
-from dataclasses import replace
+import warnings
+from dataclasses import fields, is_dataclass, replace
 from importlib import resources
 from pathlib import Path
+
+import numpy as np
 
 from tolsim.io.config.allocation import parse_allocation
 from tolsim.io.config.reader import UNITS, ConfigError, ConfigWarning, Source, Table
@@ -44,11 +48,11 @@ from tolsim.io.config.sections import (
 )
 from tolsim.io.config.sweep import parse_sweep
 from tolsim.study.analyses.limit_state import check_supported
-from tolsim.study.spec import Distribution, StudyConfig, Train
+from tolsim.study.spec import Distribution, StudyConfig, Train, set_study_value, toml_lines
 
 __all__ = ["ESTIMATOR_KEYS", "FRACTION_KEYS", "MIN_EMPIRICAL_VALUES", "NO_STUDY", "UNITS",
            "ConfigError", "ConfigWarning", "StudyConfig", "default_config_text", "load_config",
-           "parse_config"]
+           "parse_config", "text_mismatch", "with_study_settings"]
 
 
 def parse_config(text: str, path: str = "<string>", *, study: bool = True) -> StudyConfig:
@@ -95,6 +99,153 @@ def parse_config(text: str, path: str = "<string>", *, study: bool = True) -> St
     sweep = parse_sweep(Table(data["sweep"], "sweep", source), base,
                         lambda point: _build(point, source, text, path, study))
     return replace(config, sweep=sweep)
+
+
+def with_study_settings(config: StudyConfig, **settings) -> StudyConfig:
+    """``config`` with ``[study]`` settings changed in its text, which is then read again:
+    every value is checked as in a file, and the result file records the change.
+
+    ``with_study_settings(config, spot_checks=0, propagation="along_track")``. The keys are
+    those of ``[study]``; a fraction (:data:`FRACTION_KEYS`) is given by its name without unit,
+    as a fraction [-] (``velocity_deviation_limit=0.002``). ``None`` removes a key (its
+    default then applies: ``time_steps=None`` is the automatic step). A key the text lacks
+    is added under ``[study]``; the other lines, comments included, stay.
+    Unlike ``dataclasses.replace``, the change is in the text the result file embeds
+    (:func:`text_mismatch`).
+
+    Raises
+    ------
+    ConfigError
+        For a value the config reader refuses (naming the key), or a point of a sweep (change
+        the sweep's text instead).
+    """
+    if config.sweep is None and _has_sweep(config.text):
+        raise ConfigError(f"{config.path}: a point of a sweep: change the sweep's config, "
+                          "then take its point")
+    text = config.text
+    for key, value in settings.items():
+        if key in FRACTION_KEYS:  # a fraction [-], written with the unit the text uses
+            text = _set_fraction(text, key, value)
+        else:
+            text = _set_study_text(text, key, value)
+    return parse_config(text, config.path, study=False)
+
+
+def _set_fraction(text, key, value):
+    """``text`` with fraction key ``key`` (its SI name) set to ``value`` [-]: as
+    ``key_percent`` unless the text writes it in ppm, with the decimal that reads back as
+    ``value`` exactly where there is one."""
+    units = UNITS["fraction"]
+    given = [unit for unit in units if _has_study_key(text, f"{key}_{unit}")]
+    unit = given[0] if given else "percent"
+    if value is None:
+        return _set_study_text(text, f"{key}_{unit}", None)
+    x, factor = float(value), units[unit]
+    near = (x / factor, np.nextafter(x / factor, np.inf), np.nextafter(x / factor, -np.inf))
+    # the value that reads back as x, where one does (else x / factor: the config then holds
+    # the value a file with this text gives, 0.35 % for 0.0035, say)
+    written = next((float(w) for w in near if float(w) * factor == x), x / factor)
+    return _set_study_text(text, f"{key}_{unit}", written)
+
+
+def _has_study_key(text, key):
+    try:
+        set_study_value(text, key, 0)
+    except ValueError:
+        return False
+    return True
+
+
+def _has_sweep(text):
+    return any(name == "sweep" for _, _, name, _, _ in toml_lines(text.splitlines()))
+
+
+#: Stands for a value to remove, in :func:`_set_study_text`.
+_REMOVED = "tolsim-removed-value"
+
+
+def _set_study_text(text, key, value):
+    """``text`` with ``[study]`` key ``key`` set to ``value`` (a TOML scalar; None removes
+    the key)."""
+    if not re.fullmatch(r"[A-Za-z0-9_]+", key):
+        raise ConfigError(f"study.{key}: not a key of [study]")
+    if value is None:
+        literal = _REMOVED
+    elif isinstance(value, bool | np.bool_):
+        literal = "true" if value else "false"
+    elif isinstance(value, numbers.Integral):
+        literal = str(int(value))
+    elif isinstance(value, numbers.Real):
+        literal = repr(float(value))
+    elif isinstance(value, str) and re.fullmatch(r"[^\s\"\\#,}]*", value):
+        literal = f'"{value}"'
+    else:
+        raise ConfigError(f"study.{key} = {value!r}: give a number, a bool, a plain string or "
+                          "None")
+    try:
+        text = set_study_value(text, key, literal)
+    except ValueError as exc:
+        if "is found 0 times" not in str(exc):
+            raise ConfigError(str(exc)) from None
+        if value is None:
+            return text
+        lines = text.splitlines(keepends=True)
+        header = next((n for n, _, name, array, is_header in toml_lines(lines)
+                       if is_header and name == "study" and not array), None)
+        if header is None:  # a config without [study]: add it at the end
+            return f"{text.rstrip()}\n\n[study]\n{key} = {literal}\n"
+        lines.insert(header + 1, f"{key} = {literal}\n")
+        return "".join(lines)
+    if value is None:
+        lines = text.splitlines(keepends=True)
+        (number,) = (n for n, line in enumerate(lines) if _REMOVED in line)
+        if "{" in lines[number]:
+            raise ConfigError(f"study.{key}: cannot remove a key of an inline table")
+        del lines[number]
+        text = "".join(lines)
+    return text
+
+
+def text_mismatch(config: StudyConfig) -> str | None:
+    """None if ``config`` is what its own ``text`` reads as (a sweep's text: one of its
+    points), else the first setting that differs, as a clause.
+
+    A result file embeds the config text and nothing else of the config, so a file is
+    reproducible from itself only when the text says what ran. :meth:`StudyConfig.
+    with_overrides` keeps the text right; ``dataclasses.replace`` changes the settings alone,
+    and is caught here (:func:`tolsim.io.netcdf.write_result` refuses such a config). The text
+    is read again (warnings silenced: they were given when it was first read) and compared
+    by ``repr``, which holds every setting.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            read = parse_config(config.text, config.path, study=False)
+        except ConfigError as exc:
+            return f"its text is not a valid config ({exc})"
+    candidates = [read] if read.sweep is None else list(read.sweep.points)
+    if config.sweep is not None:
+        candidates = [read]
+    if any(repr(c) == repr(config) for c in candidates):
+        return None
+    name, given, read = _first_difference(candidates[0], config, "config")
+    return f"{name} = {_short(given)}, but its text gives {_short(read)}"
+
+
+def _first_difference(read, given, name, depth=3):
+    """(dotted name, given value, read value) of the first field in which ``given``
+    differs from ``read``."""
+    if depth and is_dataclass(read) and type(read) is type(given):
+        for f in fields(read):
+            a, b = getattr(read, f.name), getattr(given, f.name)
+            if repr(a) != repr(b):
+                return _first_difference(a, b, f"{name}.{f.name}", depth - 1)
+    return name, given, read
+
+
+def _short(value):
+    text = " ".join(repr(value).split())
+    return text if len(text) <= 50 else text[:47] + "..."
 
 
 #: The propagation of a ``[carriage]`` study whose ``[study]`` does not name one (issue 24):
