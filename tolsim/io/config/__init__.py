@@ -17,6 +17,7 @@ checked against its possible range (an error) and its usual one (a
 :mod:`~tolsim.io.config.plausibility`.
 """
 
+import functools
 import numbers
 import os
 import re
@@ -217,19 +218,25 @@ def text_mismatch(config: StudyConfig) -> str | None:
     is read again (warnings silenced: they were given when it was first read) and compared
     by ``repr``, which holds every setting.
     """
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            read = parse_config(config.text, config.path, study=False)
-        except ConfigError as exc:
-            return f"its text is not a valid config ({exc})"
-    candidates = [read] if read.sweep is None else list(read.sweep.points)
-    if config.sweep is not None:
-        candidates = [read]
-    if any(repr(c) == repr(config) for c in candidates):
+    try:
+        read, points = _read_back(config.text, config.path)
+    except ConfigError as exc:
+        return f"its text is not a valid config ({exc})"
+    if repr(config) in (points if config.sweep is None and points else {repr(read)}):
         return None
-    name, given, read = _first_difference(candidates[0], config, "config")
+    name, given, read = _first_difference(read, config, "config")
     return f"{name} = {_short(given)}, but its text gives {_short(read)}"
+
+
+@functools.lru_cache(maxsize=2)
+def _read_back(text, path):
+    """(the config ``text`` reads as, the reprs of its sweep's points): read once per text,
+    so a sweep's parts, each checked as it is written, cost one reading of the sweep."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # given when the text was first read
+        read = parse_config(text, path, study=False)
+    points = frozenset() if read.sweep is None else frozenset(map(repr, read.sweep.points))
+    return read, points
 
 
 def _first_difference(read, given, name, depth=3):
