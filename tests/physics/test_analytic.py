@@ -1,5 +1,7 @@
 """The analytical velocity models: Table 2, the paper's invariants and NumPy twins."""
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import assume, given
@@ -10,6 +12,7 @@ from numpy.testing import assert_allclose
 from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing, paired_forces
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.velocity import analytic as A
+from tolsim.physics.velocity import full
 
 THETA = np.deg2rad(2.0)  # Lin2018 Sec. 3.2 / Table 2
 NY = 200.0  # Lin2018 Table 1
@@ -540,3 +543,20 @@ def test_analytic_tiles_are_the_per_ball_solve_bit_for_bit(rng):
     assert np.array_equal(eps.view(np.int64), eps_t.view(np.int64))
     assert np.array_equal(valid, valid_t)
     assert valid.sum() > n // 2 and not valid[5:35].all()  # both kinds of ball
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda f: paired_forces(None, 200.0), "side_load = None: give the load per ball"),
+    (lambda f: paired_forces(-120.0, None), "normal_load = None: give the load per ball"),
+    (lambda f: paired_forces(-120.0, 200.0, 0.0), "nominal_contact_angle = 0.0 must lie in"),
+    (lambda f: paired_forces(-120.0, 200.0, np.pi / 2), "nominal_contact_angle = 1.57"),
+    (lambda f: A.analytic(np.zeros(4), f, None), "bearing = None must be a Bearing"),
+    (lambda f: A.eq24(np.zeros(4), f, None), "bearing = None must be a Bearing"),
+    (lambda f: A.point(np.zeros(4), f, None), "bearing = None must be a Bearing"),
+    (lambda f: full.full(np.zeros(4), f, None), "bearing = None must be a Bearing"),
+])
+def test_public_physics_functions_name_a_missing_argument(call, message):
+    # API audit, session 24: paired_forces(None, 200) returned NaN forces without a word,
+    # beta_0 = 0 gave +-inf, and a missing bearing an AttributeError deep inside
+    with pytest.raises(ValueError, match=re.escape(message)):
+        call(paired_forces(-120.0, 200.0))

@@ -109,6 +109,13 @@ TABLE1_GROOVE_VELOCITY = 10.0e-3
 TABLE1_NORMAL_LOAD = 200.0
 
 
+def check_bearing(bearing) -> None:
+    """Raise a ValueError naming ``bearing`` unless it is a :class:`Bearing` (None, say)."""
+    if not isinstance(bearing, Bearing):
+        raise ValueError(f"bearing = {bearing!r:.60} must be a Bearing (tolsim.TABLE1 is the "
+                         "paper's)")
+
+
 def contact_frames(contact_angle):
     """Position and local axes of the four contacts in the cross-section.
 
@@ -178,7 +185,19 @@ def paired_forces(side_load, normal_load, nominal_contact_angle=np.pi / 4):
     ndarray, shape (..., 4)
         Normal forces F_BL, F_BR, F_TR, F_TL [N] (:func:`paired_force_pair` per ball). Not
         validated: a value <= 0 means the paired approximation predicts loss of contact.
+
+    Raises
+    ------
+    ValueError
+        For a missing load (None: numpy would read it as NaN) or a nominal contact angle
+        outside (0, pi/2) (sin 2 b0 = 0 at either end).
     """
+    for name, value in (("side_load", side_load), ("normal_load", normal_load)):
+        if value is None:
+            raise ValueError(f"{name} = None: give the load per ball [N]")
+    if not 0.0 < nominal_contact_angle < 0.5 * np.pi:
+        raise ValueError(f"nominal_contact_angle = {nominal_contact_angle!r} must lie in "
+                         "(0, pi/2) [rad]")
     nx, ny = np.broadcast_arrays(np.asarray(side_load, dtype=float),
                                  np.asarray(normal_load, dtype=float))
     out = np.empty(nx.shape + (4,))

@@ -37,6 +37,8 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ellipe, ellipk
 
+from tolsim.physics.geometry import check_bearing
+
 
 def effective_modulus(youngs_modulus, poisson_ratio):
     """Contact modulus E* of two bodies of the same material [Pa].
@@ -140,6 +142,19 @@ def hertz_constants(ball_radius, conformity, youngs_modulus=210.0e9, poisson_rat
         elliptic_k=kk,
         elliptic_e=ee,
     )
+
+
+def bearing_constants(bearing):
+    """:func:`hertz_constants` of a :class:`~tolsim.physics.geometry.Bearing`.
+
+    Raises
+    ------
+    ValueError
+        Naming ``bearing`` when it is not a Bearing (None, say).
+    """
+    check_bearing(bearing)
+    return hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
+                           bearing.poisson_ratio)
 
 
 @dataclass(frozen=True)

@@ -40,8 +40,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tolsim._jit import kernel_array
-from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing
-from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.geometry import K_F_PAPER, TABLE1, Bearing, check_bearing
+from tolsim.physics.hertz import bearing_constants
 from tolsim.physics.velocity._analytic_kernels import (
     ANALYTIC_TILE,
     LOAD_COLUMNS,
@@ -235,6 +235,7 @@ def eq24(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1) -> Ve
         ``MAX_EQ24_VELOCITY_DEVIATION``. Inside them epsilon was measured within
         ``VALIDITY_ERROR_BUDGET`` of :func:`tolsim.physics.velocity.full.full`.
     """
+    check_bearing(bearing)
     dbeta, force, shape = as_ball_arrays(contact_angle_deviation, normal_force)
     eps = np.empty(len(dbeta))
     valid = np.empty(len(dbeta), dtype=np.bool_)
@@ -302,8 +303,7 @@ def analytic(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
     if not (np.isfinite(k_f) and k_f < 0):
         raise ValueError(f"k_f = {k_f!r} must be negative")
     dbeta, force, shape = as_ball_arrays(contact_angle_deviation, normal_force)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc = bearing_constants(bearing)
     if push is not None or neighbour_force is not None:
         return _analytic_loaded(dbeta, force, shape, bearing, k_f, hc, push, neighbour_force,
                                 ball_friction)
@@ -370,6 +370,7 @@ def point(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1) -> V
         ``extra["sliding_contact"]`` holds the index (0..3, BL, BR, TR, TL) of the sliding
         contact.
     """
+    check_bearing(bearing)
     dbeta, force, shape = as_ball_arrays(contact_angle_deviation, normal_force)
     n = len(dbeta)
     eps, eps22 = np.empty(n), np.empty(n)

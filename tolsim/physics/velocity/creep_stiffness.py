@@ -7,7 +7,7 @@ from numba import prange
 from tolsim._jit import pjit
 from tolsim.physics._fastmath import cbrt_nonnegative
 from tolsim.physics.geometry import K_F_PAPER
-from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.hertz import bearing_constants
 from tolsim.physics.velocity._analytic_kernels import creep_frame
 
 
@@ -50,8 +50,7 @@ def creep_stiffness(dbeta, force, bearing):
     -------
     ndarray, shape (n,)
     """
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc = bearing_constants(bearing)
     out = np.empty(len(dbeta))
     creep_stiffness_kernel(dbeta, force, cbrt_nonnegative(force),
                            bearing.nominal_contact_angle, bearing.ball_radius,

@@ -23,8 +23,15 @@ from functools import lru_cache
 
 import numpy as np
 
-from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, ZERO_VELOCITY_SIGN, Bearing
-from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.geometry import (
+    SIDE_SIGN_X,
+    SIDE_SIGN_Y,
+    TABLE1,
+    ZERO_VELOCITY_SIGN,
+    Bearing,
+    check_bearing,
+)
+from tolsim.physics.hertz import bearing_constants
 from tolsim.physics.velocity._contact_tables import (
     NEAR_FLOATS,
     TABLE_DEGREE,
@@ -359,8 +366,7 @@ def friction_loads(ball_velocity, angular_velocity, contact_angle, normal_force,
     if np.any(force < 0) or not np.all(np.isfinite(force)):
         raise ValueError("normal_force must be finite and >= 0")
     n_ang, n_rad = _parse_grid(grid)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc = bearing_constants(bearing)
     radius, v = bearing.ball_radius, float(groove_velocity)
     a = hc.semi_major_coefficient * np.cbrt(force) / radius
     b = hc.semi_minor_coefficient * np.cbrt(force) / radius
@@ -545,6 +551,7 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     if not (int(max_iter) == max_iter and max_iter >= 1):
         raise ValueError(f"max_iter = {max_iter!r} must be a positive integer")
     n_ang, n_rad = _parse_grid(grid)
+    check_bearing(bearing)
     dbeta, force, shape = as_ball_arrays(contact_angle_deviation, normal_force)
     loaded = push is not None or neighbour_force is not None
     if loaded:
@@ -555,8 +562,7 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
     beta = bearing.nominal_contact_angle + dbeta
     if np.any((beta <= 0) | (beta >= np.pi / 2)):
         raise ValueError("contact_angle_deviation puts a contact angle outside (0, 90) deg")
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc = bearing_constants(bearing)
     radius = bearing.ball_radius
     if np.any(hc.semi_major_coefficient * np.cbrt(force) >= 0.5 * radius):
         raise ValueError("normal_force too large: the contact ellipse exceeds R_B / 2")

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, Bearing
-from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.hertz import bearing_constants
 from tolsim.physics.velocity._regime_kernels import (
     REGIME_SMOOTH,
     REGIME_STICK,
@@ -102,8 +102,7 @@ def stick_criterion(normal_force, bearing: Bearing = TABLE1):
         raise ValueError(f"normal_force must have shape (..., 4), got {force.shape}")
     if np.any(force < 0) or not np.all(np.isfinite(force)):
         raise ValueError("normal_force must be finite and >= 0")
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc = bearing_constants(bearing)
     fa = force * hc.semi_major_coefficient * np.cbrt(force)
     d1 = force[..., 0] + force[..., 2]
     d2 = force[..., 1] + force[..., 3]
@@ -201,8 +200,7 @@ def _contact_points_of(dbeta, force, bearing, nodes):
     """:func:`_contact_points` of hashable inputs."""
     beta = bearing.nominal_contact_angle + np.asarray(dbeta, dtype=float)
     force = np.asarray(force, dtype=float)
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
+    hc = bearing_constants(bearing)
     n_rad, n_ang = nodes
     tg, wg = np.polynomial.legendre.leggauss(n_rad)
     t = 0.25 * np.pi * (tg + 1.0)
