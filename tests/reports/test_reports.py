@@ -505,3 +505,19 @@ def test_make_report_refuses_a_spec_limit_out_of_its_range(tmp_path, name, value
     with pytest.raises(ValueError, match=f"{name} = .* must be in"):
         study_report.make_report(tmp_path / "none.nc", tmp_path / "rep", **{name: value})
     assert not (tmp_path / "rep").exists()
+
+
+def test_a_report_into_a_file_fails_before_any_work(tmp_path):
+    # API audit, session 24: os.makedirs' raw FileExistsError, after the figures were drawn
+    from tolsim.reports.compare import compare_runs
+    from tolsim.reports.sweep import make_sweep_report
+
+    taken = tmp_path / "taken"
+    taken.write_text("not a folder")
+    missing = tmp_path / "missing.nc"  # not read: the folder is checked first
+    for call in (lambda: study_report.make_report(missing, taken),
+                 lambda: make_sweep_report(missing, taken),
+                 lambda: compare_runs([missing, missing], taken)):
+        with pytest.raises(ValueError, match=f"{taken} exists and is not a folder"):
+            call()
+    assert taken.read_text() == "not a folder"

@@ -4,12 +4,21 @@ on an error (a full disk, say) what was written is removed, so no file is left h
 
 import os
 
-__all__ = ["write_files"]
+__all__ = ["check_folder", "write_files"]
+
+
+def check_folder(folder) -> None:
+    """Raise ValueError naming ``folder`` if it exists and is not a folder: called before a
+    report's work, so a wrong output path fails at once, not after the figures."""
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise ValueError(f"{os.fspath(folder)} exists and is not a folder: give the report a "
+                         "folder")
 
 
 def write_files(folder, files: dict) -> dict:
     """Write {name: bytes} into ``folder`` (created if missing), each through a temporary
     file and a rename; on an error, remove what was written (and the folder if made here)."""
+    check_folder(folder)
     created = not os.path.isdir(folder)
     os.makedirs(folder, exist_ok=True)
     written = {}

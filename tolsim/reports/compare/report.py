@@ -11,7 +11,7 @@ from tolsim.reports.compare.comparison import Comparison, compare_datasets, run_
 from tolsim.reports.compare.figures import FIGURES
 from tolsim.reports.compare.page import CSV_NAME, HTML_NAME, comparison_html, csv_text
 from tolsim.reports.compare.statistics import CONFIDENCE_LEVEL
-from tolsim.reports.files import write_files
+from tolsim.reports.files import check_folder, write_files
 from tolsim.reports.result_view import NotAResult, read_result_file
 from tolsim.reports.style import (
     render_png,
@@ -116,6 +116,7 @@ def compare_runs(paths, folder, *, progress=None, confidence_level=CONFIDENCE_LE
     paths = [os.fspath(p) for p in paths]
     if len(paths) < 2:
         raise ValueError(f"need at least two result files to compare, got {len(paths)}")
+    check_folder(folder)
     datasets = read_runs(paths, verify=verify)
     say(f"read {len(datasets)} result files")
     comparison = compare_datasets(datasets, run_labels(paths), paths, confidence_level)

@@ -11,7 +11,7 @@ from tolsim.reports import pdf
 from tolsim.reports.assumptions import (
     assumption_table,
 )
-from tolsim.reports.files import write_files
+from tolsim.reports.files import check_folder, write_files
 from tolsim.reports.result_view import (
     config_or_none,
     read_result_file,
@@ -142,6 +142,7 @@ def make_report(path, folder, *, sensitivity=True, sensitivity_samples=None,
                              ("cpk_minimum", cpk_minimum, math.inf)):
         if value is not None and not 0.0 < float(value) < top:
             raise ValueError(f"{name} = {value!r} must be in (0, {top:g})")
+    check_folder(folder)
     say = progress or (lambda msg: None)
     ds = read_result_file(path, verify=verify)
     folder = os.fspath(folder)

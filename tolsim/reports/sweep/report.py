@@ -4,7 +4,7 @@
 import os
 from dataclasses import dataclass, field
 
-from tolsim.reports.files import write_files
+from tolsim.reports.files import check_folder, write_files
 from tolsim.reports.result_view import read_result_file
 from tolsim.reports.style import render_png
 from tolsim.reports.sweep.figures import FIGURES
@@ -55,6 +55,7 @@ def make_sweep_report(path, folder, *, progress=None, verify=True) -> SweepRepor
     NotASweep
         If it is the result of a single study (:func:`tolsim.reports.study.make_report`).
     """
+    check_folder(folder)
     say = progress or (lambda msg: None)
     ds = read_result_file(path, verify=verify)
     layout = sweep_layout(ds)
