@@ -728,3 +728,13 @@ def test_subset_ended_by_unresolved_rows_alone_says_so():
     assert "P is only known to lie in [0, " in r.message and "\n" not in r.message
     nothing = subset_simulation(lambda u: np.full(len(u), np.nan), 2, SEED)
     assert nothing.status == "unresolved" and nothing.bound_upper == 1.0
+
+
+@pytest.mark.parametrize("options", [{"subset": None}, {"importance": 5}])
+def test_rare_method_names_options_that_are_not_a_dict(options):
+    # API audit, session 24: subset=None gave "'NoneType' object is not a mapping"
+    from tolsim.rare_events import estimate
+
+    name = next(iter(options))
+    with pytest.raises(TypeError, match=f"{name} = .* must be a dict of the options of method"):
+        estimate(lambda u: 3.0 - u[:, 0], 2, method="rare", **options)

@@ -3,6 +3,7 @@ the cross-checks that keep a wrong number from being reported as ``ok``
 (:mod:`tolsim.rare_events` is its public home)."""
 
 import math
+from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np
@@ -131,6 +132,10 @@ def estimate(g, dimension, method="rare", seed=0, **options) -> RareEventResult:
         if unknown:
             raise TypeError(f"method 'rare' takes subset=, importance=, batch_size= and "
                             f"confidence_level=; got {sorted(unknown)}")
+        for name in ("subset", "importance"):
+            if not isinstance(options.get(name, {}), Mapping):
+                raise TypeError(f"{name} = {options[name]!r} must be a dict of the options of "
+                                f"method {name!r} (or left out)")
         common = {k: options[k] for k in ("batch_size", "confidence_level") if k in options}
         sub_options = {"samples_per_level": RARE_SAMPLES_PER_LEVEL,
                        **options.get("subset", {})}
