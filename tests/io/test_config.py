@@ -377,4 +377,81 @@ def test_text_mismatch_names_the_setting_the_text_does_not_say():
     assert text_mismatch(replace(config, bearing=bearing)) == (
         "config.bearing.friction_coefficient = 0.2, but its text gives 0.1")
     assert text_mismatch(replace(config, text="[study\n")).startswith(
-        "its text is not a valid config")
+        "the config's text is not a valid config")
+
+
+def test_study_settings_edge_cases_of_the_text():
+    # audit of with_study_settings (session 25, /tmp/s25/audit/FINDINGS.md D1-D5, C1-C3)
+    head = MINIMAL[:MINIMAL.index("[study]")]
+    # D5: a comment with an odd number of triple quotes hid every later line
+    quoted = parse_config(MINIMAL.replace("[train]", "# strings may use ''' quotes\n[train]"))
+    assert quoted.with_overrides(samples=5).study.samples == 5
+    assert with_study_settings(quoted, spot_checks=1).study.spot_checks == 1
+    # D1: [study] as dotted keys or an inline table: a key it lacks is refused, named
+    for text in ("study.samples = 100\nstudy.seed = 1\n" + head,
+                 "study = { samples = 100, seed = 1 }\n" + head):
+        config = parse_config(text)
+        assert with_study_settings(config, samples=7).study.samples == 7  # a key it has
+        with pytest.raises(ConfigError, match="study.spot_checks: the text gives .study. as "
+                                              "dotted keys or an inline table"):
+            with_study_settings(config, spot_checks=1)
+    # D4: no [study] at all (tolsim carriage reads such configs)
+    with pytest.raises(ConfigError, match=r"the text has no \[study\] table to add "
+                                          r"study.samples to"):
+        with_study_settings(parse_config(head, study=False), samples=5)
+    # D2: an array value is not silently left as it was
+    ranged = parse_config(MINIMAL + "velocity_deviation_range_percent = [-1, 1]\n")
+    for value in (None, (-0.02, 0.02)):
+        with pytest.raises(ConfigError, match="study.velocity_deviation_range"):
+            with_study_settings(ranged, velocity_deviation_range=value)
+    # D3: a fraction is a number
+    for value in (True, "0.5"):
+        with pytest.raises(ConfigError, match="must be a number"):
+            with_study_settings(ranged, velocity_deviation_limit=value)
+    # C1: the shortest decimal that reads back exactly
+    ppm = parse_config(MINIMAL + "velocity_deviation_limit_ppm = 1000\n")
+    changed = with_study_settings(ppm, velocity_deviation_limit=0.002)
+    assert "velocity_deviation_limit_ppm = 2000.0\n" in changed.text
+    assert changed.study.velocity_deviation_limit == 0.002
+    # C2, C3: keys added at the end of [study] in the order given, with the text's line ends;
+    # a removed key takes the comment lines that continue it
+    crlf = parse_config((MINIMAL + "time_steps = 9   # a step\n    # its note\n")
+                        .replace("\n", "\r\n"))
+    changed = with_study_settings(crlf, sampling="sobol", spot_checks=2, time_steps=None)
+    assert changed.text.endswith('seed = 1\r\nsampling = "sobol"\r\nspot_checks = 2\r\n')
+    assert "\n" not in changed.text.replace("\r\n", "")
+
+
+def test_text_mismatch_of_sweep_points_checks_their_order(tmp_path):
+    # audit D9: points permuted with dataclasses.replace were accepted (a point had only to
+    # match some point of the text)
+    from dataclasses import replace
+
+    sweep = load_config(CONFIGS / "sweep_yaw_moment.toml")
+    points = sweep.sweep.points
+    reversed_points = replace(sweep, sweep=sweep.sweep.with_points(tuple(reversed(points))))
+    assert text_mismatch(reversed_points) == (
+        "the config's sweep points are not those of its text (in order)")
+    assert text_mismatch(points[1], 1) is None
+    assert text_mismatch(points[1], 0).startswith("config.loads")
+    # D6: an override of a swept study key would collapse the sweep
+    swept = parse_config(MINIMAL + '\n[sweep]\n"study.seed" = [1, 2]\n', "sw.toml")
+    with pytest.raises(ValueError, match="seed = 5: the sweep varies study.seed"):
+        swept.with_overrides(seed=5)
+    assert swept.with_overrides(samples=50).sweep.points[1].study.seed == 2
+
+
+def test_text_mismatch_reads_data_files_as_the_config_read_them(tmp_path):
+    # audit D8: the read-back read the measured data from the disk again, so a file edited
+    # or out of reach (another working directory) after the run made the result unwritable.
+    # The data are taken by their SHA-256, which the result file records.
+    data = tmp_path / "d.csv"
+    data.write_text("rotation_deg\n" + "\n".join(str(0.01 * i) for i in range(40)) + "\n")
+    (tmp_path / "s.toml").write_text(MINIMAL.replace(
+        'distribution = "normal"\nstd_deg = 0.5',
+        'distribution = "empirical"\nfile = "d.csv"\ncolumn_deg = "rotation_deg"'))
+    config = load_config(tmp_path / "s.toml")
+    data.write_text("rotation_deg\n" + "\n".join(str(0.02 * i) for i in range(40)) + "\n")
+    assert text_mismatch(config) is None
+    data.unlink()
+    assert text_mismatch(config) is None

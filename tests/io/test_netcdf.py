@@ -224,8 +224,8 @@ def test_a_config_its_text_does_not_say_is_not_written(tmp_path):
     result = run_study(config)
     changed = replace(result, config=replace(config, study=replace(config.study, seed=99)))
     out = tmp_path / "r.nc"
-    with pytest.raises(ValueError, match=r"the study's config.study.seed = 99, but its text "
-                                         r"gives \d+: the file would not say what ran"):
+    with pytest.raises(ValueError, match=r"not written: config.study.seed = 99, but its text "
+                                         r"gives \d+; the file embeds the config text alone"):
         write_result(changed, out, history="test")
     assert not out.exists() and not list(tmp_path.iterdir())
     write_result(result, out, history="test")  # the config as read

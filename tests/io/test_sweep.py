@@ -102,6 +102,18 @@ def test_run_sweep_with_bad_arguments_leaves_no_folder(tmp_path):
         run_sweep(parse_config(known('"loads.normal_load_N" = [100, 200]')), out, workers=0)
     with pytest.raises(ValueError, match=r"has no \[sweep\]: run it with"):
         run_sweep(parse_config(KNOWN), out)
+    # audit D6, D9 (session 25): refused before the first point runs, not at its write
+    from dataclasses import replace
+
+    from tolsim.study.execution.runner import PrecisionTarget
+
+    sweep = parse_config(known('"loads.normal_load_N" = [100, 200]'))
+    points = tuple(reversed(sweep.sweep.points))
+    with pytest.raises(ValueError, match="not run: the config's sweep points are not those"):
+        run_sweep(replace(sweep, sweep=sweep.sweep.with_points(points)), out)
+    samples = parse_config(known('"study.samples" = [100, 200]'))
+    with pytest.raises(ValueError, match="a precision target sets each point's samples"):
+        run_sweep(samples, out, target=PrecisionTarget(0.1))
     assert list(tmp_path.iterdir()) == []
 
 

@@ -667,6 +667,10 @@ def test_paired_forces_in_tension_go_to_the_solved_model():
     ({"checkpoint_interval": -1.0}, "checkpoint_interval = -1.0 must be a number of seconds"),
     ({"checkpoint_interval": "30"}, "checkpoint_interval = '30' must be a number of seconds"),
     ({"checkpoint_path": "/no/such/folder/run.partial"}, "the folder /no/such/folder does not"),
+    ({"checkpoint_path": ""}, "checkpoint_path = '' must be the path of a file"),
+    ({"checkpoint_path": b"run.partial"}, "checkpoint_path = b'run.partial' must be the path"),
+    ({"checkpoint_path": 5}, "checkpoint_path = 5 must be the path of a file"),
+    ({"checkpoint_path": "/tmp"}, "checkpoint_path = '/tmp' must be the path of a file"),
 ])
 def test_run_study_refuses_bad_arguments_before_any_work(arguments, message, monkeypatch):
     # API audit, session 24: chunk_blocks=0 ran with the default, max_blocks=0 acted as 1,
@@ -696,3 +700,23 @@ def test_run_study_takes_numpy_integers():
 def test_run_study_wants_a_config_object(config):
     with pytest.raises(ValueError, match="must be a StudyConfig: read it with tolsim.load_con"):
         run_study(config)
+
+
+def test_a_checkpoint_resumes_whatever_the_spelling_of_the_config_path(tmp_path, monkeypatch):
+    # audit D7 (session 25): the fingerprint held config.path, so ``tolsim run ./s.toml``
+    # refused the checkpoint of ``tolsim run s.toml``
+    from tolsim.io.config import load_config
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text(make(samples=1000).text)
+    ckpt = tmp_path / "s.partial"
+    with pytest.raises(StudyInterrupted):
+        run_study(load_config("s.toml"), chunk_blocks=1, checkpoint_path=str(ckpt),
+                  max_blocks=2)
+    said = []
+    for spelling in ("./s.toml", str(tmp_path / "s.toml")):
+        import tolsim.study.execution.runner as runner
+
+        assert runner.checkpoint_mismatch(ckpt, load_config(spelling)) is None
+    run_study(load_config("./s.toml"), checkpoint_path=str(ckpt), notify=said.append)
+    assert said[0].startswith(f"resumed from {ckpt}: 256 of 1 000")

@@ -56,7 +56,8 @@ TEXT_ATTRIBUTES = (
     "attributes_sha256")
 
 
-def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
+def result_to_dataset(result, *, history: str | None = None,
+                      sweep_point: int | None = None) -> xr.Dataset:
     """The Dataset of a :class:`tolsim.study.execution.runner.StudyResult` (validated).
 
     Parameters
@@ -64,6 +65,9 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
     result : StudyResult
     history : str, optional
         Command line to record (default: this process's argv).
+    sweep_point : int, optional
+        The index of the sweep point whose result this is (its config must be that point of
+        its text's sweep, :func:`tolsim.io.config.text_mismatch`).
 
     Notes
     -----
@@ -80,11 +84,11 @@ def result_to_dataset(result, *, history: str | None = None) -> xr.Dataset:
         ``dataclasses.replace``, :func:`tolsim.io.config.text_mismatch`): the file embeds the
         text alone, and would not say what ran.
     """
-    mismatch = text_mismatch(result.config)
+    mismatch = text_mismatch(result.config, sweep_point)
     if mismatch:
-        raise ValueError(f"the study's {mismatch}: the file would not say what ran; change a "
-                         "study through its text or StudyConfig.with_overrides, which keep "
-                         "the text right")
+        raise ValueError(f"not written: {mismatch}; the file embeds the config text alone, "
+                         "so it would not say what ran (change a study through its text, "
+                         "with_overrides or tolsim.with_study_settings)")
     coords, data, attrs = {}, {}, {}
     for section in schema.SECTIONS:  # what the Dataset is made of
         if section.collect is not None:

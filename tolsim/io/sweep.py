@@ -21,6 +21,7 @@ import xarray as xr
 
 from tolsim.io import schema
 from tolsim.io.checksums import add_checksums, without_checksums
+from tolsim.io.config import text_mismatch
 from tolsim.io.netcdf import history_line, read_result, result_to_dataset, write_dataset
 from tolsim.io.schema import SWEEP_COORDINATES, SWEEP_DIMENSIONS, SWEEP_VARIABLES
 from tolsim.study.design.sweep import ZIP_DIMENSION, Sweep
@@ -221,6 +222,14 @@ def run_sweep(config, output, *, history=None, progress=None, on_point=None, not
     if sweep is None:
         raise ValueError(f"{config.path} has no [sweep]: run it with "
                          "tolsim.study.execution.runner.run_study")
+    mismatch = text_mismatch(config)  # before any point runs (its part would be refused)
+    if mismatch:
+        raise ValueError(f"not run: {mismatch}; the file embeds the config text alone (change "
+                         "a sweep through its text or with_overrides)")
+    if run_options.get("target") is not None and any(
+            axis.key == "study.samples" for axis in sweep.axes):
+        raise ValueError("a precision target sets each point's samples, which the sweep "
+                         "varies (study.samples): drop one of them")
     scheduler = run_options.get("scheduler")
     cluster = None
     if isinstance(scheduler, str):  # one cluster for all points (a LocalCluster starts once)
@@ -285,7 +294,7 @@ def _run_points(config, folder, history, progress, on_point, notify, run_options
         done = (int(result.statistics.n_assemblies) if result.assemblies_run is None
                 else result.assemblies_run)
         balls += done * point.balls
-        ds = result_to_dataset(result, history=history)
+        ds = result_to_dataset(result, history=history, sweep_point=k)
         ds.attrs["sweep_point_fingerprint"] = fp
         write_dataset(ds, part)
         checkpoint = folder / f"point-{k:04d}.partial"

@@ -1,7 +1,11 @@
 """The description of a Monte Carlo tolerance study: frozen dataclasses in SI units.
 
 Built by :func:`tolsim.io.config.load_config` from TOML (where the unit suffixes are
-converted), or directly in Python. Nothing here knows about files or units.
+converted), or directly in Python. Nothing here knows about files or units. A result file
+embeds the config's TOML text as its record, so only a config read from TOML (and changed
+through its text: :meth:`StudyConfig.with_overrides`,
+:func:`tolsim.io.config.with_study_settings`) can be written
+(:func:`tolsim.io.config.text_mismatch`); one built in Python runs, for tests and scripts.
 """
 
 import numbers
@@ -699,13 +703,25 @@ class StudyConfig:
 
         The new values are also written into ``text`` (the value on the ``samples`` /
         ``seed`` line of ``[study]`` is replaced; layout and comments are kept), so the text
-        stays the TOML of the study that runs. A config without text keeps an empty text.
+        stays the TOML of the study that runs. A config without text (built in Python) keeps an
+        empty text.
+
+        Raises
+        ------
+        ValueError
+            For a value that is not a whole number in range, or a key the config's sweep
+            varies (``"study.seed" = [1, 2]``: one value would replace the points' own).
         """
         changes = {}
         if samples is not None:
             changes["samples"] = whole_number("samples", samples, 1)
         if seed is not None:
             changes["seed"] = whole_number("seed", seed, 0, MAX_SEED)
+        if self.sweep is not None:
+            for key, value in changes.items():
+                if any(axis.key == f"study.{key}" for axis in self.sweep.axes):
+                    raise ValueError(f"{key} = {value}: the sweep varies study.{key}, and "
+                                     "this would set it in every point")
         text = self.text
         for key, value in changes.items():
             if text:
@@ -735,12 +751,11 @@ def toml_lines(lines):
     table, array, in_string = "", False, None
     for number, line in enumerate(lines):
         if in_string is not None:  # inside a multi-line string: not TOML structure
-            if line.count(in_string) % 2:
-                in_string = None
+            end = line.find(in_string)
+            if end >= 0:  # it closes here; the rest of the line may open another
+                in_string = _open_string(line[end + 3:])
             continue
-        for quote in ('"""', "'''"):
-            if line.count(quote) % 2:
-                in_string = quote
+        in_string = _open_string(line)
         m = _HEADER.match(line)
         if m and in_string is None:
             table = ".".join(p.strip().strip("\"'") for p in m.group(2).split("."))
@@ -750,7 +765,31 @@ def toml_lines(lines):
             yield number, line, table, array, False
 
 
-def _key(name):
+def _open_string(line):
+    """The delimiter (three double or three single quotes) of a multi-line string that
+    ``line`` leaves open, else None. Quotes inside one-line strings and in a comment do not
+    count."""
+    i, n = 0, len(line)
+    while i < n:
+        c = line[i]
+        if c == "#":  # a comment: the rest of the line is not TOML
+            return None
+        if c in "\"'" and line.startswith(c * 3, i):
+            end = line.find(c * 3, i + 3)
+            if end < 0:
+                return c * 3
+            i = end + 3
+        elif c in "\"'":  # a one-line string (a basic one with escapes)
+            j = i + 1
+            while j < n and line[j] != c:
+                j += 2 if c == '"' and line[j] == "\\" else 1
+            i = j + 1
+        else:
+            i += 1
+    return None
+
+
+def toml_key(name):
     """Regex of a TOML key name, bare or quoted."""
     return rf"""(?:{name}|"{name}"|'{name}')"""
 
@@ -772,11 +811,11 @@ def set_study_value(text: str, key: str, value: int) -> str:
     lines = text.splitlines(keepends=True)
     hits = []
     value_re = r"([^\s,}#]+)"
-    in_table = re.compile(rf"^(\s*{_key(key)}\s*=\s*){value_re}([ \t]*)(#.*)?(\r?\n)?$")
-    dotted = re.compile(rf"^(\s*{_key('study')}\s*\.\s*{_key(key)}\s*=\s*){value_re}"
+    in_table = re.compile(rf"^(\s*{toml_key(key)}\s*=\s*){value_re}([ \t]*)(#.*)?(\r?\n)?$")
+    dotted = re.compile(rf"^(\s*{toml_key('study')}\s*\.\s*{toml_key(key)}\s*=\s*){value_re}"
                         r"([ \t]*)(#.*)?(\r?\n)?$")
-    inline = re.compile(rf"^\s*{_key('study')}\s*=\s*{{")
-    inline_value = re.compile(rf"([{{,]\s*{_key(key)}\s*=\s*){value_re}")
+    inline = re.compile(rf"^\s*{toml_key('study')}\s*=\s*{{")
+    inline_value = re.compile(rf"([{{,]\s*{toml_key(key)}\s*=\s*){value_re}")
     for number, line, name, array, header in toml_lines(lines):
         if header:
             continue

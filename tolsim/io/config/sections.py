@@ -8,6 +8,8 @@ import csv
 import hashlib
 import io
 import math
+from collections import OrderedDict
+from contextvars import ContextVar
 from dataclasses import replace
 from pathlib import Path
 
@@ -99,6 +101,15 @@ def _check_order(table: Table, kind: str):
                                     f"{low_key} = {table.data[low_key]!r}")
 
 
+#: While a config's text is read back (:func:`tolsim.io.config.text_mismatch`): {data file as
+#: written: SHA-256} of the data that config was read with. Such a file's bytes are taken from
+#: :data:`_DATA_READ` by their SHA-256, not from the disk, which may have changed since (or be
+#: out of reach: another working directory).
+READ_BACK: ContextVar = ContextVar("tolsim_config_read_back", default=None)
+#: The bytes of the data files read in this process, by SHA-256 (the latest 64 files).
+_DATA_READ: OrderedDict = OrderedDict()
+
+
 def _empirical(table: Table, kind: str) -> Distribution:
     """Measured values from a CSV column: ``file``, ``column_<unit>``, optional ``sha256``."""
     file = table.text("file")
@@ -107,12 +118,18 @@ def _empirical(table: Table, kind: str) -> Distribution:
     path = Path(file)
     if not path.is_absolute():  # relative to the config file (a string config: to the cwd)
         path = Path(table.source.path).parent / path
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise table.error("file", f"= {file!r}: cannot read {path}: "
-                                  f"{exc.strerror or exc.__class__.__name__}") from None
+    raw = _DATA_READ.get((READ_BACK.get() or {}).get(file))
+    if raw is None:
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:
+            raise table.error("file", f"= {file!r}: cannot read {path}: "
+                                      f"{exc.strerror or exc.__class__.__name__}") from None
     sha256 = hashlib.sha256(raw).hexdigest()
+    _DATA_READ[sha256] = raw
+    _DATA_READ.move_to_end(sha256)
+    while len(_DATA_READ) > 64:
+        _DATA_READ.popitem(last=False)
     if table.has("sha256"):
         pinned = table.text("sha256").strip().lower()
         if pinned != sha256:

@@ -229,10 +229,15 @@ class PrecisionTarget:
 
 
 def fingerprint(config) -> str:
-    """Identity of a study for resuming: config text and settings, tolsim version."""
+    """Identity of a study for resuming: config text and settings, tolsim version.
+
+    Not the path the config was read from: ``study.toml``, ``./study.toml`` and its absolute
+    path are one study (what the path reaches, the measured-data files, is in the settings by
+    its SHA-256).
+    """
     h = hashlib.sha256()
     h.update(config.text.encode())
-    h.update(repr(config).encode())
+    h.update(repr(replace(config, path="")).encode())
     h.update(__version__.encode())
     h.update(SPOT_CHECK_SCHEME.encode())
     return h.hexdigest()
@@ -544,6 +549,10 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
         raise ValueError(f"checkpoint_interval = {checkpoint_interval!r} must be a number of "
                          "seconds >= 0")
     if checkpoint_path is not None:
+        if not isinstance(checkpoint_path, str | os.PathLike) or not os.fspath(
+                checkpoint_path) or os.path.isdir(checkpoint_path):
+            raise ValueError(f"checkpoint_path = {checkpoint_path!r} must be the path of a "
+                             "file (str or os.PathLike)")
         folder = os.path.dirname(os.path.abspath(os.fspath(checkpoint_path)))
         if not os.path.isdir(folder):
             raise ValueError(f"checkpoint_path = {os.fspath(checkpoint_path)!r}: the folder "
