@@ -551,6 +551,18 @@ def test_a_refused_checkpoint_says_what_differs(tmp_path, monkeypatch):
     changed = replace(c, study=replace(c.study, time_steps=7))  # the text is not changed
     assert runner.checkpoint_mismatch(ckpt, changed).startswith(
         "its settings differ with the same config text")
+    # a difference in blanks or line ends, or far along a line, is shown where it is
+    crlf = replace(c, text=c.text.replace("seed = 11\n", "seed = 11\r\n"))
+    assert runner.checkpoint_mismatch(ckpt, crlf).endswith(
+        "'seed = 11\\n' there, 'seed = 11\\r\\n' here")
+    blanks = replace(c, text=c.text.replace("[study]", "[study]   "))
+    assert runner.checkpoint_mismatch(ckpt, blanks).endswith("'[study]' there, '[study]   ' here")
+    far = parse_config(c.text.replace("seed = 11", "seed = 11" + " " * 60 + "# a note"))
+    with pytest.raises(StudyInterrupted):
+        run_study(far, chunk_blocks=1, checkpoint_path=str(tmp_path / "far"), max_blocks=1)
+    long = replace(far, text=far.text.replace("# a note", "# another"))
+    assert runner.checkpoint_mismatch(tmp_path / "far", long).endswith(
+        ": '# a note' there, '# another' here")  # where they differ, past the first 60
     monkeypatch.setattr(runner, "__version__", "0.0.1")
     assert runner.checkpoint_mismatch(ckpt, c).startswith("it was written by tolsim ")
     assert runner.checkpoint_mismatch(ckpt, c).endswith(", this is tolsim 0.0.1")

@@ -265,15 +265,23 @@ def checkpoint_mismatch(path, config) -> str | None:
     if version != __version__:
         return f"it was written by tolsim {version}, this is tolsim {__version__}"
     if text != config.text:
-        theirs, ours = text.splitlines(), config.text.splitlines()
+        theirs, ours = text.splitlines(keepends=True), config.text.splitlines(keepends=True)
         line = next((i for i, (a, b) in enumerate(zip(theirs, ours, strict=False)) if a != b),
                     min(len(theirs), len(ours)))
+        a, b = (lines[line] if line < len(lines) else None for lines in (theirs, ours))
+        if a is None or b is None or a.rstrip("\r\n") != b.rstrip("\r\n"):
+            a, b = (x and x.rstrip("\r\n") for x in (a, b))  # line ends: only if they differ
+        # from a little before the first character that differs (trailing blanks and line
+        # ends included), so the two never look the same
+        column = next((i for i, (x, y) in enumerate(zip(a or "", b or "", strict=False))
+                       if x != y),
+                      min(len(a or ""), len(b or "")))
+        start = max(0, column - 30) if column > 50 else 0
 
-        def shown(lines):
-            return repr(lines[line].strip()[:60]) if line < len(lines) else "the end"
+        def shown(part):
+            return "the end" if part is None else repr(part[start:start + 60].lstrip(" "))
 
-        return (f"its config differs at line {line + 1}: {shown(theirs)} there, "
-                f"{shown(ours)} here")
+        return f"its config differs at line {line + 1}: {shown(a)} there, {shown(b)} here"
     return ("its settings differ with the same config text (a config changed in Python, or "
             "another spot-check scheme)")
 
