@@ -48,6 +48,7 @@ API = {
     # studies
     "load_config": "tolsim.io.config",
     "parse_config": "tolsim.io.config",
+    "with_study_settings": "tolsim.io.config",
     "run_study": "tolsim.study.execution.runner",
     "write_result": "tolsim.io.netcdf",
     "read_result": "tolsim.io.netcdf",

@@ -336,6 +336,9 @@ def test_config_readers_name_a_wrong_argument_type(call, message):
 def test_study_settings_are_changed_in_the_text_and_checked():
     # Session 24 left this: a config changed with dataclasses.replace is neither checked nor
     # recorded. with_study_settings edits [study] in the text and reads it again.
+    import tolsim
+
+    assert tolsim.with_study_settings is with_study_settings  # the README's name
     config = load_config()
     changed = with_study_settings(config, spot_checks=0, propagation="along_track",
                                   time_steps=12, velocity_deviation_limit=0.002)
