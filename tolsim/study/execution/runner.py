@@ -478,6 +478,41 @@ def _spot_rows_of_shorter_run(config, plan_used, parts):
     return parts
 
 
+def _checked_arguments(config, workers, save_samples, chunk_blocks, max_blocks, target,
+                       progress, notify, checkpoint_interval, checkpoint_path):
+    """:func:`run_study`'s arguments checked before any work, each bad one named in a
+    ValueError; returns (workers, save_samples, chunk_blocks, max_blocks) as ints (NumPy
+    integers taken, bools refused: :func:`~tolsim.study.spec.whole_number`)."""
+    if not isinstance(config, StudyConfig):
+        raise ValueError(f"config = {config!r:.60} must be a StudyConfig: read it with "
+                         "tolsim.load_config(path) or tolsim.parse_config(text)")
+    workers = whole_number("workers", workers, 1)
+    save_samples = whole_number("save_samples", save_samples, 0)
+    if chunk_blocks is not None:
+        chunk_blocks = whole_number("chunk_blocks", chunk_blocks, 1)
+    if max_blocks is not None:
+        max_blocks = whole_number("max_blocks", max_blocks, 1)
+    if target is not None and not isinstance(target, PrecisionTarget):
+        raise ValueError(f"target = {target!r} must be a PrecisionTarget (or None)")
+    for name, value in (("progress", progress), ("notify", notify)):
+        if value is not None and not callable(value):
+            raise ValueError(f"{name} = {value!r} must be callable (or None)")
+    if isinstance(checkpoint_interval, bool) or not isinstance(
+            checkpoint_interval, numbers.Real) or not checkpoint_interval >= 0:
+        raise ValueError(f"checkpoint_interval = {checkpoint_interval!r} must be a number of "
+                         "seconds >= 0")
+    if checkpoint_path is not None:
+        if not isinstance(checkpoint_path, str | os.PathLike) or not os.fspath(
+                checkpoint_path) or os.path.isdir(checkpoint_path):
+            raise ValueError(f"checkpoint_path = {checkpoint_path!r} must be the path of a "
+                             "file (str or os.PathLike)")
+        folder = os.path.dirname(os.path.abspath(os.fspath(checkpoint_path)))
+        if not os.path.isdir(folder):
+            raise ValueError(f"checkpoint_path = {os.fspath(checkpoint_path)!r}: the folder "
+                             f"{folder} does not exist")
+    return workers, save_samples, chunk_blocks, max_blocks
+
+
 def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, progress=None,
               checkpoint_path=None, checkpoint_interval: float = 30.0,
               max_blocks: int | None = None, target: PrecisionTarget | None = None,
@@ -538,33 +573,9 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     UnanswerableStudy
         With ``require_answer``, if every train of the first block is unresolved.
     """
-    if not isinstance(config, StudyConfig):
-        raise ValueError(f"config = {config!r:.60} must be a StudyConfig: read it with "
-                         "tolsim.load_config(path) or tolsim.parse_config(text)")
-    workers = whole_number("workers", workers, 1)
-    save_samples = whole_number("save_samples", save_samples, 0)
-    if chunk_blocks is not None:
-        chunk_blocks = whole_number("chunk_blocks", chunk_blocks, 1)
-    if max_blocks is not None:
-        max_blocks = whole_number("max_blocks", max_blocks, 1)
-    if target is not None and not isinstance(target, PrecisionTarget):
-        raise ValueError(f"target = {target!r} must be a PrecisionTarget (or None)")
-    for name, value in (("progress", progress), ("notify", notify)):
-        if value is not None and not callable(value):
-            raise ValueError(f"{name} = {value!r} must be callable (or None)")
-    if isinstance(checkpoint_interval, bool) or not isinstance(
-            checkpoint_interval, numbers.Real) or not checkpoint_interval >= 0:
-        raise ValueError(f"checkpoint_interval = {checkpoint_interval!r} must be a number of "
-                         "seconds >= 0")
-    if checkpoint_path is not None:
-        if not isinstance(checkpoint_path, str | os.PathLike) or not os.fspath(
-                checkpoint_path) or os.path.isdir(checkpoint_path):
-            raise ValueError(f"checkpoint_path = {checkpoint_path!r} must be the path of a "
-                             "file (str or os.PathLike)")
-        folder = os.path.dirname(os.path.abspath(os.fspath(checkpoint_path)))
-        if not os.path.isdir(folder):
-            raise ValueError(f"checkpoint_path = {os.fspath(checkpoint_path)!r}: the folder "
-                             f"{folder} does not exist")
+    workers, save_samples, chunk_blocks, max_blocks = _checked_arguments(
+        config, workers, save_samples, chunk_blocks, max_blocks, target, progress, notify,
+        checkpoint_interval, checkpoint_path)
     if config.sweep is not None:
         raise ValueError(f"{config.path} has a [sweep] of {config.sweep.size} points: run them "
                          "with tolsim.io.sweep.run_sweep (tolsim run does), or one of "
