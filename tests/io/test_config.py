@@ -411,6 +411,10 @@ def test_study_settings_edge_cases_of_the_text():
     for value in (True, "0.5"):
         with pytest.raises(ConfigError, match="must be a number"):
             with_study_settings(ranged, velocity_deviation_limit=value)
+    # a fraction in one form only (with and without its unit, the order decided)
+    with pytest.raises(ConfigError, match="study.velocity_deviation_limit_percent: give "
+                                          "velocity_deviation_limit as a fraction"):
+        with_study_settings(ranged, velocity_deviation_limit_percent=None)
     # C1: the shortest decimal that reads back exactly
     ppm = parse_config(MINIMAL + "velocity_deviation_limit_ppm = 1000\n")
     changed = with_study_settings(ppm, velocity_deviation_limit=0.002)

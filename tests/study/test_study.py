@@ -680,6 +680,7 @@ def test_paired_forces_in_tension_go_to_the_solved_model():
     ({"checkpoint_interval": "30"}, "checkpoint_interval = '30' must be a number of seconds"),
     ({"checkpoint_path": "/no/such/folder/run.partial"}, "the folder /no/such/folder does not"),
     ({"checkpoint_path": ""}, "checkpoint_path = '' must be the path of a file"),
+    ({"require_answer": "yes"}, "require_answer = 'yes' must be True or False"),
     ({"checkpoint_path": b"run.partial"}, "checkpoint_path = b'run.partial' must be the path"),
     ({"checkpoint_path": 5}, "checkpoint_path = 5 must be the path of a file"),
     ({"checkpoint_path": "/tmp"}, "checkpoint_path = '/tmp' must be the path of a file"),

@@ -54,6 +54,9 @@ def with_study_settings(config: StudyConfig, **settings) -> StudyConfig:
                           "then take its point")
     text = config.text
     for key, value in settings.items():
+        base = next((k for k in FRACTION_KEYS if key.startswith(f"{k}_")), None)
+        if base is not None:  # one form only: the order of two would decide
+            raise ConfigError(f"study.{key}: give {base} as a fraction [-], without a unit")
         if key in FRACTION_KEYS:  # a fraction [-], written with the unit the text uses
             text = _set_fraction(text, key, value, config.path)
         else:

@@ -479,7 +479,7 @@ def _spot_rows_of_shorter_run(config, plan_used, parts):
 
 
 def _checked_arguments(config, workers, save_samples, chunk_blocks, max_blocks, target,
-                       progress, notify, checkpoint_interval, checkpoint_path):
+                       progress, notify, checkpoint_interval, checkpoint_path, require_answer):
     """:func:`run_study`'s arguments checked before any work, each bad one named in a
     ValueError; returns (workers, save_samples, chunk_blocks, max_blocks) as ints (NumPy
     integers taken, bools refused: :func:`~tolsim.study.spec.whole_number`)."""
@@ -494,6 +494,8 @@ def _checked_arguments(config, workers, save_samples, chunk_blocks, max_blocks, 
         max_blocks = whole_number("max_blocks", max_blocks, 1)
     if target is not None and not isinstance(target, PrecisionTarget):
         raise ValueError(f"target = {target!r} must be a PrecisionTarget (or None)")
+    if not isinstance(require_answer, bool | np.bool_):
+        raise ValueError(f"require_answer = {require_answer!r} must be True or False")
     for name, value in (("progress", progress), ("notify", notify)):
         if value is not None and not callable(value):
             raise ValueError(f"{name} = {value!r} must be callable (or None)")
@@ -575,7 +577,7 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
     """
     workers, save_samples, chunk_blocks, max_blocks = _checked_arguments(
         config, workers, save_samples, chunk_blocks, max_blocks, target, progress, notify,
-        checkpoint_interval, checkpoint_path)
+        checkpoint_interval, checkpoint_path, require_answer)
     if config.sweep is not None:
         raise ValueError(f"{config.path} has a [sweep] of {config.sweep.size} points: run them "
                          "with tolsim.io.sweep.run_sweep (tolsim run does), or one of "
