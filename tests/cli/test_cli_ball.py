@@ -178,3 +178,15 @@ def test_ball_shows_its_regime_and_chi(forces, dbeta, regime, capsys):
         assert (chi < 1.0) is (regime == "B")
     assert main(args) == 0
     assert f"regime                {regime}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("load, message", [
+    (["0", "1e6"], "a force above"),
+    (["0", "0"], "no contact carries a force"),
+])
+def test_solved_forces_are_held_to_the_ranges_of_given_ones(load, message, capsys):
+    # CLI audit, session 25: --static solved printed an epsilon for 5e5 N per contact (and
+    # "undefined" for no load), exit 0, where --forces-n with the same forces is refused
+    assert main(["ball", "--static", "solved", "--load-n", *load]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "(solved forces)" in err and message in err, err

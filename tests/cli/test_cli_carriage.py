@@ -425,3 +425,14 @@ def test_no_preload_every_ball_is_two_point_with_zero_epsilon(capsys, tmp_path):
     assert "regimes: 2-point 24" in text
     assert text.count("    open ") >= 48  # two open contacts per ball
     assert "no velocity model takes" not in text
+
+
+def test_figure_paths_are_checked_before_any_figure_is_written(capsys, tmp_path):
+    # CLI audit, session 25: --circuit-figure was written before --plot's missing folder was
+    # found, so the command failed with one figure left behind
+    png = tmp_path / "circuit.png"
+    circuit = CONFIG.parent / "carriage_circuit.toml"
+    err = one_line_error(capsys, ["carriage", str(circuit), "--circuit-figure", str(png),
+                                  "--plot", str(tmp_path / "no" / "x.png")])
+    assert "--plot: cannot write" in err and "its folder does not exist" in err
+    assert not png.exists()

@@ -2,6 +2,7 @@
 the after-contact panel beyond the paper (tolsim's extension) against a study's numbers."""
 
 import csv
+import os
 
 import numpy as np
 import pandas as pd
@@ -232,3 +233,17 @@ def test_fig7_largest_difference_reports_every_mirror_image():
     assert paper.locations_text([(-0.8, 3.0)]) == "ρ = -0.80, θ = +3.00°"
     tiny = paper.readme._tiny
     assert tiny(-1.6e-17) == tiny(0.0) == tiny(1e-17) == "0 ± 1e-12"
+
+
+def test_tolsim_paper_default_folder_is_made_with_its_parent(tmp_path, monkeypatch):
+    # CLI audit, session 25: the default --out reports/paper failed where reports/ was
+    # missing, although its help says "created if missing"
+    import tolsim.reports.paper as paper
+
+    made = []
+    monkeypatch.setattr(paper, "make_paper", lambda out, **kw: made.append(out) or {})
+    monkeypatch.chdir(tmp_path)
+    assert main(["paper", "--quick", "--quiet"]) == 0
+    assert made == [os.path.join("reports", "paper")]
+    # another folder's parent must exist (a typo there is not a new tree)
+    assert main(["paper", "--out", os.path.join("typo", "paper"), "--quick", "--quiet"]) == 2

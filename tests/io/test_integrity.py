@@ -129,6 +129,12 @@ def test_an_altered_and_signed_again_file_is_refused_or_marked(result_file, tmp_
                              "--no-sensitivity"], "inconsistent data: contact_probability = 0.9 "
                                                   "lies outside its interval")
     assert not (tmp_path / "r").exists()
+    # compare likewise (CLI audit, session 25: with --no-verify its forest plot raised
+    # "'xerr' must not contain negative values")
+    assert main(["compare", str(result_file), str(bad), "-o", str(tmp_path / "c")]) == 2
+    assert "inconsistent data: contact_probability = 0.9" in capsys.readouterr().err
+    assert main(["compare", str(result_file), str(bad), "-o", str(tmp_path / "c"), "--quiet",
+                 "--no-verify"]) == 0
     assert main(["report", str(bad), "-o", str(tmp_path / "r"), "--no-sensitivity",
                  "--quiet", "--no-verify"]) == 0
     page = (tmp_path / "r" / "report.html").read_text()

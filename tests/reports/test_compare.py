@@ -431,7 +431,13 @@ def test_compare_errors(yaw_runs, tmp_path, capsys):
     _one_line_error(capsys, ["compare", str(a), str(tmp_path / "missing.nc"), "-o", str(out)],
                     r"missing\.nc: no such file")
     _one_line_error(capsys, ["compare", str(a), str(junk), "-o", str(out)],
-                    r"junk\.nc: cannot open as netCDF")
+                    r"junk\.nc: not a netCDF file")
+    # CLI audit, session 25: a checkpoint gave netCDF's "Unknown file format" (report said it)
+    partial = tmp_path / "run.nc.partial"
+    np.savez(partial, fingerprint=np.array("x"))
+    (tmp_path / "run.nc.partial.npz").rename(partial)  # (savez adds .npz to a path)
+    _one_line_error(capsys, ["compare", str(a), str(partial), "-o", str(out)],
+                    r"run\.nc\.partial: the checkpoint of an interrupted tolsim run")
     _one_line_error(capsys, ["compare", str(foreign), str(a), "-o", str(out)],
                     r"foreign\.nc: not a tolsim study result")
     _one_line_error(capsys, ["compare", str(a), str(tmp_path), "-o", str(out)],

@@ -253,8 +253,15 @@ def _angles_and_forces(args, bearing):
         raise UsageError(f"--load-n {nx:g} {ny:g}: no static equilibrium with compressive "
                          "contact forces (the load must press the top groove down)")
     dbeta_deg = np.rad2deg(sol.contact_angle_deviation)
-    if solved:
+    if solved:  # held to the ranges a given ball is (load 0 0: loose; 1e6 N: no Hertz ellipse)
         forces, source = sol.normal_force, "solved"
+        _check_forces(np.asarray(forces, dtype=float), f"--load-n {nx:g} {ny:g} (solved forces)",
+                      bearing)
+        limit = STATIC_ERROR_OPTIONS["bottom_rotation_deg"][2]
+        if np.any(np.abs(dbeta_deg) > limit):
+            raise UsageError(f"--load-n {nx:g} {ny:g}: the solved contact angles move by "
+                             f"{float(np.max(np.abs(dbeta_deg))):.3g} deg, beyond the models' "
+                             f"+/-{limit:g} deg")
     else:
         forces, source = _forces(args, bearing)
     warnings = []

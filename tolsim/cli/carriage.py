@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 
 import numpy as np
 
@@ -245,6 +246,13 @@ def run(args) -> int:
                          "one; see configs/carriage_preload.toml)")
     if args.seed is not None and args.seed < 0:
         raise UsageError(f"--seed = {args.seed} must be >= 0")
+    for flag, path in (("--circuit-figure", args.circuit_figure), ("--plot", args.plot)):
+        # checked before anything is written: one bad path leaves no other figure behind
+        if path and (os.path.isdir(path) or not os.path.isdir(
+                os.path.dirname(os.path.abspath(path)))):
+            raise UsageError(f"{flag}: cannot write {path}: "
+                             + ("it is a folder" if os.path.isdir(path) else
+                                "its folder does not exist"))
     out = evaluate(config, args.seed)
     if args.circuit_figure:
         _circuit_figure(config, args)

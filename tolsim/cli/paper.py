@@ -29,11 +29,16 @@ examples:
 """
 
 
+#: Where ``tolsim paper`` writes when not told: a folder of the working directory.
+DEFAULT_OUT = os.path.join("reports", "paper")
+
+
 def add_parser(subparsers, formatter_class=None):
     p = subparsers.add_parser("paper", help="reproduce the source paper's figures and Table 2",
                               description=DESCRIPTION, formatter_class=formatter_class)
-    p.add_argument("--out", default=os.path.join("reports", "paper"), metavar="DIR",
-                   help="output folder (created if missing)")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
+                   help=f"output folder, created if missing (any other than {DEFAULT_OUT} "
+                        "must be in an existing folder)")
     p.add_argument("--quick", action="store_true",
                    help="coarse grids (seconds; for tests and previews)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
@@ -45,7 +50,7 @@ def run(args) -> int:
     if os.path.exists(out) and not os.path.isdir(out):
         raise UsageError(f"--out {out} exists and is not a folder")
     parent = os.path.dirname(os.path.abspath(out))
-    if not os.path.isdir(parent):
+    if not os.path.isdir(parent) and out != DEFAULT_OUT:  # (a typo, not a new tree)
         raise UsageError(f"--out {out}: parent folder {parent} does not exist")
     from tolsim.reports.paper import make_paper  # noqa: PLC0415
 

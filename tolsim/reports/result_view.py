@@ -73,13 +73,6 @@ def read_result_file(path, *, validate=False, verify=True):
         raise NotAResult(f"{path}: no such file")
     if os.path.isdir(path):
         raise NotAResult(f"{path}: is a folder, not a result file")
-    if validate:
-        try:
-            return read_result(path, verify=verify)
-        except IntegrityError as exc:
-            raise FailsChecksum(" ".join(str(exc).split())) from None
-        except ValueError as exc:
-            raise NotAResult(" ".join(str(exc).split())) from None
     with open(path, "rb") as fh:
         magic = fh.read(8)
     if magic.startswith(b"PK\x03\x04") and path.endswith(".partial"):
@@ -87,6 +80,17 @@ def read_result_file(path, *, validate=False, verify=True):
                          "run the same command again to finish it")
     if not (magic.startswith(b"\x89HDF\r\n\x1a\n") or magic[:3] == b"CDF"):
         raise NotAResult(f"{path}: not a netCDF file")
+    if validate:
+        try:
+            ds = read_result(path, verify=verify)
+        except IntegrityError as exc:
+            raise FailsChecksum(" ".join(str(exc).split())) from None
+        except ValueError as exc:
+            raise NotAResult(" ".join(str(exc).split())) from None
+        broken = interval_inconsistency(ds)
+        if broken and verify:  # as below
+            raise FailsChecksum(f"{path}: inconsistent data: {broken}")
+        return ds
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
             ds = ds.load()

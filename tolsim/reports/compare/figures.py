@@ -60,8 +60,10 @@ def plot_contact_probability(comparison: Comparison):
                     label=bounds_label)
             bounds_label = None
         ax.errorbar([scale * stat.estimate], [y[i]],
-                    xerr=[[scale * (stat.estimate - stat.ci_lower)],
-                          [scale * (stat.ci_upper - stat.estimate)]],
+                    # clipped at 0: a file read with --no-verify may hold an estimate
+                    # outside its interval (its report says it is unverified)
+                    xerr=[[scale * max(stat.estimate - stat.ci_lower, 0.0)],
+                          [scale * max(stat.ci_upper - stat.estimate, 0.0)]],
                     fmt="o", color=colour, capsize=4, lw=1.6, ms=6, zorder=3)
     limits = {x for x in (number(r.ds, "contact_probability_limit") for r in runs)
               if np.isfinite(x) and x > 0}
@@ -91,7 +93,8 @@ def plot_contact_probability(comparison: Comparison):
         lo = diff.ci_lower if np.isfinite(diff.ci_lower) else diff.estimate
         hi = diff.ci_upper if np.isfinite(diff.ci_upper) else diff.estimate
         ax_d.errorbar([scale * diff.estimate], [y[i]],
-                      xerr=[[scale * (diff.estimate - lo)], [scale * (hi - diff.estimate)]],
+                      xerr=[[scale * max(diff.estimate - lo, 0.0)],
+                            [scale * max(hi - diff.estimate, 0.0)]],
                       fmt="D", color=_run_style(i)["color"], capsize=4, lw=1.6, ms=5)
     span = scale * max(d_ends, default=0.0)
     if span > 0:
