@@ -190,3 +190,16 @@ def test_solved_forces_are_held_to_the_ranges_of_given_ones(load, message, capsy
     assert main(["ball", "--static", "solved", "--load-n", *load]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "(solved forces)" in err and message in err, err
+
+
+@pytest.mark.parametrize("argv", [
+    ["--push-n", "1e9"],  # the ball slides as a whole
+    ["--model", "full", "--forces-n", "1e-300", "1e-300", "1e-300", "1e-300"],  # no convergence
+])
+def test_no_epsilon_is_printed_where_there_is_none(argv, capsys):
+    # CLI audit, session 25: +148534824 % for a sliding ball, +0.0000 % for a full-model
+    # solve that did not converge (the JSON says "sliding" / "converged": false)
+    assert main(["ball", *argv]) == 0
+    out = capsys.readouterr()
+    assert "velocity deviation    undefined (see the warning)" in out.out
+    assert "warning: " in out.out and "warning" not in out.err  # once

@@ -510,7 +510,11 @@ def _load_output(model, loads, result):
 
 def _text(out):
     eps = out["velocity_deviation_percent"]
-    defined = math.isfinite(eps)
+    # not printed as a number where it is none: the full model did not converge, or the ball
+    # slides as a whole (the analytic model's epsilon then means nothing; the JSON keeps it
+    # with "converged" and "sliding")
+    defined = math.isfinite(eps) and out.get("converged") is not False and not out.get(
+        "sliding", False)
     lines = [
         f"model                 {out['model']}",
         f"velocity deviation    {eps:+.4f} %" if defined else
@@ -593,7 +597,7 @@ def _strict_json(value):
 
 def run(args):
     out = evaluate(args)
-    if out.get("converged") is False:
+    if out.get("converged") is False and args.json:  # (the text prints its warnings)
         for w in out["warnings"]:
             print(f"tolsim ball: warning: {w}", file=sys.stderr)
     if args.json:
