@@ -72,6 +72,12 @@ def test_point_model_reports_sliding_contact(capsys):
         (["--forces-n", "inf", "100", "100", "100"], "--forces-n"),
         (["--model", "full", "--forces-n", "1e300", "1", "1", "1"], "R_B / 2"),
         (["--model", "full", "--dbeta-deg", "50", "0", "0", "0"], "--dbeta-deg 50 is outside"),
+        # CLI audit, session 25 (cosmetic): taken beyond what a config takes, or ignored
+        (["--velocity-mm-s", "1e30"], "--velocity-mm-s 1e+30 is beyond 10000 mm/s"),
+        (["--neighbour-forces-n", "1", "0", "--ball-friction", "50"],
+         "--ball-friction 50 is beyond 1, the most the config's "
+         "contact.ball_friction_coefficient takes"),
+        (["--config", ""], "--config: the path is empty"),
     ],
 )
 def test_bad_arguments_one_line_exit_2(args, needle):
@@ -203,3 +209,15 @@ def test_no_epsilon_is_printed_where_there_is_none(argv, capsys):
     out = capsys.readouterr()
     assert "velocity deviation    undefined (see the warning)" in out.out
     assert "warning: " in out.out and "warning" not in out.err  # once
+
+
+@pytest.mark.parametrize("value, text", [
+    (0.0, "+0.0000 %"), (-0.0, "+0.0000 %"), (0.25, "+0.2500 %"), (-5e-5, "-0.0001 %"),
+    (-1e-17, "-1e-17 %"), (3.21e-6, "+3.21e-06 %"),
+])
+def test_percentages_too_small_for_four_decimals_keep_their_digits(value, text):
+    # CLI audit, session 25: an epsilon of -1e-17 % (round-off of a balanced ball) printed
+    # as "-0.0000 %"
+    from tolsim.cli.ball import _percent
+
+    assert _percent(value) == text

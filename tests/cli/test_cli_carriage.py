@@ -299,7 +299,7 @@ def test_text_output_and_plot(capsys, tmp_path):
     text = capsys.readouterr().out
     assert "F_BL" in text and "rho" in text and "epsilon" in text
     assert "N/um" in text and "N m/urad" in text
-    assert "locked: none" in text and "converged: yes" in text
+    assert "(locked): none" in text and "converged: yes" in text
     assert len([line for line in text.splitlines() if re.match(r"^\s+[01]\s+\d+\s", line)]) == 24
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -436,3 +436,11 @@ def test_figure_paths_are_checked_before_any_figure_is_written(capsys, tmp_path)
                                   "--plot", str(tmp_path / "no" / "x.png")])
     assert "--plot: cannot write" in err and "its folder does not exist" in err
     assert not png.exists()
+
+
+def test_a_figure_path_that_is_not_png_is_refused_before_any_work(tmp_path, capsys):
+    # CLI audit, session 25: --plot out.pdf wrote PNG bytes into out.pdf
+    pdf = tmp_path / "load.pdf"
+    err = one_line_error(capsys, ["carriage", str(CONFIG), "--plot", str(pdf)])
+    assert "--plot" in err and "must end in .png" in err
+    assert not pdf.exists()

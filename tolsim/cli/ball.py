@@ -166,6 +166,8 @@ def _external_loads(args):
     mu_bb = DEFAULT_BALL_FRICTION if args.ball_friction is None else args.ball_friction
     if not (math.isfinite(mu_bb) and mu_bb >= 0):
         raise UsageError(f"--ball-friction must be a finite coefficient >= 0, got {mu_bb:g}")
+    _within_config_range("--ball-friction", mu_bb, "contact.ball_friction_coefficient", 1.0,
+                         "")
     return {"neighbour_force": [q_back, q_front], "ball_friction": mu_bb}
 
 
@@ -291,7 +293,9 @@ def _angles_and_forces(args, bearing):
 def _bearing_and_velocity(args):
     """Bearing and top-groove velocity [m/s] from --config or Table 1."""
     bearing, velocity = TABLE1, TABLE1_GROOVE_VELOCITY
-    if args.config:
+    if args.config is not None:
+        if not args.config.strip():
+            raise UsageError("--config: the path is empty")
         from tolsim.io.config import ConfigError, load_config  # io layer, only when asked # noqa: PLC0415
 
         try:
@@ -305,8 +309,22 @@ def _bearing_and_velocity(args):
         if not (math.isfinite(args.velocity_mm_s) and args.velocity_mm_s > 0):
             raise UsageError(f"--velocity-mm-s must be a positive number, got "
                              f"{args.velocity_mm_s:g}")
+        _within_config_range("--velocity-mm-s", args.velocity_mm_s, "motion.groove_velocity",
+                             1e3, " mm/s")
         velocity = args.velocity_mm_s * 1e-3
     return bearing, velocity
+
+
+def _within_config_range(flag, value, key, factor, unit):
+    """Refuse ``value`` (in the option's unit: SI times ``factor``) beyond the possible
+    interval that a config's ``key`` is held to (:data:`tolsim.io.config.plausibility.RANGES`),
+    with its reason: an option takes what the config would."""
+    from tolsim.io.config.plausibility import RANGES  # io layer, only when asked # noqa: PLC0415
+
+    bound = RANGES[key]
+    if bound.high is not None and value > bound.high * factor:
+        raise UsageError(f"{flag} {value:g} is beyond {bound.high * factor:g}{unit}, the most "
+                         f"the config's {key} takes ({bound.source})")
 
 
 def largest_force(bearing) -> float:
@@ -508,6 +526,14 @@ def _load_output(model, loads, result):
     return out
 
 
+def _percent(value):
+    """A percentage to 4 decimals, and one that would round to 0 in 3 significant digits
+    (printed as -0.0000 % before, for an epsilon of -1e-17 %); an exact zero is +0.0000 %."""
+    if value == 0.0 or abs(value) >= 5e-5:
+        return f"{value + 0.0:+.4f} %"
+    return f"{value:+.3g} %"
+
+
 def _text(out):
     eps = out["velocity_deviation_percent"]
     # not printed as a number where it is none: the full model did not converge, or the ball
@@ -517,7 +543,7 @@ def _text(out):
         "sliding", False)
     lines = [
         f"model                 {out['model']}",
-        f"velocity deviation    {eps:+.4f} %" if defined else
+        f"velocity deviation    {_percent(eps)}" if defined else
         "velocity deviation    undefined (see the warning)",
         (f"ball velocity         {out['ball_velocity_m_s'] * 1e3:.6f} mm/s " if defined else
          "ball velocity         undefined ")
@@ -531,7 +557,7 @@ def _text(out):
                      + "  ".join(f"{g:9.4f}" if math.isfinite(g) else f"{'undefined':>9}"
                                  for g in out["zero_velocity_offset_deg"]))
     if "velocity_deviation_eq22" in out and math.isfinite(out["velocity_deviation_eq22"]):
-        lines.append(f"epsilon, Eq. (22)     {100 * out['velocity_deviation_eq22']:+.4f} %")
+        lines.append(f"epsilon, Eq. (22)     {_percent(100 * out['velocity_deviation_eq22'])}")
     if "sliding_contact" in out:
         lines.append(f"sliding contact       {out['sliding_contact']}")
     if "drag_force_n" in out and math.isfinite(out["drag_force_n"]):

@@ -228,7 +228,8 @@ def _text(out) -> str:
     k = out["stiffness"]["matrix"]
     lines.append(f"catalogue: vertical {k[1][1]:.4g} N/um, lateral {k[0][0]:.4g} N/um, pitch "
                  f"{k[2][2]:.4g}, yaw {k[3][3]:.4g}, roll {k[4][4]:.4g} N m/urad")
-    lines.append(f"locked: {', '.join(out['locked']) if out['locked'] else 'none'}")
+    lines.append("DOFs the tracks cannot resist (locked): "
+                 + (", ".join(out["locked"]) if out["locked"] else "none"))
     lines.append(f"converged: {'yes' if out['converged'] else 'NO'} "
                  f"({out['iterations']} Newton steps)")
     return "\n".join(lines)
@@ -253,6 +254,9 @@ def run(args) -> int:
             raise UsageError(f"{flag}: cannot write {path}: "
                              + ("it is a folder" if os.path.isdir(path) else
                                 "its folder does not exist"))
+        if path and not path.lower().endswith(".png"):
+            raise UsageError(f"{flag}: {path} must end in .png (the figure is written as "
+                             "PNG)")
     out = evaluate(config, args.seed)
     if args.circuit_figure:
         _circuit_figure(config, args)
