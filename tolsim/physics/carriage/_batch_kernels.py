@@ -223,7 +223,7 @@ def _lane_angles(w, s0, c0, dist):
             w[_L_DB + i, b] = atan_small(tan) if abs(tan) <= SMALL_TAN else np.nan
 
 
-@jit
+@jit(inline="always")
 def _lane_arc_centres(a, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, w, work):
     """Rows _L_DC (C_i + d n_i, carriage groove at g = 0) of every ball of assembly a.
 
@@ -403,11 +403,10 @@ def _track_assembly(w, frame, zeta, q_ext, residual, reduced, tangent, ball_tol)
     return fmax, force2, balls_ok
 
 
-@jit
-def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, max_iter, ball_tol,
-                  ball_max_iter, ball_floor, force_floor, load_norm, singular, geometric,
-                  k_ref, eig_work, cap, limit, resolve, start_resolve, q_ext, residual, tangent,
-                  state, work, low, step, reduced):
+@jit(inline="always")
+def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, ball_tol, ball_max_iter,
+                  ball_floor, force_floor, load_norm, singular, geometric, k_ref, eig_work, cap,
+                  limit, q_ext, residual, tangent, state, work, low, step, reduced):
     """Newton on the balls and the carriage together (the fast path): its steps, or -1.
 
     Unknowns: every ball centre P_b and q. Linearising the ball balance r_b = sum_i F_i u_i
@@ -419,8 +418,8 @@ def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, max_iter,
 
     (the tangent of the nested Newton, which has r_b = 0). A step costs one flank pass over
     the balls (:func:`_lane_balls`, vectorised) instead of a Newton solve of every ball.
-    While some ball's relative imbalance exceeds ``start_resolve`` at the start
-    (_START_STEPS times) or ``resolve`` after a step (_LOCAL_STEPS times) all balls take a
+    While some ball's relative imbalance exceeds _START_RESOLVE at the start
+    (_START_STEPS times) or _RESOLVE after a step (_LOCAL_STEPS times) all balls take a
     ball-only Newton step (:func:`_lane_local_step`); a ball still above it is solved alone
     by ``flank_newton``.
     Loose balls take the 1.5 correction of :func:`_lane_correct`. Steps are capped as the
@@ -428,7 +427,7 @@ def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, max_iter,
     when every ball's imbalance is <= ball_tol max(F_max,b, ball_floor) and the carriage's
     <= tol, as the nested Newton. Returns -1 (the caller falls back to the nested Newton) on
     a singular tangent, a ball step beyond 0.1 d, a motion beyond ``limit``, a failed ball
-    solve, no carriage force under a load, or max_iter steps.
+    solve, no carriage force under a load, or _JOINT_MAX_ITER steps.
 
     On entry w holds the arc centres (rows _L_DC), the oversizes and the start of P; q the
     start of the carriage. On success q, residual[0], tangent[0], state[0] (NaN energy: no
@@ -456,12 +455,12 @@ def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, max_iter,
             worst = 0.0
             for b in range(nball):
                 worst = max(worst, w[_L_RES, b])
-            if worst <= (start_resolve if it == 0 else resolve):
+            if worst <= (_START_RESOLVE if it == 0 else _RESOLVE):
                 break
             _lane_local_step(nball, w, dist)
             _lane_balls(w, s0, c0, dist, k, ball_floor)
         for b in range(nball):
-            if not w[_L_RES, b] <= (start_resolve if it == 0 else resolve):  # alone (or NaN)
+            if not w[_L_RES, b] <= (_START_RESOLVE if it == 0 else _RESOLVE):  # alone (or NaN)
                 _lane_work(w, b, s0, c0, dist, work)
                 px, py, _, ok, _ = flank_newton(work, 0, 4, dist, w[_L_H, b], k, 0.0, 0.0,
                                                 w[_L_P, b], w[_L_P + 1, b], ball_tol,
@@ -481,7 +480,7 @@ def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, max_iter,
             if not force2 > 0.0 and load_norm > 0.0:
                 return -1
             return it
-        if it >= max_iter:
+        if it >= _JOINT_MAX_ITER:
             return -1
         it += 1
         if formed_pivot(cholesky(tangent[0], free, low), singular, geometric, amap, free, k_ref,
@@ -654,200 +653,222 @@ def carriage_batch_kernel(groove_maps, frame, zetas, free, geometrics, geometric
     Outputs as :class:`CarriageBatch` (scaled back: q = q_s scale, K = K_s / scale scale^T).
     """
     nasm = out_status.shape[0]
+    for tile in prange((nasm + _ASSEMBLY_TILE - 1) // _ASSEMBLY_TILE):
+        _solve_tile(tile, groove_maps, frame, zetas, free, geometrics, geometric_maxs,
+                    ball_z, tracks, length, loaded, load, start, e_n, e_t, rot_b, rot_t,
+                    off_b, off_t, oversize_error, oversize, scale, beta0, dist, k, tol,
+                    max_iter, ball_tol, ball_max_iter, out_dbeta, out_force, out_side,
+                    out_normal, out_count, out_ball_converged, out_displacement,
+                    out_stiffness, out_residual, out_iterations, out_status, out_fallback,
+                    joint)
+
+
+@jit
+def _solve_tile(tile, groove_maps, frame, zetas, free, geometrics, geometric_maxs,
+                ball_z, tracks, length, loaded, load, start, e_n, e_t, rot_b, rot_t, off_b,
+                off_t, oversize_error, oversize, scale, beta0, dist, k, tol, max_iter,
+                ball_tol, ball_max_iter, out_dbeta, out_force, out_side, out_normal,
+                out_count, out_ball_converged, out_displacement, out_stiffness,
+                out_residual, out_iterations, out_status, out_fallback, joint):
+    """The assemblies of tile ``tile`` of :func:`carriage_batch_kernel` (its arguments),
+    with the tile's scratch. A function of its own, so that the joint Newton and the arc
+    centres are inlined into it (``inline="always"``): called with two dozen arrays once per
+    assembly, each took and released a reference to every array argument (atomic counts on
+    arrays both threads share), some 13 % of a solve's time (perf, session 26). Now that
+    happens once per tile."""
+    nasm = out_status.shape[0]
     nball = groove_maps.shape[1]
     moving = ball_z.shape[0] > 0
     s0, c0 = np.sin(beta0), np.cos(beta0)
     floor = k * FLOOR_LENGTH**1.5
     limit = LIFT_OFF * dist
     cap = STEP_CAP * dist
-    for tile in prange((nasm + _ASSEMBLY_TILE - 1) // _ASSEMBLY_TILE):
-        base = np.empty((nball, 4, 6))
-        half = np.empty(nball)
-        w = np.empty((_L_ROWS, nball))
-        pos = np.empty((2, nball, 2))
-        grv = np.empty((2, nball, 2))
-        resp = np.empty((2, nball, 4))
-        ball_ok = np.empty((2, nball), dtype=np.bool_)
-        residual = np.empty((2, 5))
-        tangent = np.empty((2, 5, 5))
-        state = np.empty((2, 3))
-        q = np.empty(5)
-        q_ext = np.empty(5)
-        step = np.empty(5)
-        trial = np.empty(5)
-        reduced = np.empty(5)
-        kreg = np.empty((5, 5))
-        singular = np.empty(3)
-        low = np.empty((5, 5))
-        work = np.empty((4, 6))
-        unit = np.empty((4, 2))
-        approach = np.empty((nball, 4))
-        amap = np.empty((10, nball))
-        own_map = np.empty((nball, 2, 5))
-        own_zeta = np.empty(nball)
-        own_geometric = np.empty((5, 5))
-        for a in range(tile * _ASSEMBLY_TILE, min(nasm, (tile + 1) * _ASSEMBLY_TILE)):
-            il = a if load.shape[0] > 1 else 0
-            i_s = a if start.shape[0] > 1 else 0
-            iz = a if loaded.shape[0] > 1 else 0
-            if moving:  # the balls' own maps (by rows), at their own z; of sum_b A_b^T A_b
-                # its diagonal, the rest when needed (formed_pivot, the nested fallback)
-                assembly_groove_rows(ball_z[a], loaded[iz], tracks, scale, length, amap,
-                                     own_zeta)
-                gram_diagonal(amap, own_geometric)
-                groove_map, zeta, geometric, geometric_max = (own_map, own_zeta,
-                                                              own_geometric, np.nan)
-            else:
-                ig = a if groove_maps.shape[0] > 1 else 0
-                groove_map, zeta = groove_maps[ig], zetas[ig]
-                geometric, geometric_max = geometrics[ig], geometric_maxs[ig]
-            if not moving and (groove_maps.shape[0] > 1 or a == tile * _ASSEMBLY_TILE):
-                for b in range(nball):  # A by rows
+    base = np.empty((nball, 4, 6))
+    half = np.empty(nball)
+    w = np.empty((_L_ROWS, nball))
+    pos = np.empty((2, nball, 2))
+    grv = np.empty((2, nball, 2))
+    resp = np.empty((2, nball, 4))
+    ball_ok = np.empty((2, nball), dtype=np.bool_)
+    residual = np.empty((2, 5))
+    tangent = np.empty((2, 5, 5))
+    state = np.empty((2, 3))
+    q = np.empty(5)
+    q_ext = np.empty(5)
+    step = np.empty(5)
+    trial = np.empty(5)
+    reduced = np.empty(5)
+    kreg = np.empty((5, 5))
+    singular = np.empty(3)
+    low = np.empty((5, 5))
+    work = np.empty((4, 6))
+    unit = np.empty((4, 2))
+    approach = np.empty((nball, 4))
+    amap = np.empty((10, nball))
+    own_map = np.empty((nball, 2, 5))
+    own_zeta = np.empty(nball)
+    own_geometric = np.empty((5, 5))
+    for a in range(tile * _ASSEMBLY_TILE, min(nasm, (tile + 1) * _ASSEMBLY_TILE)):
+        il = a if load.shape[0] > 1 else 0
+        i_s = a if start.shape[0] > 1 else 0
+        iz = a if loaded.shape[0] > 1 else 0
+        if moving:  # the balls' own maps (by rows), at their own z; of sum_b A_b^T A_b
+            # its diagonal, the rest when needed (formed_pivot, the nested fallback)
+            assembly_groove_rows(ball_z[a], loaded[iz], tracks, scale, length, amap,
+                                 own_zeta)
+            gram_diagonal(amap, own_geometric)
+            groove_map, zeta, geometric, geometric_max = (own_map, own_zeta,
+                                                          own_geometric, np.nan)
+        else:
+            ig = a if groove_maps.shape[0] > 1 else 0
+            groove_map, zeta = groove_maps[ig], zetas[ig]
+            geometric, geometric_max = geometrics[ig], geometric_maxs[ig]
+        if not moving and (groove_maps.shape[0] > 1 or a == tile * _ASSEMBLY_TILE):
+            for b in range(nball):  # A by rows
+                for c in range(2):
+                    for j in range(5):
+                        amap[5 * c + j, b] = groove_map[b, c, j]
+        load_norm = 0.0
+        for j in range(5):
+            q_ext[j] = load[il, j] * scale[j]
+            load_norm = max(load_norm, abs(q_ext[j]))
+            q[j] = start[i_s, j]
+        omax = -np.inf
+        nloaded = 0
+        for b in range(nball):
+            n = a * nball + b
+            o = (oversize_error[n if oversize_error.shape[0] > 1 else 0]
+                 + oversize[n if oversize.shape[0] > 1 else 0])
+            if loaded[iz, b]:
+                half[b] = 0.5 * o
+                omax = max(omax, o)
+                nloaded += 1
+            else:  # free: no flank reaches it
+                half[b] = -0.5 * dist
+            w[_L_H, b] = half[b]
+        _lane_arc_centres(a, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, w, work)
+        for b in range(nball):
+            gx = gy = 0.0
+            for j in range(5):
+                gx += amap[j, b] * q[j]
+                gy += amap[5 + j, b] * q[j]
+            px, py = _ball_start(w, b, s0, c0)
+            w[_L_P, b] = px + 0.5 * gx
+            w[_L_P + 1, b] = py + 0.5 * gy
+        # reference ball force and stiffness, as solve_carriage
+        f_ref = max(load_norm / max(nloaded, 1), k * max(0.5 * omax, 0.0) ** 1.5)
+        delta_ref = max((f_ref / k) ** (2.0 / 3.0), FLOOR_LENGTH)
+        k_ref = 1.5 * k * np.sqrt(delta_ref) * 0.5
+        ball_floor = max(f_ref, floor)
+        if np.isnan(geometric_max):  # not given: bounds, the value when needed
+            trace_bounds(geometric, free, k_ref, singular)
+        else:
+            for i in range(3):
+                singular[i] = 1e-10 * k_ref * geometric_max
+        it = -1
+        if joint:
+            # (30 arguments at most: CPython passes more as *args, which Numba cannot inline)
+            it = _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, ball_tol,
+                               ball_max_iter, ball_floor, floor, load_norm, singular, geometric,
+                               k_ref, kreg, cap, limit, q_ext, residual, tangent, state, work,
+                               low, step, reduced)
+        out_fallback[a] = joint and it < 0
+        if it >= 0:
+            status, cur, last = STATUS_CONVERGED, 0, 0
+            for b in range(nball):
+                pos[0, b, 0] = w[_L_P, b]
+                pos[0, b, 1] = w[_L_P + 1, b]
+                grv[0, b, 0] = w[_L_G, b]
+                grv[0, b, 1] = w[_L_G + 1, b]
+                ball_ok[0, b] = True
+        else:
+            for j in range(5):
+                q[j] = start[i_s, j]
+            if moving:  # the maps by balls and the whole sum_b A_b^T A_b
+                for b in range(nball):
                     for c in range(2):
                         for j in range(5):
-                            amap[5 * c + j, b] = groove_map[b, c, j]
-            load_norm = 0.0
-            for j in range(5):
-                q_ext[j] = load[il, j] * scale[j]
-                load_norm = max(load_norm, abs(q_ext[j]))
-                q[j] = start[i_s, j]
-            omax = -np.inf
-            nloaded = 0
+                            own_map[b, c, j] = amap[5 * c + j, b]
+                if np.isnan(own_geometric[0, 1]):
+                    gram_of_rows(amap, own_geometric)
             for b in range(nball):
-                n = a * nball + b
-                o = (oversize_error[n if oversize_error.shape[0] > 1 else 0]
-                     + oversize[n if oversize.shape[0] > 1 else 0])
-                if loaded[iz, b]:
-                    half[b] = 0.5 * o
-                    omax = max(omax, o)
-                    nloaded += 1
-                else:  # free: no flank reaches it
-                    half[b] = -0.5 * dist
-                w[_L_H, b] = half[b]
-            _lane_arc_centres(a, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, w, work)
+                arc_centres(a * nball + b, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0,
+                            dist, base[b])
+            status, it, cur, last = nested_newton(
+                q, free, groove_map, geometric, base, half, s0, c0, dist, k, tol, max_iter,
+                ball_tol, ball_max_iter, ball_floor, floor, load_norm, k_ref, singular, cap,
+                limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state, kreg,
+                low, step, trial)
+        out_status[a] = status
+        out_iterations[a] = it
+        if status == STATUS_LIFT_OFF or status == STATUS_FAILED:
             for b in range(nball):
-                gx = gy = 0.0
-                for j in range(5):
-                    gx += amap[j, b] * q[j]
-                    gy += amap[5 + j, b] * q[j]
-                px, py = _ball_start(w, b, s0, c0)
-                w[_L_P, b] = px + 0.5 * gx
-                w[_L_P + 1, b] = py + 0.5 * gy
-            # reference ball force and stiffness, as solve_carriage
-            f_ref = max(load_norm / max(nloaded, 1), k * max(0.5 * omax, 0.0) ** 1.5)
-            delta_ref = max((f_ref / k) ** (2.0 / 3.0), FLOOR_LENGTH)
-            k_ref = 1.5 * k * np.sqrt(delta_ref) * 0.5
-            ball_floor = max(f_ref, floor)
-            if np.isnan(geometric_max):  # not given: bounds, the value when needed
-                trace_bounds(geometric, free, k_ref, singular)
-            else:
-                for i in range(3):
-                    singular[i] = 1e-10 * k_ref * geometric_max
-            it = -1
-            if joint:
-                it = _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol,
-                                   _JOINT_MAX_ITER, ball_tol, ball_max_iter, ball_floor, floor,
-                                   load_norm, singular, geometric, k_ref, kreg, cap, limit,
-                                   _RESOLVE, _START_RESOLVE, q_ext, residual, tangent, state,
-                                   work, low, step,
-                                   reduced)
-            out_fallback[a] = joint and it < 0
-            if it >= 0:
-                status, cur, last = STATUS_CONVERGED, 0, 0
-                for b in range(nball):
-                    pos[0, b, 0] = w[_L_P, b]
-                    pos[0, b, 1] = w[_L_P + 1, b]
-                    grv[0, b, 0] = w[_L_G, b]
-                    grv[0, b, 1] = w[_L_G + 1, b]
-                    ball_ok[0, b] = True
-            else:
-                for j in range(5):
-                    q[j] = start[i_s, j]
-                if moving:  # the maps by balls and the whole sum_b A_b^T A_b
-                    for b in range(nball):
-                        for c in range(2):
-                            for j in range(5):
-                                own_map[b, c, j] = amap[5 * c + j, b]
-                    if np.isnan(own_geometric[0, 1]):
-                        gram_of_rows(amap, own_geometric)
-                for b in range(nball):
-                    arc_centres(a * nball + b, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0,
-                                dist, base[b])
-                status, it, cur, last = nested_newton(
-                    q, free, groove_map, geometric, base, half, s0, c0, dist, k, tol, max_iter,
-                    ball_tol, ball_max_iter, ball_floor, floor, load_norm, k_ref, singular, cap,
-                    limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state, kreg,
-                    low, step, trial)
-            out_status[a] = status
-            out_iterations[a] = it
-            if status == STATUS_LIFT_OFF or status == STATUS_FAILED:
-                for b in range(nball):
-                    out_ball_converged[a, b] = ball_ok[last, b]
-                    out_count[a, b] = 0
-                    out_side[a, b] = np.nan
-                    out_normal[a, b] = np.nan
-                    for i in range(4):
-                        out_dbeta[a, b, i] = np.nan
-                        out_force[a, b, i] = np.nan
-                for i in range(5):
-                    out_displacement[a, i] = np.nan
-                    out_residual[a, i] = np.nan
-                    for j in range(5):
-                        out_stiffness[a, i, j] = np.nan
-                continue
-            if not out_fallback[a] and joint:  # from the lanes of the joint Newton
-                _lane_angles(w, s0, c0, dist)
-                for b in range(nball):
-                    count = 0
-                    for i in range(4):
-                        f = w[_L_F01 + i, b] if i < 2 else w[_L_F23 + i - 2, b]
-                        out_force[a, b, i] = f
-                        count += f > 0.0
-                        dbeta = w[_L_DB + i, b]
-                        if np.isnan(dbeta):  # beyond the series: as ball_outputs
-                            _lane_work(w, b, s0, c0, dist, work)
-                            ux, uy, _, _, _, _ = flank(w[_L_P, b], w[_L_P + 1, b], work, i,
-                                                       dist, half[b], k)
-                            nx, ny = work[i, 4], work[i, 5]
-                            sxy = 1.0 if (i == 0 or i == 2) else -1.0
-                            dbeta = np.arctan2(sxy * (ny * ux - nx * uy), nx * ux + ny * uy)
-                        out_dbeta[a, b, i] = dbeta
-                    out_count[a, b] = count
-                    # (N_x, -N_y) = -(F_TR u_TR + F_TL u_TL), as displacement_one
-                    out_side[a, b] = -w[_L_F, b]
-                    out_normal[a, b] = w[_L_F + 1, b]
-                    out_ball_converged[a, b] = True
-                for i in range(5):
-                    out_displacement[a, i] = q[i] * scale[i]
-                    out_residual[a, i] = residual[0, i] / scale[i]
-                    for j in range(5):
-                        out_stiffness[a, i, j] = tangent[0, i, j] / (scale[i] * scale[j])
-                _settle_loose(a, ball_tol * ball_floor, s0, c0, out_force, out_dbeta,
-                              out_side, out_normal, out_count)
-                if nloaded < nball:
-                    _unloaded_outputs(loaded[iz], a, out_dbeta, out_force, out_side,
-                                      out_normal, out_count, out_ball_converged)
-                continue
-            dbeta_a = out_dbeta[a]
-            force_a = out_force[a]
-            for b in range(nball):
+                out_ball_converged[a, b] = ball_ok[last, b]
+                out_count[a, b] = 0
+                out_side[a, b] = np.nan
+                out_normal[a, b] = np.nan
                 for i in range(4):
-                    for c in range(6):
-                        work[i, c] = base[b, i, c]
-                move_top_groove(work, grv[cur, b, 0], grv[cur, b, 1])
-                out_count[a, b] = ball_outputs(b, work, pos[cur, b, 0], pos[cur, b, 1], dist,
-                                               half[b], k, dbeta_a, force_a, approach, unit)
+                    out_dbeta[a, b, i] = np.nan
+                    out_force[a, b, i] = np.nan
+            for i in range(5):
+                out_displacement[a, i] = np.nan
+                out_residual[a, i] = np.nan
+                for j in range(5):
+                    out_stiffness[a, i, j] = np.nan
+            continue
+        if not out_fallback[a] and joint:  # from the lanes of the joint Newton
+            _lane_angles(w, s0, c0, dist)
+            for b in range(nball):
+                count = 0
+                for i in range(4):
+                    f = w[_L_F01 + i, b] if i < 2 else w[_L_F23 + i - 2, b]
+                    out_force[a, b, i] = f
+                    count += f > 0.0
+                    dbeta = w[_L_DB + i, b]
+                    if np.isnan(dbeta):  # beyond the series: as ball_outputs
+                        _lane_work(w, b, s0, c0, dist, work)
+                        ux, uy, _, _, _, _ = flank(w[_L_P, b], w[_L_P + 1, b], work, i,
+                                                   dist, half[b], k)
+                        nx, ny = work[i, 4], work[i, 5]
+                        sxy = 1.0 if (i == 0 or i == 2) else -1.0
+                        dbeta = np.arctan2(sxy * (ny * ux - nx * uy), nx * ux + ny * uy)
+                    out_dbeta[a, b, i] = dbeta
+                out_count[a, b] = count
                 # (N_x, -N_y) = -(F_TR u_TR + F_TL u_TL), as displacement_one
-                out_side[a, b] = -(force_a[b, 2] * unit[2, 0] + force_a[b, 3] * unit[3, 0])
-                out_normal[a, b] = force_a[b, 2] * unit[2, 1] + force_a[b, 3] * unit[3, 1]
-                out_ball_converged[a, b] = ball_ok[cur, b]
+                out_side[a, b] = -w[_L_F, b]
+                out_normal[a, b] = w[_L_F + 1, b]
+                out_ball_converged[a, b] = True
             for i in range(5):
                 out_displacement[a, i] = q[i] * scale[i]
-                out_residual[a, i] = residual[cur, i] / scale[i]
+                out_residual[a, i] = residual[0, i] / scale[i]
                 for j in range(5):
-                    out_stiffness[a, i, j] = tangent[cur, i, j] / (scale[i] * scale[j])
-            _settle_loose(a, ball_tol * ball_floor, s0, c0, out_force, out_dbeta, out_side,
-                          out_normal, out_count)
+                    out_stiffness[a, i, j] = tangent[0, i, j] / (scale[i] * scale[j])
+            _settle_loose(a, ball_tol * ball_floor, s0, c0, out_force, out_dbeta,
+                          out_side, out_normal, out_count)
             if nloaded < nball:
-                _unloaded_outputs(loaded[iz], a, out_dbeta, out_force, out_side, out_normal,
-                                  out_count, out_ball_converged)
+                _unloaded_outputs(loaded[iz], a, out_dbeta, out_force, out_side,
+                                  out_normal, out_count, out_ball_converged)
+            continue
+        dbeta_a = out_dbeta[a]
+        force_a = out_force[a]
+        for b in range(nball):
+            for i in range(4):
+                for c in range(6):
+                    work[i, c] = base[b, i, c]
+            move_top_groove(work, grv[cur, b, 0], grv[cur, b, 1])
+            out_count[a, b] = ball_outputs(b, work, pos[cur, b, 0], pos[cur, b, 1], dist,
+                                           half[b], k, dbeta_a, force_a, approach, unit)
+            # (N_x, -N_y) = -(F_TR u_TR + F_TL u_TL), as displacement_one
+            out_side[a, b] = -(force_a[b, 2] * unit[2, 0] + force_a[b, 3] * unit[3, 0])
+            out_normal[a, b] = force_a[b, 2] * unit[2, 1] + force_a[b, 3] * unit[3, 1]
+            out_ball_converged[a, b] = ball_ok[cur, b]
+        for i in range(5):
+            out_displacement[a, i] = q[i] * scale[i]
+            out_residual[a, i] = residual[cur, i] / scale[i]
+            for j in range(5):
+                out_stiffness[a, i, j] = tangent[cur, i, j] / (scale[i] * scale[j])
+        _settle_loose(a, ball_tol * ball_floor, s0, c0, out_force, out_dbeta, out_side,
+                      out_normal, out_count)
+        if nloaded < nball:
+            _unloaded_outputs(loaded[iz], a, out_dbeta, out_force, out_side, out_normal,
+                              out_count, out_ball_converged)
