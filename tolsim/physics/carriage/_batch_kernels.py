@@ -113,7 +113,7 @@ def _soft_flank(px, py, dcx, dcy, nx, ny, d, h, k):
     return f * ux, f * uy, a11, a12, a22, f
 
 
-@jit
+@jit(leaf=True)
 def _lane_groove(w, groove, s0, c0, dist, k):
     """Flanks of one groove (0 rail: BL, BR; 1 carriage: TR, TL) of every ball at (P, g).
 
@@ -145,7 +145,7 @@ def _lane_groove(w, groove, s0, c0, dist, k):
         w[rn + 1, b] = f1
 
 
-@jit
+@jit(leaf=True)
 def _lane_condense(w):
     """S and M^-1 K_t of every ball (rows _L_S, _L_W) by :func:`schur_complement`."""
     for b in range(w.shape[1]):
@@ -161,7 +161,7 @@ def _lane_condense(w):
         w[_L_W + 3, b] = r22
 
 
-@jit
+@jit(leaf=True)
 def _lane_correct(w, k, ball_floor):
     """The ball's own Newton correction gamma M^-1 r, its relative imbalance and F_max.
 
@@ -191,7 +191,7 @@ def _lane_correct(w, k, ball_floor):
         w[_L_FM, b] = fm
 
 
-@jit
+@jit(leaf=True)
 def _lane_balls(w, s0, c0, dist, k, ball_floor):
     """Every ball (column of w) at its (P, g): the rows _L_KB to _L_FM (:func:`condensed_ball`
     in vectorised passes). The loops run from 0 (with a variable start Numba's negative-index
@@ -202,7 +202,7 @@ def _lane_balls(w, s0, c0, dist, k, ball_floor):
     _lane_correct(w, k, ball_floor)
 
 
-@jit
+@jit(leaf=True)
 def _lane_angles(w, s0, c0, dist):
     """dbeta_i of every flank of every ball at (P, g) into rows _L_DB, as ``ball_outputs``.
 
@@ -223,7 +223,7 @@ def _lane_angles(w, s0, c0, dist):
             w[_L_DB + i, b] = atan_small(tan) if abs(tan) <= SMALL_TAN else np.nan
 
 
-@jit(inline="always")
+@jit(leaf=True)
 def _lane_arc_centres(a, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, w, work):
     """Rows _L_DC (C_i + d n_i, carriage groove at g = 0) of every ball of assembly a.
 
@@ -297,7 +297,7 @@ def _lane_work(w, b, s0, c0, dist, work):
     move_top_groove(work, w[_L_G, b], w[_L_G + 1, b])
 
 
-@jit
+@jit(leaf=True)
 def _lane_local_step(nball, w, dist):
     """Ball-only Newton step P -= gamma M^-1 r (groove held), capped at 0.1 d."""
     cap2 = (0.1 * dist) ** 2
@@ -309,7 +309,7 @@ def _lane_local_step(nball, w, dist):
         w[_L_P + 1, b] -= c * dy
 
 
-@jit
+@jit(leaf=True)
 def _track_assembly(w, frame, zeta, q_ext, residual, reduced, tangent, ball_tol):
     """Carriage residual R, reduced residual and tangent of the joint Newton, track by track.
 
@@ -403,7 +403,7 @@ def _track_assembly(w, frame, zeta, q_ext, residual, reduced, tangent, ball_tol)
     return fmax, force2, balls_ok
 
 
-@jit(inline="always")
+@jit(leaf=True)
 def _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, ball_tol, ball_max_iter,
                   ball_floor, force_floor, load_norm, singular, geometric, k_ref, eig_work, cap,
                   limit, q_ext, residual, tangent, state, work, low, step, reduced):
@@ -671,11 +671,10 @@ def _solve_tile(tile, groove_maps, frame, zetas, free, geometrics, geometric_max
                 out_count, out_ball_converged, out_displacement, out_stiffness,
                 out_residual, out_iterations, out_status, out_fallback, joint):
     """The assemblies of tile ``tile`` of :func:`carriage_batch_kernel` (its arguments),
-    with the tile's scratch. A function of its own, so that the joint Newton and the arc
-    centres are inlined into it (``inline="always"``): called with two dozen arrays once per
-    assembly, each took and released a reference to every array argument (atomic counts on
-    arrays both threads share), some 13 % of a solve's time (perf, session 26). Now that
-    happens once per tile."""
+    with the tile's scratch: a function of its own, so that the parallel loop hands its
+    arrays over once per tile, not once per assembly. The joint Newton and the balls'
+    passes it calls per assembly and per step are leaf kernels (:func:`tolsim._jit.jit`):
+    their two dozen arrays cost no reference counts (about 13 % of a solve, session 26)."""
     nasm = out_status.shape[0]
     nball = groove_maps.shape[1]
     moving = ball_z.shape[0] > 0
@@ -767,7 +766,6 @@ def _solve_tile(tile, groove_maps, frame, zetas, free, geometrics, geometric_max
                 singular[i] = 1e-10 * k_ref * geometric_max
         it = -1
         if joint:
-            # (30 arguments at most: CPython passes more as *args, which Numba cannot inline)
             it = _joint_newton(q, free, amap, frame, zeta, w, s0, c0, dist, k, tol, ball_tol,
                                ball_max_iter, ball_floor, floor, load_norm, singular, geometric,
                                k_ref, kreg, cap, limit, q_ext, residual, tangent, state, work,

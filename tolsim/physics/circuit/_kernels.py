@@ -33,7 +33,7 @@ def _block_speed(weight, weighted_speed, unloaded, coast, coasting, drag):
     return coast / coasting
 
 
-@jit
+@jit(leaf=True)
 def _solve_blocks(free_speed, weight, loaded, pushed, closed, drag, cut, n, label, speed,
                   force, block_start, block_weight, block_sum, block_unloaded, block_coast,
                   block_coasting, block_speed):
@@ -137,7 +137,7 @@ def wrap(x, length):
     return x % length
 
 
-@jit
+@jit(leaf=True)
 def _pushed_speeds(q, half_sum, length, pushed, closed, speed, n, out):
     """The speeds ``out`` of the pushed balls: each run of pushed balls between the
     non-pushed balls a (behind) and b (ahead) at xi_a + (xi_b - xi_a) G_i / G (G_i the gaps
@@ -221,7 +221,7 @@ def _solve_ring(q, half_sum, length, loaded_speed, coast, ring_stiffness, ring_l
     return cut, jammed
 
 
-@jit
+@jit(leaf=True)
 def _run_closed(r, ring_pushed, ring_closed, t_pair, limit, n):
     """For a pair r that closes in this advance: the run of pushed balls through it, from the
     non-pushed ball a behind to b ahead (both r and r + 1 when neither is pushed). Returns
@@ -252,7 +252,7 @@ def _run_closed(r, ring_pushed, ring_closed, t_pair, limit, n):
     return a, b, record
 
 
-@jit
+@jit(leaf=True)
 def _open_window(c, w, start, window_low, window_high, window_peak, window_start):
     window_low[c, w] = np.inf
     window_high[c, w] = -np.inf
@@ -260,7 +260,7 @@ def _open_window(c, w, start, window_low, window_high, window_peak, window_start
     window_start[c, w] = start
 
 
-@jit
+@jit(leaf=True)
 def _track_interval(c, w, forward, ring_loaded, ball, force, slopes, n, window_low,
                     window_high, window_peak, window_force, record):
     """An interval of constant forces into window ``w`` of circuit ``c``: the friction
@@ -297,7 +297,7 @@ def _track_interval(c, w, forward, ring_loaded, ball, force, slopes, n, window_l
         window_peak[c, w] = peak
 
 
-@jit
+@jit(leaf=True)
 def step_circuit_one(c, position, diameter, eps, stiffness, pushed, loaded, closed, length,
                      zone, drag, travel, travel_start, speed_out, velocity_out, force_out,
                      mean_force_out, column_out, event_pair, event_where, event_travel, q,
@@ -515,31 +515,50 @@ def step_circuit_kernel(position, diameter, eps, stiffness, pushed, loaded, clos
     forces (M, W, N) and their count (M,) (written with ``slopes`` only); ``crossing_out``
     (M, N).
     """
-    m, n = position.shape
-    for chunk in prange((m + CHUNK - 1) // CHUNK):
-        # the work arrays of the chunk (N,), in the order of step_circuit_one's arguments
+    n = position.shape[1]
+    for chunk in prange((position.shape[0] + CHUNK - 1) // CHUNK):
+        # the work arrays of the chunk (N,) by rows, in the order of step_circuit_one's
+        # arguments: float, int and bool
         wf = np.empty((19, n))
         wi = np.empty((3, n), dtype=np.int64)
         wb = np.empty((4, n), dtype=np.bool_)
-        (q, half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
-         block_weight, block_sum, coast, loc, block_speed, loaded_speed, block_coasting,
-         block_unloaded, block_coast, ring_stiffness) = (
-            wf[0], wf[1], wf[2], wf[3], wf[4], wf[5], wf[6], wf[7], wf[8], wf[9], wf[10],
-            wf[11], wf[12], wf[13], wf[14], wf[15], wf[16], wf[17], wf[18])
-        ball, label, block_start = wi[0], wi[1], wi[2]
-        ring_loaded, ring_closed, ring_pushed, ring_push = wb[0], wb[1], wb[2], wb[3]
-        for c in range(chunk * CHUNK, min(m, (chunk + 1) * CHUNK)):
-            count, status, windows = step_circuit_one(
-                c, position, diameter, eps, stiffness, pushed, loaded, closed, length, zone,
-                drag, travel, travel_start, speed_out, velocity_out, force_out,
-                mean_force_out, column_out, event_pair, event_where, event_travel, q,
-                half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
-                block_weight, block_sum, coast, loc, block_speed, loaded_speed,
-                block_coasting, block_unloaded, block_coast, ring_stiffness, ball, label,
-                block_start, ring_loaded, ring_closed, ring_pushed, ring_push, slopes,
-                window_low, window_high, window_peak, window_start, window_force,
-                crossing_out)
-            event_count[c] = count
-            status_out[c] = status
-            if windows:
-                window_count[c] = windows
+        _step_chunk(chunk, wf, wi, wb, position, diameter, eps, stiffness, pushed, loaded,
+                    closed, length, zone, drag, travel, travel_start, speed_out, velocity_out,
+                    force_out, mean_force_out, column_out, event_count, event_pair, event_where,
+                    event_travel, status_out, slopes, window_low, window_high, window_peak,
+                    window_start, window_force, window_count, crossing_out)
+
+
+@jit(leaf=True)
+def _step_chunk(chunk, wf, wi, wb, position, diameter, eps, stiffness, pushed, loaded,
+                closed, length, zone, drag, travel, travel_start, speed_out, velocity_out,
+                force_out, mean_force_out, column_out, event_count, event_pair, event_where,
+                event_travel, status_out, slopes, window_low, window_high, window_peak,
+                window_start, window_force, window_count, crossing_out):
+    """The circuits of chunk ``chunk`` of :func:`step_circuit_kernel` (its arguments), with
+    the chunk's work arrays ``wf``, ``wi``, ``wb``: a leaf kernel (:func:`tolsim._jit.jit`),
+    so that handing some 55 arrays to :func:`step_circuit_one` for each circuit counts no
+    references."""
+    m = position.shape[0]
+    (q, half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
+     block_weight, block_sum, coast, loc, block_speed, loaded_speed, block_coasting,
+     block_unloaded, block_coast, ring_stiffness) = (
+        wf[0], wf[1], wf[2], wf[3], wf[4], wf[5], wf[6], wf[7], wf[8], wf[9], wf[10],
+        wf[11], wf[12], wf[13], wf[14], wf[15], wf[16], wf[17], wf[18])
+    ball, label, block_start = wi[0], wi[1], wi[2]
+    ring_loaded, ring_closed, ring_pushed, ring_push = wb[0], wb[1], wb[2], wb[3]
+    for c in range(chunk * CHUNK, min(m, (chunk + 1) * CHUNK)):
+        count, status, windows = step_circuit_one(
+            c, position, diameter, eps, stiffness, pushed, loaded, closed, length, zone,
+            drag, travel, travel_start, speed_out, velocity_out, force_out,
+            mean_force_out, column_out, event_pair, event_where, event_travel, q,
+            half_sum, free_speed, weight, speed, force, mean_force, t_pair, t_ball,
+            block_weight, block_sum, coast, loc, block_speed, loaded_speed,
+            block_coasting, block_unloaded, block_coast, ring_stiffness, ball, label,
+            block_start, ring_loaded, ring_closed, ring_pushed, ring_push, slopes,
+            window_low, window_high, window_peak, window_start, window_force,
+            crossing_out)
+        event_count[c] = count
+        status_out[c] = status
+        if windows:
+            window_count[c] = windows

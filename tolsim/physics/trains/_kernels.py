@@ -48,7 +48,7 @@ def _effective_stiffness(creep_stiffness, braking_sensitivity, out_weight, out_s
             out_scale[i] = scale
 
 
-@jit
+@jit(leaf=True)
 def _pav(values, weight, tier, link, tolerance, block_start, block_weight, block_sum,
          block_mean, block_tier, block_soft):
     """Pool adjacent violators of ``values`` on one train; returns the number of blocks.
@@ -107,7 +107,7 @@ def _pav(values, weight, tier, link, tolerance, block_start, block_weight, block
     return top + 1
 
 
-@jit
+@jit(leaf=True)
 def _block_terms(first, last, values, weight, tier, mean, block_tier, tolerance, out_r):
     """R_j of eq. (6) inside one block, j = first .. last - 1, into ``out_r[j]``.
 
@@ -150,7 +150,7 @@ def _block_terms(first, last, values, weight, tier, mean, block_tier, tolerance,
             out_r[i] = 0.0
 
 
-@jit
+@jit(leaf=True)
 def _pool(eps, weight, scale, tier, link, out_velocity, out_force, out_label,
           block_start, block_weight, block_sum, block_mean, block_tier, block_soft, terms):
     """Pool adjacent violators on one train; returns the number of blocks.

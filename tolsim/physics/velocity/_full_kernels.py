@@ -51,7 +51,7 @@ def _ray_moments(beta, disc, inside):
     return i1, i2
 
 
-@jit
+@jit(leaf=True)
 def planar_contact_integrals(pt, ps, a, b, cin, sin_, win, xo, wo, out):
     """Friction integrals of one planar contact for a pole at (x, z) = (pt a, ps b).
 
