@@ -104,11 +104,13 @@ def jit(func=None, leaf=False, **overrides):
     """Decorate a serial kernel with the project defaults.
 
     ``leaf=True``: a kernel that allocates nothing and reads and writes only the arrays it is
-    given (no ``np.empty``, no slices or views; Numba refuses to compile one that does). It
-    is compiled without Numba's runtime, so it takes and releases no reference count on its
-    array arguments. Numba counts a reference for every array a function receives or
-    aliases, as an atomic increment and decrement, and its pruning pass leaves many of them
-    in code with branches and early returns (numba issue #2350). In the circuit's ring step
+    given, nor does anything it calls: Numba compiles its callees without the runtime too,
+    and refuses (a TypingError naming the call) a leaf that allocates, receives a new array
+    or calls a function that allocates. It is compiled without Numba's runtime, so it takes
+    and releases no reference count on its array arguments. Numba counts a reference for
+    every array a function receives or aliases, as an atomic increment and decrement, and
+    its pruning pass leaves many of them in code with branches and early returns (numba
+    issue #2350). In the circuit's ring step
     and the carriage's joint Newton, which are called per event and per assembly with two
     dozen arrays, those counts took about 20 % of the circuit study and 8 % of the carriage
     study along the track (perf, session 26). The arithmetic is the same: results are

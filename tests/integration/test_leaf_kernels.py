@@ -43,6 +43,22 @@ def test_a_leaf_kernel_cannot_receive_a_new_array():
         takes(3)
 
 
+def test_a_leaf_kernel_cannot_call_one_that_allocates():
+    # its callees are compiled without the runtime too (tolsim._jit.jit, leaf)
+    @jit(cache=False)
+    def allocates(n):
+        x = np.empty(n)
+        x[:] = 2.0
+        return x.sum()
+
+    @jit(leaf=True, cache=False)
+    def calls(n):
+        return allocates(n)
+
+    with pytest.raises(TypingError):
+        calls(3)
+
+
 def _weighted_runs(values, weight, out_mean, out_count):
     """Means of the runs of non-decreasing values (a branchy loop over four arrays)."""
     n = values.shape[0]

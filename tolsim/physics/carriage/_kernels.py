@@ -155,7 +155,7 @@ STATUS_FAILED = int(CarriageStatus.FAILED)
 BATCH_STATUS = {int(s): s.describe() for s in CarriageStatus}
 
 
-@jit
+@jit(leaf=True)
 def _evaluate_balls(q, warm, src, dst, groove_map, base, half, dist, k, ball_tol,
                     ball_max_iter, floor, limit, q_ext, pos, grv, resp, ball_ok, work,
                     residual, tangent, state):
@@ -295,7 +295,7 @@ def scaled_error(residual, free, scale):
     return err / scale
 
 
-@jit
+@jit(leaf=True)
 def nested_newton(q, free, groove_map, geometric, base, half, s0, c0, dist, k, tol, max_iter,
                    ball_tol, ball_max_iter, ball_floor, force_floor, load_norm, k_ref, singular,
                    cap, limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state,
@@ -407,7 +407,7 @@ def nested_newton(q, free, groove_map, geometric, base, half, s0, c0, dist, k, t
     return status, it, cur, last
 
 
-@jit
+@jit(leaf=True)
 def receding(groove_map, step, s0, c0):
     """Whether the carriage motion ``step`` moves every carriage flank away from its ball.
 
@@ -434,7 +434,7 @@ def receding(groove_map, step, s0, c0):
     return True
 
 
-@jit
+@jit(leaf=True)
 def _ray_slope(residual, src, step):
     """Slope -R . step of the carriage's potential along ``step`` (evaluation ``src``)."""
     slope = 0.0
@@ -443,7 +443,7 @@ def _ray_slope(residual, src, step):
     return slope
 
 
-@jit
+@jit(leaf=True)
 def _at_distance(s, q, step, trial, src, groove_map, base, half, dist, k, ball_tol,
                  ball_max_iter, ball_floor, limit, q_ext, pos, grv, resp, ball_ok, work,
                  residual, tangent, state):
@@ -458,7 +458,7 @@ def _at_distance(s, q, step, trial, src, groove_map, base, half, dist, k, ball_t
     return failed, dst
 
 
-@jit
+@jit(leaf=True)
 def settle(q, step, cur, groove_map, base, half, s0, c0, dist, k, ball_tol, ball_max_iter,
            ball_floor, limit, q_ext, pos, grv, resp, ball_ok, work, residual, tangent, state,
            trial):

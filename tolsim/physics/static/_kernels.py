@@ -24,7 +24,7 @@ def _idx(arr, n):
     return np.int64(n) if arr.shape[0] > 1 else np.int64(0)
 
 
-@jit
+@jit(leaf=True)
 def arc_centres(n, e_n, e_t, rot_b, rot_t, off_b, off_t, s0, c0, dist, cen):
     """Arc centres of the four flanks of ball n (top groove at g = 0) into cen (4, 6).
 
@@ -91,7 +91,7 @@ def flank(px, py, cen, i, d, h, k):
     return ux, uy, inv, delta, 0.0, 0.0
 
 
-@jit
+@jit(leaf=True)
 def _residual(cen, i0, i1, d, h, k, tx, ty, px, py):
     """r = sum_i F_i u_i - T over flanks i0..i1-1, its Jacobian (symmetric) and max F_i."""
     rx = -tx
@@ -114,7 +114,7 @@ def _residual(cen, i0, i1, d, h, k, tx, ty, px, py):
     return rx, ry, j11, j12, j22, fmax
 
 
-@jit
+@jit(leaf=True)
 def flank_newton(cen, i0, i1, d, h, k, tx, ty, px, py, tol, max_iter, floor, reg, predict):
     """Newton with backtracking on |r| for sum_i F_i u_i = T; returns px, py, iters, ok, |r|.
 
@@ -171,7 +171,7 @@ def flank_newton(cen, i0, i1, d, h, k, tx, ty, px, py, tol, max_iter, floor, reg
     return px, py, it, ok, rinf
 
 
-@jit
+@jit(leaf=True)
 def _groove(cen, i0, d, h, refx, refy, tx, ty, k, rigid, tol, max_iter, floor, predict):
     """Solve one groove (flanks i0, i0+1) for the ball position relative to it.
 
@@ -232,7 +232,7 @@ def _groove(cen, i0, d, h, refx, refy, tx, ty, k, rigid, tol, max_iter, floor, p
     return px, py, it, 0 if ok else 1
 
 
-@jit
+@jit(leaf=True)
 def ball_outputs(n, cen, px, py, d, h, k, out_dbeta, out_force, out_approach, unit):
     """Contact-angle deviations, forces, approaches (and u_i into unit) of ball n at P.
 
@@ -390,7 +390,7 @@ def _nominal(i, s0, c0):
     return sx * s0, sy * c0, sx, sy
 
 
-@jit
+@jit(leaf=True)
 def _lane_gather(lo, m, side_load, normal_load, e_n, e_t, rot_b, rot_t, off_b, off_t,
                  oversize, k, w):
     """Inputs of balls lo..lo+m-1 into the rows of w (resolving the broadcast)."""
@@ -415,7 +415,7 @@ def _lane_gather(lo, m, side_load, normal_load, e_n, e_t, rot_b, rot_t, off_b, o
         w[_W_Q, j] = np.cbrt(np.sqrt(lx * lx + ly * ly) / k)
 
 
-@jit
+@jit(leaf=True)
 def _lane_start(m, groove, s0, c0, d, k, w):
     """Arc centres and elastic start of one groove (0 bottom, 1 top) for lanes 0..m-1.
 
@@ -502,7 +502,7 @@ def _lane_flank(px, py, dcx, dcy, nx, ny, d, h, k):
     return wx * inv, wy * inv, inv, delta, k * delta * sd, 1.5 * k * sd
 
 
-@jit
+@jit(leaf=True)
 def _lane_newton(m, groove, s0, c0, d, k, w):
     """_LANE_STEPS full Newton steps (as ``flank_newton``) on one groove for lanes 0..m-1."""
     ia = 2 * groove
@@ -534,7 +534,7 @@ def _lane_newton(m, groove, s0, c0, d, k, w):
             w[rp + 1, j] = py - (j11 * ry - j12 * rx) / det
 
 
-@jit
+@jit(leaf=True)
 def _lane_outputs(m, s0, c0, d, k, w):
     """u_i, delta_i, F_i and dbeta_i of the four flanks for lanes 0..m-1 (as ``ball_outputs``)."""
     for i in range(4):
@@ -633,7 +633,7 @@ def static_load_kernel(side_load, normal_load, e_n, e_t, rot_b, rot_t, off_b, of
                       out_converged, out_iter, out_count, out_residual)
 
 
-@jit
+@jit(leaf=True)
 def displacement_one(n, groove_disp, e_n, e_t, rot_b, rot_t, off_b, off_t, oversize, s0, c0,
                      dist, k, tol, max_iter, floor, cen, unit, out_dbeta, out_force,
                      out_approach, out_ball, out_load, out_converged, out_iter, out_count,
