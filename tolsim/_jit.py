@@ -96,7 +96,8 @@ _install_locators()
 
 
 #: Options of a leaf kernel (:func:`jit` with ``leaf=True``): Numba's runtime off, through its
-#: private ``_nrt`` option (``tests/test_jit.py`` fails if a Numba release drops it).
+#: private ``_nrt`` option (``tests/integration/test_leaf_kernels.py`` fails if a Numba
+#: release stops honouring it).
 LEAF = dict(JIT, _nrt=False)
 
 
@@ -110,11 +111,10 @@ def jit(func=None, leaf=False, **overrides):
     and releases no reference count on its array arguments. Numba counts a reference for
     every array a function receives or aliases, as an atomic increment and decrement, and
     its pruning pass leaves many of them in code with branches and early returns (numba
-    issue #2350). In the circuit's ring step
-    and the carriage's joint Newton, which are called per event and per assembly with two
-    dozen arrays, those counts took about 20 % of the circuit study and 8 % of the carriage
-    study along the track (perf, session 26). The arithmetic is the same: results are
-    bit-identical.
+    issue #2350). In the circuit's ring step and the carriage's joint Newton, which are
+    called per event and per assembly with two dozen arrays, those counts took about 20 % of
+    the circuit study and 8 % of the carriage study along the track (perf, session 26). The
+    arithmetic is the same: results are bit-identical.
     """
     opts = dict(LEAF if leaf else JIT, **overrides)
     return numba.njit(**opts)(func) if func is not None else numba.njit(**opts)
