@@ -145,6 +145,18 @@ def test_ctrl_c_during_a_write_takes_effect_after_it(result, tmp_path, monkeypat
     # KeyboardInterrupt follows; the next write works.
     import signal
 
+    # Python's own handler, as in an interactive run: a process started in the background
+    # by a non-interactive shell inherits SIGINT ignored (the write keeps either)
+    original = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _interrupted_write(result, tmp_path, monkeypatch)
+    finally:
+        signal.signal(signal.SIGINT, original)
+
+
+def _interrupted_write(result, tmp_path, monkeypatch):
+    import signal
+
     path = tmp_path / "r.nc"
     ds = result_to_dataset(result, history="test")
     to_netcdf = xr.Dataset.to_netcdf
