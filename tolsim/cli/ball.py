@@ -527,8 +527,9 @@ def _load_output(model, loads, result):
 
 
 def _percent(value):
-    """A percentage to 4 decimals, and one that would round to 0 in 3 significant digits
-    (printed as -0.0000 % before, for an epsilon of -1e-17 %); an exact zero is +0.0000 %."""
+    """A percentage to 4 decimals; a nonzero one that 4 decimals would show as 0.0000 in 3
+    significant digits instead (an epsilon of -1e-17 % printed as -0.0000 %); an exact zero,
+    of either sign, as +0.0000 %."""
     if value == 0.0 or abs(value) >= 5e-5:
         return f"{value + 0.0:+.4f} %"
     return f"{value:+.3g} %"
