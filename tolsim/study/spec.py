@@ -80,6 +80,15 @@ def whole_number(name, value, minimum=0, maximum=None):
 # --------------------------------------------------------------------------------------------
 # Dataclasses
 # --------------------------------------------------------------------------------------------
+def _truncnorm():
+    """``scipy.stats.truncnorm``, imported when a one-sided band needs it
+    (:attr:`Distribution.one_sided`): ``scipy.stats`` takes a good part of a second to import,
+    which ``tolsim ball`` and ``--help`` do not pay."""
+    from scipy.stats import truncnorm  # noqa: PLC0415
+
+    return truncnorm
+
+
 @dataclass(frozen=True)
 class Distribution:
     """A one-dimensional distribution, SI units, sampled through a standard normal variate.
@@ -124,6 +133,32 @@ class Distribution:
         return self.kind != "fixed" and not (self.kind == "normal" and self.std == 0.0)
 
     @property
+    def standard_band(self) -> tuple:
+        """A truncated normal's band in standard deviations from its mean: (a, b)."""
+        return (self.low - self.mean) / self.std, (self.high - self.mean) / self.std
+
+    @property
+    def one_sided(self) -> bool:
+        """A truncated normal whose band lies wholly on one side of its mean (a > 0 or
+        b < 0): sampled and summed up by ``scipy.stats.truncnorm``.
+
+        The band's probability Phi(b) - Phi(a) is then the difference of two numbers near 1
+        (or two tiny ones): beyond about 8.3 standard deviations Phi rounds both ends to 1.0,
+        and the inverse CDF on [Phi(a), Phi(b)] returned the band's far end for every draw
+        (a band [10, 20] sigma: every value 20 sigma, against a mean of 10.098 sigma), the
+        closed-form mean infinity. scipy's ``truncnorm`` works in the tails (log-space CDFs);
+        it is not used for a band across the mean, where the direct inverse CDF is exact to
+        rounding and where ``truncnorm`` loses its variance for a band much narrower than
+        the standard deviation (NaN at 5e-7 sigma wide, scipy 1.17). Every packaged config's
+        truncated normal lies across its mean, so their draws are unchanged.
+        """
+        if self.kind not in ("truncated_normal", "cpk") or (self.kind == "cpk"
+                                                            and not self.truncate):
+            return False
+        a, b = self.standard_band
+        return a > 0.0 or b < 0.0
+
+    @property
     def support(self) -> tuple:
         """(lowest, highest) value the distribution can give [SI]; for an unbounded normal
         the values at -/+ :data:`PLAUSIBLE_NORMAL_RANGE` standard deviations."""
@@ -151,7 +186,9 @@ class Distribution:
             return 0.5 * (self.low + self.high)
         if self.kind == "normal" or (self.kind == "cpk" and not self.truncate):
             return self.mean
-        a, b = (self.low - self.mean) / self.std, (self.high - self.mean) / self.std
+        if self.one_sided:
+            return float(_truncnorm().mean(*self.standard_band, loc=self.mean, scale=self.std))
+        a, b = self.standard_band
         z = ndtr(b) - ndtr(a)
         phi = lambda x: np.exp(-0.5 * x * x) / np.sqrt(2 * np.pi)  # noqa: E731
         return float(self.mean + self.std * (phi(a) - phi(b)) / z)
@@ -215,6 +252,10 @@ class Distribution:
             return self.mean + self.std * z
         if self.kind == "uniform":
             return self.low + (self.high - self.low) * ndtr(z)
+        if self.one_sided:  # a band in one tail: Phi(a), Phi(b) may round to one number
+            u = ndtr(z)
+            return np.clip(_truncnorm().ppf(u, *self.standard_band, loc=self.mean,
+                                            scale=self.std), self.low, self.high)
         # truncated normal (also cpk with truncate): inverse CDF on [Phi(a), Phi(b)]
         lo = ndtr((self.low - self.mean) / self.std)
         hi = ndtr((self.high - self.mean) / self.std)

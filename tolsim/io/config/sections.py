@@ -54,6 +54,11 @@ from tolsim.study.spec import (
 
 #: Fewest measured values an ``empirical`` distribution accepts.
 MIN_EMPIRICAL_VALUES = 10
+#: Largest std of a ``truncated_normal`` per unit of its band's width (high - low). Wider,
+#: the density varies across the band by less than 1 part in 1e12 (a uniform distribution),
+#: and the band's probability, about 0.4 (high - low) / std, is the difference of two
+#: numbers near 0.5: at 1e6 its rounding is 3e-10 of it, at 1e300 it was 0 (NaN draws).
+MAX_TRUNCATED_STD_PER_BAND = 1e6
 
 
 def _distribution(table: Table, kind: str) -> Distribution:
@@ -72,6 +77,14 @@ def _distribution(table: Table, kind: str) -> Distribution:
         mean, std = q("mean", default=0.0), q("std", positive=True)
         low, high = q("low"), q("high")
         _check_order(table, kind)
+        if std > MAX_TRUNCATED_STD_PER_BAND * (high - low):
+            std_key = table.key_for("std", kind)
+            raise table.error(std_key, f"= {table.data[std_key]!r} is more than "
+                                       f"{MAX_TRUNCATED_STD_PER_BAND:.0e} times the band "
+                                       f"{table.key_for('high', kind)} - "
+                                       f"{table.key_for('low', kind)}: the distribution is "
+                                       f"uniform on the band then (write distribution = "
+                                       f"\"uniform\")")
         d = Distribution("truncated_normal", mean=mean, std=std, low=low, high=high)
     elif name == "cpk":
         low, high = q("low"), q("high")

@@ -54,6 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import ndtr
+from scipy.stats import truncnorm
 
 from tolsim.study.pipeline.evaluate import evaluate_balls
 
@@ -96,6 +97,8 @@ def standard_deviation(distribution) -> float:
         return float(d.std)
     if d.kind == "uniform":
         return float((d.high - d.low) / np.sqrt(12.0))
+    if d.one_sided:  # (Distribution.one_sided: the closed form cancels in a tail)
+        return float(truncnorm.std(*d.standard_band, scale=d.std))
     if d.kind in ("truncated_normal", "cpk"):
         return _truncated_normal_std(d.mean, d.std, d.low, d.high)
     if d.kind == "empirical":
