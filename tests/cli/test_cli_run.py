@@ -418,6 +418,25 @@ def test_summary_splits_the_spot_checks_by_stratum(tmp_path, capsys):
     assert m and int(m.group(1)) + int(m.group(2)) == 20, line
 
 
+def test_contacts_without_a_time_are_said_so(tmp_path, capsys):
+    # The packaged default at a nominal contact angle of 3 deg: most balls have a contact angle
+    # at or below 0 (no model describes them), and every train known to touch has such a ball,
+    # so no contact has a time. The run completes (its spot checks hold balls outside the full
+    # model: it once stopped there with "puts a contact angle outside (0, 90) deg") and the
+    # summary says the time is not known instead of "earliest inf s, median nan s".
+    import tolsim
+
+    text = (Path(tolsim.__file__).parent / "data" / "default.toml").read_text()
+    line = next(x for x in text.splitlines() if x.startswith("nominal_contact_angle_deg"))
+    cfg = tmp_path / "flat.toml"
+    cfg.write_text(text.replace(line, "nominal_contact_angle_deg = 3.0", 1))
+    assert main(["run", str(cfg), "-o", str(tmp_path / "f.nc"), "--samples", "2048"]) == 0
+    out = capsys.readouterr().out
+    assert "time to first contact: not known (no train with every ball resolved touches)" in out
+    assert "earliest inf" not in out and "median nan" not in out
+    assert "outside the full model (a contact angle outside (0, 90) deg" in out
+
+
 # --- issue 26, item 4: a study that cannot answer is refused after its first block ------------
 def _variant(tmp_path, name, replacements):
     """A packaged config with ``(old, new)`` text replacements, written to tmp_path."""

@@ -354,6 +354,52 @@ def test_spot_checks_with_full_model():
     assert np.max(np.abs(diff)) < 5e-4
 
 
+def test_spot_checks_count_the_balls_outside_the_full_model():
+    # A nominal contact angle of 3 deg (plausible only as a slip, which load time warns of):
+    # 0.2 deg of rail rotation puts some contact angles at or below 0, where the full model
+    # does not describe the contact and raises. The study once stopped there ("puts a contact
+    # angle outside (0, 90) deg"); its spot checks now leave those balls without a
+    # full-model value and say how many, and every spot check is still reported.
+    pytest.importorskip("tolsim.physics.velocity.full")
+    from tolsim.physics.velocity.full import within_model
+
+    text = (make(static="solved").text.replace("spot_checks = 0", "spot_checks = 20")
+            .replace("conformity = 0.54", "conformity = 0.54\nnominal_contact_angle_deg = 3.0"))
+    with pytest.warns(UserWarning, match="nominal_contact_angle_deg"):
+        c = parse_config(text)
+    sc = run_study(c.with_overrides(samples=256)).spot_checks
+    angles, ellipses = within_model(sc.contact_angle_deviation,
+                                    np.maximum(sc.normal_force, 0.0), c.bearing)
+    outside = np.all(np.isfinite(sc.contact_angle_deviation), axis=1) & ~(angles & ellipses)
+    assert len(sc.ball_index) == 20 and 0 < outside.sum() < 20
+    assert not sc.valid_full[outside].any()
+    assert np.isnan(sc.velocity_deviation_full[outside]).all()
+    assert f"{outside.sum()} of them outside the full model" in sc.status
+
+
+def test_within_model_marks_the_balls_full_raises_for():
+    # The per-ball test that full() applies before it raises: a contact angle at 0 or 90 deg,
+    # an ellipse of R_B / 2 (a = c F^(1/3): F = (R_B / (2 c))^3), NaN; the rest inside.
+    full = pytest.importorskip("tolsim.physics.velocity.full")
+    from tolsim.physics.geometry import TABLE1
+    from tolsim.physics.hertz import bearing_constants
+
+    b0 = TABLE1.nominal_contact_angle
+    at_limit = (0.5 * TABLE1.ball_radius / bearing_constants(TABLE1).semi_major_coefficient) ** 3
+    dbeta = np.zeros((5, 4))
+    force = np.full((5, 4), 50.0)
+    dbeta[1, 2] = -b0  # 0 deg
+    dbeta[2, 0] = 0.5 * np.pi - b0  # 90 deg
+    force[3, 1] = at_limit * (1 + 1e-9)
+    dbeta[4, 3] = np.nan
+    angles, ellipses = full.within_model(dbeta, force, TABLE1)
+    assert_array_equal(angles, [True, False, False, True, False])
+    assert_array_equal(ellipses, [True, True, True, False, True])
+    for row in (1, 2, 3):
+        with pytest.raises(ValueError):
+            full.full(dbeta[row:row + 1], force[row:row + 1], TABLE1)
+
+
 def test_ctrl_c_keeps_a_checkpoint(tmp_path):
     # A KeyboardInterrupt (here raised from the progress callback after 4 blocks) saves the
     # merged blocks; the rerun completes them to the same result as an uninterrupted run.

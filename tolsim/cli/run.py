@@ -503,11 +503,14 @@ def summary(ds, output, elapsed, save_requested=0) -> str:
     lines.extend(_circuit_text(ds))
     if "friction_increase_quantile" in ds:  # [contact]: after the first contact
         lines.extend(_friction_text(ds))
-    if int(ds.n_contact):
+    if int(ds.n_contact) and math.isfinite(float(ds.time_to_contact_min)):
         lines.append(
             f"time to first contact: earliest {float(ds.time_to_contact_min):.4g} s, "
             f"median {at(tq, 0.5):.4g} s, 95 % by {at(tq, 0.95):.4g} s (given contact, "
             "resolved trains)")
+    elif int(ds.n_contact):  # every train that touches has an unresolved ball
+        lines.append("time to first contact: not known (no train with every ball resolved "
+                     "touches)")
     n_balls = int(ds.n_balls)
     n_unloaded = int(ds.n_balls_unloaded) if "n_balls_unloaded" in ds else 0
     n_unresolved_balls = n_balls - int(ds.n_balls_valid) - n_unloaded

@@ -395,6 +395,34 @@ def deformed_surface_radius(bearing: Bearing = TABLE1):
     return 2.0 * f * (2.0 * bearing.ball_radius) / (2.0 * f + 1.0)
 
 
+def within_model(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+    """The balls whose contacts the full model describes, per ball: (angles, ellipses).
+
+    ``angles``: every contact angle beta_0 + dbeta inside (0, 90) deg; ``ellipses``: every
+    contact ellipse's semi-major axis a = c F^(1/3) below R_B / 2 (Hertz's half-space no
+    longer holds beyond). NaN inputs are outside. :func:`full` raises for a ball outside;
+    a study counts such a ball unresolved instead (:func:`tolsim.study.pipeline.evaluate.
+    full_velocity`, :func:`tolsim.study.execution.chunks.finish_spot_checks`).
+
+    Parameters
+    ----------
+    contact_angle_deviation, normal_force : ndarray (..., 4)
+        [rad], [N].
+    bearing : Bearing
+
+    Returns
+    -------
+    angles, ellipses : ndarray of bool (...)
+    """
+    beta = bearing.nominal_contact_angle + np.asarray(contact_angle_deviation, dtype=float)
+    force = np.asarray(normal_force, dtype=float)
+    with np.errstate(invalid="ignore"):
+        angles = np.all((beta > 0) & (beta < 0.5 * np.pi), axis=-1)
+        ellipses = np.all(bearing_constants(bearing).semi_major_coefficient * np.cbrt(force)
+                          < 0.5 * bearing.ball_radius, axis=-1)
+    return angles, ellipses
+
+
 def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
          groove_velocity=0.01, surface="planar", free_spin=False, grid=None,
          tol=DEFAULT_TOLERANCE, max_iter=DEFAULT_MAX_ITER, push=None, neighbour_force=None,
@@ -559,13 +587,13 @@ def full(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
         if not bearing.friction_coefficient > 0:
             raise ValueError(f"friction_coefficient = {bearing.friction_coefficient!r}: a push "
                              "needs raceway friction (mu > 0) to be carried")
-    beta = bearing.nominal_contact_angle + dbeta
-    if np.any((beta <= 0) | (beta >= np.pi / 2)):
+    angles_inside, ellipses_inside = within_model(dbeta, force, bearing)
+    if not angles_inside.all():
         raise ValueError("contact_angle_deviation puts a contact angle outside (0, 90) deg")
+    if not ellipses_inside.all():
+        raise ValueError("normal_force too large: the contact ellipse exceeds R_B / 2")
     hc = bearing_constants(bearing)
     radius = bearing.ball_radius
-    if np.any(hc.semi_major_coefficient * np.cbrt(force) >= 0.5 * radius):
-        raise ValueError("normal_force too large: the contact ellipse exceeds R_B / 2")
     grid_arrays = quadrature_grid(n_ang, n_rad, hc.ellipticity)
     table = contact_table(n_ang, hc.ellipticity)
     n = len(dbeta)

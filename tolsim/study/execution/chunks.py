@@ -238,9 +238,15 @@ def finish_spot_checks(config, rows: dict) -> SpotChecks:
         return SpotChecks(**rows, velocity_deviation_full=np.empty(0),
                           converged_full=np.empty(0, bool), valid_full=np.empty(0, bool),
                           status=status)
-    # a ball without a contact state (its carriage was not solved) has nothing to check
+    # a ball without a contact state (its carriage was not solved) has nothing to check, nor
+    # one whose contacts the full model does not describe (it would raise for it)
     finite = (np.all(np.isfinite(rows["contact_angle_deviation"]), axis=1)
               & np.all(np.isfinite(rows["normal_force"]), axis=1))
+    angles, ellipses = module.within_model(rows["contact_angle_deviation"],
+                                           np.maximum(rows["normal_force"], 0.0),
+                                           config.bearing)
+    outside = finite & ~(angles & ellipses)
+    finite &= ~outside
     eps_full = np.full(k, np.nan)
     converged = np.zeros(k, bool)
     valid = np.zeros(k, bool)
@@ -258,5 +264,9 @@ def finish_spot_checks(config, rows: dict) -> SpotChecks:
         status += (f": {k - n_near} drawn uniformly, {n_near} from the {band_balls:,} balls "
                    f"of the fast model with {100 * plan.band[0]:.3g} % ≤ |ε| ≤ "
                    f"{100 * plan.band[1]:.3g} % (near the spec limit)")
+    if outside.any():
+        status += (f"; {int(outside.sum())} of them outside the full model (a contact angle "
+                   f"outside (0, 90) deg or a contact ellipse wider than R_B / 2): no "
+                   f"full-model value")
     return SpotChecks(**rows, velocity_deviation_full=eps_full, converged_full=converged,
                       valid_full=valid, status=status)

@@ -574,14 +574,8 @@ def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
     regime[count == 0] = BALL_UNLOADED
     if module is None or not hasattr(module, "full"):
         return eps, ok, regime
-    hc = hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                         bearing.poisson_ratio)
-    beta = bearing.nominal_contact_angle + dbeta
-    with np.errstate(invalid="ignore"):
-        takes = ((count >= 2) & np.all(np.isfinite(dbeta), axis=1)
-                 & np.all((beta > 0) & (beta < 0.5 * np.pi), axis=1)
-                 & np.all(hc.semi_major_coefficient * np.cbrt(force)
-                          < 0.5 * bearing.ball_radius, axis=1))
+    angles, ellipses = module.within_model(dbeta, force, bearing)
+    takes = (count >= 2) & np.all(np.isfinite(dbeta), axis=1) & angles & ellipses
     idx = np.flatnonzero(takes)
     if len(idx):  # exactly two-point balls in closed form (epsilon = 0), the rest by ``full``
         two = module.exactly_two_point(dbeta[idx], force[idx], bearing)
