@@ -437,6 +437,19 @@ def test_contacts_without_a_time_are_said_so(tmp_path, capsys):
     assert "outside the full model (a contact angle outside (0, 90) deg" in out
 
 
+def test_a_sweep_says_which_points_have_unresolved_trains(tmp_path, capsys):
+    # A nominal contact angle of 1e-30 deg: no ball of any point has a model, so every P is
+    # NaN. The table printed bare NaNs; it now gives each point's unresolved trains and a
+    # warning that says what P is over and where the bounds are.
+    cfg = _variant(tmp_path, "sweep_preload.toml", [("nominal_contact_angle_deg = 45.0",
+                                                     "nominal_contact_angle_deg = 1e-30")])
+    assert main(["run", str(cfg), "-o", str(tmp_path / "s.nc"), "--samples", "64"]) == 0
+    out = capsys.readouterr().out
+    rows = [x for x in out.splitlines() if x.rstrip().endswith("64 of 64")]
+    assert len(rows) == 10 and "unresolved" in out.splitlines()[1]
+    assert "at 10 of 10 points no train has a known outcome (nan)" in out
+
+
 # --- issue 26, item 4: a study that cannot answer is refused after its first block ------------
 def _variant(tmp_path, name, replacements):
     """A packaged config with ``(old, new)`` text replacements, written to tmp_path."""

@@ -779,6 +779,11 @@ def sweep_summary(ds, output, work) -> str:
     has_friction = "friction_increase_quantile" in ds
     if has_friction:
         head.append("friction +99% N")
+    # the unresolved trains of each point (P and its interval are over the others)
+    unresolved = (ds.n_assemblies_unresolved.values if "n_assemblies_unresolved" in ds
+                  else np.zeros(shape, dtype=np.int64))
+    if unresolved.any():
+        head.append("unresolved")
     rows = []
     for index in np.ndindex(*shape):
         pt = ds.isel(dict(zip(dims, index, strict=True)))
@@ -790,10 +795,20 @@ def sweep_summary(ds, output, work) -> str:
         if has_friction:
             q99 = pt.friction_increase_quantile.sel(quantile=0.99, method="nearest")
             row.append(f"{float(q99):.3g}")
+        if unresolved.any():
+            row.append(f"{int(pt.n_assemblies_unresolved)} of {int(pt.n_assemblies)}")
         rows.append(row)
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
     lines.extend("  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in rows)
+    if unresolved.any():
+        everything = int((unresolved == ds.n_assemblies.values).sum())
+        none_known = (f"; at {everything} of {n} points no train has a known outcome (nan)"
+                      if everything else "")
+        lines.append(
+            "warning: trains unresolved (a ball no model answers): P(contact) and its 95 % CI "
+            "are over the trains whose outcome is known, the bounds with the unresolved ones "
+            f"are in the file (tolsim report){none_known}")
     # the points run in this process only: a resumed sweep's earlier points took no time here
     lines.append(f"wrote {output} ({n} point{'' if n == 1 else 's'}, {work.elapsed:.1f} s, "
                  f"{work.balls_per_second:,.0f} balls/s)")
