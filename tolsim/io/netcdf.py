@@ -8,14 +8,12 @@ opens a file, verifies the checksums and checks that it is a tolsim result.
 """
 
 import os
-import signal
 import tempfile
-import threading
-from contextlib import contextmanager
 
 import numpy as np
 import xarray as xr
 
+from tolsim._interrupts import interrupts_held
 from tolsim.io import schema
 from tolsim.io.checksums import (
     IntegrityError,
@@ -106,28 +104,6 @@ def result_to_dataset(result, *, history: str | None = None,
         if section.finish is not None:
             section.finish(result, ds)
     return schema.validate(ds)
-
-
-@contextmanager
-def interrupts_held():
-    """Hold Ctrl-C (SIGINT) back until the block ends, then raise KeyboardInterrupt.
-
-    A KeyboardInterrupt raised inside the netCDF/HDF5 library can leave xarray's HDF5 lock
-    held and a file half-open; the next write (a sweep's next part, say) then waited on that
-    lock for ever. Writing a result takes about a second, so the interrupt is taken after it.
-    Only in the main thread (where Python delivers signals), else a no-op.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    received = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    if received:
-        raise KeyboardInterrupt
 
 
 def write_dataset(ds: xr.Dataset, path) -> dict:

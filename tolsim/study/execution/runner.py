@@ -50,6 +50,7 @@ import numpy as np
 from numba.core import event as numba_event
 
 from tolsim import __version__
+from tolsim._interrupts import interrupts_held
 from tolsim._jit import compile_seconds
 from tolsim.study.analyses.friction_examples import friction_examples
 from tolsim.study.analyses.limit_state import check_supported, estimate_events
@@ -408,11 +409,12 @@ def _save_checkpoint(path, fp, state: _Progress, config_text: str):
     arrays["part_lengths"] = np.array([[len(p[k]) for k in SPOT_FIELDS] for p in parts],
                                       dtype=np.int64).reshape(len(parts), len(SPOT_FIELDS))
     try:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, fingerprint=np.array(fp), next_block=np.int64(state.next_block),
-                     config_text=np.array(config_text), tolsim_version=np.array(__version__),
-                     **arrays)
-        os.replace(tmp, path)
+        with interrupts_held():  # Ctrl-C inside the zip writer replaced itself with an error
+            with open(tmp, "wb") as fh:
+                np.savez(fh, fingerprint=np.array(fp), next_block=np.int64(state.next_block),
+                         config_text=np.array(config_text),
+                         tolsim_version=np.array(__version__), **arrays)
+            os.replace(tmp, path)
     except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
