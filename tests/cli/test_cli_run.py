@@ -435,6 +435,12 @@ def test_contacts_without_a_time_are_said_so(tmp_path, capsys):
     assert "time to first contact: not known (no train with every ball resolved touches)" in out
     assert "earliest inf" not in out and "median nan" not in out
     assert "outside the full model (a contact angle outside (0, 90) deg" in out
+    # the report's glance table says the same (it showed "inf s / nan s")
+    from tolsim.reports.study.shared import glance_rows
+
+    rows = dict((label, text) for label, text, _ in glance_rows(read_result(tmp_path / "f.nc")))
+    assert rows["earliest / median first contact (given contact)"] == (
+        "not known (no train with every ball resolved touches)")
 
 
 def test_a_sweep_says_which_points_have_unresolved_trains(tmp_path, capsys):

@@ -117,7 +117,9 @@ def glance_rows(ds) -> list:
          False),
         *((label, text, False) for label, text in circuit_rows(ds)),
         ("earliest / median first contact (given contact)",
-         f"{number(ds, 'time_to_contact_min'):.4g} s / {med:.4g} s"
+         (f"{number(ds, 'time_to_contact_min'):.4g} s / {med:.4g} s"
+          if np.isfinite(number(ds, "time_to_contact_min")) else
+          "not known (no train with every ball resolved touches)")
          if integer(ds, "n_contact") else "no contact", True),
         *((("ε mean / std", f"{pct(number(ds, 'velocity_deviation_mean'))} / "
                             f"{100 * number(ds, 'velocity_deviation_std'):.3f} %", True),
