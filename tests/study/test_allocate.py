@@ -147,6 +147,9 @@ def test_allocation_errors():
         SourceCost("x", 2.0, 1.0)
     with pytest.raises(ValueError, match="cost_exponent"):
         SourceCost("x", cost_exponent=0.0)
+    with pytest.raises(ValueError, match=r"cost_exponent = 300.0 is beyond 130.3"):
+        SourceCost("x", 0.1, 4.0, cost_exponent=300.0)  # 300 / ln 10
+    assert SourceCost("x", 0.25, 4.0, cost_exponent=216.0).cost_exponent == 216.0
 
 
 def test_solve_cost_subproblem_twin_slsqp(rng):
@@ -260,6 +263,14 @@ def test_parse_allocation_settings():
      "allocate.sources.bottom_rotation.max_scale = 1.0: min_scale"),
     ("[allocate.sources.bottom_rotation]\ncost_exponent = 0\n",
      "allocate.sources.bottom_rotation.cost_exponent = 0 must be > 0"),
+    # the cost w s^-k must stay within e^300 over the scale range (k = 1e300 overflowed and
+    # stopped the search with a traceback): on the default [0.25, 4] k <= 300 / ln 4 = 216.4
+    ("[allocate.sources.bottom_rotation]\ncost_exponent = 1e300\n",
+     r"allocate.sources.bottom_rotation.cost_exponent = 1e\+300: a cost exponent of 1e\+300 "
+     r"is beyond 216.4, the most the scale range \[0.25, 4\] allows"),
+    ("[allocate.sources.bottom_rotation]\nmin_scale = 1e-70\n",  # k = 2 > 300 / ln 1e70
+     r"allocate.sources.bottom_rotation.min_scale = 1e-70: a cost exponent of 2 is beyond "
+     "1.861"),
     ("[allocate.sources.bottom_rotation]\nscale = 2\n",
      "allocate.sources.bottom_rotation.scale is not a known key"),
     ("[allocate.sources.top_offset_x]\n", "allocate.sources.top_offset_x has no "

@@ -46,7 +46,11 @@ from tolsim.study.design.allocate import (
     SourceCost,
     parse_target,
 )
-from tolsim.study.design.allocate.targets import largest_scale
+from tolsim.study.design.allocate.targets import (
+    MAX_COST_SPAN,
+    cost_exponent_limit,
+    largest_scale,
+)
 from tolsim.study.spec import SOURCES, set_study_value, toml_lines
 
 #: Keys of an ``[allocate.sources.<source>]`` table and their defaults (``max_scale``:
@@ -103,6 +107,16 @@ def parse_allocation(table, tolerances, bearing) -> AllocationSettings:
                 raise t.error(bad, f"= {t.data.get(bad, values[bad])!r}: min_scale "
                                    f"({values['min_scale']:g}) must be less than max_scale "
                                    f"({high:g})")
+            limit = cost_exponent_limit(values["min_scale"], high)
+            if values["cost_exponent"] > limit:  # (blame the key written: k, or a bound)
+                bad = ("cost_exponent" if t.has("cost_exponent") else "min_scale"
+                       if abs(math.log(values["min_scale"])) >= abs(math.log(high))
+                       else "max_scale")
+                raise t.error(bad, f"= {t.data.get(bad, values[bad])!r}: a cost exponent of "
+                                   f"{values['cost_exponent']:g} is beyond {limit:.4g}, the "
+                                   f"most the scale range [{values['min_scale']:g}, "
+                                   f"{high:g}] allows: the cost w scale^-k would change by "
+                                   f"more than e^{MAX_COST_SPAN:g} across it")
             top = largest_scale(given[name], bearing)
             if values["max_scale"] is not None and values["max_scale"] > top:
                 raise t.error("max_scale", f"= {t.data['max_scale']!r} takes the tolerance "

@@ -18,6 +18,12 @@ DEFAULT_MIN_SCALE = 0.25
 DEFAULT_MAX_SCALE = 4.0
 #: Reciprocal square cost, C = A + B / T^2 ([Spotts1973]).
 DEFAULT_COST_EXPONENT = 2.0
+#: Largest change of a source's cost w s^-k between s = 1 and an end of its scale range, as a
+#: power of e: k max(|ln min_scale|, |ln max_scale|) <= 300 (a factor 2e130). Cost models
+#: stay far below (k = 2 on [0.25, 4]: e^2.8 = 16); beyond, the costs and the search's sums
+#: leave double precision (k = 1e300 overflowed, and the ray search stopped with brentq's
+#: "failed to converge").
+MAX_COST_SPAN = 300.0
 DEFAULT_COST_WEIGHT = 1.0
 #: One-sided confidence of the upper bound that must meet the limit [-].
 DEFAULT_CONFIDENCE = 0.95
@@ -307,6 +313,18 @@ class SourceCost:
         if self.max_scale is not None and not self.min_scale < self.max_scale:
             raise ValueError(f"{self.source} min_scale = {self.min_scale!r} must be less than "
                              f"max_scale = {self.max_scale!r}")
+        high = DEFAULT_MAX_SCALE if self.max_scale is None else self.max_scale
+        limit = cost_exponent_limit(self.min_scale, high)
+        if self.cost_exponent > limit:
+            raise ValueError(f"{self.source} cost_exponent = {self.cost_exponent!r} is beyond "
+                             f"{limit:.4g}, the most its scale range [{self.min_scale:g}, "
+                             f"{high:g}] allows ({MAX_COST_SPAN:g} / the larger |ln scale|)")
+
+
+def cost_exponent_limit(min_scale: float, max_scale: float) -> float:
+    """The largest cost exponent k for scales in [min_scale, max_scale]:
+    :data:`MAX_COST_SPAN` / max(|ln min_scale|, |ln max_scale|)."""
+    return MAX_COST_SPAN / max(abs(math.log(min_scale)), abs(math.log(max_scale)))
 
 
 def tolerance_cost(scales, sources) -> float:
