@@ -366,3 +366,32 @@ def test_readme_table_of_ranges_is_the_code_s():
     assert set(RANGES) <= set(rows)
     assert rows["bearing.ball_diameter"][1:3] == ("[0.3, 104.775] mm", "[1, 25.4] mm")
     assert rows["bearing.friction_coefficient"][1] == "[0, 1]"
+
+
+def test_a_rail_field_spread_beyond_its_grid_is_warned_of():
+    # configs/carriage_preload.toml with a 1 mm correlation length over a 2 m stroke: its
+    # rail field needs 16 points per correlation length over some 2.1 m, 34 000 points, and
+    # gets 4 096 (MAX_FIELD_POINTS), 1.91 per correlation length. Read linearly between two
+    # points the field's variance is (1 + rho) / 2 at a cell's middle, rho = exp(-spacing /
+    # l): 20.4 % low. The warning names the key and that figure; the packaged config, at
+    # 100 mm, has its 16 points and is not warned of.
+    import math
+
+    from tolsim.study.sampling import field_grid
+
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "configs" / "carriage_preload.toml").read_text()
+    coarse = (text.replace("stroke_mm = 100.0", "stroke_mm = 2000.0", 1)
+              .replace("correlation_length_mm = 100.0", "correlation_length_mm = 1.0", 1))
+    with pytest.warns(ConfigWarning, match="grid") as caught:
+        config = parse_config(coarse, "coarse.toml")
+    _, spacing, points = field_grid(config)["bottom_rotation"]
+    assert points == 4096
+    loss = 0.5 * (1.0 - math.exp(-spacing / 1e-3))
+    message = str(next(w.message for w in caught if "grid" in str(w.message)))
+    assert message.startswith("coarse.toml:")
+    assert "tolerances.bottom_rotation.correlation_length_mm = 1.0" in message
+    assert f"variance is up to {100 * loss:.3g} % low" in message and 0.20 < loss < 0.21
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        parse_config(text, "carriage_preload.toml")

@@ -18,6 +18,7 @@ checked against its possible range (an error) and its usual one (a
 its text and checks that a config is what its text says (the record a result file embeds).
 """
 
+import math
 import os
 import re
 import tomllib
@@ -173,12 +174,48 @@ def _build(data: dict, source: "Source", text: str, path: str,
                                           "contact, sweep, allocate)")
     config = StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
                          correlations, carriage, contact, allocation)
+    _warn_coarse_fields(config, root)
     if study.estimator != "monte_carlo":  # a rare-event estimator needs a limit state
         try:
             check_supported(config)
         except ValueError as exc:
             raise study_table.error("estimator", str(exc).removeprefix("estimator ")) from None
     return config
+
+
+def _warn_coarse_fields(config, root):
+    """Warn, naming its ``correlation_length``, of a rail random field whose along-track grid
+    is coarser than :data:`tolsim.study.sampling.FIELD_POINTS_PER_CORRELATION_LENGTH` points
+    per correlation length: :data:`~tolsim.study.sampling.MAX_FIELD_POINTS` spreads them
+    over the rail the balls visit (a short correlation length, a long stroke). Read between
+    two points, linearly, the field's variance falls to (1 + rho) / 2 at a cell's middle, rho
+    = exp(-spacing / l): the rail's errors come out smaller than configured there."""
+    if not config.is_along_track:
+        return
+    from tolsim.study.sampling import (  # noqa: PLC0415 - the sampler's own grid rule
+        FIELD_POINTS_PER_CORRELATION_LENGTH,
+        MAX_FIELD_POINTS,
+        field_grid,
+    )
+
+    grid = field_grid(config)
+    for t in config.tolerances:
+        if t.source not in grid:
+            continue
+        origin, spacing, points = grid[t.source]
+        per_length = t.correlation_length / spacing
+        if per_length >= FIELD_POINTS_PER_CORRELATION_LENGTH * (1 - 1e-9):
+            continue
+        loss = 0.5 * (1.0 - math.exp(-spacing / t.correlation_length))
+        sub = root.table("tolerances").table(t.source)
+        key = sub.key_for("correlation_length", "length")
+        sub.warn(key, f"= {sub.data[key]!r}: the rail field's grid ({MAX_FIELD_POINTS} points "
+                      f"at most, over the {1e3 * (points - 1) * spacing:.4g} mm the balls "
+                      f"visit) has {per_length:.3g} points per correlation length, not "
+                      f"{FIELD_POINTS_PER_CORRELATION_LENGTH}: read between them the field's "
+                      f"variance is up to {100 * loss:.3g} % low (rail errors drawn smaller "
+                      "than configured); a longer correlation length or a shorter stroke "
+                      "avoids it")
 
 
 def default_config_text() -> str:
