@@ -257,8 +257,8 @@ class Distribution:
             return np.clip(_truncnorm().ppf(u, *self.standard_band, loc=self.mean,
                                             scale=self.std), self.low, self.high)
         # truncated normal (also cpk with truncate): inverse CDF on [Phi(a), Phi(b)]
-        lo = ndtr((self.low - self.mean) / self.std)
-        hi = ndtr((self.high - self.mean) / self.std)
+        a, b = self.standard_band
+        lo, hi = ndtr(a), ndtr(b)
         u = lo + (hi - lo) * ndtr(z)
         return np.clip(self.mean + self.std * ndtri(u), self.low, self.high)
 
