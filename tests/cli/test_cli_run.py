@@ -92,7 +92,9 @@ def test_bad_config_exit_2_one_line_no_file(tmp_path, capsys, replace_, key):
 @pytest.mark.parametrize("argv, message", [
     (["--samples", "0"], "positive integer"),
     (["--seed", "-4"], "--seed"),
-    (["--workers", "x"], "positive integer"),
+    (["--workers", "x"], "--workers: expected a number of processes from 1 to 1024"),
+    # 999999999999 overflowed the process pool's C int: a traceback (session 28's flag fuzz)
+    (["--workers", "999999999999"], "from 1 to 1024, got '999999999999'"),
     (["-o", "/nonexistent-folder/x.nc"], "does not exist"),
     (["--resume"], "no checkpoint"),
 ])

@@ -532,6 +532,12 @@ def test_allocate_cli_errors(tmp_path, capsys):
                     "--target", "contact_probability<=0.01"], "the config has a [sweep]", out)
     _error(capsys, ["allocate", str(tmp_path / "missing.toml"), "-o", str(out), "--target",
                     "contact_probability<=0.01"], "cannot read config", out)
+    # the limits of tolsim run's flags (session 28's flag fuzz: 999999999999 workers
+    # overflowed the process pool's C int, a traceback)
+    _error(capsys, ["allocate", example, "-o", str(out), "--workers", "999999999999"],
+           "--workers: expected a number of processes from 1 to 1024", out)
+    _error(capsys, ["allocate", example, "-o", str(out), "--seed", str(2**64)],
+           "--seed: expected an integer from 0 to 18446744073709551615", out)
     a_file = tmp_path / "a_file"
     a_file.write_text("")
     _error(capsys, ["allocate", example, "-o", str(a_file / "x")], "does not exist",

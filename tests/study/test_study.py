@@ -747,9 +747,11 @@ def test_paired_forces_in_tension_go_to_the_solved_model():
 
 
 @pytest.mark.parametrize("arguments, message", [
-    ({"workers": 0}, "workers = 0 must be an integer >= 1"),
-    ({"workers": True}, "workers = True must be an integer >= 1"),
-    ({"workers": 1.0}, "workers = 1.0 must be an integer >= 1"),
+    ({"workers": 0}, "workers = 0 must be an integer from 1 to 1024"),
+    ({"workers": True}, "workers = True must be an integer from 1 to 1024"),
+    ({"workers": 1.0}, "workers = 1.0 must be an integer from 1 to 1024"),
+    # a count beyond a C int overflowed in the process pool (a traceback), MAX_WORKERS
+    ({"workers": 10**12}, "workers = 1000000000000 must be an integer from 1 to 1024"),
     ({"chunk_blocks": 0}, "chunk_blocks = 0 must be an integer >= 1"),
     ({"chunk_blocks": 1.5}, "chunk_blocks = 1.5 must be an integer >= 1"),
     ({"max_blocks": 0}, "max_blocks = 0 must be an integer >= 1"),

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from tolsim.cli import UsageError, integer_at_least
+from tolsim.study.spec import MAX_SEED, MAX_WORKERS
 
 DESCRIPTION = """\
 Find the loosest set of tolerances that meets a probabilistic target at the least cost.
@@ -79,7 +80,9 @@ examples:
 """
 
 _positive_int = integer_at_least(1, "a positive integer")
-_seed = integer_at_least(0, "a non-negative integer")
+_seed = integer_at_least(0, f"an integer from 0 to {MAX_SEED}", maximum=MAX_SEED)
+_workers = integer_at_least(1, f"a number of processes from 1 to {MAX_WORKERS}",
+                            maximum=MAX_WORKERS)
 
 
 def _confidence(text):
@@ -116,7 +119,7 @@ def add_parser(subparsers, formatter_class=None):
     p.add_argument("--confidence", type=_confidence, metavar="C",
                    help="one-sided confidence of the upper bound that must meet the limit "
                         "(overrides [allocate] confidence; default: 0.95)")
-    p.add_argument("--workers", type=_positive_int, default=1, metavar="N",
+    p.add_argument("--workers", type=_workers, default=1, metavar="N",
                    help="worker processes of each study (1 is fastest for small studies)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     return p

@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 
 from tolsim.cli import UsageError, integer_at_least
-from tolsim.study.spec import MAX_SEED
+from tolsim.study.spec import MAX_SEED, MAX_WORKERS
 
 DESCRIPTION = """\
 Run a Monte Carlo tolerance study: sample assemblies (tolerances, gaps), solve each ball's
@@ -64,6 +64,8 @@ examples:
 _positive_int = integer_at_least(1, "a positive integer")
 _seed = integer_at_least(0, f"an integer from 0 to {MAX_SEED}", maximum=MAX_SEED)
 _count = integer_at_least(0, "a non-negative integer")
+_workers = integer_at_least(1, f"a number of processes from 1 to {MAX_WORKERS}",
+                            maximum=MAX_WORKERS)
 
 
 def _seconds(text):
@@ -101,7 +103,7 @@ def add_parser(subparsers, formatter_class=None):
                    help="number of assemblies (overrides study.samples); the maximum with "
                         "--target-ci-width")
     p.add_argument("--seed", type=_seed, metavar="S", help="random seed (overrides study.seed)")
-    p.add_argument("--workers", type=_positive_int, default=1, metavar="N",
+    p.add_argument("--workers", type=_workers, default=1, metavar="N",
                    help="worker processes, sharing the cores (the result does not depend on "
                         "it). 1 is fastest on a few cores: the compiled kernels already run on "
                         "every core and the next chunk is drawn meanwhile; each extra process "

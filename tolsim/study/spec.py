@@ -59,6 +59,10 @@ CREEP_MODELS = ("analytic", "full")
 PLAUSIBLE_NORMAL_RANGE = 8.0
 #: The largest seed: numpy's SeedSequence takes any, the result file stores it as uint64.
 MAX_SEED = 2**64 - 1
+#: The most worker processes of one run (``workers`` of :func:`tolsim.study.execution.runner
+#: .run_study`, ``--workers``): beyond the cores of any one machine, and far below the limits
+#: of the operating system's process pool (a C int), which a larger count overflowed.
+MAX_WORKERS = 1024
 
 
 def whole_number(name, value, minimum=0, maximum=None):

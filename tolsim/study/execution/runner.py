@@ -77,7 +77,7 @@ from tolsim.study.sampling import (
     near_limit_kept,
     spot_check_plan,
 )
-from tolsim.study.spec import StudyConfig, whole_number
+from tolsim.study.spec import MAX_WORKERS, StudyConfig, whole_number
 from tolsim.study.statistics.accumulator import Accumulator
 from tolsim.study.statistics.friction import accumulator_from_state, study_accumulator
 
@@ -488,7 +488,7 @@ def _checked_arguments(config, workers, save_samples, chunk_blocks, max_blocks, 
     if not isinstance(config, StudyConfig):
         raise ValueError(f"config = {config!r:.60} must be a StudyConfig: read it with "
                          "tolsim.load_config(path) or tolsim.parse_config(text)")
-    workers = whole_number("workers", workers, 1)
+    workers = whole_number("workers", workers, 1, MAX_WORKERS)
     save_samples = whole_number("save_samples", save_samples, 0)
     if chunk_blocks is not None:
         chunk_blocks = whole_number("chunk_blocks", chunk_blocks, 1)
