@@ -63,6 +63,19 @@ def integer_at_least(minimum, what, maximum=None):
     return parse
 
 
+def path_argument(text):
+    """An argparse ``type`` for a file or folder path: any text but an empty one.
+
+    An empty path (``-o "$OUT"`` with OUT unset) was taken as no path at all by some
+    commands, which then wrote to their default place, and by others only after their work
+    (``cannot write to :``); it is now ``argument -o/--out: expected a path, got ''``, one
+    line with exit code 2, before any work.
+    """
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return text
+
+
 class Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line and exit code 2 (no usage dump)."""
 

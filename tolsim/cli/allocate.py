@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from tolsim.cli import UsageError, integer_at_least
+from tolsim.cli import UsageError, integer_at_least, path_argument
 from tolsim.study.spec import MAX_SEED, MAX_WORKERS
 
 DESCRIPTION = """\
@@ -101,8 +101,8 @@ def add_parser(subparsers, formatter_class=None):
     p = subparsers.add_parser(
         "allocate", help="least-cost tolerances that meet a probabilistic target",
         description=DESCRIPTION, formatter_class=formatter_class)
-    p.add_argument("config", metavar="CONFIG", help="study config (TOML)")
-    p.add_argument("-o", "--out", metavar="DIR", required=True,
+    p.add_argument("config", type=path_argument, metavar="CONFIG", help="study config (TOML)")
+    p.add_argument("-o", "--out", type=path_argument, metavar="DIR", required=True,
                    help="output folder (created if missing)")
     p.add_argument("--target", metavar="TARGET",
                    help="the limit to meet, e.g. \"contact_probability<=0.01\" (overrides "

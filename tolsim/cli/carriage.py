@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from tolsim.cli import UsageError
+from tolsim.cli import UsageError, path_argument
 from tolsim.physics.carriage import DOFS
 from tolsim.physics.geometry import CONTACTS
 from tolsim.physics.velocity.models import BALL_REGIME_LABELS, BALL_UNLOADED, BALL_UNRESOLVED
@@ -59,15 +59,16 @@ def add_parser(subparsers, formatter_class=None):
         description=DESCRIPTION,
         formatter_class=formatter_class,
     )
-    p.add_argument("config", metavar="CONFIG", help="study config (TOML) with [carriage]")
+    p.add_argument("config", type=path_argument, metavar="CONFIG",
+                   help="study config (TOML) with [carriage]")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--seed", type=int, metavar="N",
                    help="solve one sampled assembly instead of the nominal one: the first "
                         "assembly of 'tolsim run CONFIG --seed N' (N >= 0)")
-    p.add_argument("--plot", metavar="FILE.png",
+    p.add_argument("--plot", type=path_argument, metavar="FILE.png",
                    help="also write the load distribution (ball force against position, per "
                         "track) to this PNG file")
-    p.add_argument("--circuit-figure", metavar="FILE.png",
+    p.add_argument("--circuit-figure", type=path_argument, metavar="FILE.png",
                    help="also write the balls of one circuit (track 0) against the carriage "
                         "travel over the stroke to this PNG file (a config with "
                         "[carriage.circuit]: the first assembly of the study, or of --seed N)")

@@ -7,7 +7,7 @@ import os
 import sys
 import time
 
-from tolsim.cli import UsageError
+from tolsim.cli import UsageError, path_argument
 
 DESCRIPTION = """\
 Put two or more result files of 'tolsim run' side by side. The first file is the reference;
@@ -56,9 +56,9 @@ examples:
 def add_parser(subparsers, formatter_class=None):
     p = subparsers.add_parser("compare", help="compare study result files side by side",
                               description=DESCRIPTION, formatter_class=formatter_class)
-    p.add_argument("results", metavar="RESULTS.nc", nargs="+",
+    p.add_argument("results", type=path_argument, metavar="RESULTS.nc", nargs="+",
                    help="two or more result files of 'tolsim run', the reference first")
-    p.add_argument("-o", "--out", metavar="DIR", required=True,
+    p.add_argument("-o", "--out", type=path_argument, metavar="DIR", required=True,
                    help="output folder (created if missing)")
     p.add_argument("--no-verify", action="store_true",
                    help="do not verify the files' checksums (forensics: a damaged file)")

@@ -8,7 +8,7 @@ import os
 import sys
 import time
 
-from tolsim.cli import UsageError
+from tolsim.cli import UsageError, path_argument
 
 DESCRIPTION = """\
 Reproduce the results of Lin, Okwudire, Duan and Wou (IMECE2018-88033) from tolsim's models
@@ -36,7 +36,7 @@ DEFAULT_OUT = os.path.join("reports", "paper")
 def add_parser(subparsers, formatter_class=None):
     p = subparsers.add_parser("paper", help="reproduce the source paper's figures and Table 2",
                               description=DESCRIPTION, formatter_class=formatter_class)
-    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
+    p.add_argument("--out", type=path_argument, default=DEFAULT_OUT, metavar="DIR",
                    help=f"output folder, created if missing (any other than {DEFAULT_OUT} "
                         "must be in an existing folder)")
     p.add_argument("--quick", action="store_true",

@@ -10,7 +10,7 @@ import os
 import sys
 import time
 
-from tolsim.cli import UsageError, integer_at_least
+from tolsim.cli import UsageError, integer_at_least, path_argument
 
 DESCRIPTION = """\
 Write an HTML report (report.html, figures embedded, plus the PNGs) and the same report as
@@ -67,9 +67,9 @@ def add_parser(subparsers, formatter_class=None):
     p = subparsers.add_parser("report", help="HTML and PDF report of a study result file "
                                              "(HTML of a sweep)",
                               description=DESCRIPTION, formatter_class=formatter_class)
-    p.add_argument("result", metavar="RESULTS.nc",
+    p.add_argument("result", type=path_argument, metavar="RESULTS.nc",
                    help="result file of 'tolsim run' (a study or a sweep)")
-    p.add_argument("-o", "--out", metavar="DIR", default=argparse.SUPPRESS,
+    p.add_argument("-o", "--out", type=path_argument, metavar="DIR", default=argparse.SUPPRESS,
                    help="output folder (default: RESULTS-report next to the file)")
     p.add_argument("--sensitivity-samples", type=_sample_count, metavar="N",
                    default=argparse.SUPPRESS,

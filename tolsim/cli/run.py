@@ -13,7 +13,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from tolsim.cli import UsageError, integer_at_least
+from tolsim.cli import UsageError, integer_at_least, path_argument
 from tolsim.study.spec import MAX_SEED, MAX_WORKERS
 
 DESCRIPTION = """\
@@ -94,9 +94,9 @@ def add_parser(subparsers, formatter_class=None):
     p = subparsers.add_parser(
         "run", help="Monte Carlo tolerance study from a TOML config to a netCDF result",
         description=DESCRIPTION, formatter_class=formatter_class)
-    p.add_argument("config", nargs="?", metavar="CONFIG",
+    p.add_argument("config", type=path_argument, nargs="?", metavar="CONFIG",
                    help="study config (TOML); default: the packaged default study")
-    p.add_argument("-o", "--output", metavar="OUT.nc",
+    p.add_argument("-o", "--output", type=path_argument, metavar="OUT.nc",
                    help="result file (default: CONFIG's name with .nc, or tolsim-result.nc for the "
                         "default study, in the current folder)")
     p.add_argument("--samples", type=_positive_int, metavar="N",

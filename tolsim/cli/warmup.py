@@ -13,7 +13,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 
-from tolsim.cli import UsageError, integer_at_least
+from tolsim.cli import UsageError, integer_at_least, path_argument
 
 DESCRIPTION = """\
 Compile the Numba kernels that the studies need, once, and keep them in Numba's disk cache,
@@ -32,7 +32,7 @@ def add_parser(sub, formatter_class):
     p = sub.add_parser("warmup", help="compile the kernels of the studies ahead of a first run",
                        description=DESCRIPTION, epilog=EXAMPLES,
                        formatter_class=formatter_class)
-    p.add_argument("configs", nargs="*", metavar="CONFIG",
+    p.add_argument("configs", type=path_argument, nargs="*", metavar="CONFIG",
                    help="study configs (TOML) whose kernels to compile; default: the "
                         "packaged default study")
     p.add_argument("--jobs", type=integer_at_least(1, "a whole number >= 1"),
