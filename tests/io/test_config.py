@@ -297,6 +297,32 @@ def test_missing_file_is_config_error(tmp_path):
         load_config(tmp_path / "nope.toml")
 
 
+def test_a_config_saved_with_a_byte_order_mark_is_read(tmp_path):
+    # Windows editors save "UTF-8 with BOM"; tomllib refused such a file at line 1 ("Invalid
+    # statement"). The mark is not part of the text: the config and its stored text are
+    # those of the file without it.
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + MINIMAL.encode())
+    config = load_config(path)
+    assert config == parse_config(MINIMAL, str(path))
+    assert config.text == MINIMAL
+
+
+@pytest.mark.parametrize("raw, where, byte", [
+    (b"\xff\xfe[study]\n", ":1:", "0xff"),  # UTF-16
+    (MINIMAL.encode() + b"# caf\xe9\n", f":{MINIMAL.count(chr(10)) + 1}:", "0xe9"),  # Latin-1
+])
+def test_a_config_that_is_not_utf8_is_one_line_with_its_line(tmp_path, raw, where, byte):
+    # it said "cannot read config: UnicodeDecodeError: 'utf-8' codec can't decode ..."
+    path = tmp_path / "bad.toml"
+    path.write_bytes(raw)
+    with pytest.raises(ConfigError) as exc:
+        load_config(path)
+    message = str(exc.value)
+    assert message == (f"{path}{where} not UTF-8 text (byte {byte}): a TOML config is UTF-8 "
+                       "text; save it as UTF-8")
+
+
 def test_config_error_is_value_error():
     assert issubclass(ConfigError, ValueError)
 

@@ -240,8 +240,14 @@ def load_config(path=None, *, study: bool = True) -> StudyConfig:
                           "os.PathLike (None: the packaged default)")
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        # "utf-8-sig": a byte-order mark (Windows editors save "UTF-8 with BOM") is not part
+        # of the TOML, which tomllib refused at line 1 with "Invalid statement"
+        text = p.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = exc.object[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"{path}:{line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x}): "
+                          "a TOML config is UTF-8 text; save it as UTF-8") from None
+    except OSError as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.__class__.__name__}: "
                           f"{getattr(exc, 'strerror', None) or exc}") from None
     return parse_config(text, str(path), study=study)
