@@ -395,3 +395,73 @@ def test_a_rail_field_spread_beyond_its_grid_is_warned_of():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         parse_config(text, "carriage_preload.toml")
+
+
+@pytest.mark.parametrize("length_mm, refused", [(1e-5, True), (0.0019, True),
+                                                 (0.0021, False)])
+def test_an_automatic_step_count_beyond_its_maximum_is_refused_naming_the_length(length_mm,
+                                                                               refused):
+    # configs/whatif_along_track.toml (free balls, 100 mm stroke: the balls travel 50 mm) with
+    # its rail field's correlation length l: the automatic count is 4 steps per l of travel,
+    # 4 x 50 / l (closed form, Notes of time_steps), 2e7 at 1e-5 mm (the shortest possible:
+    # 1e-6 of its 10 mm ball); 2e32 at 1e-30 mm ran on without end before.
+    # MAX_TIME_STEPS = 100 000 allows l >= 0.002 mm.
+    from tolsim.study.pipeline.propagation_rules import MAX_TIME_STEPS, time_steps
+
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "configs" / "whatif_along_track.toml").read_text()
+    assert "correlation_length_mm = 20.0" in text
+    text = text.replace("correlation_length_mm = 20.0", f"correlation_length_mm = {length_mm!r}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConfigWarning)  # (unusual, coarse grid: warned of)
+        if not refused:
+            assert time_steps(parse_config(text, "short.toml")) == int(
+                np.ceil(4 * 50.0 / length_mm * (1 - 1e-12))) <= MAX_TIME_STEPS
+            return
+        with pytest.raises(ConfigError) as exc:
+            parse_config(text, "short.toml")
+    message = str(exc.value)
+    count = f"{4 * 50.0 / length_mm:.3g}"
+    assert message.startswith("short.toml:")
+    assert (f"tolerances.bottom_rotation.correlation_length_mm = {length_mm!r}: along the "
+            f"track the automatic step count would be {count}, more than 100000") in message
+    assert "use at least 0.002 mm, or set study.time_steps" in message
+    # a count given is bounded alike, and the same text with it loads
+    explicit = text.replace('propagation = "along_track"',
+                            'propagation = "along_track"\ntime_steps = 100', 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConfigWarning)
+        assert time_steps(parse_config(explicit, "short.toml")) == 100
+        with pytest.raises(ConfigError, match="study.time_steps = 100001 must be <= 100000"):
+            parse_config(explicit.replace("time_steps = 100", "time_steps = 100001"), "x")
+
+
+def test_a_carriage_end_relief_too_short_for_the_steps_is_refused():
+    # c = 8 steps per end relief length of travel (50 mm): 4e11 at 1e-9 mm
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "configs" / "carriage_preload.toml").read_text()
+    relief = (text.replace("# end_relief_depth_um = 1.0 ", "end_relief_depth_um = 1.0", 1)
+              .replace("# end_relief_length_mm = 15.0 ", "end_relief_length_mm = 1e-9", 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConfigWarning)
+        with pytest.raises(ConfigError, match=r"carriage.end_relief_length_mm = 1e-09: along "
+                           r"the track the automatic step count would be 4e\+11, more than "
+                           r"100000: the end relief is the shortest length .* use at least "
+                           r"0.004 mm"):
+            parse_config(relief, "relief.toml")
+
+
+@pytest.mark.parametrize("length_mm", [1e-30, 1e-320, 9.9e-6])
+@pytest.mark.parametrize("propagation", ["constant", "along_track"])
+def test_a_correlation_length_below_a_millionth_of_the_ball_is_impossible(length_mm,
+                                                                        propagation):
+    # 1e-320 mm (a subnormal) overflowed 1 / length in the worst-case stack-up (a traceback)
+    # and in the rail field's grid; 1e-30 mm along the track asked for 2e32 steps. Balls 1e-6 D
+    # apart already draw independent errors, so nothing is lost below it (10 mm balls).
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "configs" / "whatif_along_track.toml").read_text()
+    text = text.replace("correlation_length_mm = 20.0", f"correlation_length_mm = {length_mm!r}")
+    text = text.replace('propagation = "along_track"', f'propagation = "{propagation}"')
+    with pytest.raises(ConfigError, match=rf"tolerances.bottom_rotation.correlation_length_mm = "
+                       rf"{length_mm!r} mm is outside the possible range \[1e-05, inf\] mm"):
+        parse_config(text, "short.toml")

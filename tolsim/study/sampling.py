@@ -261,8 +261,10 @@ def field_grid(config):
     grid = {}
     for t in config.tolerances:
         if t.scope == "rail" and t.correlation_length > 0:
-            points = int(np.ceil((hi - lo) / t.correlation_length
-                                 * FIELD_POINTS_PER_CORRELATION_LENGTH)) + 2
+            with np.errstate(over="ignore"):  # (a subnormal length: inf, capped below)
+                wanted = np.float64(hi - lo) / t.correlation_length \
+                    * FIELD_POINTS_PER_CORRELATION_LENGTH
+            points = int(np.ceil(wanted)) + 2 if wanted < MAX_FIELD_POINTS else MAX_FIELD_POINTS
             points = min(max(points, 2), MAX_FIELD_POINTS)
             grid[t.source] = (lo, (hi - lo) / (points - 1), points)
     return grid

@@ -174,6 +174,7 @@ def _build(data: dict, source: "Source", text: str, path: str,
                                           "contact, sweep, allocate)")
     config = StudyConfig(bearing, motion, train, loads, tolerances, study, text, path,
                          correlations, carriage, contact, allocation)
+    _check_step_count(config, root)
     _warn_coarse_fields(config, root)
     if study.estimator != "monte_carlo":  # a rare-event estimator needs a limit state
         try:
@@ -181,6 +182,36 @@ def _build(data: dict, source: "Source", text: str, path: str,
         except ValueError as exc:
             raise study_table.error("estimator", str(exc).removeprefix("estimator ")) from None
     return config
+
+
+def _check_step_count(config, root):
+    """Refuse, naming the length that sets it, an automatic step count along the track above
+    :data:`tolsim.study.pipeline.propagation_rules.MAX_TIME_STEPS` (a rail field's
+    correlation length of 1e-30 mm gave 2e32 steps, and the study ran on without end)."""
+    from tolsim.study.pipeline.propagation_rules import (  # noqa: PLC0415
+        MAX_TIME_STEPS,
+        check_step_count,
+    )
+
+    found = check_step_count(config)
+    if found is None:
+        return
+    cause, length, count, shortest = found
+    if cause.startswith("rail field "):
+        table = root.table("tolerances").table(cause.removeprefix("rail field "))
+        key = table.key_for("correlation_length", "length")
+    else:  # the carriage's ball pitch or end relief, or a train's ball spacing
+        table = root.table("carriage" if config.carriage is not None else "train")
+        name = {"ball pitch": "ball_pitch", "end relief": "end_relief_length"}.get(cause)
+        key = table.key_for(name, "length") if name else None
+    what = f"= {table.data[key]!r}" if key else f"({cause} {1e3 * length:.3g} mm)"
+    length_name = (f"correlation length of the rail field {cause.removeprefix('rail field ')}"
+                   if cause.startswith("rail field ") else cause)
+    raise table.error(key, f"{what}: along the track the automatic step count would be "
+                           f"{count:.3g}, more than {MAX_TIME_STEPS}: the {length_name} is the "
+                           "shortest length over which epsilon changes, and a step moves a "
+                           f"ball a fraction of it; use at least {1e3 * shortest:.3g} mm, or "
+                           "set study.time_steps")
 
 
 def _warn_coarse_fields(config, root):

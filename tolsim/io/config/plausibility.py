@@ -181,11 +181,15 @@ RANGES = {
     # semi-axes: tolsim.physics.hertz), so an error correlated over less than a tenth of the
     # ball is averaged by the contact; ground rails' form errors are waviness of millimetres
     # to metres. The automatic step follows the shortest length (4 steps per length along
-    # half the stroke: 200 000 steps for 1 um on a 100 mm stroke).
-    "tolerances.correlation_length": Range(0.0, None, 0.1, None, "a ball's contact averages "
-                                           "errors shorter than about a tenth of the ball; "
-                                           "the automatic step count grows as 1 / length",
-                                           open_low=True, per="ball diameter"),
+    # half the stroke: 200 000 steps for 1 um on a 100 mm stroke, beyond MAX_TIME_STEPS).
+    # Possible from 1e-6 D (10 nm for a 10 mm ball): ball centres that far apart already draw
+    # independent errors (a constant study's way to say so), and shorter lengths overflowed
+    # 1 / length in the worst-case stack-up (a traceback at 1e-320 mm).
+    "tolerances.correlation_length": Range(1e-6, None, 0.1, None, "a ball's contact averages "
+                                           "errors shorter than about a tenth of the ball, "
+                                           "balls 1e-6 D apart draw independent ones; the "
+                                           "automatic step count grows as 1 / length",
+                                           per="ball diameter"),
 }
 
 

@@ -27,6 +27,7 @@ from tolsim.io.config.reader import UNITS, Table, show
 from tolsim.physics.carriage import CarriageLayout, CarriageLoad
 from tolsim.physics.geometry import Bearing
 from tolsim.study.analyses.rare_events import MIN_CHAINS
+from tolsim.study.pipeline.propagation_rules import MAX_TIME_STEPS
 from tolsim.study.spec import (
     CREEP_MODELS,
     DISTRIBUTIONS,
@@ -604,8 +605,8 @@ def _time_steps(t):
         return None
     if isinstance(t.data["time_steps"], str):
         raise t.error("time_steps", f'= {t.data["time_steps"]!r} must be "auto" or an integer '
-                                    ">= 1")
-    return t.integer("time_steps", minimum=1)
+                                    f"from 1 to {MAX_TIME_STEPS}")
+    return t.integer("time_steps", minimum=1, maximum=MAX_TIME_STEPS)
 
 
 def read_study(t: Table) -> StudySettings:

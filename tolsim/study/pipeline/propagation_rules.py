@@ -49,6 +49,12 @@ STEPS_PER_LENGTH_RELIEF = 8.0
 STEPS_PER_LENGTH_CONTACT = 40.0
 #: The fewest automatic steps over the stroke.
 MIN_TIME_STEPS = 8
+#: The most integration steps of an ``along_track`` study, given (``study.time_steps``) or
+#: automatic. A step of a block costs about a millisecond (free balls; a carriage several),
+#: so 10^5 steps take minutes per block; the automatic count passes it only for a length far
+#: below the balls' contacts (a rail field's correlation length of 1e-30 mm gave 2e32 steps,
+#: and the study ran on without end).
+MAX_TIME_STEPS = 100_000
 
 
 def epsilon_lengths(config) -> dict:
@@ -176,20 +182,47 @@ def time_steps(config) -> int:
     """
     if config.study.time_steps is not None:
         return int(config.study.time_steps)
-    lengths = epsilon_lengths(config)
-    if not lengths:
-        return MIN_TIME_STEPS
+    count = automatic_step_count(config)
+    if not count <= MAX_TIME_STEPS:
+        raise ValueError(f"the automatic step count {count:.3g} exceeds MAX_TIME_STEPS = "
+                         f"{MAX_TIME_STEPS} (check_step_count names the length)")
+    return max(MIN_TIME_STEPS, int(np.ceil(count * (1 - 1e-12))))
+
+
+def steps_per_length(config) -> float:
+    """The automatic steps per shortest length c of :func:`time_steps` (its Notes)."""
     carriage = config.carriage
     relief = carriage is not None and carriage.end_relief_depth > 0
     if config.contact is not None and (carriage is None or carriage.circuit is None):
-        per_length = STEPS_PER_LENGTH_CONTACT
-    elif carriage is not None:
-        per_length = STEPS_PER_LENGTH_RELIEF if relief else STEPS_PER_LENGTH_CARRIAGE
-    else:
-        per_length = STEPS_PER_LENGTH
-    travel = 0.5 * config.motion.stroke
-    return max(MIN_TIME_STEPS,
-               int(np.ceil(per_length * travel / min(lengths.values()) * (1 - 1e-12))))
+        return STEPS_PER_LENGTH_CONTACT
+    if carriage is not None:
+        return STEPS_PER_LENGTH_RELIEF if relief else STEPS_PER_LENGTH_CARRIAGE
+    return STEPS_PER_LENGTH
+
+
+def automatic_step_count(config) -> float:
+    """c (s / 2) / l_min of :func:`time_steps`, unrounded and unbounded (0 without any length
+    of :func:`epsilon_lengths`; inf where it overflows)."""
+    lengths = epsilon_lengths(config)
+    if not lengths:
+        return 0.0
+    with np.errstate(over="ignore"):
+        return float(np.float64(steps_per_length(config)) * (0.5 * config.motion.stroke)
+                     / min(lengths.values()))
+
+
+def check_step_count(config):
+    """None if the automatic step count of ``config`` (along the track, ``study.time_steps``
+    "auto") is at most :data:`MAX_TIME_STEPS`; else (cause, length [m], count, the shortest
+    length that passes [m]): the cause of :func:`epsilon_lengths` that sets it."""
+    if not config.is_along_track or config.study.time_steps is not None:
+        return None
+    count = automatic_step_count(config)
+    if count <= MAX_TIME_STEPS:
+        return None
+    cause, length = min(epsilon_lengths(config).items(), key=lambda item: item[1])
+    shortest = steps_per_length(config) * 0.5 * config.motion.stroke / MAX_TIME_STEPS
+    return cause, length, count, shortest
 
 
 def propagation_caveat(config) -> str:
