@@ -1085,3 +1085,30 @@ def test_sobol_indices_of_an_along_track_carriage_study():
     np.testing.assert_array_equal(first.total, again.total)
     eps = first.outputs.index("velocity_deviation")
     assert first.total[eps, 0] == pytest.approx(1.0, abs=0.3)
+
+
+def test_two_point_balls_along_the_track_are_answered_in_closed_form(monkeypatch):
+    # No preload under 3 000 N: every loaded ball sits on one diagonal (two-point, epsilon =
+    # 0). The solves along the track stop at TRACK_TOLERANCE (1e-4), which leaves a pair up
+    # to 2e-4 rad apart (Notes of tolsim.physics.velocity.full.exactly_two_point), most beyond
+    # its tight 1e-9 rad: they went to the full model, which gave |epsilon| <= 2e-10 in 90 %
+    # of the run (session 28; configs/carriage_preload.toml so: 12.7 k balls/s). To the
+    # solve's balance they are two-point in closed form, and nearly none reaches the kernel.
+    from tolsim.physics.velocity import full as full_module
+
+    reached = []
+    kernel = full_module.full
+
+    def spy(dbeta, force, *args, **kwargs):
+        loaded = np.asarray(force) > 0.0
+        reached.append(int(np.count_nonzero(
+            (np.count_nonzero(loaded, axis=1) == 2)
+            & ((loaded[:, 0] & loaded[:, 2]) | (loaded[:, 1] & loaded[:, 3])))))
+        return kernel(dbeta, force, *args, **kwargs)
+
+    monkeypatch.setattr(full_module, "full", spy)
+    c = config(n=6, preload=0.0, vertical=3000.0, tolerances=ALL_KINDS, samples=16, steps=10)
+    result = run_study(c)
+    total = 16 * 2 * 6 * 11  # assemblies x balls x (10 midpoints and the start), about
+    assert sum(reached) <= 0.01 * total, (sum(reached), total)
+    assert result.statistics.contact_probability()[0] == 0.0  # epsilon = 0: no contact

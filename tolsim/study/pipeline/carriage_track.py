@@ -225,7 +225,7 @@ class _Evaluation:
         # a ball with less load than the solve resolves is unloaded (settle_unresolved_loads)
         force = settle_unresolved_loads(batch.normal_force, loaded, TRACK_TOLERANCE)
         state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation, force,
-                                       batch.ball_converged, solved)
+                                       batch.ball_converged, solved, TRACK_TOLERANCE)
         eps, ok, unloaded = np.empty(shape), np.empty(shape, dtype=bool), np.empty(
             shape, dtype=bool)
         scatter_loaded_balls_kernel(loaded, state.velocity_deviation, state.valid,

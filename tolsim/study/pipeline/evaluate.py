@@ -538,12 +538,13 @@ def loaded_contacts(force):
     return np.where(tension, np.int8(-1), count.astype(np.int8))
 
 
-def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
+def full_velocity(dbeta, force, bearing, groove_velocity=0.01, ball_tolerance=None):
     """epsilon and regime of balls from :func:`tolsim.physics.velocity.full.full`, never raising.
 
     ``full`` takes four-, three- and two-point balls (issue 25); the exactly two-point ones
-    (:func:`tolsim.physics.velocity.full.exactly_two_point`) are answered here in its closed
-    form (epsilon = 0, two-point), without the kernel. Balls that it cannot take
+    (:func:`tolsim.physics.velocity.full.exactly_two_point`, to the static solve's
+    ``ball_tolerance`` when given) are answered here in its closed form (epsilon = 0,
+    two-point), without the kernel. Balls that it cannot take
     (fewer than two loaded contacts, a contact in tension, a loaded contact angle outside
     (0, 90) deg, a contact ellipse wider than R_B / 2) and balls it does not certify come back
     with ``ok`` False and epsilon NaN. epsilon does not depend on ``groove_velocity``.
@@ -578,7 +579,7 @@ def full_velocity(dbeta, force, bearing, groove_velocity=0.01):
     takes = (count >= 2) & np.all(np.isfinite(dbeta), axis=1) & angles & ellipses
     idx = np.flatnonzero(takes)
     if len(idx):  # exactly two-point balls in closed form (epsilon = 0), the rest by ``full``
-        two = module.exactly_two_point(dbeta[idx], force[idx], bearing)
+        two = module.exactly_two_point(dbeta[idx], force[idx], bearing, ball_tolerance)
         eps[idx[two]] = 0.0
         ok[idx[two]] = True
         regime[idx[two]] = BALL_TWO_POINT
@@ -790,7 +791,8 @@ def with_static_fallback(config, state: BallState, values: dict, loads) -> BallS
                      marked.reshape(shape))
 
 
-def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallState:
+def ball_velocities(config, static: StaticResult, shape, counts=None,
+                    ball_tolerance=None) -> BallState:
     """The study's velocity model on balls in a known contact state, with the re-solves.
 
     Parameters
@@ -805,6 +807,9 @@ def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallSta
         :mod:`tolsim.study.pipeline.ball_kernels` on ``static.normal_force``, if the caller
         has them (:func:`paired_balls`), and the fast model's (epsilon, valid) if it has
         them too (else None); computed here if not.
+    ball_tolerance : float, optional
+        The relative ball balance of the static solve, when looser than round-off (for
+        :func:`full_velocity`).
 
     Returns
     -------
@@ -850,7 +855,8 @@ def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallSta
             with serial_if_small(len(redo)):  # (a few balls: no thread pool)
                 eps_full, ok, regime_full = full_velocity(dbeta[redo], force[redo],
                                                           config.bearing,
-                                                          config.motion.groove_velocity)
+                                                          config.motion.groove_velocity,
+                                                          ball_tolerance)
             # model time only: a cold kernel cache compiles the full model here, once
             resolve_seconds = (time.perf_counter() - t0) - (compile_seconds() - c0)
             eps[redo] = eps_full  # NaN where not ok
@@ -866,8 +872,10 @@ def ball_velocities(config, static: StaticResult, shape, counts=None) -> BallSta
     )
 
 
-def loaded_ball_velocities(config, loaded, dbeta, force, ball_converged, solved) -> BallState:
-    """:func:`ball_velocities` of the loaded balls of slot arrays (a carriage solve).
+def loaded_ball_velocities(config, loaded, dbeta, force, ball_converged, solved,
+                           ball_tolerance=None) -> BallState:
+    """:func:`ball_velocities` of the loaded balls of slot arrays (a carriage solve to the
+    relative ball balance ``ball_tolerance``; None: a tight one).
 
     Parameters
     ----------
@@ -895,14 +903,15 @@ def loaded_ball_velocities(config, loaded, dbeta, force, ball_converged, solved)
                static.four_point)
     if config.study.velocity_model != "analytic":
         gather_loaded_kernel(loaded, dbeta, force, ball_converged, solved, *outputs)
-        return ball_velocities(config, static, (n,))
+        return ball_velocities(config, static, (n,), ball_tolerance=ball_tolerance)
     count, eps, valid = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.bool_)
     with serial_if_small(n), np.errstate(divide="ignore", invalid="ignore"):
         settled = gather_analytic_kernel(loaded, dbeta, force, ball_converged, solved,
                                          round_off_force(config.bearing),
                                          *analytic_arguments(config.bearing), *outputs,
                                          count, eps, valid)
-    return ball_velocities(config, static, (n,), (count, None, settled, (eps, valid)))
+    return ball_velocities(config, static, (n,), (count, None, settled, (eps, valid)),
+                           ball_tolerance)
 
 
 def loads_per_ball(config, shape):
