@@ -222,11 +222,13 @@ def paired_analytic_kernel(tangential0, tangential1, tangential2, tangential3, b
 
 
 @pjit
-def unresolved_loads_kernel(force, loaded, tolerance, out_small):
+def unresolved_loads_kernel(force, loaded, tolerance, light, out_small, out_light):
     """The loaded balls whose every force is finite and <= tolerance x the largest finite
     force of their assembly's loaded balls (at least 0), and > 0 somewhere: ``out_small``
     (m, k) and their number (:func:`tolsim.study.pipeline.evaluate.settle_unresolved_loads`,
-    one pass over force (m, k, 4) instead of NumPy's reductions)."""
+    one pass over force (m, k, 4) instead of NumPy's reductions); ``out_light`` (m,): the
+    assembly has a contact of a loaded ball left loaded (above the floor) that carries
+    less than ``light`` x the largest force (0: none)."""
     m, k = loaded.shape
     count = 0
     for a in prange(m):
@@ -238,18 +240,24 @@ def unresolved_loads_kernel(force, loaded, tolerance, out_small):
                     if np.isfinite(f) and f > largest:
                         largest = f
         floor = tolerance * largest
+        low = light * largest
+        any_light = False
         for b in range(k):
             small = False
             if loaded[a, b]:
-                below, positive = True, False
+                below, positive, lightest = True, False, np.inf
                 for c in range(4):
                     f = force[a, b, c]
                     below = below and np.isfinite(f) and f <= floor
                     positive = positive or f > 0.0
+                    if f > 0.0 and f < lightest:
+                        lightest = f
                 small = below and positive
+                any_light = any_light or (not small and lightest < low)
             out_small[a, b] = small
             if small:
                 count += 1
+        out_light[a] = any_light
     return count
 
 

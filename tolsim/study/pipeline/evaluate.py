@@ -519,13 +519,21 @@ def settle_unresolved_loads(force, loaded, tolerance):
     :func:`settle_round_off_contacts` (2.4e-8 N) is the one that matters at the default
     tolerance of 1e-11 (a floor of 1e-11 F_max is below it up to F_max = 2 400 N).
     """
+    return settle_and_find_light(force, loaded, tolerance)[0]
+
+
+def settle_and_find_light(force, loaded, tolerance, light=0.0):
+    """:func:`settle_unresolved_loads` (the forces, the same array when nothing settles), and
+    (m,) the assemblies with a contact of a loaded ball that stays loaded and carries less
+    than ``light`` x the assembly's largest contact force (0: none), in the same pass."""
     m = force.shape[0]
     small = np.empty(loaded.shape, dtype=bool)
+    rows = np.empty(m, dtype=bool)
     if not unresolved_loads_kernel(kernel_array(force).reshape(m, -1, 4),
                                    kernel_array(loaded, bool).reshape(m, -1), float(tolerance),
-                                   small.reshape(m, -1)):
-        return force
-    return np.where(small[..., None], 0.0, force)
+                                   float(light), small.reshape(m, -1), rows):
+        return force, rows
+    return np.where(small[..., None], 0.0, force), rows
 
 
 def loaded_contacts(force):
