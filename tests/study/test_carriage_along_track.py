@@ -1154,3 +1154,40 @@ def test_assemblies_with_light_contacts_are_solved_on_to_the_tight_tolerance(mon
     assert_array_equal(np.isfinite(polished), both)
     assert np.max(np.abs(loose[both] - tight[both])) > 1e-4  # (what the polish is for)
     assert np.max(np.abs(polished[both] - tight[both])) < 1e-7
+
+
+def test_an_assembly_whose_polishing_solve_fails_keeps_its_loose_solution(monkeypatch):
+    # A polishing solve that does not converge must not turn a converged assembly into an
+    # unsolved one: its loose solution stays (forced here: the polish of the first light
+    # assembly reports FAILED).
+    import tolsim.study.pipeline.carriage_track as track
+
+    text = (ROOT / "configs" / "carriage_preload.toml").read_text().replace(
+        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0")
+    c = parse_config(text, "none.toml").with_overrides(samples=64)
+    block = sample_block(c, 0)
+    solve = track.solve_carriage_batch
+    seen = {}
+
+    def failing(*args, **kwargs):
+        batch = solve(*args, **kwargs)
+        if kwargs.get("tol") == track.POLISH_TOLERANCE:
+            batch.status[0] = 3  # STATUS_FAILED
+            seen["polished"] = len(batch.status)
+        else:
+            seen["loose"] = batch
+        return batch
+
+    monkeypatch.setattr(track, "solve_carriage_batch", failing)
+    frame = track.CarriageFrame(c, block)
+    rows = np.arange(block.size)
+    _, _, loaded, batch, _, _ = frame.evaluation(frame.position, frame.ball_id, 0.0, rows)
+    assert seen["polished"] >= 2  # (assemblies with light contacts were polished)
+    loose = seen["loose"]
+    _, light = track.settle_and_find_light(loose.normal_force, loaded, track.TRACK_TOLERANCE,
+                                           track.LIGHT_CONTACT)
+    first, others = np.flatnonzero(light)[0], np.flatnonzero(light)[1:]
+    assert batch.status[first] == STATUS_CONVERGED
+    assert_array_equal(batch.displacement[first], loose.displacement[first])
+    assert_array_equal(batch.normal_force[first], loose.normal_force[first])
+    assert not np.array_equal(batch.displacement[others], loose.displacement[others])

@@ -248,6 +248,7 @@ class _Evaluation:
         solved = batch.status == STATUS_CONVERGED
         if remember:
             self.remember(rows, t, batch, solved)
+        # (TRACK_TOLERANCE bounds the polished assemblies' balance too)
         state = loaded_ball_velocities(config, loaded, batch.contact_angle_deviation, force,
                                        batch.ball_converged, solved, TRACK_TOLERANCE)
         eps, ok, unloaded = np.empty(shape), np.empty(shape, dtype=bool), np.empty(
@@ -260,7 +261,8 @@ class _Evaluation:
 
     def polished(self, batch, force, light, errors, z, loaded):
         """``batch`` and its settled ``force`` with the assemblies ``light`` (m_k,) solved on
-        from their solution to :data:`POLISH_TOLERANCE` (Notes of :data:`LIGHT_CONTACT`)."""
+        from their solution to :data:`POLISH_TOLERANCE` (Notes of :data:`LIGHT_CONTACT`); an
+        assembly whose polishing solve does not converge keeps its loose solution."""
         carriage, m = self.config.carriage, len(light)
         sub_errors = GrooveErrors(**{
             name: (value[light] if np.ndim(value) and np.shape(value)[0] == m else value)
@@ -270,16 +272,18 @@ class _Evaluation:
                                    groove_errors=sub_errors, ball_z=z[light],
                                    loaded=loaded[light], start=batch.displacement[light],
                                    tol=POLISH_TOLERANCE, ball_tol=POLISH_TOLERANCE)
+        done = sub.status == STATUS_CONVERGED
+        rows = np.flatnonzero(light)[done]
         fields = {}
         for name in batch.__dataclass_fields__:
             value = getattr(batch, name)
             if isinstance(value, np.ndarray):
                 value = value.copy()
-                value[light] = getattr(sub, name)
+                value[rows] = getattr(sub, name)[done]
             fields[name] = value
         force = np.array(force)  # (a copy: it may be batch.normal_force)
-        force[light] = settle_unresolved_loads(sub.normal_force, loaded[light],
-                                               POLISH_TOLERANCE)
+        force[rows] = settle_unresolved_loads(sub.normal_force[done], loaded[rows],
+                                              POLISH_TOLERANCE)
         return type(batch)(**fields), force
 
     def newton_start(self, rows, t):
