@@ -510,3 +510,24 @@ def test_a_circuit_study_does_not_depend_on_the_thread_count(other_thread_count)
     assert_array_equal(serial[4].velocity_deviation, ambient[4].velocity_deviation)
     for name in ("where_count", "column_max", "column_mean", "total_gap_end", "slack_error"):
         assert_array_equal(getattr(serial[-1], name), getattr(ambient[-1], name), err_msg=name)
+
+
+def test_two_point_balls_hold_their_speed_against_the_column():
+    # Without preload under 3 000 N every loaded ball sits on one diagonal: exactly two-point,
+    # epsilon = 0, and a push below 2 mu F (some 30 N here) leaves it rolling at v / 2 (an
+    # anchor, regime_creep_coefficients). The analytic model has no creep stiffness for it
+    # (NaN), and the circuit's step moved it with the stand-in K of 1 N, so the column's
+    # push (0.02 N per return ball) slowed the balls at the exit and a wave of closing pairs
+    # ran back through the zone: every assembly touched within 5 ms (session 28). With
+    # ANCHOR_STIFFNESS the loaded balls keep their gaps: no contact inside the zone or at
+    # its entry; the exiting balls still push the column (contacts at the exit).
+    text = config(vertical=3000.0, samples=16, steps=20).text.replace(
+        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0")
+    c = parse_config(text, "circuit.toml")
+    result = run_study(c)
+    ds = result_to_dataset(result)
+    assert int(ds.n_balls_regime.sel(ball_regime=3)) == 16 * 2 * 6  # all two-point
+    assert result.statistics.contact_probability()[0] == 0.0
+    where = dict(zip(ds.circuit_contact_where_name.values.tolist(),
+                     ds.circuit_contact_count.values.tolist(), strict=True))
+    assert where["inside"] == 0 and where["entry"] == 0 and where["exit"] > 0

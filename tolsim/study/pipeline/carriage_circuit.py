@@ -28,6 +28,7 @@ from tolsim.physics.circuit import (
 )
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.physics.velocity.creep_stiffness import creep_stiffness
+from tolsim.physics.velocity.models import BALL_TWO_POINT
 from tolsim.study.pipeline.carriage_track import (
     CarriageBalls,
     CarriageFrame,
@@ -53,6 +54,17 @@ from tolsim.study.sampling import entering_capacity, moving_ball_values
 from tolsim.study.spec import ContactSettings
 
 _K = LOAD_COLUMNS.index("creep_stiffness")
+#: The creep stiffness K [N] that moves an exactly two-point ball in the circuit's step: rigid
+#: to 1e-9 of epsilon per newton of push. Such a ball rolls at v / 2 with both contacts
+#: stuck while |P| + mu_bb S <= 2 mu F (:func:`tolsim.physics.trains.regimes.
+#: regime_creep_coefficients`: an anchor, K = inf), some 30 N for a 10 mm ball on 150 N
+#: against column forces below 1 N. The analytic model has no K for it (NaN: it has no four
+#: contacts), and the stand-in of the assembly's mean K (1 N where every ball is two-point)
+#: let the column's push move it: ``carriage_preload.toml`` without preload under 3 000 N
+#: with a default circuit (every loaded ball two-point, epsilon = 0) touched in every
+#: assembly within 5 ms, as a wave of closing pairs from the exit back through the zone
+#: (session 28).
+ANCHOR_STIFFNESS = 1e9
 #: Gaps at the start of the stroke at or below this are closed [m]: the positions are sums
 #: of diameters and gaps (about 0.3 m, ulp 6e-17 m), so a zero gap comes out within a few
 #: 1e-17 m of 0.
@@ -368,8 +380,9 @@ class CircuitFrame(CarriageFrame):
     def stiffness(self, balls, loaded, where=None):
         """Creep stiffness K [N] of the loaded slots (NaN elsewhere and where unresolved):
         the analytic model at each ball's own contact state (:data:`tolsim.study.pipeline.
-        track_friction.CREEP_MODELS`), as the trains after contact; only at the slots
-        ``where`` (a subset of ``loaded``) when given."""
+        track_friction.CREEP_MODELS`), as the trains after contact, and
+        :data:`ANCHOR_STIFFNESS` for an exactly two-point ball; only at the slots ``where``
+        (a subset of ``loaded``) when given."""
         out = np.full(loaded.shape, np.nan)
         take = loaded if where is None else where
         if take.any():
@@ -381,6 +394,9 @@ class CircuitFrame(CarriageFrame):
                 k = creep_stiffness(dbeta, force, self.config.bearing)
             else:
                 k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
+            two = np.asarray(balls.regime).reshape(-1)[pick] == BALL_TWO_POINT
+            if two.any():  # an anchor (ANCHOR_STIFFNESS)
+                k = np.where(two, ANCHOR_STIFFNESS, k)
             out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
 

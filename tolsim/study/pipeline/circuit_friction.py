@@ -378,7 +378,8 @@ class CircuitTrains(StepObserver):
     motion (the Notes of :func:`tolsim.physics.circuit.step`, "Neglected"); it enters the
     friction through B_j. The creep stiffness of the motion is the analytic model's of the
     ball's own state (:class:`tolsim.study.pipeline.carriage_circuit.CircuitFrame`), not the
-    regime's (an anchor moves at its K there, not rigidly).
+    regime's, except for an exactly two-point ball, which has none: it moves as an anchor
+    (:data:`tolsim.study.pipeline.carriage_circuit.ANCHOR_STIFFNESS`, rigid to 1e-9).
     """
 
     def __init__(self, frame, friction):
