@@ -297,8 +297,14 @@ def test_a_ball_without_stiffness_takes_its_own_assemblys_mean():
                       [nan, nan, nan], [0.0, -2.0, nan],  # assembly 1: none -> 1.0
                       [0.5, 0.25, 0.25], [nan, 1.0, nan]])  # assembly 2: 2 / 4
     out = np.empty(6)
-    assembly_stiffness_kernel(stiff, 2, out)
+    assembly_stiffness_kernel(stiff, 2, np.inf, out)
     assert_array_equal(out, [2.0, 2.0, 1.0, 1.0, 0.5, 0.5])
     alone = np.empty(2)
-    assembly_stiffness_kernel(np.ascontiguousarray(stiff[4:]), 2, alone)
+    assembly_stiffness_kernel(np.ascontiguousarray(stiff[4:]), 2, np.inf, alone)
     assert_array_equal(alone, out[4:])
+    # an anchor's K (ANCHOR_STIFFNESS and above) is left out of the mean (session 28: it made
+    # the stand-in of a three-point ball beside anchors nearly rigid)
+    anchored = stiff.copy()
+    anchored[0, 2] = anchored[4, 0] = 1e9
+    assembly_stiffness_kernel(anchored, 2, 1e9, out)
+    assert_array_equal(out, [2.0, 2.0, 1.0, 1.0, 1.5 / 3, 1.5 / 3])

@@ -26,9 +26,10 @@ from tolsim.physics.circuit import (
     window_arrays,
     wrap,
 )
+from tolsim.physics.trains.regimes import regime_creep_coefficients
 from tolsim.physics.velocity.analytic import LOAD_COLUMNS
 from tolsim.physics.velocity.creep_stiffness import creep_stiffness
-from tolsim.physics.velocity.models import BALL_TWO_POINT
+from tolsim.physics.velocity.models import BALL_REGIME_B, BALL_THREE_POINT, BALL_TWO_POINT
 from tolsim.study.pipeline.carriage_track import (
     CarriageBalls,
     CarriageFrame,
@@ -58,12 +59,14 @@ _K = LOAD_COLUMNS.index("creep_stiffness")
 #: to 1e-9 of epsilon per newton of push. Such a ball rolls at v / 2 with both contacts
 #: stuck while |P| + mu_bb S <= 2 mu F (:func:`tolsim.physics.trains.regimes.
 #: regime_creep_coefficients`: an anchor, K = inf), some 30 N for a 10 mm ball on 150 N
-#: against column forces below 1 N. The analytic model has no K for it (NaN: it has no four
-#: contacts), and the stand-in of the assembly's mean K (1 N where every ball is two-point)
-#: let the column's push move it: ``carriage_preload.toml`` without preload under 3 000 N
-#: with a default circuit (every loaded ball two-point, epsilon = 0) touched in every
-#: assembly within 5 ms, as a wave of closing pairs from the exit back through the zone
-#: (session 28).
+#: against column forces below 1 N. The analytic model has no K for a ball without four
+#: contacts (NaN), and the step gave two- and three-point balls the assembly's mean K as a
+#: stand-in (1 N where no ball had one), so the column's push moved them: on
+#: ``carriage_preload.toml`` without preload and a default circuit (100 assemblies, session
+#: 28) every assembly touched, half of them within 4 ms, as waves of closing pairs from the
+#: exit back through the zone (3 000 N: every ball two-point, epsilon = 0; 300 N: two-,
+#: three- and four-point). With the regimes' K (:meth:`CircuitFrame.stiffness`) P is 0 and
+#: 0.07, with column forces of 0.38 and 0.58 N at most.
 ANCHOR_STIFFNESS = 1e9
 #: Gaps at the start of the stroke at or below this are closed [m]: the positions are sums
 #: of diameters and gaps (about 0.3 m, ulp 6e-17 m), so a zero gap comes out within a few
@@ -380,9 +383,9 @@ class CircuitFrame(CarriageFrame):
     def stiffness(self, balls, loaded, where=None):
         """Creep stiffness K [N] of the loaded slots (NaN elsewhere and where unresolved):
         the analytic model at each ball's own contact state (:data:`tolsim.study.pipeline.
-        track_friction.CREEP_MODELS`), as the trains after contact, and
-        :data:`ANCHOR_STIFFNESS` for an exactly two-point ball; only at the slots ``where``
-        (a subset of ``loaded``) when given."""
+        track_friction.CREEP_MODELS`) in regime A, and its regime's for a ball in regime B,
+        three- or two-point (:meth:`_regime_stiffness`), as the trains after contact; only
+        at the slots ``where`` (a subset of ``loaded``) when given."""
         out = np.full(loaded.shape, np.nan)
         take = loaded if where is None else where
         if take.any():
@@ -394,11 +397,32 @@ class CircuitFrame(CarriageFrame):
                 k = creep_stiffness(dbeta, force, self.config.bearing)
             else:
                 k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
-            two = np.asarray(balls.regime).reshape(-1)[pick] == BALL_TWO_POINT
-            if two.any():  # an anchor (ANCHOR_STIFFNESS)
-                k = np.where(two, ANCHOR_STIFFNESS, k)
+            regime = np.asarray(balls.regime).reshape(-1)[pick]
+            other = (regime == BALL_REGIME_B) | (regime == BALL_THREE_POINT) | (
+                regime == BALL_TWO_POINT)
+            if other.any():  # the K of its regime (Notes of ANCHOR_STIFFNESS)
+                k = k.copy()
+                k[other] = self._regime_stiffness(
+                    dbeta[other], force[other], regime[other],
+                    np.asarray(balls.velocity_deviation).reshape(-1)[pick][other])
             out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
+
+    def _regime_stiffness(self, dbeta, force, regime, eps):
+        """K [N] of balls in regime B, three- or two-point: their regime's, as the trains
+        after contact take it (:func:`tolsim.physics.trains.regimes.
+        regime_creep_coefficients`: B its stick line, three-point its own minimum of D, an
+        exactly two-point ball an anchor, here :data:`ANCHOR_STIFFNESS`). A two-point ball
+        that the full model answered off balance (epsilon not 0: the static solve's error)
+        keeps its stand-in (NaN): its epsilon times an anchor's K would be a force of that
+        error."""
+        bearing = self.config.bearing
+        load = self.model(dbeta, force, bearing, 0.0)
+        k = regime_creep_coefficients(load, regime, dbeta, force, bearing, ball_friction=0.0,
+                                      lazy_release=True)[:, _K]
+        two = regime == BALL_TWO_POINT
+        k = np.where(two & (eps == 0.0), ANCHOR_STIFFNESS, k)
+        return np.where(two & (eps != 0.0), np.nan, k)
 
     def start(self, k, t, position):
         self.step_start = t
@@ -476,7 +500,8 @@ class CircuitFrame(CarriageFrame):
         self.midpoint_stiffness = midpoint
         c, n = len(circuits), self.sigma.shape[1]
         fallback = np.empty(c)  # each assembly's own mean K for a ball without one
-        assembly_stiffness_kernel(kernel_array(stiff).reshape(c, -1), self.tracks, fallback)
+        assembly_stiffness_kernel(kernel_array(stiff).reshape(c, -1), self.tracks,
+                                  ANCHOR_STIFFNESS, fallback)
         unresolved = ~(state1.valid & state2.valid)
         # every assembly (as the circuit is followed over the stroke): the state in place,
         # else the rows' copies, written back after the step

@@ -376,10 +376,9 @@ class CircuitTrains(StepObserver):
     **Not modelled.** The circuit's step moves the balls with K alone: the ball-ball braking
     c of the open trains' cluster rule (kappa instead of K, |c K| < 1) is left out of the
     motion (the Notes of :func:`tolsim.physics.circuit.step`, "Neglected"); it enters the
-    friction through B_j. The creep stiffness of the motion is the analytic model's of the
-    ball's own state (:class:`tolsim.study.pipeline.carriage_circuit.CircuitFrame`), not the
-    regime's, except for an exactly two-point ball, which has none: it moves as an anchor
-    (:data:`tolsim.study.pipeline.carriage_circuit.ANCHOR_STIFFNESS`, rigid to 1e-9).
+    friction through B_j. The creep stiffness of the motion is its regime's, as the trains'
+    (:meth:`tolsim.study.pipeline.carriage_circuit.CircuitFrame.stiffness`; an anchor rigid
+    to 1e-9, :data:`tolsim.study.pipeline.carriage_circuit.ANCHOR_STIFFNESS`).
     """
 
     def __init__(self, frame, friction):

@@ -44,9 +44,12 @@ def entering_fill_kernel(loaded, eps, stiffness, pushed):
 
 
 @jit
-def assembly_stiffness_kernel(stiffness, tracks, out):
+def assembly_stiffness_kernel(stiffness, tracks, anchor, out):
     """Each circuit's stand-in creep stiffness K [N] for a ball without one: the mean of the
-    finite, positive K of its assembly's slots (every track), 1.0 where there is none.
+    finite, positive K below ``anchor`` of its assembly's slots (every track), 1.0 where there
+    is none. (An anchor's K, ``anchor`` and above, is not a creep stiffness: averaged in, it
+    made the stand-in nearly rigid, and a three-point ball beside anchors pressed them with
+    thousands of newtons.)
 
     ``stiffness`` (C, S) per circuit (assembly a holds circuits a T .. a T + T - 1,
     ``tracks`` = T), ``out`` (C,). Summed slot by slot in the assembly's order, so an
@@ -59,7 +62,7 @@ def assembly_stiffness_kernel(stiffness, tracks, out):
         for c in range(a * tracks, (a + 1) * tracks):
             for j in range(slots):
                 k = stiffness[c, j]
-                if np.isfinite(k) and k > 0:
+                if np.isfinite(k) and k > 0 and k < anchor:
                     total += k
                     count += 1
         value = total / count if count > 0 else 1.0
