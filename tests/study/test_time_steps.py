@@ -139,3 +139,24 @@ def test_the_carriage_newton_starts_on_the_line_through_its_two_latest_solutions
     assert_array_equal(start[3], nominal)
     evaluation.remember(rows[:1], 0.01, batch(a, 1), np.zeros(1, dtype=bool))
     assert_array_equal(evaluation.newton_start(rows[:1], 0.015)[0], b)
+
+
+def test_a_given_step_count_below_an_automatic_one_beyond_the_most_says_so():
+    # The refusal of an automatic count beyond MAX_TIME_STEPS tells the user to set
+    # study.time_steps; the caveat that compares the given count with the automatic one then
+    # raised (the automatic count asked for, 2e7 at a 1e-5 mm correlation length on the 50 mm
+    # travel of configs/whatif_along_track.toml: 4 x 50 / 1e-5): a traceback after the run
+    # (session 28). Now it names the count and the bound.
+    import warnings
+
+    from tolsim.io.config import ConfigWarning
+
+    text = (CONFIGS / "whatif_along_track.toml").read_text().replace(
+        "correlation_length_mm = 20.0", "correlation_length_mm = 1e-5")
+    text = text.replace('propagation = "along_track"',
+                        'propagation = "along_track"\ntime_steps = 50', 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConfigWarning)
+        c = parse_config(text, "short.toml")
+    assert ("study.time_steps = 50 is coarser than the automatic step (2e+07 steps, beyond "
+            "the most of 100000, \"auto\")") in propagation_caveat(c)

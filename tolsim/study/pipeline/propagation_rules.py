@@ -262,10 +262,15 @@ def _coarse_steps_caveat(config) -> str:
     given = config.study.time_steps
     if given is None:
         return ""
-    auto = time_steps(replace(config, study=replace(config.study, time_steps=None)))
-    if given >= auto:
-        return ""
-    return (f"study.time_steps = {given} is coarser than the automatic step ({auto} steps, "
+    count = automatic_step_count(replace(config, study=replace(config.study, time_steps=None)))
+    if count <= MAX_TIME_STEPS:
+        auto = max(MIN_TIME_STEPS, int(np.ceil(count * (1 - 1e-12))))
+        if given >= auto:
+            return ""
+        steps = f"{auto} steps"
+    else:  # (a length far below the contacts: "auto" is refused, MAX_TIME_STEPS)
+        steps = f"{count:.3g} steps, beyond the most of {MAX_TIME_STEPS}"
+    return (f"study.time_steps = {given} is coarser than the automatic step ({steps}, "
             "\"auto\"), whose step error was measured against a fine-step reference: the "
             "step error may move P(contact) and the first contacts beyond that (README, "
             "\"Step size\").")
