@@ -512,6 +512,15 @@ def test_a_circuit_study_does_not_depend_on_the_thread_count(other_thread_count)
         assert_array_equal(getattr(serial[-1], name), getattr(ambient[-1], name), err_msg=name)
 
 
+def _without_preload(vertical):
+    """The study of config() without preload under ``vertical`` [N], 16 assemblies, 20 steps:
+    its result and its dataset."""
+    text = config(vertical=vertical, samples=16, steps=20).text.replace(
+        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0")
+    result = run_study(parse_config(text, "circuit.toml"))
+    return result, result_to_dataset(result)
+
+
 def test_two_point_balls_hold_their_speed_against_the_column():
     # Without preload under 3 000 N every loaded ball sits on one diagonal: exactly two-point,
     # epsilon = 0, and a push below 2 mu F (some 30 N here) leaves it rolling at v / 2 (an
@@ -521,11 +530,7 @@ def test_two_point_balls_hold_their_speed_against_the_column():
     # ran back through the zone: every assembly touched within 5 ms (session 28). As an
     # anchor (ANCHOR_STIFFNESS) the loaded balls keep their gaps: no contact inside the zone
     # or at its entry; the exiting balls still push the column (contacts at the exit).
-    text = config(vertical=3000.0, samples=16, steps=20).text.replace(
-        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0")
-    c = parse_config(text, "circuit.toml")
-    result = run_study(c)
-    ds = result_to_dataset(result)
+    result, ds = _without_preload(3000.0)
     assert int(ds.n_balls_regime.sel(ball_regime=3)) == 16 * 2 * 6  # all two-point
     assert result.statistics.contact_probability()[0] == 0.0
     where = dict(zip(ds.circuit_contact_where_name.values.tolist(),
@@ -541,11 +546,7 @@ def test_balls_of_every_regime_move_with_their_regimes_stiffness():
     # (session 28). With each regime's K (the trains' columns) the column carries its drag
     # and the pushes it passes on: a few newtons at most (0.58 N measured on 100 assemblies)
     # against 16 x 0.02 N of drag, and far fewer assemblies touch than the 100 % of before.
-    text = config(vertical=300.0, samples=16, steps=20).text.replace(
-        "preload_oversize_um = 2.0", "preload_oversize_um = 0.0")
-    c = parse_config(text, "circuit.toml")
-    result = run_study(c)
-    ds = result_to_dataset(result)
+    result, ds = _without_preload(300.0)
     regimes = ds.n_balls_regime.sel(ball_regime=[2, 3]).values  # three- and two-point
     assert (regimes > 0).all()
     assert float(ds.circuit_column_force_max.max()) < 2.0
