@@ -398,8 +398,7 @@ class CircuitFrame(CarriageFrame):
             else:
                 k = self.model(dbeta, force, self.config.bearing, 0.0)[:, _K]
             regime = np.asarray(balls.regime).reshape(-1)[pick]
-            other = (regime == BALL_REGIME_B) | (regime == BALL_THREE_POINT) | (
-                regime == BALL_TWO_POINT)
+            other = np.isin(regime, (BALL_REGIME_B, BALL_THREE_POINT, BALL_TWO_POINT))
             if other.any():  # the K of its regime (Notes of ANCHOR_STIFFNESS)
                 k = k.copy()
                 k[other] = self._regime_stiffness(

@@ -186,6 +186,13 @@ def time_steps(config) -> int:
     if not count <= MAX_TIME_STEPS:
         raise ValueError(f"the automatic step count {count:.3g} exceeds MAX_TIME_STEPS = "
                          f"{MAX_TIME_STEPS} (check_step_count names the length)")
+    return _whole_steps(count)
+
+
+def _whole_steps(count) -> int:
+    """The automatic step count of an unrounded one (:func:`automatic_step_count`): at least
+    :data:`MIN_TIME_STEPS`, rounded up (a count within 1e-12 of a whole number is that
+    number)."""
     return max(MIN_TIME_STEPS, int(np.ceil(count * (1 - 1e-12))))
 
 
@@ -264,7 +271,7 @@ def _coarse_steps_caveat(config) -> str:
         return ""
     count = automatic_step_count(replace(config, study=replace(config.study, time_steps=None)))
     if count <= MAX_TIME_STEPS:
-        auto = max(MIN_TIME_STEPS, int(np.ceil(count * (1 - 1e-12))))
+        auto = _whole_steps(count)
         if given >= auto:
             return ""
         steps = f"{auto} steps"
