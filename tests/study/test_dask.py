@@ -413,3 +413,16 @@ def test_a_worker_s_heartbeat_failure_at_close_is_not_shown():
 
     assert not quiet_heartbeat(record("Failed to communicate with scheduler during heartbeat."))
     assert quiet_heartbeat(record("Worker stream died during communication"))
+
+
+def test_an_address_that_is_not_a_scheduler_is_one_line(tmp_path, capsys):
+    # A dask worker's address (found when the free port of
+    # test_unreachable_scheduler_is_one_line was taken by another test's worker, session 28):
+    # the client's handshake failed inside dask with "TypeError: Worker.identity() got an
+    # unexpected keyword argument", a traceback. Now one line naming the address.
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None) as c:
+        address = next(iter(c.workers.values())).address
+        err = _run_cli(tmp_path, capsys, "--scheduler", address)
+    assert f"{address} answered, but not as a dask scheduler" in err
+    assert "local:N" in err

@@ -189,6 +189,15 @@ def connect(scheduler: str, *, timeout=None):
                              "Is it running, and is the address right (tcp://HOST:PORT, "
                              "default port 8786)? On this machine alone, use --scheduler "
                              "local:N") from None
+    except Exception as exc:  # noqa: BLE001 - something answered, but not as a scheduler
+        if cluster is not None or kind == "local":
+            raise
+        where = f"the scheduler file {value}" if kind == "file" else value
+        raise SchedulerError(f"{where} answered, but not as a dask scheduler "
+                             f"({exc.__class__.__name__}: {_one_line(exc)}): a worker's or "
+                             "another service's address? Give the scheduler's (tcp://HOST:PORT, "
+                             "default port 8786), or on this machine alone --scheduler "
+                             "local:N") from None
     return client, cluster, _dashboard_link(client)
 
 
