@@ -344,6 +344,9 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, table, cin, s
     collapsed = False
     target = 0.01 * tol * total
     polished = False
+    nudged = False
+    w_near = w
+    g_old = g
     while evals < _LINE_MAX_ITER and np.isfinite(g):
         if abs(g) <= target:
             if polished or abs(g) <= 1e-2 * target or not curv > 0.0:
@@ -360,9 +363,25 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, table, cin, s
             # located to round-off (a nearly stuck second contact makes the slope jump by
             # ~2 mu F over ~|dbeta| a, too steep to resolve |slope| below tol)
             collapsed = True
+            if nudged and abs(g_old) < abs(g):  # back to the float of the smaller slope
+                w = w_near
+                g, curv = _line_slope(w, vk, xx, xy, px, py, vgroove, fk0, a, b, sigma_scale,
+                                      table, cin, sin_, win, xo, wo, state, loads, contact, jac,
+                                      o)
+                evals += 1
             break
         step = -g / curv if curv > 0.0 else np.nan
         wn = w + step
+        if wn == w and not nudged:
+            # the Newton step is below w's resolution: the neighbouring float towards the
+            # minimum brackets it to round-off when the slope changes sign there (else the
+            # bracket's middle, as before); the bisection back from the bracket's far end took
+            # ~20 evaluations to find that out
+            wn = np.nextafter(w, np.inf if g < 0.0 else -np.inf)
+            nudged = True
+            w_near = w
+        else:
+            nudged = False
         if not (lo < wn < hi):
             if np.isfinite(lo) and np.isfinite(hi):
                 wn = 0.5 * (lo + hi)
