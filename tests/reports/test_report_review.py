@@ -119,9 +119,14 @@ def test_assumptions_name_defaults_and_a_bearing_other_than_table1(default_resul
     text = ds.attrs["config"]
     assert "friction_coefficient = 0.1" in text and "conformity = 0.54" in text
     changed = ds.copy()
+    assert '\npropagation = "constant"' in text
     changed.attrs = dict(ds.attrs, config=text.replace("friction_coefficient = 0.1\n", "")
-                         .replace("conformity = 0.54", "conformity = 0.52"))
+                         .replace("conformity = 0.54", "conformity = 0.52")
+                         .replace('\npropagation = "constant"', '\n# propagation'))
     by = _rows(A.assumption_table(changed))
+    # free balls keep constant by default (a [carriage] study: tests/reports/
+    # test_reports_carriage.py)
+    assert by["models", "propagation: constant"].source.startswith("model default (constant)")
     friction = by["geometry", "friction coefficient μ"]
     assert friction.source == "model default (the paper's Table 1 bearing)"
     conformity = by["geometry", "groove conformity f = R_G / D"]

@@ -207,6 +207,12 @@ def test_assumptions_describe_the_carriage(carriage_result):
     assert "carriage" in static.value and "[carriage]" in static.source
     limit = [r.item for r in rows if r.topic == "spec limits"]
     assert "limit on P(contact) per assembly" in limit
+    # carriage_preload.toml does not name the propagation: a [carriage] study's default,
+    # along_track (issue 24), not the free balls' constant, which this row said before
+    propagation = next(r for r in rows if r.item.startswith("propagation"))
+    assert propagation.item == "propagation: along_track"
+    assert propagation.source.startswith("model default of a [carriage] study (along_track)")
+
 
 
 def test_a_config_this_version_cannot_parse_still_gives_the_carriage(carriage_result, tmp_path):

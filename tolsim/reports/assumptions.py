@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tolsim.io.config import CARRIAGE_PROPAGATION
 from tolsim.physics.geometry import TABLE1
 from tolsim.physics.hertz import hertz_constants
 from tolsim.physics.velocity import analytic
@@ -607,8 +608,13 @@ def assumption_table(ds, config=None) -> list:
     add("models", f"ball velocity: {vm}", VELOCITY_MODEL_TEXT.get(vm, vm),
         _source(data, "study", "velocity_model", f"{default} (analytic)") + f"; {PAPER}")
     pm = str(a.get("propagation", "?"))
+    # a [carriage] study follows its balls along the track unless the config says constant
+    # (issue 24), a study of free balls keeps them constant
+    carriage_default = config is not None and config.has_carriage
     add("models", f"propagation: {pm}", a.get("propagation_assumption", pm),
-        _source(data, "study", "propagation", f"{default} (constant)")
+        _source(data, "study", "propagation",
+                f"{default} of a [carriage] study ({CARRIAGE_PROPAGATION})" if carriage_default
+                else f"{default} (constant)")
         + " (tolsim.study.pipeline.propagation)")
     if a.get("propagation_caveat"):
         add("models", "caveat of the propagation", a["propagation_caveat"],
