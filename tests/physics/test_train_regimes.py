@@ -705,3 +705,37 @@ def test_lazy_release_pushes_are_the_eager_ones_computed_once():
     assert settle_release_pushes(lazy, np.ones(5, bool), TABLE1) == 1
     assert settle_release_pushes(lazy, np.ones(5, bool), TABLE1) == 0
     assert_array_equal(lazy, eager)
+
+
+def test_three_point_hessian_only_at_smooth_minima(monkeypatch):
+    # The Hessian of D (minimum_compliance_kernel, six quadrature solves of the ball) gives the
+    # coefficients of a smooth minimum only; a ball on a stick line takes them from its line.
+    # It is computed for the smooth balls alone (before: for every ball, 30 % of a circuit
+    # study without preload), and a mixed batch gives each ball's coefficients bit for bit as
+    # alone. Balls: case (a) at rho = -0.8 with BR open (smooth, the test above) and a nearly
+    # two-point ball of carriage_preload.toml at 0 um oversize (stuck; tests/physics/
+    # test_regimes.py).
+    import tolsim.physics.trains.ball_minimum as bm
+
+    smooth_dbeta, smooth_force = _case_a_three_point(1)
+    dbeta = np.array([smooth_dbeta, [0.005060088740111875, -0.002113268661801396,
+                                     0.005197254707667683, -0.00191100420590903]])
+    force = np.array([smooth_force, [14.003677780805587, 0.0, 14.003683961083574,
+                                     0.00192083988315822]])
+    alone = [three_point_coefficients(dbeta[i:i + 1], force[i:i + 1], TABLE1) for i in (0, 1)]
+    seen = []
+    kernel = bm.minimum_compliance_kernel
+
+    def spy(beta, *args):
+        seen.append(len(beta))
+        return kernel(beta, *args)
+
+    monkeypatch.setattr(bm, "minimum_compliance_kernel", spy)
+    cols, rate = three_point_coefficients(dbeta, force, TABLE1)
+    assert seen == [1]
+    assert_array_equal(full(dbeta, force).regime, [1, 2])
+    for i in (0, 1):
+        for name, value in cols.items():
+            assert_array_equal(value[i], alone[i][0][name][0], err_msg=name)
+        assert_array_equal(rate[i], alone[i][1][0])
+    assert np.isfinite(cols["creep_stiffness"]).all()

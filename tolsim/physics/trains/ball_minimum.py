@@ -644,8 +644,9 @@ def _three_point_solve(dbeta, force, bearing):
     """The free solve of three-point balls and what their coefficients need.
 
     Returns (K on the stick line, FullResult, the v_B row of H^-1 at a smooth minimum [1/N,
-    over mu], the state (v_B, Omega_x R, Omega_y R) / v, the inputs of the release pushes on
-    the stick line); see :func:`three_point_stiffness`, :func:`stick_line_inputs`.
+    over mu] (NaN at other balls), the state (v_B, Omega_x R, Omega_y R) / v, the inputs of
+    the release pushes on the stick line); see :func:`three_point_stiffness`,
+    :func:`stick_line_inputs`.
     """
     stick, inputs, res = stick_line_inputs(dbeta, force, bearing)
     v = 0.01
@@ -655,9 +656,16 @@ def _three_point_solve(dbeta, force, bearing):
     state[:, 0] = 0.5 * (1.0 + np.asarray(res.velocity_deviation))
     state[:, 1:] = np.asarray(res.angular_velocity)[:, :2] * bearing.ball_radius / v
     grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
-    row = np.empty((len(dbeta), 3))
-    minimum_compliance_kernel(beta, force, np.ascontiguousarray(state), a, b, *grid,
-                              STICK_STEP, row)
+    # the Hessian at smooth minima only (NaN elsewhere): a ball on a stick line takes its
+    # coefficients from the line, and an uncertified one has none; without preload 99 % of
+    # the three-point balls stick, and their Hessians were 30 % of a circuit study's time
+    row = np.full((len(dbeta), 3), np.nan)
+    smooth = np.flatnonzero(np.asarray(res.regime) == 1)
+    if len(smooth):
+        out = np.empty((len(smooth), 3))
+        minimum_compliance_kernel(beta[smooth], force[smooth], state[smooth], a[smooth],
+                                  b[smooth], *grid, STICK_STEP, out)
+        row[smooth] = out
     return stick, res, row, state, inputs
 
 
