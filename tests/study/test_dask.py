@@ -421,7 +421,7 @@ def test_an_address_that_is_not_a_scheduler_is_one_line(tmp_path, capsys):
     # the client's handshake failed inside dask with "TypeError: Worker.identity() got an
     # unexpected keyword argument", a traceback. Now one line naming the address.
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None) as c:
+    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=":0") as c:
         address = next(iter(c.workers.values())).address
         err = _run_cli(tmp_path, capsys, "--scheduler", address)
     assert f"{address} answered, but not as a dask scheduler" in err
