@@ -739,3 +739,40 @@ def test_three_point_hessian_only_at_smooth_minima(monkeypatch):
             assert_array_equal(value[i], alone[i][0][name][0], err_msg=name)
         assert_array_equal(rate[i], alone[i][1][0])
     assert np.isfinite(cols["creep_stiffness"]).all()
+
+
+def test_stick_line_stiffness_from_the_tables_is_the_quadrature_s():
+    # K on the stick line takes the line slope from the contact tables (as the line solve
+    # does), no longer from the quadrature (``ball_loads_kernel``): 3.3-3.7x cheaper. Both
+    # are the planar Coulomb integrals; the tables fit the quadrature to round-off, so K
+    # agrees to 1e-12 relative (measured 2.4e-14 at most on 20 356 balls). Balls: case (a)
+    # in regime B at rho = -0.9 and -0.98, and a nearly two-point three-point ball of
+    # carriage_preload.toml at 0 um oversize (tests/physics/test_regimes.py).
+    import tolsim.physics.trains.ball_minimum as bm
+    from tolsim.physics.velocity._full_kernels import ball_loads_kernel
+
+    theta = np.radians(2.0)
+    dbeta = np.array([[-theta, theta, 0.0, 0.0], [-theta, theta, 0.0, 0.0],
+                      [0.005060088740111875, -0.002113268661801396, 0.005197254707667683,
+                       -0.00191100420590903]])
+    force = np.array([paired_forces(-0.9 * 200.0, 200.0), paired_forces(-0.98 * 200.0, 200.0),
+                      [14.003677780805587, 0.0, 14.003683961083574, 0.00192083988315822]])
+    k, res = stick_line_stiffness(dbeta, force, TABLE1)
+    assert_array_equal(res.regime, 2)
+    _, beta, f, stuck, rate, a, b, grid = bm._stick_line(dbeta, force, TABLE1)
+    for n in range(len(dbeta)):  # the quadrature's central difference, ball by ball
+        j = stuck[n]
+        px = bm.SIDE_SIGN_X * np.sin(beta[n])
+        py = bm.SIDE_SIGN_Y * np.cos(beta[n])
+        others = np.where(np.arange(4) == j, 0.0, f[n])
+        vgroove = np.array([0.0, 0.0, 1.0, 1.0])
+        xx, xy = -py[j], px[j]
+        slope = []
+        for w in (rate[n] - bm.STICK_STEP, rate[n] + bm.STICK_STEP):
+            loads, contact = np.empty(5), np.empty((4, 5))
+            ball_loads_kernel(np.array([vgroove[j] + w, w * xx, w * xy, 0.0]), px, py, vgroove,
+                              others, a[n], b[n], 1.5 / np.pi, False, 1.0, np.zeros(4), *grid,
+                              loads, contact)
+            slope.append(-(loads[0] + loads[1] * xx + loads[2] * xy))
+        quadrature = TABLE1.friction_coefficient * 0.25 * (slope[1] - slope[0]) / bm.STICK_STEP
+        assert_allclose(k[n], quadrature, rtol=1e-12)
