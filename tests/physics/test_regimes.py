@@ -270,8 +270,8 @@ NEARLY_TWO_POINT = [
 
 
 def test_stick_line_stops_when_newton_is_below_round_off():
-    # On these balls the line slope is linear over the last steps (curvature 1e7 to 5e8 in
-    # units of sum F), and Newton's last step is below the resolution of w (~1e-16): w + step
+    # On these balls the line slope is linear over the last steps (curvature 3e5 to 1e7 sum F
+    # per unit w of v), and Newton's last step is below the resolution of w (~1e-16): w + step
     # == w. The line solve then bisected the bracket from its far end back to that float:
     # 26, 29 and 46 evaluations (55d7e34; 58 % of all line evaluations of that study). The
     # neighbouring float now brackets the minimum in one evaluation. Same minimum: epsilon

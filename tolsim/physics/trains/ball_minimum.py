@@ -677,7 +677,7 @@ def _three_point_solve(dbeta, force, bearing):
     grid = quadrature_grid(DEFAULT_ANGULAR_NODES, DEFAULT_RADIAL_NODES, hc.ellipticity)
     # the Hessian at smooth minima only (NaN elsewhere): a ball on a stick line takes its
     # coefficients from the line, and an uncertified one has none; without preload 99 % of
-    # the three-point balls stick, and their Hessians were 30 % of a circuit study's time
+    # the three-point balls stick, and their Hessians took 30 % of such a circuit study
     row = np.full((len(dbeta), 3), np.nan)
     smooth = np.flatnonzero(np.asarray(res.regime) == 1)
     if len(smooth):

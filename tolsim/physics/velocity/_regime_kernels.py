@@ -320,7 +320,11 @@ def stick_line_solve(k, px, py, vgroove, force, a, b, sigma_scale, table, cin, s
     kept inside the bracket that the signs of g give (bisection when a step leaves it; until
     both ends are known, steps of ``_LINE_BRACKET`` widened by 4x). It stops at |g| <= 1e-2
     ``tol`` sum F, after one more step if that lowers |g| (the minimum to round-off), or
-    when the bracket collapses to round-off. Writes the state, the contact rows (the stuck
+    when the bracket collapses to round-off. A Newton step below the resolution of w (w + step
+    == w: nearly two-point balls, whose slope rises by 3e5 to 1e7 sum F per unit w) tries the
+    neighbouring float towards the minimum first: where the slope changes sign there, the
+    bracket has collapsed, and the float of the smaller |g| is kept (tests/physics/
+    test_regimes.py). Writes the state, the contact rows (the stuck
     contact's z force is the reaction that balances the others) and
     ``out`` = (D, |slope| / sum F, evaluations, q_u, q_w).
     """
