@@ -551,3 +551,40 @@ def test_balls_of_every_regime_move_with_their_regimes_stiffness():
     assert (regimes > 0).all()
     assert float(ds.circuit_column_force_max.max()) < 2.0
     assert result.statistics.contact_probability()[0] < 0.5
+
+
+@pytest.mark.parametrize("kind", ["circuit", "contact"])
+def test_the_trains_take_the_full_models_solves_without_solving_again(kind, monkeypatch):
+    # A ball in regime B or three-point gets its train coefficients (the circuit's K, the
+    # trains after contact) from its own minimum of D, which full_velocity has just found
+    # with the same inputs; regime_creep_coefficients solved it again, a quarter of the time
+    # of a carriage without preload with [contact] (session 29). Now the BallState carries
+    # the solves and the trains take them: the same result, bit for bit, with fewer balls
+    # solved again (a state assembled from others carries none and is still solved; here
+    # none was: 0 balls against 37 in the circuit and 134 with [contact]).
+    import tolsim.physics.trains.ball_minimum as bm
+    from tolsim.study.pipeline.evaluate import BallState
+
+    if kind == "circuit":
+        text = config(vertical=300.0, samples=6, steps=10).text
+    else:
+        text = config(vertical=300.0, samples=6, steps=10, circuit=False).text + "\n[contact]\n"
+    c = parse_config(text.replace("preload_oversize_um = 2.0", "preload_oversize_um = 0.0"),
+                     "circuit.toml")
+    solve = bm.full
+    counted = []
+
+    def spy(dbeta, *args, **kwargs):
+        counted.append(len(dbeta))
+        return solve(dbeta, *args, **kwargs)
+
+    monkeypatch.setattr(bm, "full", spy)
+    reused = result_to_dataset(run_study(c))
+    reused_solves = sum(counted)
+    counted.clear()
+    monkeypatch.setattr(BallState, "solved_rows", lambda self, index=None: None)
+    again = result_to_dataset(run_study(c))
+    assert reused_solves < sum(counted) / 2, (reused_solves, sum(counted))
+    assert int(again.n_balls_regime.sel(ball_regime=2)) > 0  # three-point balls
+    for name, value in again.data_vars.items():
+        assert_array_equal(reused[name].values, value.values, err_msg=name)

@@ -93,13 +93,19 @@ def _semi_axes(force, bearing):
             hc.semi_minor_coefficient * np.cbrt(force) / radius)
 
 
-def _stick_line(contact_angle_deviation, normal_force, bearing):
+#: The groove velocity [m/s] of the free solves here (``full``'s default); epsilon and every
+#: coefficient are independent of it.
+FREE_SOLVE_VELOCITY = 0.01
+
+
+def _stick_line(contact_angle_deviation, normal_force, bearing, result=None):
     """The free solve of balls and their stick lines' inputs for the kernels: (result,
-    beta, F, stuck contact, w at the minimum [v], a, b [R_B], quadrature grid)."""
+    beta, F, stuck contact, w at the minimum [v], a, b [R_B], quadrature grid). ``result``:
+    the free solve when the caller has it (``full`` of these balls with its defaults)."""
     dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
     force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    v = 0.01
-    res = full(dbeta, force, bearing, groove_velocity=v)
+    v = FREE_SOLVE_VELOCITY
+    res = (full(dbeta, force, bearing, groove_velocity=v) if result is None else result)
     hc, a, b = _semi_axes(force, bearing)
     radius = bearing.ball_radius
     beta = bearing.nominal_contact_angle + dbeta
@@ -499,12 +505,16 @@ RELEASE_INPUTS = ("release_stuck_contact", "release_line_rate",
                   *(f"release_normal_force_{i}" for i in range(4)))
 
 
-def stick_line_inputs(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1):
+def stick_line_inputs(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1, *,
+                      result=None):
     """K [N] of balls on a stick line and the inputs of their release pushes, one free solve.
 
     Parameters
     ----------
     contact_angle_deviation, normal_force : array_like, shape (n, 4)
+    result : FullResult, optional
+        The free solve of these balls, when the caller has it: :func:`full` with its defaults
+        (``groove_velocity`` :data:`FREE_SOLVE_VELOCITY`); not solved again.
 
     Returns
     -------
@@ -516,7 +526,7 @@ def stick_line_inputs(contact_angle_deviation, normal_force, bearing: Bearing = 
     result : tolsim.physics.velocity.full.FullResult
     """
     res, beta, force, stuck, rate, a, b, grid = _stick_line(contact_angle_deviation,
-                                                            normal_force, bearing)
+                                                            normal_force, bearing, result)
     k = _line_stiffness(beta, force, stuck, rate, a, b, grid, bearing)
     certified = np.asarray(res.regime) == 2
     dbeta = np.asarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
@@ -659,16 +669,16 @@ def point_capacity_kernel(beta, force, out):
         out[n, 1] = stall_moment(beta[n], force[n])
 
 
-def _three_point_solve(dbeta, force, bearing):
+def _three_point_solve(dbeta, force, bearing, result=None):
     """The free solve of three-point balls and what their coefficients need.
 
     Returns (K on the stick line, FullResult, the v_B row of H^-1 at a smooth minimum [1/N,
     over mu] (NaN at other balls), the state (v_B, Omega_x R, Omega_y R) / v, the inputs of
     the release pushes on the stick line); see :func:`three_point_stiffness`,
-    :func:`stick_line_inputs`.
+    :func:`stick_line_inputs` (``result``: its free solve, when given).
     """
-    stick, inputs, res = stick_line_inputs(dbeta, force, bearing)
-    v = 0.01
+    stick, inputs, res = stick_line_inputs(dbeta, force, bearing, result=result)
+    v = FREE_SOLVE_VELOCITY
     hc, a, b = _semi_axes(force, bearing)
     beta = bearing.nominal_contact_angle + dbeta
     state = np.empty((len(dbeta), 3))
@@ -729,7 +739,7 @@ def three_point_stiffness(contact_angle_deviation, normal_force, bearing: Bearin
 
 
 def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bearing = TABLE1,
-                             *, ball_friction=0.1, release_inputs=False):
+                             *, ball_friction=0.1, release_inputs=False, result=None):
     """The creep coefficients of three-point balls from their own minimum of D (issue 25).
 
     Parameters
@@ -742,6 +752,8 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
     release_inputs : bool
         Add the inputs of the release pushes of a ball with a stuck contact
         (:data:`RELEASE_INPUTS`, for :func:`release_pushes`; NaN where no contact sticks).
+    result : FullResult, optional
+        The free solve of these balls, as :func:`stick_line_inputs` takes it.
 
     Returns
     -------
@@ -807,7 +819,7 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
     """
     dbeta = np.ascontiguousarray(contact_angle_deviation, dtype=np.float64).reshape(-1, 4)
     force = np.ascontiguousarray(normal_force, dtype=np.float64).reshape(-1, 4)
-    stick, res, row, state, inputs = _three_point_solve(dbeta, force, bearing)
+    stick, res, row, state, inputs = _three_point_solve(dbeta, force, bearing, result)
     mu = bearing.friction_coefficient
     code = np.asarray(res.regime)
     smooth, stuck = code == 1, code == 2

@@ -101,9 +101,19 @@ def two_point_rolling_rate(contact_angle_deviation, normal_force, bearing: Beari
     return 0.5 * np.stack([pt[:, 1], -pt[:, 0]], axis=-1)
 
 
+def _solved_rows(solved, take):
+    """The free solves of the balls ``take`` (a mask) from ``solved`` = (FullResult, rows), or
+    None unless every one of them has its row."""
+    if solved is None:
+        return None
+    result, rows = solved
+    rows = np.asarray(rows).reshape(-1)[take]
+    return result.take(rows) if (rows >= 0).all() else None
+
+
 def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_force,
                               bearing: Bearing = TABLE1, *, ball_friction=0.1,
-                              lazy_release=False, rates=False):
+                              lazy_release=False, rates=False, solved=None):
     """The train columns of balls from their regimes: anchors, soft balls, pushed balls.
 
     Parameters
@@ -127,6 +137,11 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
         with a ball that is not in regime A): for balls that a train joins to balls of
         another batch (a circuit's entering balls), where :func:`pair_braking` would be
         NaN at such a pair.
+    solved : (FullResult, ndarray of int (n,)), optional
+        The free solves the caller already has (:func:`tolsim.physics.velocity.full.full`
+        with its defaults, as the study's re-solves are made) and each ball's row in them (-1:
+        none). The balls in regime B and three-point are not solved again when every one of
+        them has its row (the same numbers, bit for bit); else they are.
 
     Returns
     -------
@@ -237,7 +252,8 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
             out[two, _COL[name]] = value
         rate[two] = two_point_rolling_rate(dbeta[two], force[two], bearing)
     if stick.any():
-        stiffness, inputs, res = stick_line_inputs(dbeta[stick], force[stick], bearing)
+        stiffness, inputs, res = stick_line_inputs(dbeta[stick], force[stick], bearing,
+                                                   result=_solved_rows(solved, stick))
         rows = np.flatnonzero(stick)
         out[rows, _COL["release_push_forward"]] = np.nan  # pending (NaN where uncertified)
         out[rows, _COL["release_push_backward"]] = np.nan
@@ -253,7 +269,8 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
     if three.any():
         columns, rate[three] = three_point_coefficients(dbeta[three], force[three], bearing,
                                                         ball_friction=ball_friction,
-                                                        release_inputs=True)
+                                                        release_inputs=True,
+                                                        result=_solved_rows(solved, three))
         for name, value in columns.items():
             out[three, _COL[name]] = value
         gamma[three] = out[three, _COL["braking_vector_x"]:_COL["release_push_forward"]]

@@ -18,7 +18,7 @@ References
 """
 
 import operator
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from functools import lru_cache
 
 import numpy as np
@@ -228,6 +228,11 @@ class FullResult(VelocityResult):
     regime: np.ndarray
     stuck_contact: np.ndarray
     certificate: np.ndarray
+
+    def take(self, index):
+        """The balls ``index`` (along the first axis) of this result, as a result."""
+        return replace(self, **{f.name: getattr(self, f.name)[index] for f in fields(self)
+                                if isinstance(getattr(self, f.name), np.ndarray)})
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -401,24 +401,27 @@ class CircuitFrame(CarriageFrame):
             other = np.isin(regime, (BALL_REGIME_B, BALL_THREE_POINT, BALL_TWO_POINT))
             if other.any():  # the K of its regime (Notes of ANCHOR_STIFFNESS)
                 k = k.copy()
+                solved = balls.solved_rows(pick)
                 k[other] = self._regime_stiffness(
                     dbeta[other], force[other], regime[other],
-                    np.asarray(balls.velocity_deviation).reshape(-1)[pick][other])
+                    np.asarray(balls.velocity_deviation).reshape(-1)[pick][other],
+                    None if solved is None else (solved[0], solved[1][other]))
             out[take] = np.where(np.asarray(balls.valid).reshape(-1)[pick], k, np.nan)
         return out
 
-    def _regime_stiffness(self, dbeta, force, regime, eps):
+    def _regime_stiffness(self, dbeta, force, regime, eps, solved=None):
         """K [N] of balls in regime B, three- or two-point: their regime's, as the trains
         after contact take it (:func:`tolsim.physics.trains.regimes.
         regime_creep_coefficients`: B its stick line, three-point its own minimum of D, an
         exactly two-point ball an anchor, here :data:`ANCHOR_STIFFNESS`). A two-point ball
         that the full model answered off balance (epsilon not 0: the static solve's error)
         keeps its stand-in (NaN): its epsilon times an anchor's K would be a force of that
-        error."""
+        error. ``solved``: the balls' full-model solves (:meth:`BallState.solved_rows
+        <tolsim.study.pipeline.evaluate.BallState.solved_rows>`), not solved again."""
         bearing = self.config.bearing
         load = self.model(dbeta, force, bearing, 0.0)
         k = regime_creep_coefficients(load, regime, dbeta, force, bearing, ball_friction=0.0,
-                                      lazy_release=True)[:, _K]
+                                      lazy_release=True, solved=solved)[:, _K]
         two = regime == BALL_TWO_POINT
         k = np.where(two & (eps == 0.0), ANCHOR_STIFFNESS, k)
         return np.where(two & (eps != 0.0), np.nan, k)

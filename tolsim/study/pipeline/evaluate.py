@@ -546,7 +546,8 @@ def loaded_contacts(force):
     return np.where(tension, np.int8(-1), count.astype(np.int8))
 
 
-def full_velocity(dbeta, force, bearing, groove_velocity=0.01, ball_tolerance=None):
+def full_velocity(dbeta, force, bearing, groove_velocity=0.01, ball_tolerance=None,
+                  solutions=False):
     """epsilon and regime of balls from :func:`tolsim.physics.velocity.full.full`, never raising.
 
     ``full`` takes four-, three- and two-point balls (issue 25); the exactly two-point ones
@@ -570,19 +571,28 @@ def full_velocity(dbeta, force, bearing, groove_velocity=0.01, ball_tolerance=No
     regime : ndarray of int8 (n,)
         :data:`tolsim.physics.velocity.models.BALL_REGIMES` code (``BALL_UNRESOLVED`` where not
         ok; ``BALL_UNLOADED`` for a ball without a loaded contact).
+    solved : (ndarray of int, FullResult) or None
+        With ``solutions``: the balls that ``full`` solved (their indices) and its result,
+        for the trains' coefficients of balls with an open or a stuck contact
+        (``solved`` of :func:`tolsim.physics.trains.regimes.regime_creep_coefficients`,
+        which takes them at ``groove_velocity`` 0.01 m/s); None where it solved none.
     """
     module = friction_module()
     n = len(dbeta)
     eps = np.full(n, np.nan)
     ok = np.zeros(n, dtype=bool)
     regime = np.full(n, BALL_UNRESOLVED, dtype=np.int8)
+
+    def answer(solved=None):
+        return (eps, ok, regime, solved) if solutions else (eps, ok, regime)
+
     if n == 0:
-        return eps, ok, regime
+        return answer()
     with np.errstate(invalid="ignore"):
         count = loaded_contacts(np.where(np.isfinite(force), force, -1.0))
     regime[count == 0] = BALL_UNLOADED
     if module is None or not hasattr(module, "full"):
-        return eps, ok, regime
+        return answer()
     angles, ellipses = module.within_model(dbeta, force, bearing)
     takes = (count >= 2) & np.all(np.isfinite(dbeta), axis=1) & angles & ellipses
     idx = np.flatnonzero(takes)
@@ -592,13 +602,14 @@ def full_velocity(dbeta, force, bearing, groove_velocity=0.01, ball_tolerance=No
         ok[idx[two]] = True
         regime[idx[two]] = BALL_TWO_POINT
         idx = idx[~two]
-    if len(idx):
-        res = module.full(dbeta[idx], force[idx], bearing, groove_velocity=groove_velocity)
-        good = np.asarray(res.valid, dtype=bool) & np.isfinite(res.velocity_deviation)
-        eps[idx[good]] = res.velocity_deviation[good]
-        ok[idx[good]] = True
-        regime[idx[good]] = ball_regime(force[idx[good]], res.regime[good])
-    return eps, ok, regime
+    if not len(idx):
+        return answer()
+    res = module.full(dbeta[idx], force[idx], bearing, groove_velocity=groove_velocity)
+    good = np.asarray(res.valid, dtype=bool) & np.isfinite(res.velocity_deviation)
+    eps[idx[good]] = res.velocity_deviation[good]
+    ok[idx[good]] = True
+    regime[idx[good]] = ball_regime(force[idx[good]], res.regime[good])
+    return answer((idx, res))
 
 
 # --------------------------------------------------------------------------------------------
@@ -637,6 +648,10 @@ class BallState:
     time spent in the full-model solves [s], compilation of the
     kernels (a cold cache) excluded. ``static_fallback``: balls answered by the static model of
     :data:`STATIC_FALLBACK` instead of the study's (:func:`with_static_fallback`; None: none).
+    ``solved``: (rows, FullResult), the full model's solves of these balls, rows of shape
+    ``shape`` (-1: not solved by it; :func:`full_velocity`), which the trains' coefficients
+    take instead of solving the balls again (:meth:`solved_rows`); None where the state was
+    assembled from others (the coefficients then solve their balls).
     """
 
     velocity_deviation: np.ndarray
@@ -649,6 +664,7 @@ class BallState:
     resolve_seconds: float = 0.0
     regime: np.ndarray | None = None
     static_fallback: np.ndarray | None = None
+    solved: tuple | None = None
 
     def __post_init__(self):
         if self.regime is None:
@@ -669,10 +685,18 @@ class BallState:
 
     def rows(self, sl):
         """The balls of the assemblies ``sl`` (a slice or an index array of the first axis)."""
+        solved = None if self.solved is None else (self.solved[0][sl], self.solved[1])
         return BallState(self.velocity_deviation[sl], self.valid[sl], self.converged[sl],
                          self.loss_of_contact[sl], self.contact_angle_deviation[sl],
                          self.normal_force[sl], self.model[sl], 0.0, self.regime[sl],
-                         self.static_fallback[sl])
+                         self.static_fallback[sl], solved)
+
+    def solved_rows(self, index=slice(None)):
+        """``solved`` of :func:`tolsim.physics.trains.regimes.regime_creep_coefficients` for
+        the balls ``index`` of the flattened balls (None without solves)."""
+        if self.solved is None:
+            return None
+        return self.solved[1], np.asarray(self.solved[0]).reshape(-1)[index]
 
 
 def concatenated_balls(first: BallState, second: BallState) -> BallState:
@@ -825,6 +849,7 @@ def ball_velocities(config, static: StaticResult, shape, counts=None,
     """
     n = int(np.prod(shape))
     resolve_seconds = 0.0
+    solved = None
     fast = config.study.velocity_model != "full"
     with serial_if_small(n):
         force = static.normal_force
@@ -861,22 +886,27 @@ def ball_velocities(config, static: StaticResult, shape, counts=None,
         if len(redo):
             c0, t0 = compile_seconds(), time.perf_counter()
             with serial_if_small(len(redo)):  # (a few balls: no thread pool)
-                eps_full, ok, regime_full = full_velocity(dbeta[redo], force[redo],
-                                                          config.bearing,
-                                                          config.motion.groove_velocity,
-                                                          ball_tolerance)
+                # at full_velocity's v (epsilon does not depend on it), the trains' own, so
+                # that their coefficients take its solves as they are
+                eps_full, ok, regime_full, solved = full_velocity(
+                    dbeta[redo], force[redo], config.bearing, ball_tolerance=ball_tolerance,
+                    solutions=True)
             # model time only: a cold kernel cache compiles the full model here, once
             resolve_seconds = (time.perf_counter() - t0) - (compile_seconds() - c0)
             eps[redo] = eps_full  # NaN where not ok
             valid[redo] = ok
             model[redo[ok]] = MODEL_FULL
             regime[redo] = regime_full
+            if solved is not None:
+                rows = np.full(n, -1, dtype=np.int64)
+                rows[redo[solved[0]]] = np.arange(len(solved[0]))
+                solved = (rows.reshape(shape), solved[1])
     if not fast:
         resolve_seconds = 0.0  # the study's own model, not a re-solve
     return BallState(
         eps.reshape(shape), valid.reshape(shape), static.converged.reshape(shape),
         lost.reshape(shape), dbeta.reshape(shape + (4,)), force.reshape(shape + (4,)),
-        model.reshape(shape), resolve_seconds, regime.reshape(shape),
+        model.reshape(shape), resolve_seconds, regime.reshape(shape), solved=solved,
     )
 
 

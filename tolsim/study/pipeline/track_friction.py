@@ -160,7 +160,7 @@ def ball_creep_coefficients(config, state, rates=False) -> np.ndarray:
     load = CREEP_MODELS[config.contact.creep_model](dbeta, force, config.bearing, mu_bb)
     load = regime_creep_coefficients(load, np.asarray(state.regime).reshape(-1), dbeta, force,
                                      config.bearing, ball_friction=mu_bb, lazy_release=True,
-                                     rates=rates)
+                                     rates=rates, solved=state.solved_rows())
     unresolved = ~np.asarray(state.accounted).reshape(-1)
     if unresolved.any():
         load[unresolved] = np.nan
@@ -463,10 +463,12 @@ def _flat_balls(state, index):
     def flat(x, tail=()):
         return np.asarray(x).reshape((-1,) + tail)[index]
 
+    solved = None if state.solved is None else (flat(state.solved[0]), state.solved[1])
     return BallState(flat(state.velocity_deviation), flat(state.valid),
                      flat(state.converged), flat(state.loss_of_contact),
                      flat(state.contact_angle_deviation, (4,)), flat(state.normal_force, (4,)),
-                     flat(state.model), 0.0, flat(state.regime), flat(state.static_fallback))
+                     flat(state.model), 0.0, flat(state.regime), flat(state.static_fallback),
+                     solved)
 
 
 class TrackFriction:
