@@ -651,7 +651,8 @@ class BallState:
     ``solved``: (rows, FullResult), the full model's solves of these balls, rows of shape
     ``shape`` (-1: not solved by it; :func:`full_velocity`), which the trains' coefficients
     take instead of solving the balls again (:meth:`solved_rows`); None where the state was
-    assembled from others (the coefficients then solve their balls).
+    assembled from others (the coefficients then solve their balls) and in a study without
+    trains that take them (neither ``[contact]`` nor ``[carriage.circuit]``).
     """
 
     velocity_deviation: np.ndarray
@@ -887,10 +888,13 @@ def ball_velocities(config, static: StaticResult, shape, counts=None,
             c0, t0 = compile_seconds(), time.perf_counter()
             with serial_if_small(len(redo)):  # (a few balls: no thread pool)
                 # at full_velocity's v (epsilon does not depend on it), the trains' own, so
-                # that their coefficients take its solves as they are
+                # that their coefficients take its solves as they are; kept only for a study
+                # with trains that take them (the memory of a result per re-solved ball)
                 eps_full, ok, regime_full, solved = full_velocity(
                     dbeta[redo], force[redo], config.bearing, ball_tolerance=ball_tolerance,
                     solutions=True)
+            if not (config.has_contact or config.circuit is not None):
+                solved = None
             # model time only: a cold kernel cache compiles the full model here, once
             resolve_seconds = (time.perf_counter() - t0) - (compile_seconds() - c0)
             eps[redo] = eps_full  # NaN where not ok
