@@ -11,7 +11,7 @@ from numba import prange
 
 from tolsim._jit import jit, pjit
 from tolsim.physics.geometry import SIDE_SIGN_X, SIDE_SIGN_Y, TABLE1, Bearing
-from tolsim.physics.hertz import hertz_constants
+from tolsim.physics.hertz import bearing_constants
 from tolsim.physics.velocity._contact_tables import table_ball_loads
 from tolsim.physics.velocity._full_kernels import ball_loads_kernel
 from tolsim.physics.velocity.ball_loads import point_traction_capacity, stall_moment
@@ -79,15 +79,9 @@ def stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, table, cin, sin_
         out[n] = 0.25 * (slope[1] - slope[0]) / step
 
 
-def _hertz(bearing):
-    """The Hertz constants of a ball of ``bearing`` in its groove."""
-    return hertz_constants(bearing.ball_radius, bearing.conformity, bearing.youngs_modulus,
-                           bearing.poisson_ratio)
-
-
 def _semi_axes(force, bearing):
     """(Hertz constants, a, b [R_B]) of contacts under the forces ``force`` [N]."""
-    hc = _hertz(bearing)
+    hc = bearing_constants(bearing)
     radius = bearing.ball_radius
     return (hc, hc.semi_major_coefficient * np.cbrt(force) / radius,
             hc.semi_minor_coefficient * np.cbrt(force) / radius)
@@ -121,7 +115,7 @@ def _stick_line(contact_angle_deviation, normal_force, bearing, result=None):
 def _line_stiffness(beta, force, stuck, rate, a, b, grid, bearing):
     """:func:`stick_line_stiffness_kernel` on the outputs of :func:`_stick_line` [N / mu]."""
     out = np.empty(len(beta))
-    table = contact_table(DEFAULT_ANGULAR_NODES, _hertz(bearing).ellipticity)
+    table = contact_table(DEFAULT_ANGULAR_NODES, bearing_constants(bearing).ellipticity)
     stick_line_stiffness_kernel(beta, force, stuck, rate, a, b, table, *grid[:5], STICK_STEP,
                                 out)
     return out
@@ -854,7 +848,8 @@ def three_point_coefficients(contact_angle_deviation, normal_force, bearing: Bea
 
 
 __all__ = ["FAST_ANGLES", "FAST_TOLERANCE", "FAST_WINDOW_NODES", "FAST_WINDOW_WIDTH",
-           "RELEASE_ANGLES", "RELEASE_STEPS", "RELEASE_WINDOW", "STICK_STEP", "contact_directions",
+           "FREE_SOLVE_VELOCITY", "RELEASE_ANGLES", "RELEASE_STEPS", "RELEASE_WINDOW", "STICK_STEP",
+           "contact_directions",
            "minimum_compliance_kernel", "point_capacity_kernel", "release_threshold_kernel",
            "stick_line_release", "stick_line_stiffness",
            "stick_line_stiffness_kernel", "stick_release", "stick_release_kernel",

@@ -17,6 +17,7 @@ import numpy as np
 
 from tolsim.physics.geometry import TABLE1, Bearing
 from tolsim.physics.trains.ball_minimum import (
+    FREE_SOLVE_VELOCITY,
     RELEASE_INPUTS,
     contact_directions,
     release_pushes,
@@ -265,7 +266,7 @@ def regime_creep_coefficients(load, regime, contact_angle_deviation, normal_forc
         out[rows, _COL["free_rolling_velocity_deviation"]] = res.velocity_deviation
         out[rows, _COL["free_rolling_carriage_force"]] = res.drag_force
         out[rows, _COL["carriage_force"]] = res.drag_force
-        rate[stick] = res.angular_velocity[:, :2] * bearing.ball_radius / 0.01
+        rate[stick] = res.angular_velocity[:, :2] * bearing.ball_radius / FREE_SOLVE_VELOCITY
     if three.any():
         columns, rate[three] = three_point_coefficients(dbeta[three], force[three], bearing,
                                                         ball_friction=ball_friction,
