@@ -475,6 +475,42 @@ def test_examples_do_not_depend_on_the_window(monkeypatch, window):
     assert np.all(np.ptp(reference.friction_force, axis=1) > 0)  # they touch
 
 
+EXAMPLE_FIELDS = ("assembly", "track", "travel", "baseline", "friction_force", "contact_force",
+                  "ball_position")
+
+
+@pytest.mark.parametrize("propagation", ["constant", "along_track"])
+def test_examples_follow_only_the_assemblies_the_study_chose(monkeypatch, propagation):
+    # The study keeps the examples it chose from its own evaluation of block 0 (run_chunk);
+    # friction_examples then follows again only the assemblies up to the last chosen one,
+    # not a window of EXAMPLE_WINDOW (or the whole block): the same examples, bit for bit,
+    # as friction_examples choosing them itself. A wrong choice passed in is not taken: its
+    # prefix chooses other examples, and the window's are returned.
+    c = friction_yaw(samples=256, block=128)
+    if propagation == "along_track":
+        c = replace(c, study=replace(c.study, propagation="along_track", time_steps=40))
+    reference = fx.friction_examples(c)
+    sizes = []
+    first = fx._first_assemblies
+
+    def spy(block, count):
+        sizes.append(count)
+        return first(block, count)
+
+    monkeypatch.setattr(fx, "_first_assemblies", spy)
+    result = run_study(c)
+    last = int(result.friction_examples.assembly.max())
+    assert sizes == [last + 1] and last + 1 < fx.EXAMPLE_WINDOW
+    for name in EXAMPLE_FIELDS:
+        assert_array_equal(getattr(result.friction_examples, name),
+                           getattr(reference, name), err_msg=name)
+    sizes.clear()
+    wrong = fx.friction_examples(c, order=reference.assembly[::-1])
+    assert sizes == [last + 1, fx.EXAMPLE_WINDOW]
+    for name in EXAMPLE_FIELDS:
+        assert_array_equal(getattr(wrong, name), getattr(reference, name), err_msg=name)
+
+
 def test_no_contact_section_changes_nothing(tmp_path):
     # Without [contact] the accumulator, the checkpoint and the file are today's: no friction
     # state or variable. With it, every other variable is bit-identical (the friction adds

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tolsim.physics.velocity.models import MODEL_FAST
+from tolsim.study.analyses.friction_examples import choose_examples
 from tolsim.study.execution import saved_samples
 from tolsim.study.pipeline.block import evaluate_block, evaluates_blocks_together
 from tolsim.study.pipeline.evaluate import BallState, friction_module
@@ -102,6 +103,17 @@ def draw_chunk(config, block_indices):
     return block, error_values(config, block)
 
 
+#: Key of the spot rows of block 0 of a study with ``[contact]``: the examples chosen from
+#: its friction figures (:func:`tolsim.study.analyses.friction_examples.friction_examples`).
+EXAMPLE_ORDER = "example_order"
+
+
+def example_order(parts):
+    """The examples chosen in the first block's records ``parts[0]``, or None (a run resumed
+    past it keeps the spot-check rows only)."""
+    return parts[0].get(EXAMPLE_ORDER) if parts else None
+
+
 def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
     """Evaluate consecutive blocks; return [(block, Accumulator, spot rows)] in order.
 
@@ -146,6 +158,9 @@ def run_chunk(config, block_indices, spot_indices, drawn=None, save_samples=0):
             rows.update(saved_samples.sample_rows(config, save_samples, start, values,
                                                   block.initial_gap, state, t, pair, sl,
                                                   circuit=outcome.circuit))
+            if index == 0 and outcome.friction is not None:  # the friction examples' choice
+                rows[EXAMPLE_ORDER] = choose_examples(outcome.friction.rows(sl),
+                                                      config.contact.examples)
             out.append((index, acc, rows))
             offset += size
     return out

@@ -62,6 +62,7 @@ from tolsim.study.execution.chunks import (
     SPOT_FIELDS,
     SpotChecks,
     concat_spots,
+    example_order,
     finish_spot_checks,
     prefetched,
     retain_freed_memory,
@@ -723,7 +724,8 @@ def run_study(config, *, workers: int = 1, chunk_blocks: int | None = None, prog
             nominal = solve_config_carriage(config)
         except ValueError:  # recorded as NaN; the sampled assemblies were counted anyway
             nominal = None
-    examples = friction_examples(result_config) if has_contact(config) else None
+    examples = (friction_examples(result_config, example_order(parts))
+                if has_contact(config) else None)
     rare = None
     if config.study.estimator != "monte_carlo":  # after the plain run (module docstring)
         t0 = time.perf_counter()
