@@ -480,11 +480,13 @@ EXAMPLE_FIELDS = ("assembly", "track", "travel", "baseline", "friction_force", "
 
 
 @pytest.mark.parametrize("propagation", ["constant", "along_track"])
-def test_examples_follow_only_the_assemblies_the_study_chose(monkeypatch, propagation):
+def test_examples_follow_only_the_assemblies_the_study_chose(monkeypatch, tmp_path,
+                                                            propagation):
     # The study keeps the examples it chose from its own evaluation of block 0 (run_chunk);
     # friction_examples then follows again only the assemblies up to the last chosen one,
     # not a window of EXAMPLE_WINDOW (or the whole block): the same examples, bit for bit,
-    # as friction_examples choosing them itself. A wrong choice passed in is not taken: its
+    # as friction_examples choosing them itself, also when resumed from a checkpoint written
+    # after block 0. A wrong choice passed in is not taken: its
     # prefix chooses other examples, and the window's are returned.
     c = friction_yaw(samples=256, block=128)
     if propagation == "along_track":
@@ -503,6 +505,16 @@ def test_examples_follow_only_the_assemblies_the_study_chose(monkeypatch, propag
     assert sizes == [last + 1] and last + 1 < fx.EXAMPLE_WINDOW
     for name in EXAMPLE_FIELDS:
         assert_array_equal(getattr(result.friction_examples, name),
+                           getattr(reference, name), err_msg=name)
+    sizes.clear()  # a run resumed from a checkpoint: the choice is in it
+    with pytest.raises(StudyInterrupted):
+        run_study(c, chunk_blocks=1, checkpoint_path=str(tmp_path / "run.partial"),
+                  max_blocks=1)
+    assert sizes == []
+    resumed = run_study(c, chunk_blocks=1, checkpoint_path=str(tmp_path / "run.partial"))
+    assert resumed.resumed_blocks == 1 and sizes == [last + 1]
+    for name in EXAMPLE_FIELDS:
+        assert_array_equal(getattr(resumed.friction_examples, name),
                            getattr(reference, name), err_msg=name)
     sizes.clear()
     wrong = fx.friction_examples(c, order=reference.assembly[::-1])

@@ -124,8 +124,8 @@ def friction_examples(config, order=None) -> FrictionExamples | None:
     resolved ones without. Given the study's own choice (``order``), only the assemblies up to
     the last chosen one are followed again, and they are used if they choose the same examples
     (they do when an assembly's evaluation does not depend on its batch,
-    :func:`tolsim.study.pipeline.block.evaluates_blocks_together`); otherwise, and without
-    it (a run resumed past the first block), the first :data:`EXAMPLE_WINDOW` assemblies,
+    :func:`tolsim.study.pipeline.block.evaluates_blocks_together`; a resumed run has it from
+    its checkpoint); otherwise, and without it, the first :data:`EXAMPLE_WINDOW` assemblies,
     then the whole block if too few of them touch. Either way the same examples, and the same
     trajectories: a study whose few assemblies touch does not follow a whole block again
     (a carriage without preload with ``[contact]``, 2 000 assemblies: 25 s of its 55 s).

@@ -109,8 +109,8 @@ EXAMPLE_ORDER = "example_order"
 
 
 def example_order(parts):
-    """The examples chosen in the first block's records ``parts[0]``, or None (a run resumed
-    past it keeps the spot-check rows only)."""
+    """The examples chosen in the first block's records ``parts[0]`` (kept in a checkpoint
+    too), or None."""
     return parts[0].get(EXAMPLE_ORDER) if parts else None
 
 

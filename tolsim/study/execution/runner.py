@@ -59,6 +59,7 @@ from tolsim.study.analyses.worst_case import linear_stackup
 from tolsim.study.execution import saved_samples
 from tolsim.study.execution.answerable import check_answerable
 from tolsim.study.execution.chunks import (
+    EXAMPLE_ORDER,
     SPOT_FIELDS,
     SpotChecks,
     concat_spots,
@@ -409,6 +410,9 @@ def _save_checkpoint(path, fp, state: _Progress, config_text: str):
     # rows per block and field, to split the rows into blocks again
     arrays["part_lengths"] = np.array([[len(p[k]) for k in SPOT_FIELDS] for p in parts],
                                       dtype=np.int64).reshape(len(parts), len(SPOT_FIELDS))
+    order = example_order(parts)
+    if order is not None:  # the friction examples' choice, for a resumed run
+        arrays[EXAMPLE_ORDER] = order
     try:
         with interrupts_held():  # Ctrl-C inside the zip writer replaced itself with an error
             with open(tmp, "wb") as fh:
@@ -443,6 +447,7 @@ def _load_checkpoint(path, fp) -> _Progress | None:
             next_block = int(data["next_block"])
             lengths = data["part_lengths"]
             spots = {k: data[f"spot_{k}"] for k in SPOT_FIELDS}
+            order = data[EXAMPLE_ORDER] if EXAMPLE_ORDER in data.files else None
     except Exception as exc:  # noqa: BLE001 - zipfile, zlib, numpy and OS errors alike
         reason = " ".join(f"{type(exc).__name__}: {exc}".split())
         raise DamagedCheckpoint(f"checkpoint {path} cannot be read, it is damaged or "
@@ -456,6 +461,8 @@ def _load_checkpoint(path, fp) -> _Progress | None:
     pieces = {k: np.split(v, np.cumsum(lengths[:, j])[:-1]) if next_block else []
               for j, (k, v) in enumerate(spots.items())}
     parts = [{k: pieces[k][i] for k in SPOT_FIELDS} for i in range(next_block)]
+    if parts and order is not None:
+        parts[0][EXAMPLE_ORDER] = order
     return _Progress(next_block, acc, parts)
 
 
