@@ -14,9 +14,13 @@ script prints, per step count:
   log(err_1 / err_2) / log(n_2 / n_1) (2 for the midpoint rule on smooth epsilon);
 * with ``[contact]`` (``--contact`` adds one where the config has none) the friction figures'
   means with their 95 % intervals (mean +- 1.96 s / sqrt(n)) and the same check;
-* for an along-track carriage the fraction of first contacts at the zone's ends, and with
-  ``[carriage.circuit]`` the column forces at the zone's entry and exit (means over the
-  assemblies of their stroke means [N]).
+* the median time to first contact over the assemblies that touch, with its 95 % interval
+  (order statistics: the ranks of a binomial(k, 1/2) interval), and whether the reference's
+  median lies in it;
+* for an along-track carriage the fraction of first contacts at the zone's ends with its 95 %
+  Clopper-Pearson interval over the contacts, and whether the reference's fraction lies in it,
+  and with ``[carriage.circuit]`` the column forces at the zone's entry and exit (means over
+  the assemblies of their stroke means [N]).
 
 It drives the study only through config keys set in the config's text, which the loader
 then validates (``study.time_steps``, and ``study.propagation = "along_track"`` for
@@ -27,11 +31,13 @@ configs/carriage_preload.toml, which is ``constant`` as packaged), and through t
 :func:`tolsim.study.pipeline.propagation_rules.time_steps`), marked "a" in the table.
 ``--circuit`` adds a default ``[carriage.circuit]`` to a carriage config without one, and
 ``--relief DEPTH_UM LENGTH_MM`` sets the carriage's end relief (the variants the step rule's
-Notes quote: ``--configs carriage_preload --circuit --relief 1 15``).
+Notes quote: ``--configs carriage_preload --circuit --relief 1 15``), and ``--preload UM`` its
+preload oversize (0: the carriage without preload, whose balls are mostly two- and three-point,
+Notes of :func:`tolsim.study.pipeline.propagation_rules.time_steps`).
 
 Run: ``python benchmarks/convergence_along_track.py [--configs whatif_along_track
 carriage_preload carriage_circuit] [--steps auto 25 50 100 200 400] [--reference 1600]
-[--samples N] [--seed S] [--contact] [--circuit] [--relief DEPTH_UM LENGTH_MM]``. The
+[--samples N] [--seed S] [--contact] [--circuit] [--relief DEPTH_UM LENGTH_MM] [--preload UM]``. The
 defaults (800 assemblies) run in a few minutes on two idle cores; ``--samples`` sets the
 size.
 """
@@ -45,11 +51,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import binom
 
 from tolsim import parse_config, run_study
 from tolsim.io.schema.carriage import zone_end_fraction
 from tolsim.study.pipeline.propagation_rules import time_steps as resolved_steps
 from tolsim.study.spec import set_study_value
+from tolsim.study.statistics.accumulator import clopper_pearson
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The studies of the issue: free balls, the open carriage, the circuit.
@@ -99,13 +107,15 @@ def with_carriage_keys(text: str, **keys) -> str:
 
 
 def study_config(path, time_steps, *, samples=None, seed=None, contact=False, circuit=False,
-                 relief=None):
+                 relief=None, preload=None):
     """The study of ``path`` along the track at ``time_steps`` (an int, or ``"auto"``: the
     automatic count) (and ``samples``, ``seed`` if given), spot checks and sensitivity off,
     ``[contact]`` added if ``contact`` and the config has none, a default
     ``[carriage.circuit]`` if ``circuit`` and it has none, and the carriage's end relief
-    ``relief`` = (depth [um], length [mm]) if given."""
+    ``relief`` = (depth [um], length [mm]) and preload oversize ``preload`` [um] if given."""
     text = Path(path).read_text(encoding="utf-8")
+    if preload is not None:
+        text = with_carriage_keys(text, preload_oversize_um=float(preload))
     if relief is not None:
         text = with_carriage_keys(text, end_relief_depth_um=float(relief[0]),
                                   end_relief_length_mm=float(relief[1]))
@@ -150,14 +160,33 @@ def measure(config) -> dict:
                            for name in FRICTION_FIGURES}
     if config.carriage is not None and config.is_along_track:
         tracks, balls = config.n_tracks, config.train.balls
-        out["zone_end_fraction"] = zone_end_fraction(
-            acc.pair_count[: tracks * max(balls - 1, 0)], tracks)
+        counts = acc.pair_count[: tracks * max(balls - 1, 0)]
+        out["zone_end_fraction"] = zone_end_fraction(counts, tracks)
+        pairs = np.asarray(counts, dtype=float).reshape(tracks, -1)
+        if pairs.shape[1] and pairs.sum() > 0:
+            ends = int(pairs[:, 0].sum() + (pairs[:, -1].sum() if pairs.shape[1] > 1 else 0))
+            _, low, high = clopper_pearson(ends, int(pairs.sum()))
+            out["zone_end_interval"] = (low, high)
         if acc.circuit is not None:
             c = acc.circuit
             count = max(int(c["circuit_count"]), 1)
             entry, exit_ = np.asarray(c["circuit_column_mean_sum"], dtype=float) / count
             out["column"] = {"entry": float(entry), "exit": float(exit_)}
     return out
+
+
+def median_interval(times) -> tuple:
+    """(median, low, high) of the finite ``times`` [s]: the sample median and its
+    distribution-free 95 % interval, the order statistics of ranks l and k - l + 1 with l the
+    2.5 % quantile of B ~ binomial(k, 1/2), which cover the population median with probability
+    1 - 2 P(B < l) >= 0.95 (NaN ends for fewer than 6 times, which cannot give one)."""
+    t = np.sort(np.asarray(times, dtype=float)[np.isfinite(times)])
+    k = len(t)
+    if k < 6:
+        return (float(np.median(t)) if k else float("nan"), float("nan"), float("nan"))
+    low = int(binom.ppf(0.025, k, 0.5))  # rank (1-based) of the lower end, at least 1
+    high = int(k - low + 1)
+    return float(np.median(t)), float(t[max(low, 1) - 1]), float(t[min(high, k) - 1])
 
 
 def paired(row: dict, reference: dict) -> dict:
@@ -199,6 +228,10 @@ def compare(rows: list, reference: dict) -> list:
         entry = {"time_steps": row["time_steps"],
                  "p_ok": within(reference["p"], row["low"], row["high"]),
                  **paired(row, reference)}
+        entry["median_ok"] = within(median_interval(reference["contact_time"])[0],
+                                    *median_interval(row["contact_time"])[1:])
+        if "zone_end_interval" in row and "zone_end_fraction" in reference:
+            entry["ends_ok"] = within(reference["zone_end_fraction"], *row["zone_end_interval"])
         if "friction" in row:
             entry["friction_ok"] = {
                 name: within(reference["friction"][name][0], mean - half, mean + half)
@@ -234,6 +267,18 @@ def _text(name, rows, reference, table) -> str:
     for row, entry in zip(rows, table, strict=True):
         lines.append(line(row, entry))
     lines.append(line(reference, None) + "   (reference)")
+    lines.append("  time to first contact, median [95 %] [s]; fraction of first contacts at the "
+                 "zone's ends [95 %]; reference in it:")
+    for row, entry in [*zip(rows, table, strict=True), (reference, None)]:
+        median, low, high = median_interval(row["contact_time"])
+        parts = [f"median {median:.4g} [{low:.4g}, {high:.4g}]"
+                 + ("" if entry is None else (" ok" if entry["median_ok"] else " NO"))]
+        if "zone_end_interval" in row:
+            low, high = row["zone_end_interval"]
+            parts.append(f"ends {row['zone_end_fraction']:.3f} [{low:.3f}, {high:.3f}]"
+                         + ("" if entry is None or "ends_ok" not in entry
+                            else (" ok" if entry["ends_ok"] else " NO")))
+        lines.append(f"  {row['time_steps']:>5}  " + "; ".join(parts))
     if "friction" in reference:
         lines.append("  friction figures [N], mean [95 %], reference in it:")
         for row, entry in [*zip(rows, table, strict=True), (reference, None)]:
@@ -261,6 +306,8 @@ def main(argv=None):
                         help="add a default [carriage.circuit] to a carriage config without one")
     parser.add_argument("--relief", nargs=2, type=float, metavar=("DEPTH_UM", "LENGTH_MM"),
                         help="the carriage's end relief: depth [um] and length [mm]")
+    parser.add_argument("--preload", type=float, metavar="UM",
+                        help="the carriage's preload oversize [um] (0: no preload)")
     args = parser.parse_args(argv)
     numbers = [h for h in args.steps if h != "auto"]
     if (numbers and min(numbers) < 1) or any(h >= args.reference for h in numbers):
@@ -271,12 +318,14 @@ def main(argv=None):
         path = CONFIGS[name]
         carriage = name != "whatif_along_track"
         variant = {"circuit": args.circuit and carriage,
-                   "relief": args.relief if carriage else None}
+                   "relief": args.relief if carriage else None,
+                   "preload": args.preload if carriage else None}
         contact = args.contact
         name += "".join(
             [" + default [carriage.circuit]" if variant["circuit"] else ""]
             + ([f" + relief {args.relief[0]:g} um / {args.relief[1]:g} mm"]
-               if variant["relief"] else []))
+               if variant["relief"] else [])
+            + ([f" + preload {args.preload:g} um"] if variant["preload"] is not None else []))
         # warm-up: load or compile the kernels outside the timings
         run_study(study_config(path, 2, samples=1, seed=args.seed, contact=contact, **variant))
         rows = []

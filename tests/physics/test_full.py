@@ -500,3 +500,32 @@ def test_cli_ball_surface_only_for_full(capsys):
 
     assert main(["ball", "--model", "analytic", "--surface", "curved"]) == 2
     assert "--surface" in capsys.readouterr().err
+
+
+#: Three balls of configs/carriage_preload.toml without preload or load (its bearing:
+#: D = 10 mm, f = 0.54, 45 deg, 210 GPa, 0.28, mu = 0.1), captured along the track at 40
+#: steps (session 30): forces of micronewtons, the four contacts loaded.
+DIVERGING_DBETA = np.array(
+    [[-0.002756261034220927, 0.001176788085054726, 0.004449903476108877, -0.0015825482098843567],
+     [-3.1667268421809574e-06, 0.0005097262178542008, 0.002826197436633889, -0.0014219112482700877],
+     [2.3192148564549593e-05, 0.005288319842921386, 0.0013146125806270887, -0.008991936237506996]])
+DIVERGING_FORCE = np.array(
+    [[3.2894017727104716e-06, 7.812090003287225e-06, 3.2678275382108066e-06, 7.835698584743027e-06],
+     [7.476109495936052e-07, 3.367409275455208e-06, 7.411063682052673e-07, 3.369505128421708e-06],
+     [2.7419767271071856e-05, 7.493309516273224e-05, 2.634941788165592e-05, 7.496901926620101e-05]])
+
+
+def test_a_newton_that_runs_off_is_not_a_solution():
+    # With micronewton forces the smooth Newton ran off to an infinite (or 1e78) state in its
+    # 50 iterations, and for balls 0 and 2 the residual there read 0: full() returned them
+    # valid, regime A, with epsilon NaN; the study then moved them with a NaN epsilon. A state
+    # at or beyond DIVERGED_STATE is no solution: they are unsolved (the study counts them
+    # unresolved, "full model failed"), without a floating-point warning (the diverged
+    # state's units overflowed; a pushed ball that slides keeps its +-inf). The same balls at
+    # forces 1e6 times larger solve (they are well-formed balls, regime A, |epsilon| < 1 %).
+    bearing = Bearing(ball_radius=0.005, conformity=0.54, nominal_contact_angle=np.pi / 4,
+                      youngs_modulus=210e9, poisson_ratio=0.28, friction_coefficient=0.1)
+    res = full(DIVERGING_DBETA, DIVERGING_FORCE, bearing)
+    assert not res.valid.any() and np.all(res.regime == 0) and not res.converged.any()
+    scaled = full(DIVERGING_DBETA, DIVERGING_FORCE * 1e6, bearing)
+    assert scaled.valid.all() and np.all(np.abs(scaled.velocity_deviation) < 0.01)

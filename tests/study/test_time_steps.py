@@ -10,10 +10,14 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from tolsim.io.config import parse_config
+from tolsim.physics import carriage
+from tolsim.physics.carriage import CarriageError, CarriageStatus, solve_carriage
 from tolsim.study.pipeline.carriage_track import CarriageFrame
 from tolsim.study.pipeline.propagation_rules import (
+    LIGHT_PRELOAD_CONTACT,
     MIN_TIME_STEPS,
     epsilon_lengths,
+    light_preload,
     propagation_assumption,
     propagation_caveat,
     time_steps,
@@ -116,6 +120,40 @@ def test_steps_follow_the_shortest_length_and_the_stroke():
     plain = parse_config(text, "plain.toml")
     assert epsilon_lengths(plain) == {}
     assert time_steps(plain) == MIN_TIME_STEPS
+
+
+def preloaded(oversize_um, circuit=False):
+    """configs/carriage_preload.toml along the track at a preload oversize [um]."""
+    text = packaged("carriage_preload").text.replace(
+        "preload_oversize_um = 2.0", f"preload_oversize_um = {oversize_um}", 1)
+    return parse_config(text + ("\n[carriage.circuit]\n" if circuit else ""), "light.toml")
+
+
+@pytest.mark.parametrize(("oversize_um", "light"), [(0.0, True), (0.5, True), (1.0, True),
+                                                    (1.5, False), (2.0, False), (3.0, False)])
+def test_a_light_preload_takes_the_steps_of_a_relief(oversize_um, light):
+    # The nominal carriage of carriage_preload.toml (300 N, 2 N m) has its lightest contact
+    # at 0 (two-point balls) up to 0.5 um, at 0.002 of the largest at 1 um, 0.185 at 1.5 um,
+    # 0.359 at 2 um (as shipped) and 0.582 at 3 um (light_preload's docstring); below 0.1 the
+    # carriage takes the relief's factor 8: 8 x 50 / 10.05 = 39.8 -> 40 steps, with or
+    # without a circuit, else 10 (time_steps' Notes give the convergence behind it).
+    c = preloaded(oversize_um)
+    force = np.asarray(solve_carriage(c.carriage.layout, c.carriage.load, c.bearing,
+                                      oversize=c.carriage.oversize).normal_force)
+    assert (force.min() < LIGHT_PRELOAD_CONTACT * force.max()) == light
+    assert light_preload(c) == light
+    assert time_steps(c) == (40 if light else 10)
+    assert time_steps(preloaded(oversize_um, circuit=True)) == (40 if light else 10)
+
+
+def test_a_carriage_without_a_nominal_solution_takes_the_fine_steps(monkeypatch):
+    # A nominal carriage that lifts off or fails (CarriageError) has no lightest contact to
+    # read: the cautious side, the fine steps.
+    def fails(*args, **kwargs):
+        raise CarriageError("lifted off", status=CarriageStatus.LIFT_OFF)
+
+    monkeypatch.setattr(carriage, "solve_carriage", fails)
+    assert time_steps(preloaded(2.0)) == 40
 
 
 def test_the_carriage_newton_starts_on_the_line_through_its_two_latest_solutions():

@@ -17,6 +17,10 @@ from tolsim.physics.velocity._curved_kernels import (
 SLIDING_POLE = 1e7
 #: Relative step of the central-difference Jacobian (unknowns scaled by v and v/R).
 FD_STEP = 1e-6
+#: A Newton state (v_B / v and Omega R / v, of order 1 for a rolling ball: 1/2 and sqrt(2)) at
+#: or beyond this magnitude, or not finite, has diverged: not converged, whatever the residual
+#: there (:func:`solve_one`).
+DIVERGED_STATE = 1e6
 
 
 # --------------------------------------------------------------------------------------------
@@ -532,7 +536,14 @@ def solve_one(beta, force, semi_major, semi_minor, sigma_scale, curved, rd, hoff
                       loads, contact, res)
     info[0] = worst
     info[1] = it
-    info[2] = 1.0 if worst <= tol else 0.0
+    # a state that ran off to inf (or 1e300) is no solution, whatever its residual says: with
+    # micronewton forces (a carriage without preload or load) the Newton diverged in 50
+    # iterations and its residual at the infinite state read 0 (session 30)
+    finite = True
+    for k in range(4):
+        if not abs(state[k]) < DIVERGED_STATE:
+            finite = False
+    info[2] = 1.0 if worst <= tol and finite else 0.0
 
 
 @jit(inline="always")

@@ -696,6 +696,13 @@ def exactly_two_point(contact_angle_deviation, normal_force, bearing: Bearing = 
     return (np.count_nonzero(loaded, axis=1) == 2) & (pair[:, 0] | pair[:, 1])
 
 
+def _per_second(state, scale):
+    """``state * scale``: a Newton that ran off leaves its last iterate (not converged, up to
+    1e307, or +-inf for a ball that slides), whose units overflow to +-inf without a warning."""
+    with np.errstate(over="ignore"):
+        return state * scale
+
+
 def _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocity, regime=None):
     """The fields of :class:`FullResult` from the kernel's internal-unit outputs.
 
@@ -736,7 +743,7 @@ def _full_fields(state, contact, info, force, shape, bearing, hc, groove_velocit
         zero_velocity_offset=shaped(gamma, 4),
         velocity_deviation_eq22=None,
         ball_velocity=shaped(state[:, 0] * v),
-        angular_velocity=shaped(state[:, 1:] * v / radius, 3),
+        angular_velocity=shaped(_per_second(state[:, 1:], v / radius), 3),
         contact_offset_ratio=shaped(ratio, 4),
         spin_to_roll=shaped(spin_to_roll, 4),
         drag_force=shaped(drag),

@@ -42,8 +42,11 @@ STEPS_PER_LENGTH = 4.0
 #: in the midpoint solve from their entry and move at their own epsilon from it.
 STEPS_PER_LENGTH_CARRIAGE = 2.0
 #: The same for a carriage with an end relief (balls unload and reload within it, and most
-#: first contacts form there).
+#: first contacts form there) or a light preload (:func:`light_preload`).
 STEPS_PER_LENGTH_RELIEF = 8.0
+#: A carriage's preload is light (:func:`light_preload`) when its nominal assembly has a
+#: contact below this fraction of its largest contact force, open ones included.
+LIGHT_PRELOAD_CONTACT = 0.1
 #: The same with ``[contact]`` (the friction figures' extremes are taken over step means),
 #: except with ``[carriage.circuit]``, whose step gives them between its events.
 STEPS_PER_LENGTH_CONTACT = 40.0
@@ -89,10 +92,10 @@ def time_steps(config) -> int:
     them: n = max(:data:`MIN_TIME_STEPS`, ceil(c (s / 2) / l_min)), with c =
     :data:`STEPS_PER_LENGTH` (4) for free balls, :data:`STEPS_PER_LENGTH_CARRIAGE` (2) for a
     carriage (with or without ``[carriage.circuit]``), :data:`STEPS_PER_LENGTH_RELIEF` (8) for
-    a carriage with an end relief, and :data:`STEPS_PER_LENGTH_CONTACT` (40) with
-    ``[contact]`` unless the carriage has a circuit (which keeps its own c);
-    :data:`MIN_TIME_STEPS` without any length (epsilon then changes only through the
-    unloaded balls, the trains after contact, or not at all).
+    a carriage with an end relief or a light preload (:func:`light_preload`), and
+    :data:`STEPS_PER_LENGTH_CONTACT` (40) with ``[contact]`` unless the carriage has a
+    circuit (which keeps its own c); :data:`MIN_TIME_STEPS` without any length (epsilon then
+    changes only through the unloaded balls, the trains after contact, or not at all).
 
     The factors come from ``benchmarks/convergence_along_track.py`` (each config's seed,
     paired against a fine-step reference on the same assemblies, 600 assemblies, reference
@@ -133,6 +136,31 @@ def time_steps(config) -> int:
     the entries keep their phase. On the gaps of a small carriage with the preload
     alone they matter: 4.9e-7 m from a 320-step run at 10 steps with them, 4.9e-6 m
     without (``tests/study/test_circuit_entry.py``).)
+
+    A light preload converges as slowly as a relief. Where the preload leaves a contact of the
+    nominal carriage light or open (:func:`light_preload`), the tolerances open and close
+    contacts along the track: balls cross between regimes A, B, three- and two-point as they
+    roll through the zone and past its ends, and most first contacts of a circuit form at
+    the ends. With c = 2 the error fell at first order, and P(contact) of a circuit lay
+    outside its own interval, too low. ``configs/carriage_preload.toml`` at 0, 0.5 and 1 um of
+    preload oversize (4 000 assemblies, seed 12, paired against 400 steps; session 30):
+
+    * with a default circuit, P = 0.0732 [0.0654, 0.0818] at 10 steps against 0.0828
+      (+26/-64, mean change of the first contact 34.6 ms), 0.0810 at 40 (+11/-18, 6.3 ms);
+      at 0.5 um 0.4145 [0.3992, 0.4299] against 0.4517 (+145/-294, 27.6 ms), 0.4467 at 40
+      (+60/-80, 7.1 ms); at 1 um 0.9922 and 0.9935 against 0.9930 (9.1 and 3.3 ms);
+    * open, P inside its interval at 10 steps, but the fraction of first contacts at the
+      zone's ends outside its own (Clopper-Pearson over the contacts): 0.586 at 10 steps and
+      0.736 at 40 against 0.722 at 0 um, 0.522 and 0.662 against 0.669 at 0.5 um, 0.188 and
+      0.148 against 0.129 at 1 um (inside from 80 steps there); the mean change of the first
+      contact 27.2, 18.7 and 31.7 ms at 10 steps, 7.1, 4.2 and 9.4 ms at 40.
+
+    Hence c = 8 for them too (40 steps). At 1.5 um (lightest nominal contact 0.185 of the
+    largest) the circuit had every figure inside at 10 steps (P 0.9280 against 0.9277, 2.1 ms)
+    and the open trains P (0.3882 against 0.3857, 9.6 ms); so has the shipped 2 um. The open
+    trains' fraction at the ends converges at first order at every preload, and lay just
+    outside its interval at their 10 steps at 1.5 and 2 um (0.232 against 0.205, 0.218
+    against 0.188), inside from 20 steps: the report gives it with its interval and says so.
 
     With ``[contact]`` the largest increase and the ripple are extremes of step-mean friction
     forces, which converge at first order from below: on the free balls (1 000 assemblies)
@@ -199,12 +227,37 @@ def _whole_steps(count) -> int:
 def steps_per_length(config) -> float:
     """The automatic steps per shortest length c of :func:`time_steps` (its Notes)."""
     carriage = config.carriage
-    relief = carriage is not None and carriage.end_relief_depth > 0
     if config.contact is not None and (carriage is None or carriage.circuit is None):
         return STEPS_PER_LENGTH_CONTACT
     if carriage is not None:
-        return STEPS_PER_LENGTH_RELIEF if relief else STEPS_PER_LENGTH_CARRIAGE
+        fine = carriage.end_relief_depth > 0 or light_preload(config)
+        return STEPS_PER_LENGTH_RELIEF if fine else STEPS_PER_LENGTH_CARRIAGE
     return STEPS_PER_LENGTH
+
+
+def light_preload(config) -> bool:
+    """Whether a carriage's preload leaves a contact of its nominal assembly (no tolerances,
+    :func:`tolsim.physics.carriage.solve_carriage`, about 0.5 ms) below
+    :data:`LIGHT_PRELOAD_CONTACT` of the largest contact force, open ones included; True
+    also when the nominal assembly has no solution (a lift-off), the cautious side. Such a
+    carriage takes :data:`STEPS_PER_LENGTH_RELIEF` (Notes of :func:`time_steps`).
+
+    On ``configs/carriage_preload.toml`` (300 N, 2 N m) the lightest nominal contact is 0
+    (every ball two-point) at 0, 0.25 and 0.5 um of preload oversize, 0.002 of the largest at 1
+    um, 0.185 at 1.5 um, 0.359 at 2 um (as shipped) and 0.582 at 3 um.
+    """
+    from tolsim.physics.carriage import solve_carriage  # noqa: PLC0415 - config loading
+    # imports this module, and the carriage's kernels are needed only here
+
+    carriage = config.carriage
+    try:
+        solution = solve_carriage(carriage.layout, carriage.load, config.bearing,
+                                  oversize=carriage.oversize)
+    except ValueError:  # CarriageError: lift-off or failure
+        return True
+    force = np.asarray(solution.normal_force, dtype=float)
+    largest = float(np.max(force)) if force.size else 0.0
+    return not (largest > 0 and float(np.min(force)) >= LIGHT_PRELOAD_CONTACT * largest)
 
 
 def automatic_step_count(config) -> float:
