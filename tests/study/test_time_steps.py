@@ -17,6 +17,7 @@ from tolsim.study.pipeline.propagation_rules import (
     LIGHT_PRELOAD_CONTACT,
     MIN_TIME_STEPS,
     epsilon_lengths,
+    fine_step_reason,
     light_preload,
     propagation_assumption,
     propagation_caveat,
@@ -107,6 +108,8 @@ def test_steps_follow_the_shortest_length_and_the_stroke():
     relief = parse_config(text, "relief.toml")
     assert epsilon_lengths(relief)["end relief"] == pytest.approx(0.002, rel=1e-12)
     assert time_steps(relief) == 200
+    assert fine_step_reason(relief) == "the finer steps of an end relief"
+    assert fine_step_reason(c) == ""
     longer = parse_config(text.replace("stroke_mm = 100.0", "stroke_mm = 400.0"), "long.toml")
     assert time_steps(longer) == 800
     circuit = parse_config(text + "\n[carriage.circuit]\n", "circuit.toml")
@@ -144,6 +147,14 @@ def test_a_light_preload_takes_the_steps_of_a_relief(oversize_um, light):
     assert light_preload(c) == light
     assert time_steps(c) == (40 if light else 10)
     assert time_steps(preloaded(oversize_um, circuit=True)) == (40 if light else 10)
+    # the file, summary and report say why (the propagation assumption)
+    said = propagation_assumption("along_track", time_steps(c), automatic=True,
+                                  reason=fine_step_reason(c))
+    assert said.endswith(
+        "(midpoint rule, 40 steps chosen automatically (the finer steps of an end relief, "
+        "for a light preload: a contact of the nominal carriage below 0.1 of its largest): "
+        'study.time_steps = "auto")' if light else
+        '(midpoint rule, 10 steps chosen automatically: study.time_steps = "auto")')
 
 
 def test_a_carriage_without_a_nominal_solution_takes_the_fine_steps(monkeypatch):

@@ -16,6 +16,7 @@ from tolsim.physics.geometry import CONTACTS
 from tolsim.physics.velocity.models import BALL_REGIMES
 from tolsim.study.analyses.limit_state import EVENT_PROBABILITY
 from tolsim.study.pipeline.propagation_rules import (
+    fine_step_reason,
     propagation_assumption,
     propagation_caveat,
     time_steps,
@@ -426,7 +427,8 @@ def collect(result, history=None) -> tuple:
         "full_model_resolve_seconds": float(acc.resolve_seconds),
         "propagation_assumption": propagation_assumption(
             st.propagation, time_steps(cfg) if cfg.is_along_track else None,
-            automatic=st.time_steps is None),
+            automatic=st.time_steps is None,
+            reason=fine_step_reason(cfg) if cfg.is_along_track else ""),
         "propagation_caveat": propagation_caveat(cfg),
         "elapsed_seconds": float(result.elapsed),
         # Numba compilation (a cold kernel cache) and kernel-cache loading in the run, not part

@@ -22,14 +22,16 @@ PROPAGATION_ASSUMPTIONS = {
 
 
 def propagation_assumption(propagation: str, steps: int | None = None,
-                           automatic: bool = False) -> str:
+                           automatic: bool = False, reason: str = "") -> str:
     """The one-sentence assumption of a propagation model (:data:`PROPAGATION_ASSUMPTIONS`),
     with the number of steps of an ``along_track`` study when ``steps`` is given
     (:func:`time_steps`), and whether that number is the automatic one (``automatic``:
-    ``study.time_steps = "auto"``) or the config's."""
+    ``study.time_steps = "auto"``, with ``reason``, :func:`fine_step_reason`, if any) or the
+    config's."""
     text = PROPAGATION_ASSUMPTIONS[propagation]
     if steps is not None and propagation == "along_track":
-        count = (f'{int(steps)} steps chosen automatically: study.time_steps = "auto"'
+        why = f" ({reason})" if reason else ""
+        count = (f'{int(steps)} steps chosen automatically{why}: study.time_steps = "auto"'
                  if automatic else f"{int(steps)} steps (study.time_steps)")
         text = text.replace("study.time_steps steps", count)
     return text
@@ -233,6 +235,18 @@ def steps_per_length(config) -> float:
         fine = carriage.end_relief_depth > 0 or light_preload(config)
         return STEPS_PER_LENGTH_RELIEF if fine else STEPS_PER_LENGTH_CARRIAGE
     return STEPS_PER_LENGTH
+
+
+def fine_step_reason(config) -> str:
+    """Why a carriage's automatic step is the finer one of :data:`STEPS_PER_LENGTH_RELIEF`
+    (an end relief, a light preload), for the propagation assumption; "" otherwise."""
+    carriage = config.carriage
+    if carriage is None or steps_per_length(config) != STEPS_PER_LENGTH_RELIEF:
+        return ""
+    if carriage.end_relief_depth > 0:
+        return "the finer steps of an end relief"
+    return (f"the finer steps of an end relief, for a light preload: a contact of the nominal "
+            f"carriage below {LIGHT_PRELOAD_CONTACT:g} of its largest")
 
 
 def light_preload(config) -> bool:
