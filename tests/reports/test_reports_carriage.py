@@ -332,19 +332,17 @@ def test_pdf_has_the_carriage_section(carriage_result, carriage_report):
     assert all(f"page {i} of {len(pages)}" in t for i, t in enumerate(texts, 1))
 
 
-def test_the_zone_end_fraction_has_its_interval_and_the_step_caveat():
+def test_the_zone_end_fraction_has_its_interval():
     # By hand: first contacts per pair [[3, 1, 2], [1, 0, 3]] (track by pair): 10, of which
     # 3 + 2 + 1 + 3 = 9 at a first or last pair, 90 %; its 95 % Clopper-Pearson interval
-    # (scipy's binomtest, exact) [55.5, 99.7] %. Open trains say that the fraction carries the
-    # step's error beyond it (propagation_rules.time_steps' Notes); a circuit does not.
+    # (scipy's binomtest, exact) [55.5, 99.7] %, with or without a circuit.
     ds = xr.Dataset({"contact_zone_end_fraction": ((), 0.9),
                      "contact_pair_count": (("track", "pair"), np.array([[3, 1, 2], [1, 0, 3]]))})
     ci = binomtest(9, 10).proportion_ci(confidence_level=0.95, method="exact")
     label, text = circuit_rows(ds)[0]
     assert label == "first contacts at the ends of the loaded zone (first or last pair)"
-    assert text.startswith(f"90.0 % [{100 * ci.low:.1f}, {100 * ci.high:.1f}] (95 %, of 10 "
-                           "first contacts); open trains: this fraction converges at first "
-                           "order in the step")
+    assert text == f"90.0 % [{100 * ci.low:.1f}, {100 * ci.high:.1f}] (95 %, of 10 first " \
+                   "contacts)"
     assert (ci.low, ci.high) == pytest.approx((0.555, 0.9975), abs=5e-4)
     ds["circuit_balls"] = 30
     assert _zone_end_text(ds, 0.9) == f"90.0 % [{100 * ci.low:.1f}, {100 * ci.high:.1f}] " \

@@ -1,6 +1,7 @@
 """The compiled glue of the carriage along the track against the NumPy code it replaced."""
 
 import numpy as np
+import pytest
 from numpy.testing import assert_array_equal
 
 from tolsim.study.pipeline.carriage_track_kernels import (
@@ -116,7 +117,9 @@ def test_remember_keeps_the_latest_solutions_in_order():
 
 def first_contact_twin(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, dt, balls,
                        time, pair, valid):
-    """The NumPy code of CarriageFirstContact.observe (session 12)."""
+    """The NumPy code of CarriageFirstContact.observe (session 12), with the pair counted
+    among the balls in the zone at the contact (session 30: less the slots behind it whose
+    ball has left by then)."""
     slots = z0.shape[2]
     searching = ~np.isfinite(time[rows])
     resolved = valid1 & valid2
@@ -133,7 +136,12 @@ def first_contact_twin(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, dt
     hit = np.isfinite(tmin) & searching
     time[rows[hit]] = tmin[hit]
     track, slot = np.divmod(first[hit], slots - 1)
-    pair[rows[hit]] = track * (balls - 1) + np.minimum(slot, max(balls - 2, 0))
+    at = frac.reshape(len(rows), -1)[np.flatnonzero(hit), first[hit]]
+    left = np.array([np.count_nonzero(z0[a, tr, :j] + f * (z1[a, tr, :j] - z0[a, tr, :j])
+                                      < -half)
+                     for a, tr, j, f in zip(np.flatnonzero(hit), track, slot, at, strict=True)],
+                    dtype=np.int64)
+    pair[rows[hit]] = track * (balls - 1) + np.minimum(slot - left, max(balls - 2, 0))
     return searching
 
 
@@ -172,6 +180,32 @@ def test_first_contact_kernel_matches_its_numpy_twin():
     hits = np.isfinite(twin[0]) & ~np.isfinite(time)
     assert 10 < hits.sum() < m - 10  # both branches seen
     assert (twin[1][hits] >= balls - 1).any() and (twin[1][hits] < balls - 1).any()
+
+
+def test_a_contact_after_an_exit_in_its_step_is_counted_among_the_balls_in_the_zone():
+    # By hand (zone [-0.06, 0.06] m, a step of 0.025 s from t = 0.2 s, 12-ball trains): the
+    # trailing ball (slot 0) drifts from -0.059 to -0.061 m and leaves the zone at half the
+    # step; the pair of slots 1 and 2 closes at 0.75 of the step (gap 3 -> -1 um), when the
+    # ball of slot 1 is the zone's trailing ball: its pair is the zone's first (index 0), not
+    # 1 (the slot index, which the kernel gave before session 30: exits are applied at the
+    # step's end, so within the step the slots still hold the ball that left). The same
+    # contact at 0.25 of the step (gap 1 -> -3 um), before the exit, is pair 1.
+    half, slots = 0.06, 13
+    z0 = np.full((1, 1, slots), np.nan)
+    z0[0, 0, :12] = -0.059 + 0.01005 * np.arange(12)
+    z1 = z0 - 0.002
+    for gap_start, gap_end, want in ((3e-6, -1e-6, 0), (1e-6, -3e-6, 1)):
+        gap0 = np.full((1, 1, slots - 1), 5e-5)
+        gap1 = gap0.copy()
+        gap0[0, 0, 1], gap1[0, 0, 1] = gap_start, gap_end
+        ok = np.isfinite(z0)
+        time, pair, valid = np.full(1, np.inf), np.full(1, -1), np.ones(1, dtype=bool)
+        first_contact_kernel(np.array([0]), z0, z1, gap0, gap1, ok, ok, ok, half, 0.2, 0.025,
+                             12, time, pair, valid, np.empty(1, dtype=bool),
+                             np.empty((0, 0, 0)))
+        frac = gap_start / (gap_start - gap_end)
+        assert time[0] == pytest.approx(0.2 + frac * 0.025, abs=1e-15)
+        assert pair[0] == want
 
 
 def test_carriage_motion_kernel_matches_the_numpy_expression():

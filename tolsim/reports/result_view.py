@@ -201,9 +201,7 @@ def static_fallback_text(ds) -> str:
 
 def _zone_end_text(ds, fraction) -> str:
     """The fraction of first contacts at the zone's ends with its 95 % Clopper-Pearson
-    interval over the first contacts (``contact_pair_count``, track by pair), and for open
-    trains the step's error, which the interval does not hold (Notes of
-    :func:`tolsim.study.pipeline.propagation_rules.time_steps`)."""
+    interval over the first contacts (``contact_pair_count``, track by pair)."""
     text = f"{100 * fraction:.1f} %"
     if "contact_pair_count" in ds.variables:
         pairs = np.asarray(ds["contact_pair_count"], dtype=float)
@@ -213,12 +211,6 @@ def _zone_end_text(ds, fraction) -> str:
             ends = int(pairs[:, 0].sum() + (pairs[:, -1].sum() if pairs.shape[1] > 1 else 0))
             _, low, high = clopper_pearson(ends, total)
             text += f" [{100 * low:.1f}, {100 * high:.1f}] (95 %, of {total:,} first contacts)"
-    if "circuit_balls" not in ds.variables:
-        text += ("; open trains: this fraction converges at first order in the step, and "
-                 "at the automatic step it lay beyond its interval in the convergence study "
-                 "(configs/carriage_preload.toml: 0.218 at 10 steps against 0.188 at 400; "
-                 "at 1 um of preload 0.148 at 40 against 0.129, inside from 80): more steps "
-                 "(study.time_steps) bring it closer; a [carriage.circuit] had it inside")
     return text
 
 

@@ -325,6 +325,19 @@ def remember_kernel(rows, t, displacement, solved, start, solution, solved_at):
                 solved_at[i, r] = np.nan
 
 
+@jit(inline="always")
+def _exited_before(z0, z1, a, tr, j, frac, half):
+    """How many of the balls in slots 0 .. j - 1 of track ``tr`` of row ``a`` have left the
+    zone (their centre behind -``half``) at ``frac`` of the step: the slots hold the balls of
+    the step's start in z order, and exits are applied at the step's end, so a pair's slot j
+    less these is its place among the balls in the zone at that time (a NaN slot counts not)."""
+    count = 0
+    for k in range(j):
+        if z0[a, tr, k] + frac * (z1[a, tr, k] - z0[a, tr, k]) < -half:
+            count += 1
+    return count
+
+
 @pjit
 def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, dt, balls,
                          time, pair, valid, searching, closed):
@@ -342,6 +355,7 @@ def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, 
     (:func:`entry_shift_kernel`; NaN elsewhere) counts as closing then.
     """
     m, tracks, pairs = gap0.shape
+    cap = max(balls - 2, 0)
     for a in prange(m):
         r = rows[a]
         searching[a] = not np.isfinite(time[r])
@@ -360,7 +374,8 @@ def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, 
                 if closed.shape[0] and ok[a, tr, j + 1] and ok[a, tr, j] and (
                         closed[a, tr, j] < best):  # (False for NaN)
                     best = closed[a, tr, j]
-                    where = tr * (balls - 1) + min(j, max(balls - 2, 0))
+                    before = _exited_before(z0, z1, a, tr, j, (best - t) / dt, half)
+                    where = tr * (balls - 1) + min(j - before, cap)
                 if not (g1 <= 0.0 and g0 > g1 and ok[a, tr, j + 1] and ok[a, tr, j]):
                     continue
                 frac = 0.0 if g0 <= 0.0 else g0 / (g0 - g1)
@@ -371,7 +386,8 @@ def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, 
                 tc = t + frac * dt
                 if tc < best:
                     best = tc
-                    where = tr * (balls - 1) + min(j, max(balls - 2, 0))
+                    where = tr * (balls - 1) + min(
+                        j - _exited_before(z0, z1, a, tr, j, frac, half), cap)
         if np.isfinite(best):
             time[r] = best
             pair[r] = where
