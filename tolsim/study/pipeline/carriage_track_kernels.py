@@ -350,7 +350,8 @@ def first_contact_kernel(rows, z0, z1, gap0, gap1, ok, valid1, valid2, half, t, 
     ``ok``) closes when gap1 <= 0 < gap0 - gap1, at frac = 0 (gap0 <= 0) or gap0 / (gap0 -
     gap1) of the step, if both balls, interpolated from ``z0`` to ``z1``, are in [-half,
     half] then; the earliest, t + frac dt (first track, then trailing pair, on ties), is the
-    row's ``time`` and ``pair`` tr (balls - 1) + min(j, balls - 2). ``closed`` (m, T, S - 1),
+    row's ``time`` and ``pair`` tr (balls - 1) + min(j - e, balls - 2), e the balls behind it
+    that have left the zone by then (:func:`_exited_before`). ``closed`` (m, T, S - 1),
     when it has rows: a pair (both balls ``ok``) that closed before the step at that time
     (:func:`entry_shift_kernel`; NaN elsewhere) counts as closing then.
     """
