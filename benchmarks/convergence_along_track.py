@@ -54,7 +54,7 @@ import numpy as np
 from scipy.stats import binom
 
 from tolsim import parse_config, run_study
-from tolsim.io.schema.carriage import zone_end_fraction
+from tolsim.io.schema.carriage import zone_end_counts, zone_end_fraction
 from tolsim.study.pipeline.propagation_rules import time_steps as resolved_steps
 from tolsim.study.spec import set_study_value
 from tolsim.study.statistics.accumulator import clopper_pearson
@@ -162,11 +162,9 @@ def measure(config) -> dict:
         tracks, balls = config.n_tracks, config.train.balls
         counts = acc.pair_count[: tracks * max(balls - 1, 0)]
         out["zone_end_fraction"] = zone_end_fraction(counts, tracks)
-        pairs = np.asarray(counts, dtype=float).reshape(tracks, -1)
-        if pairs.shape[1] and pairs.sum() > 0:
-            ends = int(pairs[:, 0].sum() + (pairs[:, -1].sum() if pairs.shape[1] > 1 else 0))
-            _, low, high = clopper_pearson(ends, int(pairs.sum()))
-            out["zone_end_interval"] = (low, high)
+        ends, total = zone_end_counts(counts, tracks)
+        if total:
+            out["zone_end_interval"] = clopper_pearson(ends, total)[1:]
         if acc.circuit is not None:
             c = acc.circuit
             count = max(int(c["circuit_count"]), 1)

@@ -19,6 +19,7 @@ import xarray as xr
 from tolsim.io import schema
 from tolsim.io.config import parse_config
 from tolsim.io.netcdf import IntegrityError, check_attributes, read_result, verify_checksums
+from tolsim.io.schema.carriage import zone_end_counts
 from tolsim.physics.velocity.models import BALL_REGIME_LABELS, BALL_UNLOADED
 from tolsim.study.statistics.accumulator import clopper_pearson
 
@@ -204,11 +205,9 @@ def _zone_end_text(ds, fraction) -> str:
     interval over the first contacts (``contact_pair_count``, track by pair)."""
     text = f"{100 * fraction:.1f} %"
     if "contact_pair_count" in ds.variables:
-        pairs = np.asarray(ds["contact_pair_count"], dtype=float)
-        pairs = pairs.reshape(pairs.shape[0], -1) if pairs.ndim else pairs.reshape(1, -1)
-        total = int(pairs.sum())
-        if pairs.shape[1] and total:
-            ends = int(pairs[:, 0].sum() + (pairs[:, -1].sum() if pairs.shape[1] > 1 else 0))
+        counts = np.asarray(ds["contact_pair_count"])  # (track, pair)
+        ends, total = zone_end_counts(counts, counts.shape[0] if counts.ndim else 1)
+        if total:
             _, low, high = clopper_pearson(ends, total)
             text += f" [{100 * low:.1f}, {100 * high:.1f}] (95 %, of {total:,} first contacts)"
     return text

@@ -169,15 +169,22 @@ def carriage_variables(config, statistics, nominal: CarriageResult | None) -> tu
     return coords, data
 
 
+def zone_end_counts(pair_count, tracks: int) -> tuple:
+    """(first contacts at the first or last pair of a track's loaded zone, all first
+    contacts) of ``pair_count`` (first contacts per pair, track by track); (0, 0) without
+    pairs."""
+    pairs = np.asarray(pair_count, dtype=float).reshape(tracks, -1)
+    if pairs.shape[1] == 0:
+        return 0, 0
+    ends = pairs[:, 0].sum() + (pairs[:, -1].sum() if pairs.shape[1] > 1 else 0.0)
+    return int(ends), int(pairs.sum())
+
+
 def zone_end_fraction(pair_count, tracks: int) -> float:
     """Fraction of the first contacts at the first or last pair of a track's loaded zone
-    (``pair_count``: first contacts per pair, track by track; NaN without contacts)."""
-    pairs = np.asarray(pair_count, dtype=float).reshape(tracks, -1)
-    total = pairs.sum()
-    if pairs.shape[1] == 0 or total == 0:
-        return np.nan
-    ends = pairs[:, 0].sum() + (pairs[:, -1].sum() if pairs.shape[1] > 1 else 0.0)
-    return float(ends / total)
+    (:func:`zone_end_counts`; NaN without contacts)."""
+    ends, total = zone_end_counts(pair_count, tracks)
+    return float(ends / total) if total else np.nan
 
 
 def circuit_variables(config, acc) -> tuple:
